@@ -1,0 +1,620 @@
+//! Message types exchanged between the auvnav processes through iceoryx2 shared memory, and
+//! written to the logs.
+//!
+//! Every type is `#[repr(C)]`, made of fixed-size fields only, free of padding (checked at compile
+//! time by `bytemuck::Pod`) and carries a versioned iceoryx2 type name (`auvnav/<Type>/v<N>`).
+//! Because the layout has no padding and every field sits at an offset that is a multiple of its
+//! own size, the bytes of a value are also its little-endian CDR encoding (XCDR1: primitives aligned
+//! to their size, fixed arrays without a length prefix). The log format relies on this: a log
+//! message is the 4-byte CDR encapsulation header followed by the struct bytes, and the channel's
+//! schema is the `ros2msg` text produced by [`Message::ros2msg_definition`], so third-party MCAP
+//! readers decode our logs without our code.
+//!
+//! Conventions: SI units and radians; navigation frame NED, body frame FRD (x forward, y starboard,
+//! z down); rotations are named source_to_target. Validity is carried as bit flags, never as
+//! sentinel values: a field whose validity bit is clear holds zero and must not be used.
+//! Two clock domains exist and are never mixed: host time (`CLOCK_MONOTONIC` of the machine the
+//! process runs on, or simulated time in a simulated log) and device time (the sensor's own clock).
+//!
+//! The zero-copy derive of iceoryx2 emits `unsafe impl`, so this crate cannot forbid unsafe code;
+//! it contains no hand-written `unsafe`.
+
+pub mod qos;
+pub mod topic;
+
+pub use bytemuck::{Pod, Zeroable};
+use iceoryx2::prelude::ZeroCopySend;
+
+/// A time in the host clock domain: nanoseconds of `CLOCK_MONOTONIC` (or simulated time).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default)]
+pub struct HostTime(pub u64);
+
+/// A time in a device's own clock domain, in nanoseconds since the device's epoch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default)]
+pub struct DeviceTime(pub u64);
+
+impl HostTime {
+    /// Seconds as `f64` (for arithmetic in the navigation core).
+    pub fn as_secs_f64(self) -> f64 {
+        self.0 as f64 * 1e-9
+    }
+    /// From seconds; negative or non-finite input saturates to 0.
+    pub fn from_secs_f64(s: f64) -> Self {
+        if s.is_finite() && s > 0.0 {
+            HostTime((s * 1e9).round() as u64)
+        } else {
+            HostTime(0)
+        }
+    }
+}
+
+/// A message type that can travel through shared memory and be written to a log.
+pub trait Message: Pod + ZeroCopySend + Default + std::fmt::Debug {
+    /// iceoryx2 type name, versioned (`auvnav/ImuSample/v1`).
+    const TYPE_NAME: &'static str;
+    /// Schema name in the log (`auvnav_msgs/msg/ImuSampleV1`).
+    const SCHEMA_NAME: &'static str;
+    /// The `ros2msg` schema text describing the CDR layout of this type (with field docs as
+    /// comments).
+    fn ros2msg_definition() -> String;
+    /// The host-clock time stamp of the message, used as the log time.
+    fn host_time(&self) -> HostTime;
+}
+
+/// The `ros2msg` name of a field type.
+pub trait RosField {
+    fn ros_type() -> String;
+}
+
+macro_rules! ros_field {
+    ($($t:ty => $n:literal),* $(,)?) => {
+        $(impl RosField for $t { fn ros_type() -> String { $n.to_string() } })*
+    };
+}
+ros_field!(f64 => "float64", f32 => "float32", u64 => "uint64", u32 => "uint32", u16 => "uint16",
+    u8 => "uint8", i64 => "int64", i32 => "int32", i16 => "int16", i8 => "int8");
+
+impl<T: RosField, const N: usize> RosField for [T; N] {
+    fn ros_type() -> String {
+        format!("{}[{}]", T::ros_type(), N)
+    }
+}
+
+macro_rules! message {
+    (
+        $(#[doc = $doc:literal])*
+        #[type_name($tn:literal)]
+        #[schema_name($sn:literal)]
+        pub struct $name:ident {
+            $(
+                $(#[doc = $fdoc:literal])*
+                pub $field:ident : $ty:ty,
+            )*
+        }
+    ) => {
+        $(#[doc = $doc])*
+        #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, Pod, Zeroable)]
+        #[repr(C)]
+        #[type_name($tn)]
+        pub struct $name {
+            $( $(#[doc = $fdoc])* pub $field: $ty, )*
+        }
+
+        impl Default for $name {
+            fn default() -> Self {
+                Zeroable::zeroed()
+            }
+        }
+
+        impl Message for $name {
+            const TYPE_NAME: &'static str = $tn;
+            const SCHEMA_NAME: &'static str = $sn;
+            fn ros2msg_definition() -> String {
+                let mut s = String::new();
+                $( s.push('#'); s.push_str($doc); s.push('\n'); )*
+                $(
+                    $( s.push('#'); s.push_str($fdoc); s.push('\n'); )*
+                    s.push_str(&<$ty as RosField>::ros_type());
+                    s.push(' ');
+                    s.push_str(stringify!($field));
+                    s.push('\n');
+                )*
+                s
+            }
+            fn host_time(&self) -> HostTime {
+                HostTime(self.host_time_ns)
+            }
+        }
+    };
+}
+
+message! {
+    /// One inertial measurement: angular rate and specific force (rate mode) or their increments
+    /// over `interval_s` (increment mode, status bit `INCREMENTS`), in the IMU body frame (FRD).
+    #[type_name("auvnav/ImuSample/v1")]
+    #[schema_name("auvnav_msgs/msg/ImuSampleV1")]
+    pub struct ImuSampleV1 {
+        /// Host time at read return (ns, CLOCK_MONOTONIC; simulated time in simulated logs); also the time of validity.
+        pub host_time_ns: u64,
+        /// Device clock at the sample (ns); valid with status bit DEVICE_TIME_VALID.
+        pub device_time_ns: u64,
+        /// Sequence number assigned by the publisher, +1 per sample; gaps mean lost samples.
+        pub sequence: u64,
+        /// Angular rate of the body w.r.t. inertial space (rad/s, body FRD, |x| < 35 rad/s), or its increment (rad) in increment mode.
+        pub angular: [f64; 3],
+        /// Specific force (m/s^2, body FRD, |x| < 500 m/s^2), or its increment, delta-velocity (m/s), in increment mode.
+        pub specific: [f64; 3],
+        /// Sample interval; the integration interval of the increments in increment mode (s, 0 < x < 1).
+        pub interval_s: f64,
+        /// Sensor temperature (degC, -60..120); valid with status bit TEMPERATURE_VALID.
+        pub temperature_c: f32,
+        /// Status bit flags (ImuSampleV1::STATUS_*).
+        pub status: u32,
+    }
+}
+
+impl ImuSampleV1 {
+    /// `angular`/`specific` hold increments (rad, m/s) over `interval_s` rather than rates.
+    pub const STATUS_INCREMENTS: u32 = 1 << 0;
+    pub const STATUS_GYRO_VALID: u32 = 1 << 1;
+    pub const STATUS_ACCEL_VALID: u32 = 1 << 2;
+    pub const STATUS_TEMPERATURE_VALID: u32 = 1 << 3;
+    pub const STATUS_DEVICE_TIME_VALID: u32 = 1 << 4;
+    pub const STATUS_GYRO_SATURATED: u32 = 1 << 5;
+    pub const STATUS_ACCEL_SATURATED: u32 = 1 << 6;
+    /// The device's built-in test reports a failure.
+    pub const STATUS_BUILT_IN_TEST_FAIL: u32 = 1 << 7;
+}
+
+message! {
+    /// One Doppler velocity log ping: vehicle velocity in the DVL instrument frame, per-beam
+    /// velocity and range, altitude.
+    #[type_name("auvnav/DvlVelocity/v1")]
+    #[schema_name("auvnav_msgs/msg/DvlVelocityV1")]
+    pub struct DvlVelocityV1 {
+        /// Host time at read return (ns, CLOCK_MONOTONIC; simulated time in simulated logs).
+        pub host_time_ns: u64,
+        /// Device clock at the ping (ns); valid with DEVICE_TIME_VALID.
+        pub device_time_ns: u64,
+        /// Sequence number assigned by the publisher.
+        pub sequence: u64,
+        /// Time of validity of the velocity in the host clock (ns); the driver derives it from the read time and the device's reported latency.
+        pub validity_time_ns: u64,
+        /// Velocity of the vehicle relative to the bottom (or water) in the DVL frame (m/s, DVL x forward, y starboard, z down, |x| < 20 m/s); valid with VELOCITY_VALID.
+        pub velocity_dvl_m_s: [f64; 3],
+        /// One-sigma velocity uncertainty per DVL axis (m/s, 0..10); valid with STD_VALID.
+        pub velocity_std_m_s: [f64; 3],
+        /// Radial velocity along each beam, positive towards the transducer (m/s, |x| < 20); beam i valid with BEAM_VELOCITY_VALID << i.
+        pub beam_velocity_m_s: [f64; 4],
+        /// Slant range to the bottom along each beam (m, 0..1000); beam i valid with BEAM_RANGE_VALID << i.
+        pub beam_range_m: [f64; 4],
+        /// Altitude above the bottom (m, 0..1000); valid with ALTITUDE_VALID.
+        pub altitude_m: f64,
+        /// Figure of merit / error velocity reported by the device (m/s, 0..10); valid with FOM_VALID.
+        pub figure_of_merit_m_s: f64,
+        /// Sound speed used by the device for the velocity (m/s, 1375..1650); valid with SOUND_SPEED_VALID.
+        pub sound_speed_m_s: f64,
+        /// Validity and mode bit flags (DvlVelocityV1::VALID_*, TRACK_*).
+        pub validity: u32,
+        /// Number of beams that contributed to the velocity (0..4).
+        pub beams_used: u32,
+    }
+}
+
+impl DvlVelocityV1 {
+    pub const VALID_VELOCITY: u32 = 1 << 0;
+    pub const VALID_ALTITUDE: u32 = 1 << 1;
+    pub const VALID_STD: u32 = 1 << 2;
+    pub const VALID_FOM: u32 = 1 << 3;
+    pub const VALID_SOUND_SPEED: u32 = 1 << 4;
+    pub const VALID_DEVICE_TIME: u32 = 1 << 5;
+    /// The velocity is relative to the water (water track); clear means bottom track.
+    pub const TRACK_WATER: u32 = 1 << 6;
+    /// Beam i velocity valid: `VALID_BEAM_VELOCITY << i`, i in 0..4.
+    pub const VALID_BEAM_VELOCITY: u32 = 1 << 8;
+    /// Beam i range valid: `VALID_BEAM_RANGE << i`, i in 0..4.
+    pub const VALID_BEAM_RANGE: u32 = 1 << 12;
+}
+
+message! {
+    /// One USBL acoustic fix between the docking-station array and the vehicle's responder: slant
+    /// range, range differences across the hydrophone baselines, angles and the device's own fix.
+    #[type_name("auvnav/UsblFix/v1")]
+    #[schema_name("auvnav_msgs/msg/UsblFixV1")]
+    pub struct UsblFixV1 {
+        /// Host time at read return (ns, CLOCK_MONOTONIC; simulated time in simulated logs).
+        pub host_time_ns: u64,
+        /// Device clock at the fix (ns); valid with VALID_DEVICE_TIME.
+        pub device_time_ns: u64,
+        /// Sequence number assigned by the publisher.
+        pub sequence: u64,
+        /// Time of validity (signal reception at the array) in the host clock (ns).
+        pub validity_time_ns: u64,
+        /// Slant range from the central transducer to the responder (m, 0..10000); valid with VALID_RANGE.
+        pub slant_range_m: f64,
+        /// One-way acoustic travel time (s, 0..10); valid with VALID_RANGE.
+        pub travel_time_s: f64,
+        /// Range differences R1-R3 and R2-R4 between opposite hydrophones (m, |x| < baseline); valid with VALID_RANGE_DIFFERENCES.
+        pub range_difference_m: [f64; 2],
+        /// Azimuth of the responder in the array frame, from array x towards y (rad, -pi..pi); valid with VALID_ANGLES.
+        pub azimuth_rad: f64,
+        /// Elevation of the responder in the array frame, positive towards array -z (rad, -pi/2..pi/2); valid with VALID_ANGLES.
+        pub elevation_rad: f64,
+        /// Responder position computed by the device in the array frame (m, array x, y, z down, |x| < 10000); valid with VALID_POSITION.
+        pub position_array_m: [f64; 3],
+        /// Sound speed used by the device (m/s, 1375..1650); valid with VALID_SOUND_SPEED.
+        pub sound_speed_m_s: f64,
+        /// Received signal strength per hydrophone channel 1..4 (dB re device reference, -200..200); valid with VALID_RSSI.
+        pub rssi_db: [f32; 4],
+        /// Fit error of the direction solution reported by the device (m, 0..1000); valid with VALID_FIT_ERROR.
+        pub fit_error_m: f32,
+        /// Validity bit flags (UsblFixV1::VALID_*).
+        pub validity: u32,
+        /// Identifier of the beacon/responder (0..65535).
+        pub beacon_id: u32,
+        /// Reserved, zero.
+        pub reserved: u32,
+    }
+}
+
+impl UsblFixV1 {
+    pub const VALID_RANGE: u32 = 1 << 0;
+    pub const VALID_RANGE_DIFFERENCES: u32 = 1 << 1;
+    pub const VALID_ANGLES: u32 = 1 << 2;
+    pub const VALID_POSITION: u32 = 1 << 3;
+    pub const VALID_SOUND_SPEED: u32 = 1 << 4;
+    pub const VALID_RSSI: u32 = 1 << 5;
+    pub const VALID_FIT_ERROR: u32 = 1 << 6;
+    pub const VALID_DEVICE_TIME: u32 = 1 << 7;
+}
+
+message! {
+    /// Depth from a pressure sensor.
+    #[type_name("auvnav/Depth/v1")]
+    #[schema_name("auvnav_msgs/msg/DepthV1")]
+    pub struct DepthV1 {
+        /// Host time at read return (ns, CLOCK_MONOTONIC; simulated time in simulated logs).
+        pub host_time_ns: u64,
+        /// Device clock (ns); valid with VALID_DEVICE_TIME.
+        pub device_time_ns: u64,
+        /// Sequence number assigned by the publisher.
+        pub sequence: u64,
+        /// Depth of the sensor below the surface (m, positive down, -10..11000); valid with VALID_DEPTH.
+        pub depth_m: f64,
+        /// Gauge pressure, absolute minus atmospheric (Pa, -1e5..1.2e8); valid with VALID_PRESSURE.
+        pub pressure_pa: f64,
+        /// Water density assumed to convert pressure to depth (kg/m^3, 990..1050).
+        pub water_density_kg_m3: f64,
+        /// Water temperature (degC, -5..50); valid with VALID_TEMPERATURE.
+        pub temperature_c: f32,
+        /// Validity bit flags (DepthV1::VALID_*).
+        pub validity: u32,
+    }
+}
+
+impl DepthV1 {
+    pub const VALID_DEPTH: u32 = 1 << 0;
+    pub const VALID_PRESSURE: u32 = 1 << 1;
+    pub const VALID_TEMPERATURE: u32 = 1 << 2;
+    pub const VALID_DEVICE_TIME: u32 = 1 << 3;
+}
+
+message! {
+    /// Magnetic flux density measured by a three-axis magnetometer.
+    #[type_name("auvnav/Magnetometer/v1")]
+    #[schema_name("auvnav_msgs/msg/MagnetometerV1")]
+    pub struct MagnetometerV1 {
+        /// Host time at read return (ns, CLOCK_MONOTONIC; simulated time in simulated logs).
+        pub host_time_ns: u64,
+        /// Device clock (ns); valid with VALID_DEVICE_TIME.
+        pub device_time_ns: u64,
+        /// Sequence number assigned by the publisher.
+        pub sequence: u64,
+        /// Magnetic flux density in the sensor frame, uncalibrated (T, body FRD, |x| < 1e-3); valid with VALID_FIELD.
+        pub field_t: [f64; 3],
+        /// Sensor temperature (degC, -60..120); valid with VALID_TEMPERATURE.
+        pub temperature_c: f32,
+        /// Validity bit flags (MagnetometerV1::VALID_*).
+        pub validity: u32,
+    }
+}
+
+impl MagnetometerV1 {
+    pub const VALID_FIELD: u32 = 1 << 0;
+    pub const VALID_TEMPERATURE: u32 = 1 << 1;
+    pub const VALID_DEVICE_TIME: u32 = 1 << 2;
+}
+
+message! {
+    /// A GNSS position fix (available at the surface only).
+    #[type_name("auvnav/GnssFix/v1")]
+    #[schema_name("auvnav_msgs/msg/GnssFixV1")]
+    pub struct GnssFixV1 {
+        /// Host time at read return (ns, CLOCK_MONOTONIC; simulated time in simulated logs).
+        pub host_time_ns: u64,
+        /// GNSS time of the fix (ns since the GPS epoch); valid with VALID_DEVICE_TIME.
+        pub device_time_ns: u64,
+        /// Sequence number assigned by the publisher.
+        pub sequence: u64,
+        /// Geodetic latitude, WGS-84 (rad, -pi/2..pi/2); valid with VALID_POSITION.
+        pub latitude_rad: f64,
+        /// Longitude, WGS-84 (rad, -pi..pi); valid with VALID_POSITION.
+        pub longitude_rad: f64,
+        /// Height above the WGS-84 ellipsoid (m, -1000..10000); valid with VALID_HEIGHT.
+        pub height_m: f64,
+        /// Velocity (m/s, NED, |x| < 100); valid with VALID_VELOCITY.
+        pub velocity_ned_m_s: [f64; 3],
+        /// One-sigma horizontal position uncertainty (m, 0..1000).
+        pub horizontal_std_m: f64,
+        /// One-sigma vertical position uncertainty (m, 0..1000).
+        pub vertical_std_m: f64,
+        /// Number of satellites used (0..255).
+        pub satellites: u32,
+        /// Validity bit flags (GnssFixV1::VALID_*).
+        pub validity: u32,
+    }
+}
+
+impl GnssFixV1 {
+    pub const VALID_POSITION: u32 = 1 << 0;
+    pub const VALID_HEIGHT: u32 = 1 << 1;
+    pub const VALID_VELOCITY: u32 = 1 << 2;
+    pub const VALID_DEVICE_TIME: u32 = 1 << 3;
+    /// The fix is differentially corrected (DGNSS or RTK).
+    pub const DIFFERENTIAL: u32 = 1 << 4;
+}
+
+/// The operating mode of the navigation solution.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum NavMode {
+    /// Waiting for the first sensor data; the solution is not usable.
+    Initialising = 0,
+    /// Initial alignment in progress; attitude (heading) not yet converged.
+    Aligning = 1,
+    /// Aligned and aided.
+    Navigating = 2,
+    /// Aligned, but an aiding source it relies on is lost: pure inertial or partly aided.
+    Degraded = 3,
+}
+
+impl TryFrom<u32> for NavMode {
+    type Error = u32;
+    fn try_from(v: u32) -> Result<Self, u32> {
+        match v {
+            0 => Ok(NavMode::Initialising),
+            1 => Ok(NavMode::Aligning),
+            2 => Ok(NavMode::Navigating),
+            3 => Ok(NavMode::Degraded),
+            other => Err(other),
+        }
+    }
+}
+
+message! {
+    /// The navigation solution of the fusion core: position, velocity, attitude of the body (IMU)
+    /// frame, their uncertainties, estimated sensor biases, mode and sensor health.
+    #[type_name("auvnav/NavSolution/v1")]
+    #[schema_name("auvnav_msgs/msg/NavSolutionV1")]
+    pub struct NavSolutionV1 {
+        /// Time of validity in the host clock (ns).
+        pub host_time_ns: u64,
+        /// Sequence number of the solution.
+        pub sequence: u64,
+        /// Geodetic latitude, WGS-84 (rad, -pi/2..pi/2).
+        pub latitude_rad: f64,
+        /// Longitude, WGS-84 (rad, -pi..pi).
+        pub longitude_rad: f64,
+        /// Height above the WGS-84 ellipsoid (m, -11000..10000); depth is approximately -height.
+        pub height_m: f64,
+        /// Velocity w.r.t. the Earth (m/s, NED, |x| < 100).
+        pub velocity_ned_m_s: [f64; 3],
+        /// Attitude quaternion rotating body FRD to NED, scalar first (w, x, y, z), unit norm.
+        pub quaternion_body_to_ned: [f64; 4],
+        /// Roll, pitch, yaw (ZYX Euler angles) of body FRD w.r.t. NED (rad; roll, yaw -pi..pi, pitch -pi/2..pi/2).
+        pub euler_rad: [f64; 3],
+        /// One-sigma position uncertainty north, east, down (m, >= 0).
+        pub position_std_ned_m: [f64; 3],
+        /// One-sigma velocity uncertainty (m/s, NED, >= 0).
+        pub velocity_std_ned_m_s: [f64; 3],
+        /// One-sigma attitude uncertainty, small-angle tilt about N, E and D (rad, >= 0).
+        pub attitude_std_rad: [f64; 3],
+        /// Estimated gyro bias (rad/s, body FRD).
+        pub gyro_bias_rad_s: [f64; 3],
+        /// Estimated accelerometer bias (m/s^2, body FRD).
+        pub accel_bias_m_s2: [f64; 3],
+        /// Mode (NavMode: 0 initialising, 1 aligning, 2 navigating, 3 degraded).
+        pub mode: u32,
+        /// Sensor health bit flags (NavSolutionV1::HEALTH_*): set = the sensor delivers and is fused.
+        pub sensor_health: u32,
+    }
+}
+
+impl NavSolutionV1 {
+    pub const HEALTH_IMU: u32 = 1 << 0;
+    pub const HEALTH_DVL: u32 = 1 << 1;
+    pub const HEALTH_USBL: u32 = 1 << 2;
+    pub const HEALTH_DEPTH: u32 = 1 << 3;
+    pub const HEALTH_MAGNETOMETER: u32 = 1 << 4;
+    pub const HEALTH_GNSS: u32 = 1 << 5;
+
+    /// The mode field as a [`NavMode`], or the raw value when it is out of range.
+    pub fn nav_mode(&self) -> Result<NavMode, u32> {
+        NavMode::try_from(self.mode)
+    }
+}
+
+/// The aiding source a diagnostics message reports on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum AidSource {
+    DvlVelocity = 1,
+    Depth = 2,
+    GnssPosition = 3,
+    UsblPosition = 4,
+    UsblSlantRange = 5,
+    ZeroVelocity = 6,
+    Magnetometer = 7,
+}
+
+impl TryFrom<u32> for AidSource {
+    type Error = u32;
+    fn try_from(v: u32) -> Result<Self, u32> {
+        Ok(match v {
+            1 => AidSource::DvlVelocity,
+            2 => AidSource::Depth,
+            3 => AidSource::GnssPosition,
+            4 => AidSource::UsblPosition,
+            5 => AidSource::UsblSlantRange,
+            6 => AidSource::ZeroVelocity,
+            7 => AidSource::Magnetometer,
+            other => return Err(other),
+        })
+    }
+}
+
+message! {
+    /// What the filter did with one measurement of one aiding source (up to 3 components).
+    #[type_name("auvnav/AidDiagnostics/v1")]
+    #[schema_name("auvnav_msgs/msg/AidDiagnosticsV1")]
+    pub struct AidDiagnosticsV1 {
+        /// Time of validity of the measurement in the host clock (ns).
+        pub host_time_ns: u64,
+        /// Sequence number of the diagnostics message.
+        pub sequence: u64,
+        /// Observation components (unit of the source: m/s for velocity, m for range/position/depth); first `dimension` used.
+        pub observation: [f64; 3],
+        /// Observation noise variance per component (unit^2, > 0).
+        pub observation_variance: [f64; 3],
+        /// Innovation, observation minus prediction, per component (unit of the source).
+        pub innovation: [f64; 3],
+        /// Innovation variance per component, diagonal of H P H^T + R (unit^2, > 0).
+        pub innovation_variance: [f64; 3],
+        /// Normalised innovation squared divided by the gate (dimensionless, >= 0; > 1 means rejected by the gate).
+        pub test_ratio: f64,
+        /// Aid source (AidSource: 1 DVL velocity, 2 depth, 3 GNSS, 4 USBL position, 5 USBL slant range, 6 zero velocity, 7 magnetometer).
+        pub source: u32,
+        /// Number of components used (1..3).
+        pub dimension: u32,
+        /// Flags (AidDiagnosticsV1::FLAG_*).
+        pub flags: u32,
+        /// Reserved, zero.
+        pub reserved: u32,
+    }
+}
+
+impl AidDiagnosticsV1 {
+    /// The measurement was rejected (gate, invalid data or a numerical failure).
+    pub const FLAG_REJECTED: u32 = 1 << 0;
+    /// The measurement was fused into the state.
+    pub const FLAG_FUSED: u32 = 1 << 1;
+}
+
+/// The state of a process as reported in its health message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum ProcessState {
+    Starting = 0,
+    Running = 1,
+    /// The device is absent or silent; the process is trying to reconnect.
+    Reconnecting = 2,
+    Stopping = 3,
+}
+
+message! {
+    /// Health counters of one process (driver, daemon or recorder), published periodically.
+    #[type_name("auvnav/ProcessHealth/v1")]
+    #[schema_name("auvnav_msgs/msg/ProcessHealthV1")]
+    pub struct ProcessHealthV1 {
+        /// Host time of the report (ns, CLOCK_MONOTONIC).
+        pub host_time_ns: u64,
+        /// Sequence number of the report.
+        pub sequence: u64,
+        /// Frames decoded and published since start (count).
+        pub frames: u64,
+        /// Frames dropped for a checksum mismatch (count).
+        pub checksum_errors: u64,
+        /// Resynchronisations of the byte stream (count).
+        pub resyncs: u64,
+        /// Bytes skipped while searching for a frame start (count).
+        pub bytes_skipped: u64,
+        /// Read timeouts / missed deadlines (count).
+        pub timeouts: u64,
+        /// Reconnections to the device (count).
+        pub reconnects: u64,
+        /// Messages dropped: sequence gaps, full buffers, late messages (count).
+        pub drops: u64,
+        /// Frames or messages rejected as malformed or out of range (count).
+        pub invalid: u64,
+        /// Process name, UTF-8, zero padded.
+        pub name: [u8; 32],
+        /// Process id (0..2^32).
+        pub pid: u32,
+        /// State (ProcessState: 0 starting, 1 running, 2 reconnecting, 3 stopping).
+        pub state: u32,
+    }
+}
+
+impl ProcessHealthV1 {
+    /// Copies `name` into the fixed field, truncated at a character boundary to 32 bytes.
+    pub fn set_name(&mut self, name: &str) {
+        self.name = [0; 32];
+        let mut end = name.len().min(32);
+        while !name.is_char_boundary(end) {
+            end -= 1;
+        }
+        self.name[..end].copy_from_slice(&name.as_bytes()[..end]);
+    }
+    /// The process name (up to the first zero byte; invalid UTF-8 is replaced).
+    pub fn name(&self) -> String {
+        let end = self.name.iter().position(|&b| b == 0).unwrap_or(32);
+        String::from_utf8_lossy(&self.name[..end]).into_owned()
+    }
+}
+
+message! {
+    /// The true vehicle state of a simulated voyage (log channel only; never published on board).
+    #[type_name("auvnav/TruthState/v1")]
+    #[schema_name("auvnav_msgs/msg/TruthStateV1")]
+    pub struct TruthStateV1 {
+        /// Simulated time (ns).
+        pub host_time_ns: u64,
+        /// Sequence number.
+        pub sequence: u64,
+        /// Geodetic latitude of the body (IMU) origin, WGS-84 (rad).
+        pub latitude_rad: f64,
+        /// Longitude, WGS-84 (rad).
+        pub longitude_rad: f64,
+        /// Height above the WGS-84 ellipsoid (m).
+        pub height_m: f64,
+        /// Velocity w.r.t. the Earth (m/s, NED).
+        pub velocity_ned_m_s: [f64; 3],
+        /// Attitude quaternion body FRD to NED, scalar first.
+        pub quaternion_body_to_ned: [f64; 4],
+        /// Roll, pitch, yaw (ZYX Euler) (rad).
+        pub euler_rad: [f64; 3],
+        /// True angular rate of the body w.r.t. inertial space (rad/s, body FRD).
+        pub angular_rate_rad_s: [f64; 3],
+        /// True specific force (m/s^2, body FRD).
+        pub specific_force_m_s2: [f64; 3],
+    }
+}
+
+/// Every message type with its log schema, for tools that list or validate schemas.
+pub fn all_schemas() -> Vec<(&'static str, &'static str, String)> {
+    fn entry<T: Message>() -> (&'static str, &'static str, String) {
+        (T::TYPE_NAME, T::SCHEMA_NAME, T::ros2msg_definition())
+    }
+    vec![
+        entry::<ImuSampleV1>(),
+        entry::<DvlVelocityV1>(),
+        entry::<UsblFixV1>(),
+        entry::<DepthV1>(),
+        entry::<MagnetometerV1>(),
+        entry::<GnssFixV1>(),
+        entry::<NavSolutionV1>(),
+        entry::<AidDiagnosticsV1>(),
+        entry::<ProcessHealthV1>(),
+        entry::<TruthStateV1>(),
+    ]
+}

@@ -1,0 +1,43 @@
+//! Quality-of-service settings of the publish-subscribe services. Publishers and subscribers must
+//! open a service with identical settings (iceoryx2 refuses mismatches at open), so they live here,
+//! next to the types.
+//!
+//! Safe overflow is on everywhere: a slow subscriber (the recorder) loses its oldest samples
+//! instead of throttling a driver; losses are visible as sequence gaps and counted.
+
+/// Settings for one service.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ServiceQos {
+    /// Samples a subscriber can hold before the oldest is overwritten (count).
+    pub subscriber_max_buffer_size: usize,
+    /// Samples delivered to a late-joining subscriber (count).
+    pub history_size: usize,
+    /// Maximum number of publishers (count).
+    pub max_publishers: usize,
+    /// Maximum number of subscribers (count).
+    pub max_subscribers: usize,
+}
+
+/// Sensor topics: 256 slots absorb several milliseconds of VM stall at 1 kHz.
+pub const SENSOR: ServiceQos = ServiceQos {
+    subscriber_max_buffer_size: 256,
+    history_size: 0,
+    max_publishers: 2,
+    max_subscribers: 8,
+};
+
+/// Navigation outputs (solution, diagnostics) published at IMU rate.
+pub const NAVIGATION: ServiceQos = ServiceQos {
+    subscriber_max_buffer_size: 256,
+    history_size: 1,
+    max_publishers: 2,
+    max_subscribers: 8,
+};
+
+/// Process health: low rate, many publishers.
+pub const HEALTH: ServiceQos = ServiceQos {
+    subscriber_max_buffer_size: 64,
+    history_size: 0,
+    max_publishers: 16,
+    max_subscribers: 8,
+};

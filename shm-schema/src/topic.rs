@@ -1,0 +1,35 @@
+//! Topic (iceoryx2 service) names. Every process builds its service names from these constants
+//! and a deployment prefix ([`service_name`]), so concurrent test runs never share topics. The log
+//! channels carry the same names without the prefix.
+
+/// IMU samples ([`crate::ImuSampleV1`]).
+pub const IMU: &str = "imu";
+/// DVL velocity ([`crate::DvlVelocityV1`]).
+pub const DVL: &str = "dvl";
+/// USBL fixes ([`crate::UsblFixV1`]).
+pub const USBL: &str = "usbl";
+/// Depth ([`crate::DepthV1`]).
+pub const DEPTH: &str = "depth";
+/// Magnetometer ([`crate::MagnetometerV1`]).
+pub const MAGNETOMETER: &str = "magnetometer";
+/// GNSS fixes ([`crate::GnssFixV1`]).
+pub const GNSS: &str = "gnss";
+/// Navigation solution ([`crate::NavSolutionV1`]).
+pub const NAV_SOLUTION: &str = "nav/solution";
+/// Per-aid-source diagnostics ([`crate::AidDiagnosticsV1`]).
+pub const NAV_AID_DIAGNOSTICS: &str = "nav/aid_diagnostics";
+/// Process health of every process ([`crate::ProcessHealthV1`]).
+pub const HEALTH: &str = "health";
+/// Simulated truth (log only, [`crate::TruthStateV1`]).
+pub const TRUTH: &str = "truth";
+
+/// The default deployment prefix of service names.
+pub const DEFAULT_PREFIX: &str = "auvnav";
+
+/// Every topic that carries sensor data into the fusion daemon.
+pub const SENSOR_TOPICS: [&str; 6] = [IMU, DVL, USBL, DEPTH, MAGNETOMETER, GNSS];
+
+/// The iceoryx2 service name of `topic` under a deployment prefix: `"{prefix}/{topic}"`.
+pub fn service_name(prefix: &str, topic: &str) -> String {
+    format!("{prefix}/{topic}")
+}
