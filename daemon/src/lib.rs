@@ -1,1 +1,8 @@
-//! placeholder
+//! The auvnav navigation core. Pure: it reads no clock and no random source; time comes from the
+//! messages, so the same ordered inputs give bit-identical outputs.
+#![forbid(unsafe_code)]
+
+pub mod earth;
+pub mod filter;
+pub mod navigator;
+pub mod strapdown;

@@ -8,16 +8,44 @@ use std::mem::{align_of, size_of};
 #[test]
 fn layouts_are_pinned() {
     let layouts = [
-        ("ImuSampleV1", size_of::<ImuSampleV1>(), align_of::<ImuSampleV1>()),
-        ("DvlVelocityV1", size_of::<DvlVelocityV1>(), align_of::<DvlVelocityV1>()),
+        (
+            "ImuSampleV1",
+            size_of::<ImuSampleV1>(),
+            align_of::<ImuSampleV1>(),
+        ),
+        (
+            "DvlVelocityV1",
+            size_of::<DvlVelocityV1>(),
+            align_of::<DvlVelocityV1>(),
+        ),
         ("UsblFixV1", size_of::<UsblFixV1>(), align_of::<UsblFixV1>()),
         ("DepthV1", size_of::<DepthV1>(), align_of::<DepthV1>()),
-        ("MagnetometerV1", size_of::<MagnetometerV1>(), align_of::<MagnetometerV1>()),
+        (
+            "MagnetometerV1",
+            size_of::<MagnetometerV1>(),
+            align_of::<MagnetometerV1>(),
+        ),
         ("GnssFixV1", size_of::<GnssFixV1>(), align_of::<GnssFixV1>()),
-        ("NavSolutionV1", size_of::<NavSolutionV1>(), align_of::<NavSolutionV1>()),
-        ("AidDiagnosticsV1", size_of::<AidDiagnosticsV1>(), align_of::<AidDiagnosticsV1>()),
-        ("ProcessHealthV1", size_of::<ProcessHealthV1>(), align_of::<ProcessHealthV1>()),
-        ("TruthStateV1", size_of::<TruthStateV1>(), align_of::<TruthStateV1>()),
+        (
+            "NavSolutionV1",
+            size_of::<NavSolutionV1>(),
+            align_of::<NavSolutionV1>(),
+        ),
+        (
+            "AidDiagnosticsV1",
+            size_of::<AidDiagnosticsV1>(),
+            align_of::<AidDiagnosticsV1>(),
+        ),
+        (
+            "ProcessHealthV1",
+            size_of::<ProcessHealthV1>(),
+            align_of::<ProcessHealthV1>(),
+        ),
+        (
+            "TruthStateV1",
+            size_of::<TruthStateV1>(),
+            align_of::<TruthStateV1>(),
+        ),
     ];
     println!("{layouts:?}");
     let expected = [
@@ -42,7 +70,10 @@ fn schema_size(def: &str) -> usize {
         .map(|l| {
             let ty = l.split_whitespace().next().unwrap_or_default();
             let (base, count) = match ty.find('[') {
-                Some(i) => (&ty[..i], ty[i + 1..ty.len() - 1].parse::<usize>().unwrap_or(0)),
+                Some(i) => (
+                    &ty[..i],
+                    ty[i + 1..ty.len() - 1].parse::<usize>().unwrap_or(0),
+                ),
                 None => (ty, 1),
             };
             let size = match base {
@@ -72,7 +103,10 @@ fn schemas_describe_the_whole_struct() {
         size_of::<TruthStateV1>(),
     ];
     for ((type_name, schema_name, def), size) in all_schemas().into_iter().zip(sizes) {
-        assert!(type_name.starts_with("auvnav/") && type_name.ends_with("/v1"), "{type_name}");
+        assert!(
+            type_name.starts_with("auvnav/") && type_name.ends_with("/v1"),
+            "{type_name}"
+        );
         assert!(schema_name.starts_with("auvnav_msgs/msg/"), "{schema_name}");
         assert_eq!(schema_size(&def), size, "{schema_name}:\n{def}");
     }
@@ -120,9 +154,19 @@ fn roundtrip_iceoryx2<T: Message + 'static>(node: &Node<ipc::Service>, prefix: &
     let publisher = service.publisher_builder().create().expect("publisher");
     let subscriber = service.subscriber_builder().create().expect("subscriber");
     let sent: T = filled(3);
-    publisher.loan_uninit().expect("loan").write_payload(sent).send().expect("send");
+    publisher
+        .loan_uninit()
+        .expect("loan")
+        .write_payload(sent)
+        .send()
+        .expect("send");
     let sample = subscriber.receive().expect("receive").expect("a sample");
-    assert_eq!(bytemuck::bytes_of(sample.payload()), bytemuck::bytes_of(&sent), "{}", T::TYPE_NAME);
+    assert_eq!(
+        bytemuck::bytes_of(sample.payload()),
+        bytemuck::bytes_of(&sent),
+        "{}",
+        T::TYPE_NAME
+    );
 }
 
 #[test]

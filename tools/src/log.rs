@@ -471,7 +471,8 @@ impl<R: Read> LogReader<R> {
     fn handle(&mut self, record: Record<'_>) -> Result<Option<RawLogMessage>, LogError> {
         match record {
             Record::Schema { header, .. } => {
-                self.schemas.insert(header.id, Arc::from(header.name.as_str()));
+                self.schemas
+                    .insert(header.id, Arc::from(header.name.as_str()));
             }
             Record::Channel(c) => {
                 let schema_name = self

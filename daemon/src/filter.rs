@@ -1,0 +1,203 @@
+//! Error-state extended Kalman filter around the strapdown solution.
+//!
+//! Error definitions (estimate minus truth unless stated):
+//! - `dp`: position error, NED metres;
+//! - `dv`: velocity error, NED (m/s);
+//! - `phi`: attitude error (psi-angle), `C_b^n(est) = (I - [phi x]) C_b^n(true)` (rad);
+//! - `dbg`, `dba`: residual gyro / accelerometer bias, true minus estimated (rad/s, m/s^2), so the
+//!   corrected IMU output is in error by `+dbg`, `+dba`.
+//!
+//! Continuous error dynamics (Titterton & Weston psi-angle form, NED):
+//! `dp' = dv`;
+//! `dv' = f^n x phi + C dba - (2 w_ie + w_en) x dv + (0, 0, 2 g / R dp_D)`;
+//! `phi' = -(w_ie + w_en) x phi + dw_en(dv) - C dbg`, with `dw_en = (dv_E/R_N, -dv_N/R_M, -dv_E tan L / R_N)`;
+//! biases: random walks driven by the bias-instability noise.
+
+use nalgebra::{SMatrix, SVector, Vector3};
+
+/// Number of error states.
+pub const N: usize = 15;
+/// Index of the first component of each block.
+pub const POS: usize = 0;
+pub const VEL: usize = 3;
+pub const ATT: usize = 6;
+pub const BG: usize = 9;
+pub const BA: usize = 12;
+const _: () = assert!(BA + 3 == N, "state layout must fill N");
+
+pub type StateVector = SVector<f64, N>;
+pub type Covariance = SMatrix<f64, N, N>;
+
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum FilterError {
+    #[error("innovation covariance is not positive definite")]
+    SingularInnovation,
+    #[error("state covariance lost positive definiteness (diagonal {index} = {value})")]
+    NotPositiveDefinite { index: usize, value: f64 },
+}
+
+/// The result of one measurement update.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct UpdateReport<const M: usize> {
+    pub innovation: SVector<f64, M>,
+    pub innovation_variance: SVector<f64, M>,
+    /// Normalised innovation squared divided by the gate.
+    pub test_ratio: f64,
+    pub fused: bool,
+}
+
+/// Error covariance (the error state itself is reset to zero after each correction).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ErrorFilter {
+    pub p: Covariance,
+}
+
+fn skew(v: &Vector3<f64>) -> nalgebra::Matrix3<f64> {
+    nalgebra::Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
+}
+
+/// Everything the error dynamics depend on, averaged over the propagation interval.
+#[derive(Debug, Clone, Copy)]
+pub struct DynamicsInputs {
+    pub c_body_to_ned: nalgebra::Matrix3<f64>,
+    pub specific_force_ned: Vector3<f64>,
+    pub velocity_ned: Vector3<f64>,
+    pub latitude_rad: f64,
+    pub height_m: f64,
+}
+
+/// Continuous-time error dynamics matrix F.
+pub fn dynamics_matrix(d: &DynamicsInputs) -> Covariance {
+    let lat = d.latitude_rad;
+    let rm = crate::earth::meridian_radius(lat) + d.height_m;
+    let rn = crate::earth::prime_vertical_radius(lat) + d.height_m;
+    let w_ie = crate::earth::earth_rate_ned(lat);
+    let w_en = crate::earth::transport_rate_ned(lat, d.height_m, &d.velocity_ned);
+    let g = crate::earth::normal_gravity(lat, d.height_m);
+    let c = d.c_body_to_ned;
+    let mut f = Covariance::zeros();
+    f.fixed_view_mut::<3, 3>(POS, VEL)
+        .copy_from(&nalgebra::Matrix3::identity());
+    f.fixed_view_mut::<3, 3>(VEL, ATT)
+        .copy_from(&skew(&d.specific_force_ned));
+    f.fixed_view_mut::<3, 3>(VEL, BA).copy_from(&c);
+    f.fixed_view_mut::<3, 3>(VEL, VEL)
+        .copy_from(&(-skew(&(2.0 * w_ie + w_en))));
+    f[(VEL + 2, POS + 2)] = 2.0 * g / ((rm * rn).sqrt());
+    f.fixed_view_mut::<3, 3>(ATT, ATT)
+        .copy_from(&(-skew(&(w_ie + w_en))));
+    f[(ATT, VEL + 1)] = 1.0 / rn;
+    f[(ATT + 1, VEL)] = -1.0 / rm;
+    f[(ATT + 2, VEL + 1)] = -lat.tan() / rn;
+    f.fixed_view_mut::<3, 3>(ATT, BG).copy_from(&(-c));
+    f
+}
+
+/// Process noise densities.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProcessNoise {
+    /// Gyro white noise density (rad/s/sqrt(Hz)) = angle random walk.
+    pub gyro_noise: f64,
+    /// Accelerometer white noise density (m/s^2/sqrt(Hz)) = velocity random walk.
+    pub accel_noise: f64,
+    /// Gyro bias random-walk density (rad/s^2/sqrt(Hz)).
+    pub gyro_bias_walk: f64,
+    /// Accelerometer bias random-walk density (m/s^3/sqrt(Hz)).
+    pub accel_bias_walk: f64,
+}
+
+impl ErrorFilter {
+    pub fn new(p0_diagonal: &StateVector) -> Self {
+        ErrorFilter {
+            p: Covariance::from_diagonal(p0_diagonal),
+        }
+    }
+
+    /// Propagates the covariance over `dt` with `F` held constant: `Phi = I + F dt + (F dt)^2/2`,
+    /// `Q` from the noise densities mapped through the body-to-NED rotation.
+    pub fn predict(
+        &mut self,
+        f: &Covariance,
+        c_body_to_ned: &nalgebra::Matrix3<f64>,
+        q: &ProcessNoise,
+        dt: f64,
+    ) {
+        let fdt = f * dt;
+        let phi = Covariance::identity() + fdt + 0.5 * fdt * fdt;
+        let mut qd = Covariance::zeros();
+        let c = c_body_to_ned;
+        let qv = c * c.transpose() * (q.accel_noise * q.accel_noise * dt);
+        let qa = c * c.transpose() * (q.gyro_noise * q.gyro_noise * dt);
+        qd.fixed_view_mut::<3, 3>(VEL, VEL).copy_from(&qv);
+        qd.fixed_view_mut::<3, 3>(ATT, ATT).copy_from(&qa);
+        for i in 0..3 {
+            qd[(BG + i, BG + i)] = q.gyro_bias_walk * q.gyro_bias_walk * dt;
+            qd[(BA + i, BA + i)] = q.accel_bias_walk * q.accel_bias_walk * dt;
+        }
+        self.p = phi * self.p * phi.transpose() + qd;
+        self.symmetrise();
+    }
+
+    fn symmetrise(&mut self) {
+        self.p = 0.5 * (self.p + self.p.transpose());
+    }
+
+    /// Linear update for `y = h(x_est) - z = H dx + noise` with noise covariance `r`, gated at
+    /// `gate` (chi-square value of the NIS). Returns the error-state estimate to apply (zero when
+    /// rejected) and the report. Joseph form.
+    pub fn update<const M: usize>(
+        &mut self,
+        y: &SVector<f64, M>,
+        h: &SMatrix<f64, M, N>,
+        r: &SMatrix<f64, M, M>,
+        gate: f64,
+    ) -> Result<(StateVector, UpdateReport<M>), FilterError> {
+        let s = h * self.p * h.transpose() + r;
+        let s_inv = s.try_inverse().ok_or(FilterError::SingularInnovation)?;
+        let nis = (y.transpose() * s_inv * y)[(0, 0)];
+        let report = UpdateReport {
+            innovation: *y,
+            innovation_variance: s.diagonal(),
+            test_ratio: nis / gate,
+            fused: nis <= gate,
+        };
+        if !report.fused {
+            return Ok((StateVector::zeros(), report));
+        }
+        let k = self.p * h.transpose() * s_inv;
+        let dx = k * y;
+        let ikh = Covariance::identity() - k * h;
+        self.p = ikh * self.p * ikh.transpose() + k * r * k.transpose();
+        self.symmetrise();
+        for i in 0..N {
+            let v = self.p[(i, i)];
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(FilterError::NotPositiveDefinite { index: i, value: v });
+            }
+        }
+        Ok((dx, report))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn update_reduces_variance_and_rejects_outliers() {
+        let mut f = ErrorFilter::new(&StateVector::from_element(1.0));
+        let mut h = SMatrix::<f64, 1, N>::zeros();
+        h[(0, POS + 2)] = 1.0;
+        let r = SMatrix::<f64, 1, 1>::new(1.0);
+        let (dx, rep) = f
+            .update(&SVector::<f64, 1>::new(1.0), &h, &r, 10.83)
+            .expect("update");
+        assert!(rep.fused);
+        assert!((dx[POS + 2] - 0.5).abs() < 1e-12);
+        assert!((f.p[(POS + 2, POS + 2)] - 0.5).abs() < 1e-12);
+        let (dx, rep) = f
+            .update(&SVector::<f64, 1>::new(100.0), &h, &r, 10.83)
+            .expect("update");
+        assert!(!rep.fused && dx == StateVector::zeros());
+    }
+}

@@ -1,0 +1,468 @@
+//! The navigator: strapdown mechanisation plus the error-state filter with DVL velocity and depth
+//! aiding. It consumes sensor messages in timestamp order and produces navigation solutions and
+//! per-aid diagnostics. It reads no clock: time comes from the messages.
+//!
+//! Covariance propagation runs at `covariance_interval_s` (default 20 Hz), not at the IMU rate:
+//! the error dynamics change slowly compared with the IMU interval, a 15-state propagation costs
+//! about 7 000 flops, and doing it at 200–1000 Hz would dominate the replay time that offline
+//! calibration depends on. The pending interval is always propagated before a measurement update,
+//! so updates see the covariance at their own time.
+
+use crate::earth::{self, Geodetic};
+use crate::filter::{self, DynamicsInputs, ErrorFilter, ProcessNoise, StateVector};
+use crate::strapdown::{ImuIncrement, NavState, Strapdown};
+use auvnav_shm_schema::{
+    AidDiagnosticsV1, AidSource, DepthV1, DvlVelocityV1, ImuSampleV1, NavMode, NavSolutionV1,
+};
+use nalgebra::{Matrix3, Rotation3, SMatrix, SVector, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// Chi-square gate, 3 degrees of freedom, 99.9 %.
+pub const GATE_CHI2_3DOF: f64 = 16.27;
+/// Chi-square gate, 1 degree of freedom, 99.9 %.
+pub const GATE_CHI2_1DOF: f64 = 10.83;
+
+/// The navigation configuration shared by the daemon, replay and every offline tool.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NavConfig {
+    /// Gyro angle random walk (deg/sqrt(h)). Default 0.005.
+    pub gyro_angle_random_walk_deg_sqrt_h: f64,
+    /// Accelerometer velocity random walk (m/s/sqrt(h)). Default 0.002.
+    pub accel_velocity_random_walk_m_s_sqrt_h: f64,
+    /// Gyro bias random walk (deg/h/sqrt(h)). Default 0.002.
+    pub gyro_bias_walk_deg_h_sqrt_h: f64,
+    /// Accelerometer bias random walk (ug/sqrt(h)). Default 5.
+    pub accel_bias_walk_ug_sqrt_h: f64,
+    /// Initial one-sigma position uncertainty (m). Default 1.
+    pub initial_position_std_m: f64,
+    /// Initial one-sigma velocity uncertainty (m/s). Default 0.1.
+    pub initial_velocity_std_m_s: f64,
+    /// Initial one-sigma roll/pitch uncertainty (deg). Default 0.05.
+    pub initial_tilt_std_deg: f64,
+    /// Initial one-sigma heading uncertainty (deg). Default 0.1.
+    pub initial_heading_std_deg: f64,
+    /// Initial one-sigma gyro bias (deg/h). Default 0.05.
+    pub initial_gyro_bias_std_deg_h: f64,
+    /// Initial one-sigma accelerometer bias (ug). Default 100.
+    pub initial_accel_bias_std_ug: f64,
+    /// DVL velocity noise per axis when the device gives none (m/s). Default 0.02.
+    pub dvl_velocity_std_m_s: f64,
+    /// DVL mounting angles roll, pitch, yaw of the DVL frame w.r.t. the body (deg). Default 0.
+    pub dvl_mount_deg: [f64; 3],
+    /// DVL scale factor (1 = none). Default 1.
+    pub dvl_scale_factor: f64,
+    /// DVL position in the body frame (m). Default 0.
+    pub dvl_lever_arm_m: [f64; 3],
+    /// Depth noise (m). Default 0.1.
+    pub depth_std_m: f64,
+    /// Gate for DVL velocity (chi-square, 3 dof). Default 16.27 (99.9 %).
+    pub dvl_gate_chi2: f64,
+    /// Gate for depth (chi-square, 1 dof). Default 10.83 (99.9 %).
+    pub depth_gate_chi2: f64,
+    /// Covariance propagation interval (s). Default 0.05.
+    pub covariance_interval_s: f64,
+    /// Without a fused DVL velocity for this long the mode is degraded (s). Default 5.
+    pub dvl_timeout_s: f64,
+    /// IMU gaps longer than this many nominal intervals are bridged and counted (count). Default 10.
+    pub imu_max_gap_intervals: f64,
+}
+
+impl Default for NavConfig {
+    fn default() -> Self {
+        NavConfig {
+            gyro_angle_random_walk_deg_sqrt_h: 0.005,
+            accel_velocity_random_walk_m_s_sqrt_h: 0.002,
+            gyro_bias_walk_deg_h_sqrt_h: 0.002,
+            accel_bias_walk_ug_sqrt_h: 5.0,
+            initial_position_std_m: 1.0,
+            initial_velocity_std_m_s: 0.1,
+            initial_tilt_std_deg: 0.05,
+            initial_heading_std_deg: 0.1,
+            initial_gyro_bias_std_deg_h: 0.05,
+            initial_accel_bias_std_ug: 100.0,
+            dvl_velocity_std_m_s: 0.02,
+            dvl_mount_deg: [0.0; 3],
+            dvl_scale_factor: 1.0,
+            dvl_lever_arm_m: [0.0; 3],
+            depth_std_m: 0.1,
+            dvl_gate_chi2: GATE_CHI2_3DOF,
+            depth_gate_chi2: GATE_CHI2_1DOF,
+            covariance_interval_s: 0.05,
+            dvl_timeout_s: 5.0,
+            imu_max_gap_intervals: 10.0,
+        }
+    }
+}
+
+const DEG: f64 = std::f64::consts::PI / 180.0;
+const UG: f64 = 9.806_65e-6;
+
+/// Counters of inputs the navigator skipped.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct NavCounters {
+    pub imu_samples: u64,
+    /// IMU samples with a non-increasing time stamp (skipped).
+    pub imu_out_of_order: u64,
+    /// IMU samples with non-finite or invalid values (skipped).
+    pub imu_invalid: u64,
+    /// IMU gaps longer than the allowed number of intervals (bridged with one long step).
+    pub imu_gaps: u64,
+    pub dvl_fused: u64,
+    pub dvl_rejected: u64,
+    pub dvl_invalid: u64,
+    pub depth_fused: u64,
+    pub depth_rejected: u64,
+    pub depth_invalid: u64,
+    /// Aiding messages older than the navigation state (skipped).
+    pub aid_late: u64,
+}
+
+/// The navigator.
+#[derive(Debug, Clone)]
+pub struct Navigator {
+    cfg: NavConfig,
+    noise: ProcessNoise,
+    sd: Strapdown,
+    kf: ErrorFilter,
+    gyro_bias: Vector3<f64>,
+    accel_bias: Vector3<f64>,
+    c_dvl_to_body: Matrix3<f64>,
+    last_imu_ns: Option<u64>,
+    last_omega_ib: Vector3<f64>,
+    pending_dt: f64,
+    pending_f_ned: Vector3<f64>,
+    last_dvl_fused_s: f64,
+    solution_sequence: u64,
+    diagnostics_sequence: u64,
+    pub counters: NavCounters,
+}
+
+impl Navigator {
+    /// Starts navigating from a known initial state (alignment is a separate mode).
+    pub fn new(cfg: NavConfig, initial: NavState) -> Navigator {
+        let mut p0 = StateVector::zeros();
+        for i in 0..3 {
+            p0[filter::POS + i] = cfg.initial_position_std_m.powi(2);
+            p0[filter::VEL + i] = cfg.initial_velocity_std_m_s.powi(2);
+            p0[filter::BG + i] = (cfg.initial_gyro_bias_std_deg_h * DEG / 3600.0).powi(2);
+            p0[filter::BA + i] = (cfg.initial_accel_bias_std_ug * UG).powi(2);
+        }
+        p0[filter::ATT] = (cfg.initial_tilt_std_deg * DEG).powi(2);
+        p0[filter::ATT + 1] = (cfg.initial_tilt_std_deg * DEG).powi(2);
+        p0[filter::ATT + 2] = (cfg.initial_heading_std_deg * DEG).powi(2);
+        let noise = ProcessNoise {
+            gyro_noise: cfg.gyro_angle_random_walk_deg_sqrt_h * DEG / 60.0,
+            accel_noise: cfg.accel_velocity_random_walk_m_s_sqrt_h / 60.0,
+            gyro_bias_walk: cfg.gyro_bias_walk_deg_h_sqrt_h * DEG / 3600.0 / 60.0,
+            accel_bias_walk: cfg.accel_bias_walk_ug_sqrt_h * UG / 60.0,
+        };
+        let [r, p, y] = cfg.dvl_mount_deg;
+        let c_dvl_to_body = Rotation3::from_euler_angles(r * DEG, p * DEG, y * DEG).into_inner();
+        Navigator {
+            noise,
+            sd: Strapdown::new(initial),
+            kf: ErrorFilter::new(&p0),
+            gyro_bias: Vector3::zeros(),
+            accel_bias: Vector3::zeros(),
+            c_dvl_to_body,
+            last_imu_ns: None,
+            last_omega_ib: Vector3::zeros(),
+            pending_dt: 0.0,
+            pending_f_ned: Vector3::zeros(),
+            last_dvl_fused_s: initial.time_s,
+            solution_sequence: 0,
+            diagnostics_sequence: 0,
+            counters: NavCounters::default(),
+            cfg,
+        }
+    }
+
+    pub fn state(&self) -> &NavState {
+        &self.sd.state
+    }
+
+    pub fn covariance(&self) -> &filter::Covariance {
+        &self.kf.p
+    }
+
+    /// Processes one IMU sample; returns the solution at its time, or `None` if it was skipped.
+    pub fn on_imu(&mut self, m: &ImuSampleV1) -> Option<NavSolutionV1> {
+        let t_ns = m.host_time_ns;
+        let finite = m
+            .angular
+            .iter()
+            .chain(m.specific.iter())
+            .all(|x| x.is_finite());
+        let valid_bits = ImuSampleV1::STATUS_GYRO_VALID | ImuSampleV1::STATUS_ACCEL_VALID;
+        if !finite
+            || m.status & valid_bits != valid_bits
+            || !(m.interval_s > 0.0 && m.interval_s < 1.0)
+        {
+            self.counters.imu_invalid += 1;
+            return None;
+        }
+        let state_ns = (self.sd.state.time_s * 1e9).round() as u64;
+        let last = self.last_imu_ns.unwrap_or(state_ns);
+        if t_ns <= last {
+            self.counters.imu_out_of_order += 1;
+            return None;
+        }
+        let mut dt = (t_ns - last) as f64 * 1e-9;
+        if dt > self.cfg.imu_max_gap_intervals * m.interval_s {
+            self.counters.imu_gaps += 1;
+            // Bridge the gap with the sample's own rates over its nominal interval only; the
+            // missing time still passes (the state time follows the message time).
+            dt = dt.min(1.0);
+        }
+        self.last_imu_ns = Some(t_ns);
+        self.counters.imu_samples += 1;
+        let increments = m.status & ImuSampleV1::STATUS_INCREMENTS != 0;
+        let (w, f) = if increments {
+            (
+                Vector3::from(m.angular) / m.interval_s,
+                Vector3::from(m.specific) / m.interval_s,
+            )
+        } else {
+            (Vector3::from(m.angular), Vector3::from(m.specific))
+        };
+        let w = w - self.gyro_bias;
+        let f = f - self.accel_bias;
+        self.last_omega_ib = w;
+        let c_before = self.sd.state.c_body_to_ned();
+        self.sd.propagate(&ImuIncrement {
+            dtheta: w * dt,
+            dv: f * dt,
+            dt,
+        });
+        self.sd.state.time_s = t_ns as f64 * 1e-9;
+        self.pending_f_ned += c_before * f * dt;
+        self.pending_dt += dt;
+        if self.pending_dt >= self.cfg.covariance_interval_s {
+            self.propagate_covariance();
+        }
+        Some(self.solution(t_ns))
+    }
+
+    fn propagate_covariance(&mut self) {
+        if self.pending_dt <= 0.0 {
+            return;
+        }
+        let s = &self.sd.state;
+        let inputs = DynamicsInputs {
+            c_body_to_ned: s.c_body_to_ned(),
+            specific_force_ned: self.pending_f_ned / self.pending_dt,
+            velocity_ned: s.velocity_ned,
+            latitude_rad: s.position.latitude_rad,
+            height_m: s.position.height_m,
+        };
+        let f = filter::dynamics_matrix(&inputs);
+        self.kf
+            .predict(&f, &inputs.c_body_to_ned, &self.noise, self.pending_dt);
+        self.pending_dt = 0.0;
+        self.pending_f_ned = Vector3::zeros();
+    }
+
+    /// Applies an error-state estimate to the navigation state and the biases.
+    fn correct(&mut self, dx: &StateVector) {
+        let s = &mut self.sd.state;
+        let dp = Vector3::new(dx[filter::POS], dx[filter::POS + 1], dx[filter::POS + 2]);
+        s.position = earth::offset_position(&s.position, &(-dp));
+        s.velocity_ned -= Vector3::new(dx[filter::VEL], dx[filter::VEL + 1], dx[filter::VEL + 2]);
+        let phi = Vector3::new(dx[filter::ATT], dx[filter::ATT + 1], dx[filter::ATT + 2]);
+        s.q_body_to_ned = UnitQuaternion::from_scaled_axis(phi) * s.q_body_to_ned;
+        self.gyro_bias += Vector3::new(dx[filter::BG], dx[filter::BG + 1], dx[filter::BG + 2]);
+        self.accel_bias += Vector3::new(dx[filter::BA], dx[filter::BA + 1], dx[filter::BA + 2]);
+    }
+
+    fn aid_is_late(&mut self, t_ns: u64) -> bool {
+        // An aid more than one covariance interval older than the state is not fused.
+        let state_ns = (self.sd.state.time_s * 1e9).round() as i128;
+        let late =
+            (state_ns - i128::from(t_ns)) as f64 * 1e-9 > self.cfg.covariance_interval_s.max(0.05);
+        if late {
+            self.counters.aid_late += 1;
+        }
+        late
+    }
+
+    fn diagnostics(&mut self, t_ns: u64, source: AidSource) -> AidDiagnosticsV1 {
+        self.diagnostics_sequence += 1;
+        AidDiagnosticsV1 {
+            host_time_ns: t_ns,
+            sequence: self.diagnostics_sequence,
+            source: source as u32,
+            ..Default::default()
+        }
+    }
+
+    /// Fuses a DVL velocity: `h(x) = s C_b^d (C_n^b v^n + omega_eb^b x l)`.
+    pub fn on_dvl(&mut self, m: &DvlVelocityV1) -> AidDiagnosticsV1 {
+        let t_ns = m.validity_time_ns;
+        let mut d = self.diagnostics(t_ns, AidSource::DvlVelocity);
+        d.dimension = 3;
+        let z = Vector3::from(m.velocity_dvl_m_s);
+        if m.validity & DvlVelocityV1::VALID_VELOCITY == 0
+            || !z.iter().all(|x| x.is_finite())
+            || z.norm() > 20.0
+        {
+            self.counters.dvl_invalid += 1;
+            d.flags = AidDiagnosticsV1::FLAG_REJECTED;
+            return d;
+        }
+        if self.aid_is_late(t_ns) {
+            d.flags = AidDiagnosticsV1::FLAG_REJECTED;
+            return d;
+        }
+        self.propagate_covariance();
+        let s = &self.sd.state;
+        let c_bn = s.c_body_to_ned();
+        let c_nb = c_bn.transpose();
+        let c_bd = self.c_dvl_to_body.transpose();
+        let scale = self.cfg.dvl_scale_factor;
+        let lever = Vector3::from(self.cfg.dvl_lever_arm_m);
+        let w_ie_b = c_nb * earth::earth_rate_ned(s.position.latitude_rad);
+        let w_eb = self.last_omega_ib - w_ie_b;
+        let v_b = c_nb * s.velocity_ned;
+        let predicted = scale * c_bd * (v_b + w_eb.cross(&lever));
+        let y = predicted - z;
+        let mut h = SMatrix::<f64, 3, { filter::N }>::zeros();
+        let a = scale * c_bd * c_nb;
+        h.fixed_view_mut::<3, 3>(0, filter::VEL).copy_from(&a);
+        let v = s.velocity_ned;
+        let skew_v = Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0);
+        h.fixed_view_mut::<3, 3>(0, filter::ATT)
+            .copy_from(&(-a * skew_v));
+        let sigma = if m.validity & DvlVelocityV1::VALID_STD != 0 {
+            Vector3::from(m.velocity_std_m_s).map(|x| x.max(1e-3))
+        } else {
+            Vector3::repeat(self.cfg.dvl_velocity_std_m_s)
+        };
+        let r = Matrix3::from_diagonal(&sigma.map(|x| x * x));
+        d.observation = z.into();
+        d.observation_variance = r.diagonal().into();
+        match self.kf.update(&y, &h, &r, self.cfg.dvl_gate_chi2) {
+            Ok((dx, rep)) => {
+                d.innovation = (-rep.innovation).into();
+                d.innovation_variance = rep.innovation_variance.into();
+                d.test_ratio = rep.test_ratio;
+                if rep.fused {
+                    self.correct(&dx);
+                    self.counters.dvl_fused += 1;
+                    self.last_dvl_fused_s = t_ns as f64 * 1e-9;
+                    d.flags = AidDiagnosticsV1::FLAG_FUSED;
+                } else {
+                    self.counters.dvl_rejected += 1;
+                    d.flags = AidDiagnosticsV1::FLAG_REJECTED;
+                }
+            }
+            Err(_) => {
+                self.counters.dvl_rejected += 1;
+                d.flags = AidDiagnosticsV1::FLAG_REJECTED;
+            }
+        }
+        d
+    }
+
+    /// Fuses a depth measurement: `h(x) = -height`.
+    pub fn on_depth(&mut self, m: &DepthV1) -> AidDiagnosticsV1 {
+        let t_ns = m.host_time_ns;
+        let mut d = self.diagnostics(t_ns, AidSource::Depth);
+        d.dimension = 1;
+        if m.validity & DepthV1::VALID_DEPTH == 0
+            || !m.depth_m.is_finite()
+            || !(-10.0..=11000.0).contains(&m.depth_m)
+        {
+            self.counters.depth_invalid += 1;
+            d.flags = AidDiagnosticsV1::FLAG_REJECTED;
+            return d;
+        }
+        if self.aid_is_late(t_ns) {
+            d.flags = AidDiagnosticsV1::FLAG_REJECTED;
+            return d;
+        }
+        self.propagate_covariance();
+        let y = SVector::<f64, 1>::new(-self.sd.state.position.height_m - m.depth_m);
+        let mut h = SMatrix::<f64, 1, { filter::N }>::zeros();
+        h[(0, filter::POS + 2)] = 1.0;
+        let r = SMatrix::<f64, 1, 1>::new(self.cfg.depth_std_m.powi(2));
+        d.observation[0] = m.depth_m;
+        d.observation_variance[0] = r[(0, 0)];
+        match self.kf.update(&y, &h, &r, self.cfg.depth_gate_chi2) {
+            Ok((dx, rep)) => {
+                d.innovation[0] = -rep.innovation[0];
+                d.innovation_variance[0] = rep.innovation_variance[0];
+                d.test_ratio = rep.test_ratio;
+                if rep.fused {
+                    self.correct(&dx);
+                    self.counters.depth_fused += 1;
+                    d.flags = AidDiagnosticsV1::FLAG_FUSED;
+                } else {
+                    self.counters.depth_rejected += 1;
+                    d.flags = AidDiagnosticsV1::FLAG_REJECTED;
+                }
+            }
+            Err(_) => {
+                self.counters.depth_rejected += 1;
+                d.flags = AidDiagnosticsV1::FLAG_REJECTED;
+            }
+        }
+        d
+    }
+
+    /// The navigation solution now.
+    pub fn solution(&mut self, t_ns: u64) -> NavSolutionV1 {
+        self.solution_sequence += 1;
+        let s = &self.sd.state;
+        let q = s.q_body_to_ned;
+        let p = &self.kf.p;
+        let std = |i: usize| {
+            [
+                p[(i, i)].sqrt(),
+                p[(i + 1, i + 1)].sqrt(),
+                p[(i + 2, i + 2)].sqrt(),
+            ]
+        };
+        let dvl_ok = s.time_s - self.last_dvl_fused_s <= self.cfg.dvl_timeout_s;
+        let mut health = NavSolutionV1::HEALTH_IMU;
+        if dvl_ok {
+            health |= NavSolutionV1::HEALTH_DVL;
+        }
+        NavSolutionV1 {
+            host_time_ns: t_ns,
+            sequence: self.solution_sequence,
+            latitude_rad: s.position.latitude_rad,
+            longitude_rad: s.position.longitude_rad,
+            height_m: s.position.height_m,
+            velocity_ned_m_s: s.velocity_ned.into(),
+            quaternion_body_to_ned: [q.w, q.i, q.j, q.k],
+            euler_rad: s.euler(),
+            position_std_ned_m: std(filter::POS),
+            velocity_std_ned_m_s: std(filter::VEL),
+            attitude_std_rad: std(filter::ATT),
+            gyro_bias_rad_s: self.gyro_bias.into(),
+            accel_bias_m_s2: self.accel_bias.into(),
+            mode: if dvl_ok {
+                NavMode::Navigating
+            } else {
+                NavMode::Degraded
+            } as u32,
+            sensor_health: health,
+        }
+    }
+}
+
+/// Convenience: the initial state from a geodetic position, NED velocity and Euler angles.
+pub fn initial_state(
+    time_s: f64,
+    position: Geodetic,
+    velocity_ned: [f64; 3],
+    euler_rad: [f64; 3],
+) -> NavState {
+    NavState {
+        time_s,
+        position,
+        velocity_ned: Vector3::from(velocity_ned),
+        q_body_to_ned: UnitQuaternion::from_euler_angles(euler_rad[0], euler_rad[1], euler_rad[2]),
+    }
+}

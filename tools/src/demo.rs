@@ -1,0 +1,177 @@
+//! `auvnav demo`: simulates a voyage and runs it through the navigation core (the same
+//! [`auvnav_core::navigator::Navigator`] the daemon and replay use), then prints the accuracy
+//! against the simulated truth. Until the daemon and drivers exist, this runs in one process.
+
+use crate::accuracy::{Accuracy, AccuracyTracker};
+use crate::log::LogMessage;
+use crate::sim::{self, SimConfig, SimSummary, scenario::Scenario};
+use anyhow::Context;
+use auvnav_core::earth::Geodetic;
+use auvnav_core::navigator::{NavConfig, NavCounters, Navigator, initial_state};
+use auvnav_shm_schema::{NavSolutionV1, TruthStateV1};
+use serde::Serialize;
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct DemoArgs {
+    /// Simulated seconds (default: the whole scenario).
+    #[arg(long)]
+    pub seconds: Option<f64>,
+    /// Built-in scenario or scenario file.
+    #[arg(long, default_value = "lawnmower")]
+    pub scenario: String,
+    /// Random seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Write the simulated log (sim.mcap) and the navigation solution (nav.csv) here.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Print the result as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Serialize)]
+pub struct DemoResult {
+    pub scenario: String,
+    pub seed: u64,
+    pub simulated: SimSummary,
+    pub accuracy: Accuracy,
+    pub counters: NavCounters,
+    pub wall_seconds: f64,
+}
+
+/// Runs a simulated voyage through the navigator; optionally writes the solution as CSV rows.
+pub fn run_voyage(
+    cfg: &SimConfig,
+    nav_cfg: NavConfig,
+    mut csv: Option<&mut dyn std::io::Write>,
+) -> anyhow::Result<(SimSummary, Accuracy, NavCounters)> {
+    let mut messages = Vec::new();
+    let summary = sim::simulate(cfg, |m| {
+        messages.push(*m);
+        Ok(())
+    })?;
+    let mut nav: Option<Navigator> = None;
+    let mut tracker = AccuracyTracker::new(100.0);
+    let mut last: Option<NavSolutionV1> = None;
+    if let Some(w) = csv.as_deref_mut() {
+        writeln!(w, "{}", crate::csv::NAV_HEADER)?;
+    }
+    for m in &messages {
+        match m {
+            LogMessage::Truth(t) => match nav.as_mut() {
+                None => nav = Some(Navigator::new(nav_cfg.clone(), truth_initial_state(t))),
+                Some(_) => {
+                    if let Some(sol) = last.filter(|s| s.host_time_ns == t.host_time_ns) {
+                        tracker.add(&sol, t);
+                    }
+                }
+            },
+            LogMessage::Imu(x) => {
+                if let Some(sol) = nav.as_mut().and_then(|n| n.on_imu(x)) {
+                    if let Some(w) = csv.as_deref_mut() {
+                        crate::csv::write_nav_row(w, &sol)?;
+                    }
+                    last = Some(sol);
+                }
+            }
+            LogMessage::Dvl(x) => {
+                if let Some(n) = nav.as_mut() {
+                    n.on_dvl(x);
+                }
+            }
+            LogMessage::Depth(x) => {
+                if let Some(n) = nav.as_mut() {
+                    n.on_depth(x);
+                }
+            }
+            _ => {}
+        }
+    }
+    let counters = nav.map(|n| n.counters).unwrap_or_default();
+    Ok((summary, tracker.result(), counters))
+}
+
+/// The initial navigation state taken from a truth record.
+pub fn truth_initial_state(t: &TruthStateV1) -> auvnav_core::strapdown::NavState {
+    initial_state(
+        t.host_time_ns as f64 * 1e-9,
+        Geodetic {
+            latitude_rad: t.latitude_rad,
+            longitude_rad: t.longitude_rad,
+            height_m: t.height_m,
+        },
+        t.velocity_ned_m_s,
+        t.euler_rad,
+    )
+}
+
+pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
+    let scenario = Scenario::load(&a.scenario)?;
+    let effects = scenario.effects()?;
+    let cfg = SimConfig {
+        scenario,
+        effects,
+        seed: a.seed,
+        duration_s: a.seconds,
+    };
+    let start = std::time::Instant::now();
+    let mut csv_file = None;
+    if let Some(dir) = &a.out {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        sim::simulate_to_log(&cfg, &dir.join("sim.mcap"))?;
+        let f = std::fs::File::create(dir.join("nav.csv")).context("creating nav.csv")?;
+        csv_file = Some(std::io::BufWriter::new(f));
+    }
+    let (simulated, accuracy, counters) = run_voyage(
+        &cfg,
+        NavConfig::default(),
+        csv_file.as_mut().map(|w| w as &mut dyn std::io::Write),
+    )?;
+    if let Some(mut w) = csv_file {
+        std::io::Write::flush(&mut w)?;
+    }
+    let result = DemoResult {
+        scenario: cfg.scenario.name.clone(),
+        seed: cfg.seed,
+        simulated,
+        accuracy,
+        counters,
+        wall_seconds: start.elapsed().as_secs_f64(),
+    };
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&result)?);
+    } else {
+        let acc = &result.accuracy;
+        println!(
+            "auvnav demo: scenario {} (seed {}), {:.0} s simulated, {:.0} m travelled",
+            result.scenario, result.seed, result.simulated.duration_s, acc.distance_travelled_m
+        );
+        println!("  INS + DVL + depth through the navigation core:");
+        println!(
+            "  horizontal error: final {:.2} m, max {:.2} m, CEP50 {:.2} m",
+            acc.horizontal_error_final_m, acc.horizontal_error_max_m, acc.horizontal_error_cep50_m
+        );
+        println!(
+            "  error/distance CEP50 {:.3} %, heading error RMS {:.4} deg",
+            acc.error_per_distance_cep50_percent, acc.heading_error_rms_deg
+        );
+        println!(
+            "  fused: {} DVL ({} rejected), {} depth ({} rejected); {:.2} s wall",
+            result.counters.dvl_fused,
+            result.counters.dvl_rejected,
+            result.counters.depth_fused,
+            result.counters.depth_rejected,
+            result.wall_seconds
+        );
+        if let Some(dir) = &a.out {
+            println!(
+                "  log: {}  solution: {}",
+                dir.join("sim.mcap").display(),
+                dir.join("nav.csv").display()
+            );
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,512 @@
+//! Sensor models: each turns the true state into one message, applying its named effects.
+
+use super::effects::Effects;
+use super::rng::Rng;
+use super::scenario::Station;
+use super::trajectory::TruthSample;
+use auvnav_core::earth::{self, Geodetic};
+use auvnav_shm_schema::{
+    DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, UsblFixV1,
+};
+use nalgebra::{Matrix3, Matrix3x4, Rotation3, Vector3};
+
+const DEG_PER_H: f64 = std::f64::consts::PI / 180.0 / 3600.0;
+const MICRO_G: f64 = 9.806_65e-6;
+/// Sound speed the acoustic devices assume (m/s).
+pub const ASSUMED_SOUND_SPEED: f64 = 1500.0;
+/// Water density the depth sensor assumes (kg/m^3).
+pub const ASSUMED_DENSITY: f64 = 1025.0;
+/// Standard gravity used by the depth sensor to convert pressure (m/s^2).
+const STANDARD_GRAVITY: f64 = 9.806_65;
+
+fn ns(t: f64) -> u64 {
+    (t * 1e9).round().max(0.0) as u64
+}
+
+fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
+}
+
+/// The IMU: biases (constant and Gauss-Markov), white noise, scale factor, misalignment and
+/// quantisation of the increments. Outputs rates (interval averages) stamped at the interval end.
+pub struct ImuModel {
+    rng: Rng,
+    dt: f64,
+    gyro_error: Matrix3<f64>,
+    accel_error: Matrix3<f64>,
+    gyro_bias: Vector3<f64>,
+    accel_bias: Vector3<f64>,
+    gyro_gm: Vector3<f64>,
+    accel_gm: Vector3<f64>,
+    gm_decay: f64,
+    gyro_gm_drive: f64,
+    accel_gm_drive: f64,
+    gyro_white: f64,
+    accel_white: f64,
+    gyro_quantum: f64,
+    accel_quantum: f64,
+    gyro_residual: Vector3<f64>,
+    accel_residual: Vector3<f64>,
+    sequence: u64,
+}
+
+impl ImuModel {
+    pub fn new(e: &Effects, seed: u64, rate_hz: f64) -> ImuModel {
+        let dt = 1.0 / rate_hz;
+        let sf = |v: [f64; 3]| Matrix3::from_diagonal(&Vector3::from(v).map(|x| 1.0 + x * 1e-6));
+        let mis = |v: [f64; 3]| Matrix3::identity() - skew(&(Vector3::from(v) * 1e-3));
+        let tau = e.imu_bias_correlation_time;
+        let decay = (-dt / tau).exp();
+        let drive = (1.0 - decay * decay).sqrt();
+        let mut rng = Rng::new(seed, "imu");
+        let g_gm = e.imu_gyro_bias_instability * DEG_PER_H;
+        let a_gm = e.imu_accel_bias_instability * MICRO_G;
+        // The Gauss-Markov biases start in their stationary distribution.
+        let gyro_gm = Vector3::new(rng.gauss(g_gm), rng.gauss(g_gm), rng.gauss(g_gm));
+        let accel_gm = Vector3::new(rng.gauss(a_gm), rng.gauss(a_gm), rng.gauss(a_gm));
+        ImuModel {
+            rng,
+            dt,
+            gyro_error: sf(e.imu_gyro_scale_factor) * mis(e.imu_gyro_misalignment),
+            accel_error: sf(e.imu_accel_scale_factor) * mis(e.imu_accel_misalignment),
+            gyro_bias: Vector3::from(e.imu_gyro_bias) * DEG_PER_H,
+            accel_bias: Vector3::from(e.imu_accel_bias) * MICRO_G,
+            gyro_gm,
+            accel_gm,
+            gm_decay: decay,
+            gyro_gm_drive: g_gm * drive,
+            accel_gm_drive: a_gm * drive,
+            // ARW deg/sqrt(h) -> rad/sqrt(s); per-sample rate sigma = N / sqrt(dt).
+            gyro_white: e.imu_angle_random_walk * std::f64::consts::PI / 180.0 / 60.0 / dt.sqrt(),
+            accel_white: e.imu_velocity_random_walk / 60.0 / dt.sqrt(),
+            gyro_quantum: e.imu_gyro_quantum,
+            accel_quantum: e.imu_accel_quantum,
+            gyro_residual: Vector3::zeros(),
+            accel_residual: Vector3::zeros(),
+            sequence: 0,
+        }
+    }
+
+    /// One sample from the true interval-average rate and specific force, stamped at `t`.
+    pub fn sample(&mut self, t: f64, omega_ib: &Vector3<f64>, f_b: &Vector3<f64>) -> ImuSampleV1 {
+        let r = &mut self.rng;
+        let gyro_noise = Vector3::new(
+            r.gauss(self.gyro_white),
+            r.gauss(self.gyro_white),
+            r.gauss(self.gyro_white),
+        );
+        let accel_noise = Vector3::new(
+            r.gauss(self.accel_white),
+            r.gauss(self.accel_white),
+            r.gauss(self.accel_white),
+        );
+        let mut w = self.gyro_error * omega_ib + self.gyro_bias + self.gyro_gm + gyro_noise;
+        let mut f = self.accel_error * f_b + self.accel_bias + self.accel_gm + accel_noise;
+        for i in 0..3 {
+            self.gyro_gm[i] = self.gm_decay * self.gyro_gm[i] + r.gauss(self.gyro_gm_drive);
+            self.accel_gm[i] = self.gm_decay * self.accel_gm[i] + r.gauss(self.accel_gm_drive);
+        }
+        w = quantise(w, self.dt, self.gyro_quantum, &mut self.gyro_residual);
+        f = quantise(f, self.dt, self.accel_quantum, &mut self.accel_residual);
+        self.sequence += 1;
+        ImuSampleV1 {
+            host_time_ns: ns(t),
+            device_time_ns: ns(t),
+            sequence: self.sequence,
+            angular: w.into(),
+            specific: f.into(),
+            interval_s: self.dt,
+            temperature_c: 20.0,
+            status: ImuSampleV1::STATUS_GYRO_VALID
+                | ImuSampleV1::STATUS_ACCEL_VALID
+                | ImuSampleV1::STATUS_TEMPERATURE_VALID
+                | ImuSampleV1::STATUS_DEVICE_TIME_VALID,
+        }
+    }
+}
+
+/// Quantises the increment `rate * dt` to `quantum`, carrying the residual; returns the rate.
+fn quantise(
+    rate: Vector3<f64>,
+    dt: f64,
+    quantum: f64,
+    residual: &mut Vector3<f64>,
+) -> Vector3<f64> {
+    if quantum <= 0.0 {
+        return rate;
+    }
+    let inc = rate * dt + *residual;
+    let q = inc.map(|x| (x / quantum).round() * quantum);
+    *residual = inc - q;
+    q / dt
+}
+
+/// Half-angle of the DVL beams from the instrument z axis (rad).
+pub const DVL_BEAM_ANGLE: f64 = 30.0 * std::f64::consts::PI / 180.0;
+
+/// Unit vectors of the four Janus beams in the DVL frame (pointing from the transducer to the
+/// bottom): beam i at azimuth 45 + 90 i deg from DVL x, 30 deg from DVL z.
+pub fn dvl_beam_directions() -> [Vector3<f64>; 4] {
+    let (s, c) = DVL_BEAM_ANGLE.sin_cos();
+    std::array::from_fn(|i| {
+        let az = (45.0 + 90.0 * i as f64).to_radians();
+        Vector3::new(s * az.cos(), s * az.sin(), c)
+    })
+}
+
+/// The DVL: beam velocities with noise, least-squares instrument velocity, mounting rotation,
+/// lever arm, scale factor, sound speed, time offset and loss of bottom lock.
+pub struct DvlModel {
+    rng: Rng,
+    beams: [Vector3<f64>; 4],
+    pinv: Matrix3x4<f64>,
+    c_body_to_dvl: Matrix3<f64>,
+    lever_arm: Vector3<f64>,
+    scale: f64,
+    noise: f64,
+    velocity_std: Vector3<f64>,
+    loss_rate: f64,
+    loss_duration: f64,
+    max_altitude: f64,
+    seabed_depth: f64,
+    lost_until: f64,
+    pub time_offset: f64,
+    sequence: u64,
+}
+
+impl DvlModel {
+    pub fn new(e: &Effects, seed: u64, seabed_depth_m: f64) -> DvlModel {
+        let beams = dvl_beam_directions();
+        let b = nalgebra::Matrix4x3::from_rows(&beams.map(|v| v.transpose()));
+        let btb_inv = (b.transpose() * b)
+            .try_inverse()
+            .unwrap_or_else(Matrix3::identity);
+        let pinv = btb_inv * b.transpose();
+        let c_dvl_to_body = Rotation3::from_euler_angles(
+            e.dvl_mount_roll.to_radians(),
+            e.dvl_mount_pitch.to_radians(),
+            e.dvl_mount_yaw.to_radians(),
+        );
+        DvlModel {
+            rng: Rng::new(seed, "dvl"),
+            beams,
+            pinv,
+            c_body_to_dvl: c_dvl_to_body.inverse().into_inner(),
+            lever_arm: Vector3::from(e.dvl_lever_arm),
+            scale: e.dvl_scale_factor * ASSUMED_SOUND_SPEED / e.dvl_sound_speed,
+            noise: e.dvl_noise,
+            velocity_std: btb_inv.diagonal().map(f64::sqrt) * e.dvl_noise,
+            loss_rate: e.dvl_bottom_lock_loss_rate,
+            loss_duration: e.dvl_bottom_lock_loss_duration,
+            max_altitude: e.dvl_max_altitude,
+            seabed_depth: seabed_depth_m,
+            lost_until: f64::NEG_INFINITY,
+            time_offset: e.dvl_time_offset,
+            sequence: 0,
+        }
+    }
+
+    /// One ping stamped at `t`; `truth` is the state at the time of validity `t - time_offset`.
+    pub fn sample(&mut self, t: f64, interval: f64, truth: &TruthSample) -> DvlVelocityV1 {
+        self.sequence += 1;
+        let mut m = DvlVelocityV1 {
+            host_time_ns: ns(t),
+            device_time_ns: ns(t),
+            sequence: self.sequence,
+            validity_time_ns: ns(t),
+            sound_speed_m_s: ASSUMED_SOUND_SPEED,
+            validity: DvlVelocityV1::VALID_SOUND_SPEED | DvlVelocityV1::VALID_DEVICE_TIME,
+            ..Default::default()
+        };
+        let altitude = self.seabed_depth + truth.position.height_m;
+        if self.loss_rate > 0.0
+            && t >= self.lost_until
+            && self.rng.uniform() < self.loss_rate * interval
+        {
+            self.lost_until = t + self.loss_duration;
+        }
+        let locked = t >= self.lost_until && altitude > 0.5 && altitude <= self.max_altitude;
+        if !locked {
+            return m;
+        }
+        let v_body = truth.c_body_to_ned.transpose() * truth.velocity_ned
+            + truth.omega_eb_body.cross(&self.lever_arm);
+        let v_dvl = self.c_body_to_dvl * v_body * self.scale;
+        let c_dvl_to_ned = truth.c_body_to_ned * self.c_body_to_dvl.transpose();
+        let mut y = nalgebra::Vector4::zeros();
+        for (i, b) in self.beams.iter().enumerate() {
+            y[i] = b.dot(&v_dvl) + self.rng.gauss(self.noise);
+            m.beam_velocity_m_s[i] = y[i];
+            let down = (c_dvl_to_ned * b).z;
+            m.validity |= DvlVelocityV1::VALID_BEAM_VELOCITY << i;
+            if down > 0.1 {
+                m.beam_range_m[i] = altitude / down;
+                m.validity |= DvlVelocityV1::VALID_BEAM_RANGE << i;
+            }
+        }
+        let v = self.pinv * y;
+        m.velocity_dvl_m_s = v.into();
+        m.altitude_m = altitude;
+        m.beams_used = 4;
+        m.validity |= DvlVelocityV1::VALID_VELOCITY | DvlVelocityV1::VALID_ALTITUDE;
+        if self.noise > 0.0 {
+            m.velocity_std_m_s = self.velocity_std.into();
+            m.validity |= DvlVelocityV1::VALID_STD;
+        }
+        m
+    }
+}
+
+/// Array-frame positions of the four hydrophones: 1 and 3 on array x, 2 and 4 on array y.
+pub fn hydrophone_positions(baseline_m: f64) -> [Vector3<f64>; 4] {
+    let h = baseline_m / 2.0;
+    [
+        Vector3::new(h, 0.0, 0.0),
+        Vector3::new(0.0, h, 0.0),
+        Vector3::new(-h, 0.0, 0.0),
+        Vector3::new(0.0, -h, 0.0),
+    ]
+}
+
+/// The docking-station USBL: slant range from the central transducer, range differences across
+/// the hydrophone baselines, angles and the device's own position fix, from the true geometry
+/// (true array position and yaw = surveyed + the offset and yaw effects).
+pub struct UsblModel {
+    rng: Rng,
+    true_array: Geodetic,
+    c_ned_to_array: Matrix3<f64>,
+    hydrophones: [Vector3<f64>; 4],
+    responder: Vector3<f64>,
+    range_scale: f64,
+    e: Effects,
+    sequence: u64,
+}
+
+/// Outlier indicator for tests and diagnostics: which fixes got a multipath error.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct UsblTruth {
+    pub outlier_m: f64,
+}
+
+impl UsblModel {
+    /// `surveyed`: the array position as surveyed (the filter's belief).
+    pub fn new(e: &Effects, seed: u64, station: &Station, surveyed: &Geodetic) -> UsblModel {
+        let true_array = earth::offset_position(surveyed, &Vector3::from(e.usbl_array_offset));
+        let yaw = (station.yaw_deg + e.usbl_array_yaw).to_radians();
+        let c_array_to_ned = Rotation3::from_euler_angles(0.0, 0.0, yaw);
+        UsblModel {
+            rng: Rng::new(seed, "usbl"),
+            true_array,
+            c_ned_to_array: c_array_to_ned.inverse().into_inner(),
+            hydrophones: hydrophone_positions(station.baseline_m),
+            responder: Vector3::from(station.responder_lever_arm_m),
+            range_scale: ASSUMED_SOUND_SPEED / e.usbl_sound_speed,
+            e: e.clone(),
+            sequence: 0,
+        }
+    }
+
+    /// The true responder position in the true array frame (m).
+    pub fn responder_in_array(&self, truth: &TruthSample) -> Vector3<f64> {
+        let to_auv = earth::ned_offset(&self.true_array, &truth.position);
+        self.c_ned_to_array * (to_auv + truth.c_body_to_ned * self.responder)
+    }
+
+    /// A fix for the geometry of `truth` (at validity time), delivered at `t_delivered`; `None`
+    /// outside the coverage.
+    pub fn sample(
+        &mut self,
+        t_delivered: f64,
+        truth: &TruthSample,
+    ) -> Option<(UsblFixV1, UsblTruth)> {
+        let p = self.responder_in_array(truth);
+        let range = p.norm();
+        if range > self.e.usbl_max_range {
+            return None;
+        }
+        let ranges = self.hydrophones.map(|h| (p - h).norm());
+        let e = &self.e;
+        let r = &mut self.rng;
+        let mut outlier = 0.0;
+        if e.usbl_outlier_fraction > 0.0 && r.uniform() < e.usbl_outlier_fraction {
+            let [lo, hi] = e.usbl_outlier_range;
+            outlier = lo + (hi - lo) * r.uniform();
+        }
+        let slant = range * self.range_scale + outlier + r.gauss(e.usbl_range_noise);
+        let d13 =
+            (ranges[0] - ranges[2]) * self.range_scale + r.gauss(e.usbl_range_difference_noise);
+        let d24 =
+            (ranges[1] - ranges[3]) * self.range_scale + r.gauss(e.usbl_range_difference_noise);
+        let angle_noise = e.usbl_angle_noise.to_radians();
+        let az = p.y.atan2(p.x) + r.gauss(angle_noise);
+        let el = (-p.z).atan2(p.x.hypot(p.y)) + r.gauss(angle_noise);
+        self.sequence += 1;
+        let t = ns(t_delivered);
+        let fix = UsblFixV1 {
+            host_time_ns: t,
+            device_time_ns: t,
+            sequence: self.sequence,
+            validity_time_ns: t,
+            slant_range_m: slant,
+            travel_time_s: slant / ASSUMED_SOUND_SPEED,
+            range_difference_m: [d13, d24],
+            azimuth_rad: az,
+            elevation_rad: el,
+            position_array_m: [
+                slant * el.cos() * az.cos(),
+                slant * el.cos() * az.sin(),
+                -slant * el.sin(),
+            ],
+            sound_speed_m_s: ASSUMED_SOUND_SPEED,
+            rssi_db: [(-60.0 - 20.0 * range.max(1.0).log10()) as f32; 4],
+            fit_error_m: 0.0,
+            validity: UsblFixV1::VALID_RANGE
+                | UsblFixV1::VALID_RANGE_DIFFERENCES
+                | UsblFixV1::VALID_ANGLES
+                | UsblFixV1::VALID_POSITION
+                | UsblFixV1::VALID_SOUND_SPEED
+                | UsblFixV1::VALID_RSSI
+                | UsblFixV1::VALID_DEVICE_TIME,
+            beacon_id: 1,
+            reserved: 0,
+        };
+        Some((fix, UsblTruth { outlier_m: outlier }))
+    }
+}
+
+/// Pressure depth: density error, bias, noise.
+pub struct DepthModel {
+    rng: Rng,
+    e: Effects,
+    sequence: u64,
+}
+
+impl DepthModel {
+    pub fn new(e: &Effects, seed: u64) -> DepthModel {
+        DepthModel {
+            rng: Rng::new(seed, "depth"),
+            e: e.clone(),
+            sequence: 0,
+        }
+    }
+
+    pub fn sample(&mut self, t: f64, truth: &TruthSample) -> DepthV1 {
+        let depth = -truth.position.height_m;
+        let pressure = self.e.depth_density * STANDARD_GRAVITY * depth;
+        let measured = pressure / (ASSUMED_DENSITY * STANDARD_GRAVITY)
+            + self.e.depth_bias
+            + self.rng.gauss(self.e.depth_noise);
+        self.sequence += 1;
+        DepthV1 {
+            host_time_ns: ns(t),
+            device_time_ns: ns(t),
+            sequence: self.sequence,
+            depth_m: measured,
+            pressure_pa: measured * ASSUMED_DENSITY * STANDARD_GRAVITY,
+            water_density_kg_m3: ASSUMED_DENSITY,
+            temperature_c: 12.0,
+            validity: DepthV1::VALID_DEPTH
+                | DepthV1::VALID_PRESSURE
+                | DepthV1::VALID_TEMPERATURE
+                | DepthV1::VALID_DEVICE_TIME,
+        }
+    }
+}
+
+/// Magnetometer: Earth field (declination, inclination, intensity), soft and hard iron, noise.
+pub struct MagnetometerModel {
+    rng: Rng,
+    field_ned_ut: Vector3<f64>,
+    soft_iron: Matrix3<f64>,
+    hard_iron_ut: Vector3<f64>,
+    noise_ut: f64,
+    sequence: u64,
+}
+
+impl MagnetometerModel {
+    pub fn new(e: &Effects, seed: u64) -> MagnetometerModel {
+        let (dec, inc) = (
+            e.mag_declination.to_radians(),
+            e.mag_inclination.to_radians(),
+        );
+        MagnetometerModel {
+            rng: Rng::new(seed, "magnetometer"),
+            field_ned_ut: e.mag_intensity
+                * Vector3::new(inc.cos() * dec.cos(), inc.cos() * dec.sin(), inc.sin()),
+            soft_iron: Matrix3::from_row_slice(&e.mag_soft_iron),
+            hard_iron_ut: Vector3::from(e.mag_hard_iron),
+            noise_ut: e.mag_noise,
+            sequence: 0,
+        }
+    }
+
+    pub fn sample(&mut self, t: f64, truth: &TruthSample) -> MagnetometerV1 {
+        let b = truth.c_body_to_ned.transpose() * self.field_ned_ut;
+        let r = &mut self.rng;
+        let noise = Vector3::new(
+            r.gauss(self.noise_ut),
+            r.gauss(self.noise_ut),
+            r.gauss(self.noise_ut),
+        );
+        let m = self.soft_iron * b + self.hard_iron_ut + noise;
+        self.sequence += 1;
+        MagnetometerV1 {
+            host_time_ns: ns(t),
+            device_time_ns: ns(t),
+            sequence: self.sequence,
+            field_t: (m * 1e-6).into(),
+            temperature_c: 20.0,
+            validity: MagnetometerV1::VALID_FIELD
+                | MagnetometerV1::VALID_TEMPERATURE
+                | MagnetometerV1::VALID_DEVICE_TIME,
+        }
+    }
+}
+
+/// Surface GNSS: fixes only while the antenna is above water (depth below 0.5 m).
+pub struct GnssModel {
+    rng: Rng,
+    noise_m: f64,
+    sequence: u64,
+}
+
+/// Depth above which the GNSS antenna is out of the water (m).
+pub const GNSS_MAX_DEPTH_M: f64 = 0.5;
+
+impl GnssModel {
+    pub fn new(e: &Effects, seed: u64) -> GnssModel {
+        GnssModel {
+            rng: Rng::new(seed, "gnss"),
+            noise_m: e.gnss_noise,
+            sequence: 0,
+        }
+    }
+
+    pub fn sample(&mut self, t: f64, truth: &TruthSample) -> Option<GnssFixV1> {
+        if -truth.position.height_m > GNSS_MAX_DEPTH_M {
+            return None;
+        }
+        let d = Vector3::new(
+            self.rng.gauss(self.noise_m),
+            self.rng.gauss(self.noise_m),
+            0.0,
+        );
+        let p = earth::offset_position(&truth.position, &d);
+        self.sequence += 1;
+        Some(GnssFixV1 {
+            host_time_ns: ns(t),
+            device_time_ns: ns(t),
+            sequence: self.sequence,
+            latitude_rad: p.latitude_rad,
+            longitude_rad: p.longitude_rad,
+            height_m: p.height_m,
+            velocity_ned_m_s: truth.velocity_ned.into(),
+            horizontal_std_m: self.noise_m.max(0.01),
+            vertical_std_m: 2.0 * self.noise_m.max(0.01),
+            satellites: 10,
+            validity: GnssFixV1::VALID_POSITION
+                | GnssFixV1::VALID_HEIGHT
+                | GnssFixV1::VALID_VELOCITY,
+        })
+    }
+}
