@@ -1,0 +1,182 @@
+//! The `auvnav` program driven as a user would: simulation determinism, bad input, third-party
+//! readability of the logs, the demo. Every child process runs under a watchdog.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+const WATCHDOG: Duration = Duration::from_secs(300);
+
+fn run_with_watchdog(cmd: &mut Command) -> Output {
+    let mut child = cmd
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn");
+    let start = Instant::now();
+    loop {
+        if child.try_wait().expect("wait").is_some() {
+            return child.wait_with_output().expect("output");
+        }
+        if start.elapsed() > WATCHDOG {
+            let _ = child.kill();
+            panic!("watchdog: {cmd:?} still running after {WATCHDOG:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn auvnav(args: &[&str]) -> Output {
+    run_with_watchdog(Command::new(env!("CARGO_BIN_EXE_auvnav")).args(args))
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("auvnav-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("temp dir");
+    d
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn no_files_in(dir: &Path) -> bool {
+    std::fs::read_dir(dir).map(|mut d| d.next().is_none()).unwrap_or(true)
+}
+
+#[test]
+fn identical_seeds_give_identical_files() {
+    let dir = temp_dir("determinism");
+    let p = |n: &str| dir.join(n).to_string_lossy().into_owned();
+    for (name, seed) in [("a.mcap", "1"), ("b.mcap", "1"), ("c.mcap", "2")] {
+        let o = auvnav(&["sim", "--scenario", "docking", "--seed", seed, "--duration", "60", "--out", &p(name)]);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let read = |n: &str| std::fs::read(dir.join(n)).expect("read");
+    assert_eq!(read("a.mcap"), read("b.mcap"), "same seed, same bytes");
+    assert_ne!(read("a.mcap"), read("c.mcap"), "another seed, other noise");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_input_gives_a_clear_error_and_no_file() {
+    let dir = temp_dir("bad-input");
+    let out = dir.join("x.mcap").to_string_lossy().into_owned();
+    let cases: Vec<(Vec<String>, &[&str])> = vec![
+        (vec!["--effect".into(), "dvl.scale=1.004".into()], &["dvl.scale", "--list-effects"]),
+        (vec!["--effect".into(), "dvl.scale_factor=1.5".into()], &["dvl.scale_factor", "0.9..=1.1"]),
+        (vec!["--effect".into(), "dvl.lever_arm=1,2".into()], &["dvl.lever_arm", "3"]),
+        (vec!["--effect".into(), "dvl.scale_factor=abc".into()], &["dvl.scale_factor"]),
+        (vec!["--scenario".into(), "nonexistent".into()], &["nonexistent", "--list-scenarios"]),
+        (vec!["--duration=-5".into()], &["--duration", "allowed range"]),
+    ];
+    for (extra, needles) in cases {
+        let mut args = vec!["sim".to_string(), "--out".into(), out.clone()];
+        args.extend(extra.clone());
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = auvnav(&args);
+        assert!(!o.status.success(), "{extra:?} must fail");
+        let err = stderr(&o);
+        for n in needles {
+            assert!(err.contains(n), "{extra:?}: {err:?} should mention {n:?}");
+        }
+        assert!(no_files_in(&dir), "{extra:?} left a file behind");
+    }
+    // Malformed and out-of-range scenario files.
+    let bad_files = [
+        ("malformed.toml", "name = \"x\"\n[start\nlatitude_deg = 1\n", "malformed.toml"),
+        ("unknown_key.toml", &std::fs::read_to_string(scenario_path("straight")).expect("read").replace("[start]", "colour = 1\n[start]"), "colour"),
+        ("range.toml", &std::fs::read_to_string(scenario_path("straight")).expect("read").replace("latitude_deg = 31.0", "latitude_deg = 95.0"), "start.latitude_deg"),
+    ];
+    let scen_dir = temp_dir("bad-scenarios");
+    for (name, text, needle) in bad_files {
+        let path = scen_dir.join(name);
+        std::fs::write(&path, text).expect("write");
+        let o = auvnav(&["sim", "--scenario", &path.to_string_lossy(), "--out", &out]);
+        assert!(!o.status.success(), "{name} must fail");
+        assert!(stderr(&o).contains(needle), "{name}: {}", stderr(&o));
+        assert!(no_files_in(&dir), "{name} left a file behind");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&scen_dir);
+}
+
+fn scenario_path(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("src/sim/scenarios/{name}.toml"))
+}
+
+#[test]
+fn lists_effects_and_scenarios() {
+    let o = auvnav(&["sim", "--list-effects"]);
+    assert!(o.status.success());
+    let text = String::from_utf8_lossy(&o.stdout);
+    for name in ["dvl.scale_factor", "dvl.mount_yaw", "dvl.lever_arm", "dvl.time_offset", "usbl.array_yaw", "depth.density", "mag.hard_iron"] {
+        assert!(text.contains(name), "{name} missing from --list-effects");
+    }
+    let o = auvnav(&["sim", "--list-scenarios"]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    for name in ["straight", "turns", "depth_changes", "lawnmower", "docking", "moored"] {
+        assert!(text.contains(name), "{name} missing from --list-scenarios");
+    }
+}
+
+/// `python3` with the `mcap` and `mcap-ros2-support` packages, or why not.
+fn python_reader() -> Result<(), String> {
+    let o = Command::new("python3")
+        .args(["-c", "import mcap, mcap_ros2.decoder"])
+        .output()
+        .map_err(|e| format!("python3 not runnable: {e}"))?;
+    if o.status.success() {
+        Ok(())
+    } else {
+        Err(format!("python packages mcap / mcap-ros2-support missing: {}", stderr(&o)))
+    }
+}
+
+#[test]
+fn every_scenario_log_is_decoded_by_the_python_mcap_reader() {
+    if let Err(why) = python_reader() {
+        if std::env::var("CI").is_ok_and(|v| v == "true") {
+            panic!("under CI the third-party reader must be installed: {why}");
+        }
+        eprintln!("SKIPPED: {why} (pip install mcap mcap-ros2-support)");
+        return;
+    }
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/python/read_log.py");
+    let dir = temp_dir("python");
+    for name in ["straight", "turns", "depth_changes", "lawnmower", "docking", "moored"] {
+        let out = dir.join(format!("{name}.mcap"));
+        let o = auvnav(&["sim", "--scenario", name, "--seed", "1", "--out", &out.to_string_lossy()]);
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        let o = run_with_watchdog(Command::new("python3").arg(&script).arg(&out));
+        let report = String::from_utf8_lossy(&o.stdout);
+        assert!(o.status.success(), "{name}: {report} {}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_str(&report).expect("json");
+        for topic in ["imu", "dvl", "depth", "magnetometer", "truth"] {
+            assert!(v["messages"][topic].as_u64().unwrap_or(0) > 0, "{name}: no {topic} decoded: {report}");
+        }
+        if name == "docking" {
+            assert!(v["messages"]["usbl"].as_u64().unwrap_or(0) > 0, "docking: no usbl: {report}");
+        }
+        assert_eq!(v["header"]["producer"], "auvnav sim");
+        // Decoded by the third party with the field names of our schema.
+        assert!(v["first"]["imu"]["angular"].is_array(), "{report}");
+        std::fs::remove_file(&out).expect("remove");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn demo_runs_a_voyage_through_the_core_and_reports_accuracy() {
+    let o = auvnav(&["demo", "--seconds", "300", "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let acc = &v["accuracy"];
+    let travelled = acc["distance_travelled_m"].as_f64().expect("distance");
+    let final_err = acc["horizontal_error_final_m"].as_f64().expect("error");
+    assert!(travelled > 500.0, "{v}");
+    // Navigation-grade INS with DVL: well under 1 % of distance travelled.
+    assert!(final_err < 0.01 * travelled, "{v}");
+    assert!(v["counters"]["dvl_fused"].as_u64().unwrap_or(0) > 1000, "{v}");
+}
