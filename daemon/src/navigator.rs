@@ -296,6 +296,35 @@ impl Navigator {
         }
     }
 
+    /// Copies an update's innovation into the diagnostics (as observation minus prediction) and
+    /// applies the correction when it was fused; returns whether it was.
+    fn finish_update<const M: usize>(
+        &mut self,
+        result: Result<(StateVector, filter::UpdateReport<M>), filter::FilterError>,
+        d: &mut AidDiagnosticsV1,
+    ) -> bool {
+        match result {
+            Ok((dx, rep)) => {
+                for i in 0..M.min(3) {
+                    d.innovation[i] = -rep.innovation[i];
+                    d.innovation_variance[i] = rep.innovation_variance[i];
+                }
+                d.test_ratio = rep.test_ratio;
+                if rep.fused {
+                    self.correct(&dx);
+                    d.flags = AidDiagnosticsV1::FLAG_FUSED;
+                } else {
+                    d.flags = AidDiagnosticsV1::FLAG_REJECTED;
+                }
+                rep.fused
+            }
+            Err(_) => {
+                d.flags = AidDiagnosticsV1::FLAG_REJECTED;
+                false
+            }
+        }
+    }
+
     /// Fuses a DVL velocity: `h(x) = s C_b^d (C_n^b v^n + omega_eb^b x l)`.
     pub fn on_dvl(&mut self, m: &DvlVelocityV1) -> AidDiagnosticsV1 {
         let t_ns = m.validity_time_ns;
@@ -341,25 +370,12 @@ impl Navigator {
         let r = Matrix3::from_diagonal(&sigma.map(|x| x * x));
         d.observation = z.into();
         d.observation_variance = r.diagonal().into();
-        match self.kf.update(&y, &h, &r, self.cfg.dvl_gate_chi2) {
-            Ok((dx, rep)) => {
-                d.innovation = (-rep.innovation).into();
-                d.innovation_variance = rep.innovation_variance.into();
-                d.test_ratio = rep.test_ratio;
-                if rep.fused {
-                    self.correct(&dx);
-                    self.counters.dvl_fused += 1;
-                    self.last_dvl_fused_s = t_ns as f64 * 1e-9;
-                    d.flags = AidDiagnosticsV1::FLAG_FUSED;
-                } else {
-                    self.counters.dvl_rejected += 1;
-                    d.flags = AidDiagnosticsV1::FLAG_REJECTED;
-                }
-            }
-            Err(_) => {
-                self.counters.dvl_rejected += 1;
-                d.flags = AidDiagnosticsV1::FLAG_REJECTED;
-            }
+        let result = self.kf.update(&y, &h, &r, self.cfg.dvl_gate_chi2);
+        if self.finish_update(result, &mut d) {
+            self.counters.dvl_fused += 1;
+            self.last_dvl_fused_s = t_ns as f64 * 1e-9;
+        } else {
+            self.counters.dvl_rejected += 1;
         }
         d
     }
@@ -388,24 +404,11 @@ impl Navigator {
         let r = SMatrix::<f64, 1, 1>::new(self.cfg.depth_std_m.powi(2));
         d.observation[0] = m.depth_m;
         d.observation_variance[0] = r[(0, 0)];
-        match self.kf.update(&y, &h, &r, self.cfg.depth_gate_chi2) {
-            Ok((dx, rep)) => {
-                d.innovation[0] = -rep.innovation[0];
-                d.innovation_variance[0] = rep.innovation_variance[0];
-                d.test_ratio = rep.test_ratio;
-                if rep.fused {
-                    self.correct(&dx);
-                    self.counters.depth_fused += 1;
-                    d.flags = AidDiagnosticsV1::FLAG_FUSED;
-                } else {
-                    self.counters.depth_rejected += 1;
-                    d.flags = AidDiagnosticsV1::FLAG_REJECTED;
-                }
-            }
-            Err(_) => {
-                self.counters.depth_rejected += 1;
-                d.flags = AidDiagnosticsV1::FLAG_REJECTED;
-            }
+        let result = self.kf.update(&y, &h, &r, self.cfg.depth_gate_chi2);
+        if self.finish_update(result, &mut d) {
+            self.counters.depth_fused += 1;
+        } else {
+            self.counters.depth_rejected += 1;
         }
         d
     }

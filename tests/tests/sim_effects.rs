@@ -66,20 +66,40 @@ fn static_imu_measures_gravity_and_earth_rate_within_the_configured_noise() {
         .collect();
     let n = imu.len() as f64;
     let dt = imu[0].interval_s;
-    let mean = |f: &dyn Fn(&ImuSampleV1) -> Vector3<f64>| imu.iter().map(f).sum::<Vector3<f64>>() / n;
+    let mean =
+        |f: &dyn Fn(&ImuSampleV1) -> Vector3<f64>| imu.iter().map(f).sum::<Vector3<f64>>() / n;
     let w_mean = mean(&|x| Vector3::from(x.angular));
     let f_mean = mean(&|x| Vector3::from(x.specific));
     // Standard deviation of a mean over T seconds of white noise with density N: N / sqrt(T).
     let sigma_w = arw_deg_sqrt_h.to_radians() / 60.0 / duration.sqrt();
     let sigma_f = vrw_m_s_sqrt_h / 60.0 / duration.sqrt();
     for i in 0..3 {
-        assert!((w_mean[i] - w_expected[i]).abs() < 4.0 * sigma_w, "gyro axis {i}: {} vs {}", w_mean[i], w_expected[i]);
-        assert!((f_mean[i] - f_expected[i]).abs() < 4.0 * sigma_f, "accel axis {i}: {} vs {}", f_mean[i], f_expected[i]);
+        assert!(
+            (w_mean[i] - w_expected[i]).abs() < 4.0 * sigma_w,
+            "gyro axis {i}: {} vs {}",
+            w_mean[i],
+            w_expected[i]
+        );
+        assert!(
+            (f_mean[i] - f_expected[i]).abs() < 4.0 * sigma_f,
+            "accel axis {i}: {} vs {}",
+            f_mean[i],
+            f_expected[i]
+        );
     }
     // The per-sample spread is the configured density over sqrt(dt).
-    let var_w = imu.iter().map(|x| (x.angular[0] - w_mean[0]).powi(2)).sum::<f64>() / n;
+    let var_w = imu
+        .iter()
+        .map(|x| (x.angular[0] - w_mean[0]).powi(2))
+        .sum::<f64>()
+        / n;
     let expected_sd = arw_deg_sqrt_h.to_radians() / 60.0 / dt.sqrt();
-    assert!((var_w.sqrt() / expected_sd - 1.0).abs() < 0.02, "{} vs {}", var_w.sqrt(), expected_sd);
+    assert!(
+        (var_w.sqrt() / expected_sd - 1.0).abs() < 0.02,
+        "{} vs {}",
+        var_w.sqrt(),
+        expected_sd
+    );
     // The Earth rate is resolved: its magnitude is 15.04 deg/h.
     assert!((w_mean.norm() / earth::OMEGA_IE - 1.0).abs() < 0.01);
 }
@@ -167,14 +187,32 @@ fn usbl_range_differences_match_the_array_geometry() {
                     // The true array is yawed by the error; express the direction in its frame.
                     let yaw = station.yaw_rad + yaw_error_deg.to_radians();
                     let (s, c) = yaw.sin_cos();
-                    let r_a = Vector3::new(c * r_ned.x + s * r_ned.y, -s * r_ned.x + c * r_ned.y, r_ned.z);
+                    let r_a = Vector3::new(
+                        c * r_ned.x + s * r_ned.y,
+                        -s * r_ned.x + c * r_ned.y,
+                        r_ned.z,
+                    );
                     let range = r_a.norm();
                     let u = r_a / range;
                     // Far field: R1 - R3 = -(h1 - h3) . u = -b u_x, error below b^2 / range.
                     let tol = b * b / range + 1e-9;
-                    assert!((f.slant_range_m - range).abs() < 1e-6, "{} vs {range}", f.slant_range_m);
-                    assert!((f.range_difference_m[0] + b * u.x).abs() < tol, "{:?} vs {}", f.range_difference_m, -b * u.x);
-                    assert!((f.range_difference_m[1] + b * u.y).abs() < tol, "{:?} vs {}", f.range_difference_m, -b * u.y);
+                    assert!(
+                        (f.slant_range_m - range).abs() < 1e-6,
+                        "{} vs {range}",
+                        f.slant_range_m
+                    );
+                    assert!(
+                        (f.range_difference_m[0] + b * u.x).abs() < tol,
+                        "{:?} vs {}",
+                        f.range_difference_m,
+                        -b * u.x
+                    );
+                    assert!(
+                        (f.range_difference_m[1] + b * u.y).abs() < tol,
+                        "{:?} vs {}",
+                        f.range_difference_m,
+                        -b * u.y
+                    );
                     fixes += 1;
                 }
                 _ => {}

@@ -42,7 +42,9 @@ fn stderr(o: &Output) -> String {
 }
 
 fn no_files_in(dir: &Path) -> bool {
-    std::fs::read_dir(dir).map(|mut d| d.next().is_none()).unwrap_or(true)
+    std::fs::read_dir(dir)
+        .map(|mut d| d.next().is_none())
+        .unwrap_or(true)
 }
 
 #[test]
@@ -50,7 +52,17 @@ fn identical_seeds_give_identical_files() {
     let dir = temp_dir("determinism");
     let p = |n: &str| dir.join(n).to_string_lossy().into_owned();
     for (name, seed) in [("a.mcap", "1"), ("b.mcap", "1"), ("c.mcap", "2")] {
-        let o = auvnav(&["sim", "--scenario", "docking", "--seed", seed, "--duration", "60", "--out", &p(name)]);
+        let o = auvnav(&[
+            "sim",
+            "--scenario",
+            "docking",
+            "--seed",
+            seed,
+            "--duration",
+            "60",
+            "--out",
+            &p(name),
+        ]);
         assert!(o.status.success(), "{}", stderr(&o));
     }
     let read = |n: &str| std::fs::read(dir.join(n)).expect("read");
@@ -64,12 +76,30 @@ fn bad_input_gives_a_clear_error_and_no_file() {
     let dir = temp_dir("bad-input");
     let out = dir.join("x.mcap").to_string_lossy().into_owned();
     let cases: Vec<(Vec<String>, &[&str])> = vec![
-        (vec!["--effect".into(), "dvl.scale=1.004".into()], &["dvl.scale", "--list-effects"]),
-        (vec!["--effect".into(), "dvl.scale_factor=1.5".into()], &["dvl.scale_factor", "0.9..=1.1"]),
-        (vec!["--effect".into(), "dvl.lever_arm=1,2".into()], &["dvl.lever_arm", "3"]),
-        (vec!["--effect".into(), "dvl.scale_factor=abc".into()], &["dvl.scale_factor"]),
-        (vec!["--scenario".into(), "nonexistent".into()], &["nonexistent", "--list-scenarios"]),
-        (vec!["--duration=-5".into()], &["--duration", "allowed range"]),
+        (
+            vec!["--effect".into(), "dvl.scale=1.004".into()],
+            &["dvl.scale", "--list-effects"],
+        ),
+        (
+            vec!["--effect".into(), "dvl.scale_factor=1.5".into()],
+            &["dvl.scale_factor", "0.9..=1.1"],
+        ),
+        (
+            vec!["--effect".into(), "dvl.lever_arm=1,2".into()],
+            &["dvl.lever_arm", "3"],
+        ),
+        (
+            vec!["--effect".into(), "dvl.scale_factor=abc".into()],
+            &["dvl.scale_factor"],
+        ),
+        (
+            vec!["--scenario".into(), "nonexistent".into()],
+            &["nonexistent", "--list-scenarios"],
+        ),
+        (
+            vec!["--duration=-5".into()],
+            &["--duration", "allowed range"],
+        ),
     ];
     for (extra, needles) in cases {
         let mut args = vec!["sim".to_string(), "--out".into(), out.clone()];
@@ -85,9 +115,25 @@ fn bad_input_gives_a_clear_error_and_no_file() {
     }
     // Malformed and out-of-range scenario files.
     let bad_files = [
-        ("malformed.toml", "name = \"x\"\n[start\nlatitude_deg = 1\n", "malformed.toml"),
-        ("unknown_key.toml", &std::fs::read_to_string(scenario_path("straight")).expect("read").replace("[start]", "colour = 1\n[start]"), "colour"),
-        ("range.toml", &std::fs::read_to_string(scenario_path("straight")).expect("read").replace("latitude_deg = 31.0", "latitude_deg = 95.0"), "start.latitude_deg"),
+        (
+            "malformed.toml",
+            "name = \"x\"\n[start\nlatitude_deg = 1\n",
+            "malformed.toml",
+        ),
+        (
+            "unknown_key.toml",
+            &std::fs::read_to_string(scenario_path("straight"))
+                .expect("read")
+                .replace("[start]", "colour = 1\n[start]"),
+            "colour",
+        ),
+        (
+            "range.toml",
+            &std::fs::read_to_string(scenario_path("straight"))
+                .expect("read")
+                .replace("latitude_deg = 31.0", "latitude_deg = 95.0"),
+            "start.latitude_deg",
+        ),
     ];
     let scen_dir = temp_dir("bad-scenarios");
     for (name, text, needle) in bad_files {
@@ -111,12 +157,27 @@ fn lists_effects_and_scenarios() {
     let o = auvnav(&["sim", "--list-effects"]);
     assert!(o.status.success());
     let text = String::from_utf8_lossy(&o.stdout);
-    for name in ["dvl.scale_factor", "dvl.mount_yaw", "dvl.lever_arm", "dvl.time_offset", "usbl.array_yaw", "depth.density", "mag.hard_iron"] {
+    for name in [
+        "dvl.scale_factor",
+        "dvl.mount_yaw",
+        "dvl.lever_arm",
+        "dvl.time_offset",
+        "usbl.array_yaw",
+        "depth.density",
+        "mag.hard_iron",
+    ] {
         assert!(text.contains(name), "{name} missing from --list-effects");
     }
     let o = auvnav(&["sim", "--list-scenarios"]);
     let text = String::from_utf8_lossy(&o.stdout);
-    for name in ["straight", "turns", "depth_changes", "lawnmower", "docking", "moored"] {
+    for name in [
+        "straight",
+        "turns",
+        "depth_changes",
+        "lawnmower",
+        "docking",
+        "moored",
+    ] {
         assert!(text.contains(name), "{name} missing from --list-scenarios");
     }
 }
@@ -130,7 +191,10 @@ fn python_reader() -> Result<(), String> {
     if o.status.success() {
         Ok(())
     } else {
-        Err(format!("python packages mcap / mcap-ros2-support missing: {}", stderr(&o)))
+        Err(format!(
+            "python packages mcap / mcap-ros2-support missing: {}",
+            stderr(&o)
+        ))
     }
 }
 
@@ -145,19 +209,40 @@ fn every_scenario_log_is_decoded_by_the_python_mcap_reader() {
     }
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/python/read_log.py");
     let dir = temp_dir("python");
-    for name in ["straight", "turns", "depth_changes", "lawnmower", "docking", "moored"] {
+    for name in [
+        "straight",
+        "turns",
+        "depth_changes",
+        "lawnmower",
+        "docking",
+        "moored",
+    ] {
         let out = dir.join(format!("{name}.mcap"));
-        let o = auvnav(&["sim", "--scenario", name, "--seed", "1", "--out", &out.to_string_lossy()]);
+        let o = auvnav(&[
+            "sim",
+            "--scenario",
+            name,
+            "--seed",
+            "1",
+            "--out",
+            &out.to_string_lossy(),
+        ]);
         assert!(o.status.success(), "{name}: {}", stderr(&o));
         let o = run_with_watchdog(Command::new("python3").arg(&script).arg(&out));
         let report = String::from_utf8_lossy(&o.stdout);
         assert!(o.status.success(), "{name}: {report} {}", stderr(&o));
         let v: serde_json::Value = serde_json::from_str(&report).expect("json");
         for topic in ["imu", "dvl", "depth", "magnetometer", "truth"] {
-            assert!(v["messages"][topic].as_u64().unwrap_or(0) > 0, "{name}: no {topic} decoded: {report}");
+            assert!(
+                v["messages"][topic].as_u64().unwrap_or(0) > 0,
+                "{name}: no {topic} decoded: {report}"
+            );
         }
         if name == "docking" {
-            assert!(v["messages"]["usbl"].as_u64().unwrap_or(0) > 0, "docking: no usbl: {report}");
+            assert!(
+                v["messages"]["usbl"].as_u64().unwrap_or(0) > 0,
+                "docking: no usbl: {report}"
+            );
         }
         assert_eq!(v["header"]["producer"], "auvnav sim");
         // Decoded by the third party with the field names of our schema.
@@ -178,5 +263,8 @@ fn demo_runs_a_voyage_through_the_core_and_reports_accuracy() {
     assert!(travelled > 500.0, "{v}");
     // Navigation-grade INS with DVL: well under 1 % of distance travelled.
     assert!(final_err < 0.01 * travelled, "{v}");
-    assert!(v["counters"]["dvl_fused"].as_u64().unwrap_or(0) > 1000, "{v}");
+    assert!(
+        v["counters"]["dvl_fused"].as_u64().unwrap_or(0) > 1000,
+        "{v}"
+    );
 }
