@@ -183,7 +183,7 @@ fn usbl_range_differences_match_the_array_geometry() {
                         height_m: t.height_m,
                     };
                     let r_ned = earth::ned_offset(&station.position, &pos)
-                        + c_body_to_ned(&t) * Vector3::from(station.responder_lever_arm_m);
+                        + c_body_to_ned(t) * Vector3::from(station.responder_lever_arm_m);
                     // The true array is yawed by the error; express the direction in its frame.
                     let yaw = station.yaw_rad + yaw_error_deg.to_radians();
                     let (s, c) = yaw.sin_cos();
