@@ -344,24 +344,14 @@ impl Navigator {
             return d;
         }
         self.propagate_covariance();
-        let s = &self.sd.state;
-        let c_bn = s.c_body_to_ned();
-        let c_nb = c_bn.transpose();
-        let c_bd = self.c_dvl_to_body.transpose();
-        let scale = self.cfg.dvl_scale_factor;
-        let lever = Vector3::from(self.cfg.dvl_lever_arm_m);
-        let w_ie_b = c_nb * earth::earth_rate_ned(s.position.latitude_rad);
-        let w_eb = self.last_omega_ib - w_ie_b;
-        let v_b = c_nb * s.velocity_ned;
-        let predicted = scale * c_bd * (v_b + w_eb.cross(&lever));
+        let (predicted, h) = dvl_model(
+            &self.sd.state,
+            &self.last_omega_ib,
+            &self.c_dvl_to_body,
+            self.cfg.dvl_scale_factor,
+            &Vector3::from(self.cfg.dvl_lever_arm_m),
+        );
         let y = predicted - z;
-        let mut h = SMatrix::<f64, 3, { filter::N }>::zeros();
-        let a = scale * c_bd * c_nb;
-        h.fixed_view_mut::<3, 3>(0, filter::VEL).copy_from(&a);
-        let v = s.velocity_ned;
-        let skew_v = Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0);
-        h.fixed_view_mut::<3, 3>(0, filter::ATT)
-            .copy_from(&(-a * skew_v));
         let sigma = if m.validity & DvlVelocityV1::VALID_STD != 0 {
             Vector3::from(m.velocity_std_m_s).map(|x| x.max(1e-3))
         } else {
@@ -453,6 +443,33 @@ impl Navigator {
             sensor_health: health,
         }
     }
+}
+
+/// The DVL measurement model: predicted velocity in the DVL frame,
+/// `h = s C_b^d (C_n^b v^n + omega_eb^b x l)`, and its Jacobian w.r.t. the error state
+/// (`dh/d dv = s C_b^d C_n^b`, `dh/d phi = -s C_b^d C_n^b [v x]`; the lever-arm term's dependence on
+/// the gyro bias is neglected). `omega_ib_body` is the bias-corrected angular rate.
+pub fn dvl_model(
+    s: &NavState,
+    omega_ib_body: &Vector3<f64>,
+    c_dvl_to_body: &Matrix3<f64>,
+    scale: f64,
+    lever_arm_body: &Vector3<f64>,
+) -> (Vector3<f64>, SMatrix<f64, 3, { filter::N }>) {
+    let c_nb = s.c_body_to_ned().transpose();
+    let c_bd = c_dvl_to_body.transpose();
+    let w_ie_b = c_nb * earth::earth_rate_ned(s.position.latitude_rad);
+    let w_eb = omega_ib_body - w_ie_b;
+    let v_b = c_nb * s.velocity_ned;
+    let predicted = scale * c_bd * (v_b + w_eb.cross(lever_arm_body));
+    let mut h = SMatrix::<f64, 3, { filter::N }>::zeros();
+    let a = scale * c_bd * c_nb;
+    h.fixed_view_mut::<3, 3>(0, filter::VEL).copy_from(&a);
+    let v = s.velocity_ned;
+    let skew_v = Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0);
+    h.fixed_view_mut::<3, 3>(0, filter::ATT)
+        .copy_from(&(-a * skew_v));
+    (predicted, h)
 }
 
 /// Convenience: the initial state from a geodetic position, NED velocity and Euler angles.

@@ -5,8 +5,9 @@
 //! 1. coning-corrected rotation vector: `phi = dtheta + (dtheta_prev x dtheta) / 12`;
 //! 2. sculling-corrected velocity increment: `dv_b = dv + (dtheta x dv) / 2
 //!    + (dtheta_prev x dv + dv_prev x dtheta) / 12` (single-sample, previous-interval form);
-//! 3. velocity: `v += C_b^n(t_{k-1}) dv_b + (g^n - (2 omega_ie^n + omega_en^n) x v) dt`, with the
-//!    Coriolis and gravity terms evaluated at the start of the interval;
+//! 3. velocity: `v += C_b^n(t_{k-1}) dv_b - (zeta x C_b^n(t_{k-1}) dv) / 2 + (g^n - (2 omega_ie^n
+//!    plus omega_en^n) x v) dt`; the second term accounts for the rotation of the navigation frame
+//!    during the interval (zeta below); Coriolis and gravity are taken at the interval start;
 //! 4. attitude: `q_b^n(t_k) = exp(-zeta) * q_b^n(t_{k-1}) * exp(phi)`, `zeta = (omega_ie^n +
 //!    omega_en^n) dt` (rotation of the navigation frame);
 //! 5. position: latitude, longitude, height from the mean of the old and new velocity.
@@ -78,9 +79,10 @@ impl Strapdown {
         let w_en = earth::transport_rate_ned(lat, h, &v_old);
         let g = earth::gravity_ned(lat, h);
         let c_bn = s.c_body_to_ned();
-        let v_new = v_old + c_bn * dv_b + (g - (2.0 * w_ie + w_en).cross(&v_old)) * dt;
-
         let zeta = (w_ie + w_en) * dt;
+        let dv_n = c_bn * dv_b - 0.5 * zeta.cross(&(c_bn * inc.dv));
+        let v_new = v_old + dv_n + (g - (2.0 * w_ie + w_en).cross(&v_old)) * dt;
+
         s.q_body_to_ned = UnitQuaternion::from_scaled_axis(-zeta)
             * s.q_body_to_ned
             * UnitQuaternion::from_scaled_axis(phi);
