@@ -209,14 +209,8 @@ fn every_scenario_log_is_decoded_by_the_python_mcap_reader() {
     }
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/python/read_log.py");
     let dir = temp_dir("python");
-    for name in [
-        "straight",
-        "turns",
-        "depth_changes",
-        "lawnmower",
-        "docking",
-        "moored",
-    ] {
+    // Every built-in scenario, as `--list-scenarios` lists them.
+    for name in auvnav_tools::sim::scenario::BUILTIN.iter().map(|(n, _)| *n) {
         let out = dir.join(format!("{name}.mcap"));
         let o = auvnav(&[
             "sim",
