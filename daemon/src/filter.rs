@@ -52,7 +52,8 @@ pub struct ErrorFilter {
     pub p: Covariance,
 }
 
-fn skew(v: &Vector3<f64>) -> nalgebra::Matrix3<f64> {
+/// The cross-product matrix: `skew(a) * b = a x b`.
+pub fn skew(v: &Vector3<f64>) -> nalgebra::Matrix3<f64> {
     nalgebra::Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
 }
 

@@ -310,14 +310,12 @@ fn interpolate(history: &VecDeque<(f64, Geodetic)>, t: f64) -> Geodetic {
             if let Some((t0, p0)) = before
                 && ti > t0
             {
-                {
-                    let a = (t - t0) / (ti - t0);
-                    return Geodetic {
-                        latitude_rad: p0.latitude_rad + a * (p.latitude_rad - p0.latitude_rad),
-                        longitude_rad: p0.longitude_rad + a * (p.longitude_rad - p0.longitude_rad),
-                        height_m: p0.height_m + a * (p.height_m - p0.height_m),
-                    };
-                }
+                let a = (t - t0) / (ti - t0);
+                return Geodetic {
+                    latitude_rad: p0.latitude_rad + a * (p.latitude_rad - p0.latitude_rad),
+                    longitude_rad: p0.longitude_rad + a * (p.longitude_rad - p0.longitude_rad),
+                    height_m: p0.height_m + a * (p.height_m - p0.height_m),
+                };
             }
             return p;
         }

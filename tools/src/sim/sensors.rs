@@ -5,6 +5,7 @@ use super::rng::Rng;
 use super::scenario::Station;
 use super::trajectory::TruthSample;
 use auvnav_core::earth::{self, Geodetic};
+use auvnav_core::filter::skew;
 use auvnav_shm_schema::{
     DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, UsblFixV1,
 };
@@ -21,10 +22,6 @@ const STANDARD_GRAVITY: f64 = 9.806_65;
 
 fn ns(t: f64) -> u64 {
     (t * 1e9).round().max(0.0) as u64
-}
-
-fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
-    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
 }
 
 /// The IMU: biases (constant and Gauss-Markov), white noise, scale factor, misalignment and
