@@ -12,21 +12,41 @@
 //! `dv' = f^n x phi + C dba - (2 w_ie + w_en) x dv + (0, 0, 2 g / R dp_D)`;
 //! `phi' = -(w_ie + w_en) x phi + dw_en(dv) - C dbg`, with `dw_en = (dv_E/R_N, -dv_N/R_M, -dv_E tan L / R_N)`;
 //! biases: random walks driven by the bias-instability noise.
+//!
+//! Parameter states follow the 15 core states: DVL mounting (small rotation, 3), DVL scale factor
+//! (1), DVL lever arm (3) and DVL time offset (1), all "estimate minus truth" and constant in time.
+//! They appear only in measurement models, never in `F`, so the covariance propagation handles
+//! them as a static block: `P_cc <- Phi P_cc Phi^T + Q`, `P_cp <- Phi P_cp`, `P_pp` unchanged. A
+//! parameter state that is switched off has zero variance and zero correlation, so no update can
+//! move it; switching one on costs nothing in the propagation beyond the 15 x 8 cross block.
 
 use nalgebra::{SMatrix, SVector, Vector3};
 
 /// Number of error states.
-pub const N: usize = 15;
+pub const N: usize = 23;
+/// Number of core states (navigation errors and IMU biases) that have dynamics.
+pub const CORE: usize = 15;
 /// Index of the first component of each block.
 pub const POS: usize = 0;
 pub const VEL: usize = 3;
 pub const ATT: usize = 6;
 pub const BG: usize = 9;
 pub const BA: usize = 12;
-const _: () = assert!(BA + 3 == N, "state layout must fill N");
+/// DVL mounting error: `C_dvl->body(est) = C_dvl->body(true) (I + [dm x])` (rad).
+pub const DVL_MOUNT: usize = 15;
+/// DVL scale-factor error (estimate minus truth, 1).
+pub const DVL_SCALE: usize = 18;
+/// DVL lever-arm error (body frame, m).
+pub const DVL_LEVER: usize = 19;
+/// DVL time-offset error (s).
+pub const DVL_TIME: usize = 22;
+const _: () = assert!(BA + 3 == CORE, "core layout must fill CORE");
+const _: () = assert!(DVL_TIME + 1 == N, "state layout must fill N");
 
 pub type StateVector = SVector<f64, N>;
 pub type Covariance = SMatrix<f64, N, N>;
+/// The dynamics of the core states.
+pub type CoreMatrix = SMatrix<f64, CORE, CORE>;
 
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum FilterError {
@@ -67,8 +87,8 @@ pub struct DynamicsInputs {
     pub height_m: f64,
 }
 
-/// Continuous-time error dynamics matrix F.
-pub fn dynamics_matrix(d: &DynamicsInputs) -> Covariance {
+/// Continuous-time error dynamics matrix F of the core states (parameter states are constant).
+pub fn dynamics_matrix(d: &DynamicsInputs) -> CoreMatrix {
     let lat = d.latitude_rad;
     let rm = crate::earth::meridian_radius(lat) + d.height_m;
     let rn = crate::earth::prime_vertical_radius(lat) + d.height_m;
@@ -76,7 +96,7 @@ pub fn dynamics_matrix(d: &DynamicsInputs) -> Covariance {
     let w_en = crate::earth::transport_rate_ned(lat, d.height_m, &d.velocity_ned);
     let g = crate::earth::normal_gravity(lat, d.height_m);
     let c = d.c_body_to_ned;
-    let mut f = Covariance::zeros();
+    let mut f = CoreMatrix::zeros();
     f.fixed_view_mut::<3, 3>(POS, VEL)
         .copy_from(&nalgebra::Matrix3::identity());
     f.fixed_view_mut::<3, 3>(VEL, ATT)
@@ -118,14 +138,14 @@ impl ErrorFilter {
     /// `Q` from the noise densities mapped through the body-to-NED rotation.
     pub fn predict(
         &mut self,
-        f: &Covariance,
+        f: &CoreMatrix,
         c_body_to_ned: &nalgebra::Matrix3<f64>,
         q: &ProcessNoise,
         dt: f64,
     ) {
         let fdt = f * dt;
-        let phi = Covariance::identity() + fdt + 0.5 * fdt * fdt;
-        let mut qd = Covariance::zeros();
+        let phi = CoreMatrix::identity() + fdt + 0.5 * fdt * fdt;
+        let mut qd = CoreMatrix::zeros();
         let c = c_body_to_ned;
         let qv = c * c.transpose() * (q.accel_noise * q.accel_noise * dt);
         let qa = c * c.transpose() * (q.gyro_noise * q.gyro_noise * dt);
@@ -135,7 +155,20 @@ impl ErrorFilter {
             qd[(BG + i, BG + i)] = q.gyro_bias_walk * q.gyro_bias_walk * dt;
             qd[(BA + i, BA + i)] = q.accel_bias_walk * q.accel_bias_walk * dt;
         }
-        self.p = phi * self.p * phi.transpose() + qd;
+        let p_cc: CoreMatrix = self.p.fixed_view::<CORE, CORE>(0, 0).into_owned();
+        let p_cp: SMatrix<f64, CORE, { N - CORE }> = self
+            .p
+            .fixed_view::<CORE, { N - CORE }>(0, CORE)
+            .into_owned();
+        let p_cc = phi * p_cc * phi.transpose() + qd;
+        let p_cp = phi * p_cp;
+        self.p.fixed_view_mut::<CORE, CORE>(0, 0).copy_from(&p_cc);
+        self.p
+            .fixed_view_mut::<CORE, { N - CORE }>(0, CORE)
+            .copy_from(&p_cp);
+        self.p
+            .fixed_view_mut::<{ N - CORE }, CORE>(CORE, 0)
+            .copy_from(&p_cp.transpose());
         self.symmetrise();
     }
 

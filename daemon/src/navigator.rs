@@ -9,10 +9,11 @@
 //! so updates see the covariance at their own time.
 
 use crate::earth::{self, Geodetic};
-use crate::filter::{self, DynamicsInputs, ErrorFilter, ProcessNoise, StateVector};
+use crate::filter::{self, DynamicsInputs, ErrorFilter, ProcessNoise, StateVector, skew};
 use crate::strapdown::{ImuIncrement, NavState, Strapdown};
 use auvnav_shm_schema::{
-    AidDiagnosticsV1, AidSource, DepthV1, DvlVelocityV1, ImuSampleV1, NavMode, NavSolutionV1,
+    AidDiagnosticsV1, AidSource, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, NavMode,
+    NavSolutionV1,
 };
 use nalgebra::{Matrix3, Rotation3, SMatrix, SVector, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
@@ -66,6 +67,37 @@ pub struct NavConfig {
     pub dvl_timeout_s: f64,
     /// IMU gaps longer than this many nominal intervals are bridged and counted (count). Default 10.
     pub imu_max_gap_intervals: f64,
+    /// DVL time offset: the velocity stamped at t is the vehicle's at t - offset (s). Default 0.
+    pub dvl_time_offset_s: f64,
+    /// Estimate the DVL mounting angles (parameter states). Default false.
+    pub estimate_dvl_mounting: bool,
+    /// Initial one-sigma of the DVL mounting angles when estimated (deg). Default 1.
+    pub initial_dvl_mounting_std_deg: f64,
+    /// Estimate the DVL scale factor (parameter state). Default false.
+    pub estimate_dvl_scale: bool,
+    /// Initial one-sigma of the DVL scale factor when estimated (1). Default 0.01.
+    pub initial_dvl_scale_std: f64,
+    /// Estimate the DVL lever arm (parameter states). Default false.
+    pub estimate_dvl_lever_arm: bool,
+    /// Initial one-sigma of the DVL lever arm when estimated (m). Default 0.5.
+    pub initial_dvl_lever_arm_std_m: f64,
+    /// Estimate the DVL time offset (parameter state). Default false.
+    pub estimate_dvl_time_offset: bool,
+    /// Initial one-sigma of the DVL time offset when estimated (s). Default 0.2.
+    pub initial_dvl_time_offset_std_s: f64,
+    /// GNSS antenna position in the body frame (m). Default 0.
+    pub gnss_lever_arm_m: [f64; 3],
+    /// Smallest GNSS position one-sigma used, whatever the receiver reports (m). Default 0.5.
+    pub gnss_min_std_m: f64,
+    /// Gate for GNSS position (chi-square, 3 dof). Default 16.27 (99.9 %).
+    pub gnss_gate_chi2: f64,
+    /// One-sigma of a zero-velocity update per axis (m/s). Default 0.01.
+    pub zero_velocity_std_m_s: f64,
+    /// After valid DVL velocities have been rejected without a break for this long, the velocity
+    /// covariance is re-opened (cross-covariances dropped, the innovation added to the variances)
+    /// and the measurement fused: the filter had become too sure of a wrong velocity (s; 0 =
+    /// never). Default 5.
+    pub dvl_reset_after_s: f64,
 }
 
 impl Default for NavConfig {
@@ -91,6 +123,20 @@ impl Default for NavConfig {
             covariance_interval_s: 0.05,
             dvl_timeout_s: 5.0,
             imu_max_gap_intervals: 10.0,
+            dvl_time_offset_s: 0.0,
+            estimate_dvl_mounting: false,
+            initial_dvl_mounting_std_deg: 1.0,
+            estimate_dvl_scale: false,
+            initial_dvl_scale_std: 0.01,
+            estimate_dvl_lever_arm: false,
+            initial_dvl_lever_arm_std_m: 0.5,
+            estimate_dvl_time_offset: false,
+            initial_dvl_time_offset_std_s: 0.2,
+            gnss_lever_arm_m: [0.0; 3],
+            gnss_min_std_m: 0.5,
+            gnss_gate_chi2: GATE_CHI2_3DOF,
+            zero_velocity_std_m_s: 0.01,
+            dvl_reset_after_s: 5.0,
         }
     }
 }
@@ -111,9 +157,16 @@ pub struct NavCounters {
     pub dvl_fused: u64,
     pub dvl_rejected: u64,
     pub dvl_invalid: u64,
+    /// Velocity covariance re-opened after a run of DVL rejections (see `dvl_reset_after_s`).
+    pub dvl_resets: u64,
     pub depth_fused: u64,
     pub depth_rejected: u64,
     pub depth_invalid: u64,
+    pub gnss_fused: u64,
+    pub gnss_rejected: u64,
+    pub gnss_invalid: u64,
+    pub zero_velocity_fused: u64,
+    pub zero_velocity_rejected: u64,
     /// Aiding messages older than the navigation state (skipped).
     pub aid_late: u64,
 }
@@ -127,12 +180,14 @@ pub struct Navigator {
     kf: ErrorFilter,
     gyro_bias: Vector3<f64>,
     accel_bias: Vector3<f64>,
-    c_dvl_to_body: Matrix3<f64>,
+    dvl: DvlParameters,
     last_imu_ns: Option<u64>,
     last_omega_ib: Vector3<f64>,
+    last_f_body: Vector3<f64>,
     pending_dt: f64,
     pending_f_ned: Vector3<f64>,
     last_dvl_fused_s: f64,
+    dvl_rejected_since_s: Option<f64>,
     solution_sequence: u64,
     diagnostics_sequence: u64,
     pub counters: NavCounters,
@@ -151,6 +206,20 @@ impl Navigator {
         p0[filter::ATT] = (cfg.initial_tilt_std_deg * DEG).powi(2);
         p0[filter::ATT + 1] = (cfg.initial_tilt_std_deg * DEG).powi(2);
         p0[filter::ATT + 2] = (cfg.initial_heading_std_deg * DEG).powi(2);
+        for i in 0..3 {
+            if cfg.estimate_dvl_mounting {
+                p0[filter::DVL_MOUNT + i] = (cfg.initial_dvl_mounting_std_deg * DEG).powi(2);
+            }
+            if cfg.estimate_dvl_lever_arm {
+                p0[filter::DVL_LEVER + i] = cfg.initial_dvl_lever_arm_std_m.powi(2);
+            }
+        }
+        if cfg.estimate_dvl_scale {
+            p0[filter::DVL_SCALE] = cfg.initial_dvl_scale_std.powi(2);
+        }
+        if cfg.estimate_dvl_time_offset {
+            p0[filter::DVL_TIME] = cfg.initial_dvl_time_offset_std_s.powi(2);
+        }
         let noise = ProcessNoise {
             gyro_noise: cfg.gyro_angle_random_walk_deg_sqrt_h * DEG / 60.0,
             accel_noise: cfg.accel_velocity_random_walk_m_s_sqrt_h / 60.0,
@@ -158,19 +227,26 @@ impl Navigator {
             accel_bias_walk: cfg.accel_bias_walk_ug_sqrt_h * UG / 60.0,
         };
         let [r, p, y] = cfg.dvl_mount_deg;
-        let c_dvl_to_body = Rotation3::from_euler_angles(r * DEG, p * DEG, y * DEG).into_inner();
+        let dvl = DvlParameters {
+            c_dvl_to_body: Rotation3::from_euler_angles(r * DEG, p * DEG, y * DEG).into_inner(),
+            scale: cfg.dvl_scale_factor,
+            lever_arm_m: Vector3::from(cfg.dvl_lever_arm_m),
+            time_offset_s: cfg.dvl_time_offset_s,
+        };
         Navigator {
             noise,
             sd: Strapdown::new(initial),
             kf: ErrorFilter::new(&p0),
             gyro_bias: Vector3::zeros(),
             accel_bias: Vector3::zeros(),
-            c_dvl_to_body,
+            dvl,
             last_imu_ns: None,
             last_omega_ib: Vector3::zeros(),
+            last_f_body: Vector3::zeros(),
             pending_dt: 0.0,
             pending_f_ned: Vector3::zeros(),
             last_dvl_fused_s: initial.time_s,
+            dvl_rejected_since_s: None,
             solution_sequence: 0,
             diagnostics_sequence: 0,
             counters: NavCounters::default(),
@@ -184,6 +260,16 @@ impl Navigator {
 
     pub fn covariance(&self) -> &filter::Covariance {
         &self.kf.p
+    }
+
+    /// The current DVL installation parameters (estimated when their states are switched on).
+    pub fn dvl_parameters(&self) -> &DvlParameters {
+        &self.dvl
+    }
+
+    /// The current IMU bias estimates: gyro (rad/s), accelerometer (m/s^2).
+    pub fn imu_biases(&self) -> (Vector3<f64>, Vector3<f64>) {
+        (self.gyro_bias, self.accel_bias)
     }
 
     /// Processes one IMU sample; returns the solution at its time, or `None` if it was skipped.
@@ -229,6 +315,7 @@ impl Navigator {
         let w = w - self.gyro_bias;
         let f = f - self.accel_bias;
         self.last_omega_ib = w;
+        self.last_f_body = f;
         let c_before = self.sd.state.c_body_to_ned();
         self.sd.propagate(&ImuIncrement {
             dtheta: w * dt,
@@ -273,6 +360,19 @@ impl Navigator {
         s.q_body_to_ned = UnitQuaternion::from_scaled_axis(phi) * s.q_body_to_ned;
         self.gyro_bias += Vector3::new(dx[filter::BG], dx[filter::BG + 1], dx[filter::BG + 2]);
         self.accel_bias += Vector3::new(dx[filter::BA], dx[filter::BA + 1], dx[filter::BA + 2]);
+        let dm = Vector3::new(
+            dx[filter::DVL_MOUNT],
+            dx[filter::DVL_MOUNT + 1],
+            dx[filter::DVL_MOUNT + 2],
+        );
+        self.dvl.c_dvl_to_body *= Rotation3::from_scaled_axis(-dm).into_inner();
+        self.dvl.scale -= dx[filter::DVL_SCALE];
+        self.dvl.lever_arm_m -= Vector3::new(
+            dx[filter::DVL_LEVER],
+            dx[filter::DVL_LEVER + 1],
+            dx[filter::DVL_LEVER + 2],
+        );
+        self.dvl.time_offset_s -= dx[filter::DVL_TIME];
     }
 
     fn aid_is_late(&mut self, t_ns: u64) -> bool {
@@ -325,7 +425,8 @@ impl Navigator {
         }
     }
 
-    /// Fuses a DVL velocity: `h(x) = s C_b^d (C_n^b v^n + omega_eb^b x l)`.
+    /// Fuses a DVL velocity: `h(x) = s C_b^d (C_n^b v^n + omega_eb^b x l)` minus the time-offset
+    /// term (see [`dvl_model`]).
     pub fn on_dvl(&mut self, m: &DvlVelocityV1) -> AidDiagnosticsV1 {
         let t_ns = m.validity_time_ns;
         let mut d = self.diagnostics(t_ns, AidSource::DvlVelocity);
@@ -347,9 +448,8 @@ impl Navigator {
         let (predicted, h) = dvl_model(
             &self.sd.state,
             &self.last_omega_ib,
-            &self.c_dvl_to_body,
-            self.cfg.dvl_scale_factor,
-            &Vector3::from(self.cfg.dvl_lever_arm_m),
+            &self.last_f_body,
+            &self.dvl,
         );
         let y = predicted - z;
         let sigma = if m.validity & DvlVelocityV1::VALID_STD != 0 {
@@ -360,14 +460,47 @@ impl Navigator {
         let r = Matrix3::from_diagonal(&sigma.map(|x| x * x));
         d.observation = z.into();
         d.observation_variance = r.diagonal().into();
-        let result = self.kf.update(&y, &h, &r, self.cfg.dvl_gate_chi2);
+        let t = t_ns as f64 * 1e-9;
+        let mut result = self.kf.update(&y, &h, &r, self.cfg.dvl_gate_chi2);
+        let rejected = matches!(result, Ok((_, ref rep)) if !rep.fused);
+        let since = *self.dvl_rejected_since_s.get_or_insert(t);
+        if rejected && self.cfg.dvl_reset_after_s > 0.0 && t - since >= self.cfg.dvl_reset_after_s {
+            self.reopen_velocity(&(self.sd.state.c_body_to_ned() * y));
+            self.counters.dvl_resets += 1;
+            d.flags |= AidDiagnosticsV1::FLAG_RESET;
+            let (predicted, h) = dvl_model(
+                &self.sd.state,
+                &self.last_omega_ib,
+                &self.last_f_body,
+                &self.dvl,
+            );
+            result = self.kf.update(&(predicted - z), &h, &r, f64::INFINITY);
+        }
+        let reset = d.flags & AidDiagnosticsV1::FLAG_RESET;
         if self.finish_update(result, &mut d) {
             self.counters.dvl_fused += 1;
-            self.last_dvl_fused_s = t_ns as f64 * 1e-9;
+            self.last_dvl_fused_s = t;
+            self.dvl_rejected_since_s = None;
         } else {
             self.counters.dvl_rejected += 1;
         }
+        d.flags |= reset;
         d
+    }
+
+    /// Drops the velocity states' cross-covariances and adds `innovation_ned` squared to their
+    /// variances, so the next velocity measurement is believed again.
+    fn reopen_velocity(&mut self, innovation_ned: &Vector3<f64>) {
+        let p = &mut self.kf.p;
+        for i in 0..3 {
+            let v = filter::VEL + i;
+            let keep = p[(v, v)] + innovation_ned[i].powi(2);
+            for j in 0..filter::N {
+                p[(v, j)] = 0.0;
+                p[(j, v)] = 0.0;
+            }
+            p[(v, v)] = keep;
+        }
     }
 
     /// Fuses a depth measurement: `h(x) = -height`.
@@ -399,6 +532,79 @@ impl Navigator {
             self.counters.depth_fused += 1;
         } else {
             self.counters.depth_rejected += 1;
+        }
+        d
+    }
+
+    /// Fuses a GNSS position: `h(x) = p + C_b^n l` (antenna lever arm `l`), compared in local NED
+    /// metres around the fix.
+    pub fn on_gnss(&mut self, m: &GnssFixV1) -> AidDiagnosticsV1 {
+        let t_ns = m.host_time_ns;
+        let mut d = self.diagnostics(t_ns, AidSource::GnssPosition);
+        d.dimension = 3;
+        let need = GnssFixV1::VALID_POSITION | GnssFixV1::VALID_HEIGHT;
+        let fix = Geodetic {
+            latitude_rad: m.latitude_rad,
+            longitude_rad: m.longitude_rad,
+            height_m: m.height_m,
+        };
+        if m.validity & need != need
+            || !(m.latitude_rad.abs() <= std::f64::consts::FRAC_PI_2
+                && m.longitude_rad.abs() <= std::f64::consts::PI
+                && (-1000.0..=10000.0).contains(&m.height_m)
+                && (0.0..=1000.0).contains(&m.horizontal_std_m)
+                && (0.0..=1000.0).contains(&m.vertical_std_m))
+        {
+            self.counters.gnss_invalid += 1;
+            d.flags = AidDiagnosticsV1::FLAG_REJECTED;
+            return d;
+        }
+        if self.aid_is_late(t_ns) {
+            d.flags = AidDiagnosticsV1::FLAG_REJECTED;
+            return d;
+        }
+        self.propagate_covariance();
+        let (y, h) = gnss_model(
+            &self.sd.state,
+            &Vector3::from(self.cfg.gnss_lever_arm_m),
+            &fix,
+        );
+        let sh = m.horizontal_std_m.max(self.cfg.gnss_min_std_m);
+        let sv = m.vertical_std_m.max(self.cfg.gnss_min_std_m);
+        let r = Matrix3::from_diagonal(&Vector3::new(sh * sh, sh * sh, sv * sv));
+        d.observation = [m.latitude_rad, m.longitude_rad, m.height_m];
+        d.observation_variance = r.diagonal().into();
+        let result = self.kf.update(&y, &h, &r, self.cfg.gnss_gate_chi2);
+        if self.finish_update(result, &mut d) {
+            self.counters.gnss_fused += 1;
+        } else {
+            self.counters.gnss_rejected += 1;
+        }
+        d
+    }
+
+    /// Fuses a zero-velocity observation (the vehicle is known to be still, for example moored
+    /// alongside or sitting on the seabed): `h(x) = v^n`. The caller decides when this holds;
+    /// the IMU alone cannot tell rest from uniform motion.
+    pub fn on_zero_velocity(&mut self, t_ns: u64) -> AidDiagnosticsV1 {
+        let mut d = self.diagnostics(t_ns, AidSource::ZeroVelocity);
+        d.dimension = 3;
+        if self.aid_is_late(t_ns) {
+            d.flags = AidDiagnosticsV1::FLAG_REJECTED;
+            return d;
+        }
+        self.propagate_covariance();
+        let y = self.sd.state.velocity_ned;
+        let mut h = SMatrix::<f64, 3, { filter::N }>::zeros();
+        h.fixed_view_mut::<3, 3>(0, filter::VEL)
+            .copy_from(&Matrix3::identity());
+        let r = Matrix3::identity() * self.cfg.zero_velocity_std_m_s.powi(2);
+        d.observation_variance = r.diagonal().into();
+        let result = self.kf.update(&y, &h, &r, self.cfg.dvl_gate_chi2);
+        if self.finish_update(result, &mut d) {
+            self.counters.zero_velocity_fused += 1;
+        } else {
+            self.counters.zero_velocity_rejected += 1;
         }
         d
     }
@@ -445,31 +651,80 @@ impl Navigator {
     }
 }
 
+/// The DVL installation: mounting, scale factor, lever arm and time offset.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DvlParameters {
+    /// Rotation DVL frame -> body frame.
+    pub c_dvl_to_body: Matrix3<f64>,
+    /// Scale factor (1 = none).
+    pub scale: f64,
+    /// DVL position in the body frame (m).
+    pub lever_arm_m: Vector3<f64>,
+    /// The velocity stamped at t is the vehicle's at t - offset (s).
+    pub time_offset_s: f64,
+}
+
 /// The DVL measurement model: predicted velocity in the DVL frame,
-/// `h = s C_b^d (C_n^b v^n + omega_eb^b x l)`, and its Jacobian w.r.t. the error state
-/// (`dh/d dv = s C_b^d C_n^b`, `dh/d phi = -s C_b^d C_n^b [v x]`; the lever-arm term's dependence on
-/// the gyro bias is neglected). `omega_ib_body` is the bias-corrected angular rate.
+/// `h = s C_b^d (v_b + omega_eb^b x l) - tau s C_b^d a_b` with `v_b = C_n^b v^n` and
+/// `a_b = d v_b / dt = f_b + C_n^b g^n - omega_eb^b x v_b` (so the measurement stamped at t is the
+/// velocity at t - tau to first order), and its Jacobian w.r.t. the error state:
+/// `dh/d dv = s C_b^d (I + tau [omega_eb x]) C_n^b`,
+/// `dh/d phi = -(dh/d dv) [v x] + tau s C_b^d C_n^b [g x]`, `dh/d dm = [h x]` (mounting),
+/// `dh/d ds = h / s`, `dh/d dl = s C_b^d [omega_eb x]`, `dh/d dtau = -s C_b^d a_b`. Neglected: the
+/// Earth-rate part of `omega_eb` through the attitude (below 1e-4 of the lever-arm term) and the
+/// dependence on the bias errors (second order).
+/// `omega_ib_body` and `f_body` are the bias-corrected IMU outputs.
 pub fn dvl_model(
     s: &NavState,
     omega_ib_body: &Vector3<f64>,
-    c_dvl_to_body: &Matrix3<f64>,
-    scale: f64,
-    lever_arm_body: &Vector3<f64>,
+    f_body: &Vector3<f64>,
+    p: &DvlParameters,
 ) -> (Vector3<f64>, SMatrix<f64, 3, { filter::N }>) {
     let c_nb = s.c_body_to_ned().transpose();
-    let c_bd = c_dvl_to_body.transpose();
-    let w_ie_b = c_nb * earth::earth_rate_ned(s.position.latitude_rad);
+    let c_bd = p.c_dvl_to_body.transpose();
+    let lat = s.position.latitude_rad;
+    let w_ie_b = c_nb * earth::earth_rate_ned(lat);
     let w_eb = omega_ib_body - w_ie_b;
     let v_b = c_nb * s.velocity_ned;
-    let predicted = scale * c_bd * (v_b + w_eb.cross(lever_arm_body));
+    let a_b = f_body + c_nb * earth::gravity_ned(lat, s.position.height_m) - w_eb.cross(&v_b);
+    let unscaled = c_bd * (v_b + w_eb.cross(&p.lever_arm_m) - p.time_offset_s * a_b);
+    let predicted = p.scale * unscaled;
     let mut h = SMatrix::<f64, 3, { filter::N }>::zeros();
-    let a = scale * c_bd * c_nb;
-    h.fixed_view_mut::<3, 3>(0, filter::VEL).copy_from(&a);
-    let v = s.velocity_ned;
-    let skew_v = Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0);
-    h.fixed_view_mut::<3, 3>(0, filter::ATT)
-        .copy_from(&(-a * skew_v));
+    // v_b and a_b through the velocity and the attitude: C_n^b(est) = C_n^b (I + [phi x]).
+    let through_v = p.scale * c_bd * (Matrix3::identity() + p.time_offset_s * skew(&w_eb)) * c_nb;
+    h.fixed_view_mut::<3, 3>(0, filter::VEL)
+        .copy_from(&through_v);
+    let g_n = earth::gravity_ned(lat, s.position.height_m);
+    h.fixed_view_mut::<3, 3>(0, filter::ATT).copy_from(
+        &(-through_v * skew(&s.velocity_ned)
+            + p.scale * p.time_offset_s * c_bd * c_nb * skew(&g_n)),
+    );
+    h.fixed_view_mut::<3, 3>(0, filter::DVL_MOUNT)
+        .copy_from(&skew(&predicted));
+    h.fixed_view_mut::<3, 1>(0, filter::DVL_SCALE)
+        .copy_from(&unscaled);
+    h.fixed_view_mut::<3, 3>(0, filter::DVL_LEVER)
+        .copy_from(&(p.scale * c_bd * skew(&w_eb)));
+    h.fixed_view_mut::<3, 1>(0, filter::DVL_TIME)
+        .copy_from(&(-p.scale * c_bd * a_b));
     (predicted, h)
+}
+
+/// The GNSS position model: the innovation `y = (p + C_b^n l) - fix` in NED metres and its
+/// Jacobian (`dy/d dp = I`, `dy/d phi = [(C_b^n l) x]`).
+pub fn gnss_model(
+    s: &NavState,
+    lever_arm_body: &Vector3<f64>,
+    fix: &Geodetic,
+) -> (Vector3<f64>, SMatrix<f64, 3, { filter::N }>) {
+    let arm_ned = s.c_body_to_ned() * lever_arm_body;
+    let y = earth::ned_offset(fix, &s.position) + arm_ned;
+    let mut h = SMatrix::<f64, 3, { filter::N }>::zeros();
+    h.fixed_view_mut::<3, 3>(0, filter::POS)
+        .copy_from(&Matrix3::identity());
+    h.fixed_view_mut::<3, 3>(0, filter::ATT)
+        .copy_from(&skew(&arm_ned));
+    (y, h)
 }
 
 /// Convenience: the initial state from a geodetic position, NED velocity and Euler angles.

@@ -3,9 +3,9 @@
 
 use auvnav_core::earth::{self, Geodetic};
 use auvnav_core::filter;
-use auvnav_core::navigator::dvl_model;
+use auvnav_core::navigator::{DvlParameters, dvl_model, gnss_model};
 use auvnav_core::strapdown::{ImuIncrement, NavState, Strapdown};
-use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, Rotation3, SMatrix, UnitQuaternion, Vector3};
 
 fn state() -> NavState {
     NavState {
@@ -20,32 +20,128 @@ fn state() -> NavState {
     }
 }
 
+fn dvl_parameters() -> DvlParameters {
+    DvlParameters {
+        c_dvl_to_body: Rotation3::from_euler_angles(0.01, -0.02, 0.03).into_inner(),
+        scale: 1.003,
+        lever_arm_m: Vector3::new(0.8, -0.1, 0.3),
+        time_offset_s: 0.12,
+    }
+}
+
+fn column(h: &SMatrix<f64, 3, { filter::N }>, j: usize) -> Vector3<f64> {
+    h.fixed_view::<3, 1>(0, j).into()
+}
+
 #[test]
 fn dvl_jacobian_matches_finite_differences() {
     let s = state();
     let w = Vector3::new(0.01, -0.02, 0.05);
-    let c_dvl_to_body = Rotation3::from_euler_angles(0.01, -0.02, 0.03).into_inner();
-    let lever = Vector3::new(0.8, -0.1, 0.3);
-    let scale = 1.003;
-    let (h0, h) = dvl_model(&s, &w, &c_dvl_to_body, scale, &lever);
+    let f = Vector3::new(0.3, 0.1, -9.7);
+    let p = dvl_parameters();
+    let (h0, h) = dvl_model(&s, &w, &f, &p);
     let eps = 1e-6;
+    let fd = |s: &NavState, p: &DvlParameters| (dvl_model(s, &w, &f, p).0 - h0) / eps;
     for k in 0..3 {
+        let mut unit = Vector3::zeros();
+        unit[k] = eps;
         // Velocity error: v_est = v + dv.
         let mut sv = s;
         sv.velocity_ned[k] += eps;
-        let col = (dvl_model(&sv, &w, &c_dvl_to_body, scale, &lever).0 - h0) / eps;
-        let analytic: Vector3<f64> = h.fixed_view::<3, 1>(0, filter::VEL + k).into();
+        let (col, analytic) = (fd(&sv, &p), column(&h, filter::VEL + k));
         assert!((col - analytic).norm() < 1e-6, "dv{k}: {col} vs {analytic}");
         // Attitude error: C_est = (I - [phi x]) C, i.e. q_est = exp(-phi) q.
         let mut sa = s;
-        let mut phi = Vector3::zeros();
-        phi[k] = eps;
-        sa.q_body_to_ned = UnitQuaternion::from_scaled_axis(-phi) * s.q_body_to_ned;
-        let col = (dvl_model(&sa, &w, &c_dvl_to_body, scale, &lever).0 - h0) / eps;
-        let analytic: Vector3<f64> = h.fixed_view::<3, 1>(0, filter::ATT + k).into();
-        // The lever-arm term's attitude dependence (through the Earth rate) is neglected: 1e-4 m/s.
+        sa.q_body_to_ned = UnitQuaternion::from_scaled_axis(-unit) * s.q_body_to_ned;
+        let (col, analytic) = (fd(&sa, &p), column(&h, filter::ATT + k));
+        // The Earth-rate part of the lever-arm term's attitude dependence is neglected.
         assert!(
             (col - analytic).norm() < 1e-4,
+            "phi{k}: {col} vs {analytic}"
+        );
+        // Mounting error: C_dvl->body(est) = C_dvl->body(true) (I + [dm x]).
+        let mut pm = p;
+        pm.c_dvl_to_body = p.c_dvl_to_body * Rotation3::from_scaled_axis(unit).into_inner();
+        let (col, analytic) = (fd(&s, &pm), column(&h, filter::DVL_MOUNT + k));
+        assert!((col - analytic).norm() < 1e-6, "dm{k}: {col} vs {analytic}");
+        // Lever-arm error: l_est = l + dl.
+        let mut pl = p;
+        pl.lever_arm_m[k] += eps;
+        let (col, analytic) = (fd(&s, &pl), column(&h, filter::DVL_LEVER + k));
+        assert!((col - analytic).norm() < 1e-6, "dl{k}: {col} vs {analytic}");
+    }
+    let mut ps = p;
+    ps.scale += eps;
+    let (col, analytic) = (fd(&s, &ps), column(&h, filter::DVL_SCALE));
+    assert!((col - analytic).norm() < 1e-6, "ds: {col} vs {analytic}");
+    let mut pt = p;
+    pt.time_offset_s += eps;
+    let (col, analytic) = (fd(&s, &pt), column(&h, filter::DVL_TIME));
+    assert!((col - analytic).norm() < 1e-6, "dtau: {col} vs {analytic}");
+}
+
+#[test]
+fn dvl_time_offset_term_is_the_velocity_change_over_the_offset() {
+    // Propagate a state with a constant body acceleration and check that the model's time-offset
+    // term predicts the body velocity tau earlier.
+    let s = state();
+    let lat = s.position.latitude_rad;
+    let c_nb: Matrix3<f64> = s.c_body_to_ned().transpose();
+    let w = c_nb * earth::earth_rate_ned(lat) + Vector3::new(0.0, 0.0, 0.02);
+    let accel_ned = Vector3::new(0.2, -0.1, 0.05);
+    let f = c_nb * (accel_ned - earth::gravity_ned(lat, s.position.height_m));
+    let tau = 0.05;
+    let p = DvlParameters {
+        c_dvl_to_body: Matrix3::identity(),
+        scale: 1.0,
+        lever_arm_m: Vector3::zeros(),
+        time_offset_s: tau,
+    };
+    let (predicted, _) = dvl_model(&s, &w, &f, &p);
+    // Body velocity at t - tau, integrated backwards with the same IMU output.
+    let mut sd = Strapdown::new(s);
+    let n = 200;
+    let dt = -tau / n as f64;
+    for _ in 0..n {
+        sd.propagate(&ImuIncrement {
+            dtheta: w * dt,
+            dv: f * dt,
+            dt,
+        });
+    }
+    let earlier = sd.state.c_body_to_ned().transpose() * sd.state.velocity_ned;
+    // The term itself is tau |a_b| = 1.2e-2 m/s here; what remains is second order in tau and
+    // the neglected Coriolis acceleration.
+    let term = (predicted - (c_nb * s.velocity_ned)).norm();
+    assert!(term > 1e-2, "{term}");
+    assert!(
+        (predicted - earlier).norm() < 5e-5,
+        "{predicted} vs {earlier}"
+    );
+}
+
+#[test]
+fn gnss_jacobian_matches_finite_differences() {
+    let s = state();
+    let arm = Vector3::new(-1.5, 0.2, -2.0);
+    let fix = earth::offset_position(&s.position, &Vector3::new(3.0, -4.0, 0.5));
+    let (y0, h) = gnss_model(&s, &arm, &fix);
+    // Millimetres: smaller steps drown in the rounding of the latitude in radians.
+    let eps = 1e-3;
+    for k in 0..3 {
+        let mut unit = Vector3::zeros();
+        unit[k] = eps;
+        let mut sp = s;
+        sp.position = earth::offset_position(&s.position, &unit);
+        let col = (gnss_model(&sp, &arm, &fix).0 - y0) / eps;
+        let analytic = column(&h, filter::POS + k);
+        assert!((col - analytic).norm() < 1e-5, "dp{k}: {col} vs {analytic}");
+        let mut sa = s;
+        sa.q_body_to_ned = UnitQuaternion::from_scaled_axis(-unit * 1e-3) * s.q_body_to_ned;
+        let col = (gnss_model(&sa, &arm, &fix).0 - y0) / (eps * 1e-3);
+        let analytic = column(&h, filter::ATT + k);
+        assert!(
+            (col - analytic).norm() < 1e-5,
             "phi{k}: {col} vs {analytic}"
         );
     }

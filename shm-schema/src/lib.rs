@@ -508,6 +508,9 @@ impl AidDiagnosticsV1 {
     pub const FLAG_REJECTED: u32 = 1 << 0;
     /// The measurement was fused into the state.
     pub const FLAG_FUSED: u32 = 1 << 1;
+    /// The aid had been rejected for too long: the covariance of the states it observes was
+    /// re-opened before this measurement was fused.
+    pub const FLAG_RESET: u32 = 1 << 2;
 }
 
 /// The state of a process as reported in its health message.

@@ -2,13 +2,11 @@
 //! [`auvnav_core::navigator::Navigator`] the daemon and replay use), then prints the accuracy
 //! against the simulated truth. Until the daemon and drivers exist, this runs in one process.
 
-use crate::accuracy::{Accuracy, AccuracyTracker};
-use crate::log::LogMessage;
+use crate::accuracy::Accuracy;
+use crate::replay::{Output, Replay, ReplayConfig};
 use crate::sim::{self, SimConfig, SimSummary, scenario::Scenario};
 use anyhow::Context;
-use auvnav_core::earth::Geodetic;
-use auvnav_core::navigator::{NavConfig, NavCounters, Navigator, initial_state};
-use auvnav_shm_schema::{NavSolutionV1, TruthStateV1};
+use auvnav_core::navigator::{NavConfig, NavCounters};
 use serde::Serialize;
 use std::path::PathBuf;
 
@@ -41,7 +39,8 @@ pub struct DemoResult {
     pub wall_seconds: f64,
 }
 
-/// Runs a simulated voyage through the navigator; optionally writes the solution as CSV rows.
+/// Runs a simulated voyage through the navigator (the same [`Replay`] as `auvnav replay`, fed
+/// from memory); optionally writes the solution as CSV rows.
 pub fn run_voyage(
     cfg: &SimConfig,
     nav_cfg: NavConfig,
@@ -52,59 +51,29 @@ pub fn run_voyage(
         messages.push(*m);
         Ok(())
     })?;
-    let mut nav: Option<Navigator> = None;
-    let mut tracker = AccuracyTracker::new(100.0);
-    let mut last: Option<NavSolutionV1> = None;
+    let mut replay = Replay::new(
+        &ReplayConfig {
+            navigation: nav_cfg,
+            initial: None,
+        },
+        100.0,
+    );
     if let Some(w) = csv.as_deref_mut() {
         writeln!(w, "{}", crate::csv::NAV_HEADER)?;
     }
     for m in &messages {
-        match m {
-            LogMessage::Truth(t) => match nav.as_mut() {
-                None => nav = Some(Navigator::new(nav_cfg.clone(), truth_initial_state(t))),
-                Some(_) => {
-                    if let Some(sol) = last.filter(|s| s.host_time_ns == t.host_time_ns) {
-                        tracker.add(&sol, t);
-                    }
-                }
-            },
-            LogMessage::Imu(x) => {
-                if let Some(sol) = nav.as_mut().and_then(|n| n.on_imu(x)) {
-                    if let Some(w) = csv.as_deref_mut() {
-                        crate::csv::write_nav_row(w, &sol)?;
-                    }
-                    last = Some(sol);
-                }
+        replay.process(m, &mut |o| {
+            if let (Output::Solution(s), Some(w)) = (o, csv.as_deref_mut()) {
+                crate::csv::write_nav_row(w, s)?;
             }
-            LogMessage::Dvl(x) => {
-                if let Some(n) = nav.as_mut() {
-                    n.on_dvl(x);
-                }
-            }
-            LogMessage::Depth(x) => {
-                if let Some(n) = nav.as_mut() {
-                    n.on_depth(x);
-                }
-            }
-            _ => {}
-        }
+            Ok(())
+        })?;
     }
-    let counters = nav.map(|n| n.counters).unwrap_or_default();
-    Ok((summary, tracker.result(), counters))
-}
-
-/// The initial navigation state taken from a truth record.
-pub fn truth_initial_state(t: &TruthStateV1) -> auvnav_core::strapdown::NavState {
-    initial_state(
-        t.host_time_ns as f64 * 1e-9,
-        Geodetic {
-            latitude_rad: t.latitude_rad,
-            longitude_rad: t.longitude_rad,
-            height_m: t.height_m,
-        },
-        t.velocity_ned_m_s,
-        t.euler_rad,
-    )
+    Ok((
+        summary,
+        replay.accuracy().unwrap_or_default(),
+        replay.nav_counters(),
+    ))
 }
 
 pub fn run(a: &DemoArgs) -> anyhow::Result<()> {

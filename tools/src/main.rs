@@ -23,11 +23,25 @@ enum Command {
     Sim(SimArgs),
     /// Simulate a voyage, run it through the navigation core and print the accuracy.
     Demo(auvnav_tools::demo::DemoArgs),
+    /// Run a log through the navigation core; with a truth channel, report the accuracy.
+    Replay(auvnav_tools::replay::ReplayArgs),
+    /// Turn a measured data set into a log.
+    Import {
+        #[command(subcommand)]
+        what: ImportWhat,
+    },
     /// Throughput benchmarks, printed as JSON with --json.
     Bench {
         #[command(subcommand)]
         what: BenchWhat,
     },
+}
+
+#[derive(Subcommand)]
+enum ImportWhat {
+    /// A segment of the Snapir AUV data set (IMU, DVL, reference solution as truth, depth from
+    /// the reference).
+    Snapir(auvnav_tools::import::SnapirArgs),
 }
 
 #[derive(Subcommand)]
@@ -137,11 +151,55 @@ fn run_sim(a: SimArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+fn run_replay(a: &auvnav_tools::replay::ReplayArgs) -> anyhow::Result<()> {
+    let report = auvnav_tools::replay::run(a)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        auvnav_tools::replay::print_report(&report);
+    }
+    Ok(())
+}
+
+fn run_import_snapir(a: &auvnav_tools::import::SnapirArgs) -> anyhow::Result<()> {
+    let s = auvnav_tools::import::snapir(a)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&s)?);
+    } else {
+        eprintln!(
+            "{}: segment {} ({:.0} s, {} messages): {} IMU, {} DVL, {} reference rows; skipped {} malformed, {} out of order",
+            a.out.display(),
+            s.segment,
+            s.duration_s,
+            s.messages,
+            s.imu.rows,
+            s.dvl.rows,
+            s.reference.rows,
+            s.imu.malformed + s.dvl.malformed + s.reference.malformed,
+            s.imu.out_of_order + s.dvl.out_of_order + s.reference.out_of_order,
+        );
+        if let Some(al) = s.alignment {
+            eprintln!(
+                "  reference clock aligned to the IMU: offset {:+.2} s (rotation residual {:.3} deg per interval, {:.3} deg without; {} reference rows before the IMU dropped)",
+                al.offset_s, al.residual_deg, al.residual_at_zero_deg, s.reference_before_imu
+            );
+        }
+        eprintln!(
+            "  replay starts from the reference at the segment start; depth is derived from the reference"
+        );
+    }
+    Ok(())
+}
+
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Sim(a) => run_sim(a),
         Command::Demo(a) => auvnav_tools::demo::run(&a),
+        Command::Replay(a) => run_replay(&a),
+        Command::Import { what } => match what {
+            ImportWhat::Snapir(a) => run_import_snapir(&a),
+        },
         Command::Bench { what } => match what {
             BenchWhat::Sim {
                 hours,

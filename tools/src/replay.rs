@@ -1,0 +1,584 @@
+//! `auvnav replay`: runs a log through the navigation core as fast as it can.
+//!
+//! The same [`Navigator`] the daemon runs consumes the log's sensor messages in log order. The
+//! initial state comes from the configuration's `[initial]` table when it has one, otherwise from
+//! the first record of the log's truth channel (simulated truth, or the reference solution of an
+//! imported data set); sensor messages before that are counted and skipped. When the log has a
+//! truth channel, the solution is compared with it at every truth epoch (linear interpolation
+//! between the two solutions around the epoch).
+
+use crate::accuracy::{Accuracy, AccuracyTracker};
+use crate::log::{LogError, LogHeader, LogMessage, LogReader, write_log_atomically};
+use anyhow::{Context, bail};
+use auvnav_core::earth::Geodetic;
+use auvnav_core::navigator::{NavConfig, NavCounters, Navigator, initial_state};
+use auvnav_core::strapdown::NavState;
+use auvnav_shm_schema::{AidDiagnosticsV1, NavSolutionV1, TruthStateV1, topic};
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Initial state given in the replay configuration (instead of the log's truth channel).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InitialState {
+    pub latitude_deg: f64,
+    pub longitude_deg: f64,
+    pub height_m: f64,
+    #[serde(default)]
+    pub velocity_ned_m_s: [f64; 3],
+    /// Roll, pitch, yaw (deg).
+    pub euler_deg: [f64; 3],
+}
+
+/// The replay configuration file: `[navigation]` (the core's [`NavConfig`]) and an optional
+/// `[initial]` state.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ReplayConfig {
+    pub navigation: NavConfig,
+    pub initial: Option<InitialState>,
+}
+
+impl ReplayConfig {
+    pub fn load(path: &Path) -> anyhow::Result<ReplayConfig> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("reading configuration {}", path.display()))?;
+        toml::from_str(&text).with_context(|| format!("configuration {}", path.display()))
+    }
+}
+
+/// One output of the navigator.
+#[derive(Debug, Clone, Copy)]
+pub enum Output<'a> {
+    Solution(&'a NavSolutionV1),
+    Diagnostics(&'a AidDiagnosticsV1),
+    /// A truth record of the input, passed through so outputs can be compared with it.
+    Truth(&'a TruthStateV1),
+}
+
+/// What a replay skipped or could not use, per kind of input.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct ReplayCounts {
+    pub messages: u64,
+    pub imu: u64,
+    pub dvl: u64,
+    pub depth: u64,
+    pub gnss: u64,
+    pub truth: u64,
+    /// Sensor messages before the initial state was known (skipped).
+    pub before_start: u64,
+    /// Messages this replay does not use (USBL, magnetometer, outputs of an earlier run).
+    pub unused: u64,
+    /// Channels with a schema this program does not know (skipped).
+    pub unknown: u64,
+    /// Messages whose bytes do not match their schema (skipped).
+    pub malformed: u64,
+    /// Truth records older than the solution they would be compared with (skipped).
+    pub truth_late: u64,
+}
+
+/// Where the initial state came from, stated in the output.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct InitialReport {
+    pub source: &'static str,
+    pub time_s: f64,
+    pub latitude_deg: f64,
+    pub longitude_deg: f64,
+    pub height_m: f64,
+    pub velocity_ned_m_s: [f64; 3],
+    pub euler_deg: [f64; 3],
+}
+
+/// The replay state machine, fed one message at a time.
+pub struct Replay {
+    cfg: NavConfig,
+    configured_initial: Option<InitialState>,
+    nav: Option<Navigator>,
+    initial: Option<InitialReport>,
+    tracker: AccuracyTracker,
+    has_truth: bool,
+    prev_solution: Option<NavSolutionV1>,
+    pending_truth: Option<TruthStateV1>,
+    pub counts: ReplayCounts,
+    first_time_ns: Option<u64>,
+    last_time_ns: u64,
+}
+
+impl Replay {
+    pub fn new(cfg: &ReplayConfig, min_distance_m: f64) -> Replay {
+        Replay {
+            cfg: cfg.navigation.clone(),
+            configured_initial: cfg.initial.clone(),
+            nav: None,
+            initial: None,
+            tracker: AccuracyTracker::new(min_distance_m),
+            has_truth: false,
+            prev_solution: None,
+            pending_truth: None,
+            counts: ReplayCounts::default(),
+            first_time_ns: None,
+            last_time_ns: 0,
+        }
+    }
+
+    pub fn navigator(&self) -> Option<&Navigator> {
+        self.nav.as_ref()
+    }
+
+    fn start(
+        &mut self,
+        state: NavState,
+        source: &'static str,
+        out: &mut dyn FnMut(Output) -> anyhow::Result<()>,
+    ) -> anyhow::Result<()> {
+        let e = state.euler();
+        self.initial = Some(InitialReport {
+            source,
+            time_s: state.time_s,
+            latitude_deg: state.position.latitude_rad.to_degrees(),
+            longitude_deg: state.position.longitude_rad.to_degrees(),
+            height_m: state.position.height_m,
+            velocity_ned_m_s: state.velocity_ned.into(),
+            euler_deg: e.map(f64::to_degrees),
+        });
+        let mut nav = Navigator::new(self.cfg.clone(), state);
+        let t_ns = (state.time_s * 1e9).round() as u64;
+        let sol = nav.solution(t_ns);
+        out(Output::Solution(&sol))?;
+        self.prev_solution = Some(sol);
+        self.nav = Some(nav);
+        Ok(())
+    }
+
+    /// Processes one message in log order; outputs go to `out`.
+    pub fn process(
+        &mut self,
+        m: &LogMessage,
+        out: &mut dyn FnMut(Output) -> anyhow::Result<()>,
+    ) -> anyhow::Result<()> {
+        self.counts.messages += 1;
+        match m {
+            LogMessage::Truth(t) => {
+                self.counts.truth += 1;
+                self.has_truth = true;
+                out(Output::Truth(t))?;
+                self.note_time(t.host_time_ns);
+                if self.nav.is_none() && self.configured_initial.is_none() {
+                    let state = initial_state(
+                        t.host_time_ns as f64 * 1e-9,
+                        Geodetic {
+                            latitude_rad: t.latitude_rad,
+                            longitude_rad: t.longitude_rad,
+                            height_m: t.height_m,
+                        },
+                        t.velocity_ned_m_s,
+                        t.euler_rad,
+                    );
+                    self.start(state, "first record of the truth channel", out)?;
+                }
+                self.compare(t);
+            }
+            LogMessage::Imu(x) => {
+                self.counts.imu += 1;
+                self.note_time(x.host_time_ns);
+                if self.nav.is_none()
+                    && let Some(i) = self.configured_initial.clone()
+                {
+                    let state = initial_state(
+                        x.host_time_ns as f64 * 1e-9,
+                        Geodetic {
+                            latitude_rad: i.latitude_deg.to_radians(),
+                            longitude_rad: i.longitude_deg.to_radians(),
+                            height_m: i.height_m,
+                        },
+                        i.velocity_ned_m_s,
+                        i.euler_deg.map(f64::to_radians),
+                    );
+                    self.start(state, "[initial] table of the configuration", out)?;
+                    return Ok(());
+                }
+                let Some(nav) = self.nav.as_mut() else {
+                    self.counts.before_start += 1;
+                    return Ok(());
+                };
+                if let Some(sol) = nav.on_imu(x) {
+                    out(Output::Solution(&sol))?;
+                    self.on_solution(sol);
+                }
+            }
+            LogMessage::Dvl(x) => {
+                self.counts.dvl += 1;
+                self.note_time(x.host_time_ns);
+                match self.nav.as_mut() {
+                    Some(nav) => out(Output::Diagnostics(&nav.on_dvl(x)))?,
+                    None => self.counts.before_start += 1,
+                }
+            }
+            LogMessage::Depth(x) => {
+                self.counts.depth += 1;
+                self.note_time(x.host_time_ns);
+                match self.nav.as_mut() {
+                    Some(nav) => out(Output::Diagnostics(&nav.on_depth(x)))?,
+                    None => self.counts.before_start += 1,
+                }
+            }
+            LogMessage::Gnss(x) => {
+                self.counts.gnss += 1;
+                self.note_time(x.host_time_ns);
+                match self.nav.as_mut() {
+                    Some(nav) => out(Output::Diagnostics(&nav.on_gnss(x)))?,
+                    None => self.counts.before_start += 1,
+                }
+            }
+            LogMessage::Unknown => self.counts.unknown += 1,
+            _ => self.counts.unused += 1,
+        }
+        Ok(())
+    }
+
+    fn note_time(&mut self, t_ns: u64) {
+        self.first_time_ns.get_or_insert(t_ns);
+        self.last_time_ns = self.last_time_ns.max(t_ns);
+    }
+
+    fn compare(&mut self, t: &TruthStateV1) {
+        let Some(prev) = self.prev_solution else {
+            return;
+        };
+        if prev.host_time_ns == t.host_time_ns {
+            self.tracker.add(&prev, t);
+        } else if prev.host_time_ns > t.host_time_ns {
+            self.counts.truth_late += 1;
+        } else {
+            // Wait for the first solution at or after the truth epoch. A newer truth record
+            // replaces one still waiting (only possible when the IMU is slower than the truth).
+            if self.pending_truth.replace(*t).is_some() {
+                self.counts.truth_late += 1;
+            }
+        }
+    }
+
+    fn on_solution(&mut self, sol: NavSolutionV1) {
+        if let (Some(t), Some(prev)) = (self.pending_truth, self.prev_solution)
+            && sol.host_time_ns >= t.host_time_ns
+        {
+            self.tracker
+                .add(&interpolate(&prev, &sol, t.host_time_ns), &t);
+            self.pending_truth = None;
+        }
+        self.prev_solution = Some(sol);
+    }
+
+    /// The accuracy against the truth channel, when the log has one.
+    pub fn accuracy(&self) -> Option<Accuracy> {
+        self.has_truth.then(|| self.tracker.result())
+    }
+
+    pub fn initial(&self) -> Option<&InitialReport> {
+        self.initial.as_ref()
+    }
+
+    pub fn nav_counters(&self) -> NavCounters {
+        self.nav.as_ref().map(|n| n.counters).unwrap_or_default()
+    }
+
+    /// Log time covered by the messages seen (s).
+    pub fn duration_s(&self) -> f64 {
+        self.first_time_ns
+            .map(|f| (self.last_time_ns - f) as f64 * 1e-9)
+            .unwrap_or(0.0)
+    }
+}
+
+/// The solution at `t_ns` between `a` and `b` (position, velocity and heading interpolated
+/// linearly; the rest taken from `b`).
+pub fn interpolate(a: &NavSolutionV1, b: &NavSolutionV1, t_ns: u64) -> NavSolutionV1 {
+    let span = b.host_time_ns.saturating_sub(a.host_time_ns);
+    if span == 0 {
+        return *b;
+    }
+    let w = t_ns.saturating_sub(a.host_time_ns) as f64 / span as f64;
+    let lerp = |x: f64, y: f64| x + (y - x) * w;
+    let mut s = *b;
+    s.host_time_ns = t_ns;
+    s.latitude_rad = lerp(a.latitude_rad, b.latitude_rad);
+    s.longitude_rad = lerp(a.longitude_rad, b.longitude_rad);
+    s.height_m = lerp(a.height_m, b.height_m);
+    for i in 0..3 {
+        s.velocity_ned_m_s[i] = lerp(a.velocity_ned_m_s[i], b.velocity_ned_m_s[i]);
+    }
+    let dyaw = (b.euler_rad[2] - a.euler_rad[2] + std::f64::consts::PI)
+        .rem_euclid(std::f64::consts::TAU)
+        - std::f64::consts::PI;
+    s.euler_rad[2] = a.euler_rad[2] + dyaw * w;
+    s
+}
+
+/// Command-line arguments of `auvnav replay`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ReplayArgs {
+    /// The log to replay (MCAP written by auvnav).
+    pub log: PathBuf,
+    /// Configuration TOML: `[navigation]` (filter settings) and an optional `[initial]` state.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Write the solution and the diagnostics: MCAP, or CSV when the name ends in .csv (the
+    /// diagnostics then go to NAME.diagnostics.csv).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Write every Nth solution (diagnostics are always all written).
+    #[arg(long, default_value_t = 1)]
+    pub decimate: u64,
+    /// Distance travelled beyond which points enter the error/distance figure (m).
+    #[arg(long, default_value_t = 100.0)]
+    pub min_distance: f64,
+    /// Print the result as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// The result of a replay.
+#[derive(Debug, Clone, Serialize)]
+pub struct ReplayReport {
+    pub log: String,
+    pub initial_state: Option<InitialReport>,
+    /// Present when the log has a truth channel.
+    pub accuracy: Option<Accuracy>,
+    pub samples_processed: u64,
+    pub log_seconds: f64,
+    pub wall_seconds: f64,
+    pub real_time_factor: f64,
+    pub counts: ReplayCounts,
+    pub navigator: NavCounters,
+    /// Why the log ended early, when it did (for example a truncated file).
+    pub log_error: Option<String>,
+}
+
+/// Reads `log` and feeds every message to `replay`. A truncated or damaged tail ends the replay
+/// with what was read and the reason in the second value; a log that cannot be read at all is an
+/// error.
+pub fn run_log(
+    log: &Path,
+    replay: &mut Replay,
+    out: &mut dyn FnMut(Output) -> anyhow::Result<()>,
+) -> anyhow::Result<(LogHeader, Option<String>)> {
+    let mut reader = LogReader::open(log)?;
+    let header = reader
+        .read_header()
+        .with_context(|| format!("reading {}", log.display()))?;
+    loop {
+        let raw = match reader.next_message() {
+            Ok(Some(raw)) => raw,
+            Ok(None) => return Ok((header, None)),
+            Err(e @ (LogError::Truncated | LogError::Mcap(_))) => {
+                return Ok((header, Some(e.to_string())));
+            }
+            Err(e) => return Err(e).with_context(|| format!("reading {}", log.display())),
+        };
+        match raw.decode_any() {
+            Ok(m) => replay.process(&m, out)?,
+            Err(_) => replay.counts.malformed += 1,
+        }
+    }
+}
+
+fn partial_path(path: &Path) -> PathBuf {
+    let mut p = path.as_os_str().to_owned();
+    p.push(".partial");
+    PathBuf::from(p)
+}
+
+/// The CSV file that receives the diagnostics when the solution goes to `nav_csv`.
+pub fn diagnostics_csv_path(nav_csv: &Path) -> PathBuf {
+    nav_csv.with_extension("diagnostics.csv")
+}
+
+pub const DIAGNOSTICS_HEADER: &str = "time_ns,sequence,source,dimension,flags,observation_0,observation_1,observation_2,innovation_0,innovation_1,innovation_2,innovation_variance_0,innovation_variance_1,innovation_variance_2,test_ratio";
+
+fn write_diagnostics_row(w: &mut dyn Write, d: &AidDiagnosticsV1) -> std::io::Result<()> {
+    writeln!(
+        w,
+        "{},{},{},{},{},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?}",
+        d.host_time_ns,
+        d.sequence,
+        d.source,
+        d.dimension,
+        d.flags,
+        d.observation[0],
+        d.observation[1],
+        d.observation[2],
+        d.innovation[0],
+        d.innovation[1],
+        d.innovation[2],
+        d.innovation_variance[0],
+        d.innovation_variance[1],
+        d.innovation_variance[2],
+        d.test_ratio
+    )
+}
+
+/// Runs `auvnav replay`.
+pub fn run(a: &ReplayArgs) -> anyhow::Result<ReplayReport> {
+    let cfg = match &a.config {
+        Some(p) => ReplayConfig::load(p)?,
+        None => ReplayConfig::default(),
+    };
+    if !(a.min_distance.is_finite() && a.min_distance >= 0.0) {
+        bail!("--min-distance {}: must be >= 0 m", a.min_distance);
+    }
+    let decimate = a.decimate.max(1);
+    let mut replay = Replay::new(&cfg, a.min_distance);
+    let start = std::time::Instant::now();
+    let mut solutions = 0u64;
+    let mut log_error = None;
+    let config_text = toml::to_string(&cfg).unwrap_or_default();
+    match &a.out {
+        None => {
+            log_error = run_log(&a.log, &mut replay, &mut |_| Ok(()))?.1;
+        }
+        Some(path) if path.extension().is_some_and(|e| e == "csv") => {
+            let diag_path = diagnostics_csv_path(path);
+            let (nav_partial, diag_partial) = (partial_path(path), partial_path(&diag_path));
+            let result = (|| -> anyhow::Result<()> {
+                let mut nav_w = std::io::BufWriter::new(
+                    std::fs::File::create(&nav_partial)
+                        .with_context(|| format!("creating {}", nav_partial.display()))?,
+                );
+                let mut diag_w = std::io::BufWriter::new(
+                    std::fs::File::create(&diag_partial)
+                        .with_context(|| format!("creating {}", diag_partial.display()))?,
+                );
+                writeln!(nav_w, "{}", crate::csv::NAV_HEADER)?;
+                writeln!(diag_w, "{DIAGNOSTICS_HEADER}")?;
+                log_error = run_log(&a.log, &mut replay, &mut |o| {
+                    match o {
+                        Output::Solution(s) => {
+                            solutions += 1;
+                            if (solutions - 1).is_multiple_of(decimate) {
+                                crate::csv::write_nav_row(&mut nav_w, s)?;
+                            }
+                        }
+                        Output::Diagnostics(d) => write_diagnostics_row(&mut diag_w, d)?,
+                        Output::Truth(_) => {}
+                    }
+                    Ok(())
+                })?
+                .1;
+                nav_w.flush()?;
+                diag_w.flush()?;
+                std::fs::rename(&nav_partial, path)?;
+                std::fs::rename(&diag_partial, &diag_path)?;
+                Ok(())
+            })();
+            if result.is_err() {
+                let _ = std::fs::remove_file(&nav_partial);
+                let _ = std::fs::remove_file(&diag_partial);
+            }
+            result?;
+        }
+        Some(path) => {
+            let mut header = LogHeader::new("auvnav replay", &config_text);
+            header
+                .notes
+                .insert("replay.source_log".into(), a.log.display().to_string());
+            write_log_atomically(path, &header, |w| {
+                log_error = run_log(&a.log, &mut replay, &mut |o| {
+                    match o {
+                        Output::Solution(s) => {
+                            solutions += 1;
+                            if (solutions - 1).is_multiple_of(decimate) {
+                                w.write(topic::NAV_SOLUTION, s)?;
+                            }
+                        }
+                        Output::Diagnostics(d) => w.write(topic::NAV_AID_DIAGNOSTICS, d)?,
+                        Output::Truth(t) => w.write(topic::TRUTH, t)?,
+                    }
+                    Ok(())
+                })?
+                .1;
+                Ok(())
+            })?;
+        }
+    }
+    let wall = start.elapsed().as_secs_f64();
+    if replay.initial().is_none() {
+        bail!(
+            "{}: no initial state: the log has no truth channel and the configuration no [initial] table",
+            a.log.display()
+        );
+    }
+    let log_seconds = replay.duration_s();
+    Ok(ReplayReport {
+        log: a.log.display().to_string(),
+        initial_state: replay.initial().cloned(),
+        accuracy: replay.accuracy(),
+        samples_processed: replay.counts.imu,
+        log_seconds,
+        wall_seconds: wall,
+        real_time_factor: if wall > 0.0 { log_seconds / wall } else { 0.0 },
+        counts: replay.counts,
+        navigator: replay.nav_counters(),
+        log_error,
+    })
+}
+
+/// Prints a replay report for people.
+pub fn print_report(r: &ReplayReport) {
+    println!("auvnav replay: {}", r.log);
+    if let Some(i) = &r.initial_state {
+        println!(
+            "  initial state from the {} at t = {:.3} s: {:.7} deg N, {:.7} deg E, height {:.2} m, \
+             v_ned [{:.3}, {:.3}, {:.3}] m/s, roll/pitch/yaw [{:.3}, {:.3}, {:.3}] deg",
+            i.source,
+            i.time_s,
+            i.latitude_deg,
+            i.longitude_deg,
+            i.height_m,
+            i.velocity_ned_m_s[0],
+            i.velocity_ned_m_s[1],
+            i.velocity_ned_m_s[2],
+            i.euler_deg[0],
+            i.euler_deg[1],
+            i.euler_deg[2]
+        );
+    }
+    if let Some(acc) = &r.accuracy {
+        println!(
+            "  horizontal error: final {:.2} m, max {:.2} m, CEP50 {:.2} m over {:.0} m travelled",
+            acc.horizontal_error_final_m,
+            acc.horizontal_error_max_m,
+            acc.horizontal_error_cep50_m,
+            acc.distance_travelled_m
+        );
+        println!(
+            "  error/distance CEP50 {:.3} %, heading error RMS {:.4} deg",
+            acc.error_per_distance_cep50_percent, acc.heading_error_rms_deg
+        );
+    }
+    let n = &r.navigator;
+    println!(
+        "  {} IMU samples, {:.0} s of log in {:.3} s (real-time factor {:.0}); fused {} DVL ({} rejected, {} invalid), {} depth ({} rejected), {} GNSS ({} rejected)",
+        r.samples_processed,
+        r.log_seconds,
+        r.wall_seconds,
+        r.real_time_factor,
+        n.dvl_fused,
+        n.dvl_rejected,
+        n.dvl_invalid,
+        n.depth_fused,
+        n.depth_rejected,
+        n.gnss_fused,
+        n.gnss_rejected
+    );
+    let skipped = n.imu_out_of_order + n.imu_invalid + n.aid_late + r.counts.before_start;
+    if skipped > 0 || n.imu_gaps > 0 {
+        println!(
+            "  skipped: {} IMU out of order, {} IMU invalid, {} late aids, {} before the initial state; {} IMU gaps bridged",
+            n.imu_out_of_order, n.imu_invalid, n.aid_late, r.counts.before_start, n.imu_gaps
+        );
+    }
+    if let Some(e) = &r.log_error {
+        println!("  the log ended early: {e}");
+    }
+}
