@@ -4,5 +4,6 @@ pub mod csv;
 pub mod demo;
 pub mod import;
 pub mod log;
+pub mod montecarlo;
 pub mod replay;
 pub mod sim;

@@ -104,7 +104,7 @@ impl LogHeader {
         }
     }
 
-    fn to_metadata(&self) -> Metadata {
+    pub fn to_metadata(&self) -> Metadata {
         let mut m = self.notes.clone();
         m.insert("format_version".into(), self.format_version.to_string());
         m.insert(

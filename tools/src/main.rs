@@ -30,11 +30,22 @@ enum Command {
         #[command(subcommand)]
         what: ImportWhat,
     },
+    /// Monte Carlo studies of the navigation filter.
+    Montecarlo {
+        #[command(subcommand)]
+        what: MonteCarloWhat,
+    },
     /// Throughput benchmarks, printed as JSON with --json.
     Bench {
         #[command(subcommand)]
         what: BenchWhat,
     },
+}
+
+#[derive(Subcommand)]
+enum MonteCarloWhat {
+    /// Filter consistency: normalised estimation error squared of position, velocity and attitude.
+    Nees(auvnav_tools::montecarlo::NeesArgs),
 }
 
 #[derive(Subcommand)]
@@ -46,6 +57,27 @@ enum ImportWhat {
 
 #[derive(Subcommand)]
 enum BenchWhat {
+    /// INS/DVL/depth accuracy on a simulated scenario (default: the 6 km survey) over seeds.
+    Accuracy {
+        #[arg(long, default_value = "survey")]
+        scenario: String,
+        /// Seeds 1..=N.
+        #[arg(long, default_value_t = 10)]
+        seeds: u64,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Real-time factor of INS/DVL/depth replay: one hour of 200 Hz IMU, 1 Hz DVL, 1 Hz depth.
+    Replay {
+        /// Log hours.
+        #[arg(long, default_value_t = 1.0)]
+        hours: f64,
+        /// Repetitions (the median is reported).
+        #[arg(long, default_value_t = 5)]
+        repeat: usize,
+        #[arg(long)]
+        json: bool,
+    },
     /// Time to simulate and write one hour of 200 Hz IMU, 5 Hz DVL, 1 Hz USBL and 1 Hz depth.
     Sim {
         /// Simulated hours.
@@ -197,6 +229,9 @@ fn main() -> std::process::ExitCode {
         Command::Sim(a) => run_sim(a),
         Command::Demo(a) => auvnav_tools::demo::run(&a),
         Command::Replay(a) => run_replay(&a),
+        Command::Montecarlo { what } => match what {
+            MonteCarloWhat::Nees(a) => auvnav_tools::montecarlo::run_nees(&a),
+        },
         Command::Import { what } => match what {
             ImportWhat::Snapir(a) => run_import_snapir(&a),
         },
@@ -206,6 +241,16 @@ fn main() -> std::process::ExitCode {
                 repeat,
                 json,
             } => auvnav_tools::bench::sim(hours, repeat, json),
+            BenchWhat::Accuracy {
+                scenario,
+                seeds,
+                json,
+            } => auvnav_tools::bench::accuracy(&scenario, seeds, json),
+            BenchWhat::Replay {
+                hours,
+                repeat,
+                json,
+            } => auvnav_tools::bench::replay(hours, repeat, json),
         },
     };
     match result {

@@ -163,6 +163,7 @@ pub const BUILTIN: &[(&str, &str)] = &[
     ("lawnmower", include_str!("scenarios/lawnmower.toml")),
     ("docking", include_str!("scenarios/docking.toml")),
     ("moored", include_str!("scenarios/moored.toml")),
+    ("survey", include_str!("scenarios/survey.toml")),
 ];
 
 impl Scenario {

@@ -1,0 +1,380 @@
+//! `auvnav montecarlo nees`: filter consistency by Monte Carlo.
+//!
+//! Each run simulates the scenario with sensor errors drawn from exactly the statistics the
+//! filter assumes (white IMU noise at the configured random walks, constant IMU biases drawn from
+//! the initial bias uncertainty, bias random walks, DVL beam noise and depth noise), starts the
+//! navigator from the truth perturbed by a draw from its initial covariance, and records at every
+//! truth epoch the normalised estimation error squared (NEES) of position, velocity and attitude:
+//! `e^T P^-1 e` with `e` the estimate minus the truth and `P` the filter's block. Averaged over `N`
+//! runs, `N * ANEES` of a consistent filter is chi-square with `3 N` degrees of freedom; the report
+//! gives the two-sided 95 % bounds and the fraction of epochs inside them per block.
+
+use crate::log::LogMessage;
+use crate::sim::{self, SimConfig, effects::Effects, rng::Rng, scenario::Scenario};
+use anyhow::bail;
+use auvnav_core::earth::{self, Geodetic};
+use auvnav_core::filter;
+use auvnav_core::navigator::{NavConfig, Navigator, initial_state};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use serde::Serialize;
+
+const DEG: f64 = std::f64::consts::PI / 180.0;
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct NeesArgs {
+    /// Number of Monte Carlo runs.
+    #[arg(long, default_value_t = 50)]
+    pub runs: usize,
+    /// Built-in scenario or scenario file.
+    #[arg(long, default_value = "lawnmower")]
+    pub scenario: String,
+    /// Simulated seconds per run (default: the whole scenario).
+    #[arg(long)]
+    pub seconds: Option<f64>,
+    /// First seed; run k uses seed + k.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// DVL beam noise (m/s).
+    #[arg(long, default_value_t = 0.01)]
+    pub dvl_beam_noise: f64,
+    /// Epochs before this time (s from the start) are left out of the statistics.
+    #[arg(long, default_value_t = 10.0)]
+    pub skip_seconds: f64,
+    /// Configuration TOML with a `[navigation]` table (the filter and the simulated errors both
+    /// follow it).
+    #[arg(long)]
+    pub config: Option<std::path::PathBuf>,
+    /// Write the run-averaged NEES per epoch to this CSV (time_s, position, velocity, attitude).
+    #[arg(long)]
+    pub series: Option<std::path::PathBuf>,
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Statistics of one NEES block.
+#[derive(Debug, Clone, Serialize)]
+pub struct NeesBlock {
+    /// Mean over epochs of the run-averaged NEES (3 for a consistent filter).
+    pub mean_anees: f64,
+    /// Fraction of epochs whose run-averaged NEES is inside the 95 % bounds.
+    pub fraction_inside: f64,
+    pub fraction_above: f64,
+    pub fraction_below: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct NeesReport {
+    pub scenario: String,
+    pub runs: usize,
+    pub epochs: usize,
+    pub seconds_per_run: f64,
+    /// Two-sided 95 % bounds of the run-averaged NEES (3 degrees of freedom per run).
+    pub lower_bound: f64,
+    pub upper_bound: f64,
+    pub position: NeesBlock,
+    pub velocity: NeesBlock,
+    pub attitude: NeesBlock,
+    /// Run-averaged NEES per epoch: time (s), position, velocity, attitude.
+    #[serde(skip)]
+    pub series: Vec<[f64; 4]>,
+}
+
+/// Chi-square quantile (Wilson-Hilferty; better than 1 % for k >= 30).
+pub fn chi2_quantile(k: f64, z: f64) -> f64 {
+    let a = 2.0 / (9.0 * k);
+    k * (1.0 - a + z * a.sqrt()).powi(3)
+}
+
+/// The attitude error `phi` with `C_est = (I - [phi x]) C_true`.
+fn attitude_error(est: &UnitQuaternion<f64>, truth: &UnitQuaternion<f64>) -> Vector3<f64> {
+    -(est * truth.inverse()).scaled_axis()
+}
+
+fn nees(e: &Vector3<f64>, p: &Matrix3<f64>) -> f64 {
+    match p.try_inverse() {
+        Some(inv) => (e.transpose() * inv * e)[(0, 0)],
+        None => f64::INFINITY,
+    }
+}
+
+/// The simulation effects matching the filter's noise model, with biases drawn for one run.
+fn matched_effects(cfg: &NavConfig, dvl_beam_noise: f64, rng: &mut Rng) -> anyhow::Result<Effects> {
+    let mut e = Effects::default();
+    let gb = cfg.initial_gyro_bias_std_deg_h;
+    let ab = cfg.initial_accel_bias_std_ug;
+    e.set(
+        "imu.gyro_bias",
+        &[rng.gauss(gb), rng.gauss(gb), rng.gauss(gb)],
+    )?;
+    e.set(
+        "imu.accel_bias",
+        &[rng.gauss(ab), rng.gauss(ab), rng.gauss(ab)],
+    )?;
+    e.set(
+        "imu.angle_random_walk",
+        &[cfg.gyro_angle_random_walk_deg_sqrt_h],
+    )?;
+    e.set(
+        "imu.velocity_random_walk",
+        &[cfg.accel_velocity_random_walk_m_s_sqrt_h],
+    )?;
+    // A Gauss-Markov bias with sigma s and correlation time T grows like a random walk of
+    // density sqrt(2 s^2 / T) for t << T: pick s so the densities agree.
+    let tau = 1.0e6;
+    e.set("imu.bias_correlation_time", &[tau])?;
+    let gyro_walk = cfg.gyro_bias_walk_deg_h_sqrt_h / 60.0; // deg/h per sqrt(s)
+    e.set(
+        "imu.gyro_bias_instability",
+        &[gyro_walk * (tau / 2.0).sqrt()],
+    )?;
+    let accel_walk = cfg.accel_bias_walk_ug_sqrt_h / 60.0;
+    e.set(
+        "imu.accel_bias_instability",
+        &[accel_walk * (tau / 2.0).sqrt()],
+    )?;
+    e.set("dvl.noise", &[dvl_beam_noise])?;
+    e.set("depth.noise", &[cfg.depth_std_m])?;
+    Ok(e)
+}
+
+/// Runs the Monte Carlo and returns the report.
+pub fn nees_monte_carlo(a: &NeesArgs, cfg: &NavConfig) -> anyhow::Result<NeesReport> {
+    nees_monte_carlo_with(a, cfg, cfg)
+}
+
+/// The Monte Carlo with the simulated errors drawn from `truth_cfg` and the filter run with
+/// `filter_cfg` (to show what a mis-tuned filter looks like).
+pub fn nees_monte_carlo_with(
+    a: &NeesArgs,
+    truth_cfg: &NavConfig,
+    filter_cfg: &NavConfig,
+) -> anyhow::Result<NeesReport> {
+    if a.runs == 0 {
+        bail!("--runs must be at least 1");
+    }
+    let scenario = Scenario::load(&a.scenario)?;
+    // Sums over runs per epoch index: time, position, velocity, attitude NEES.
+    let mut sums: Vec<[f64; 4]> = Vec::new();
+    let mut counts: Vec<usize> = Vec::new();
+    let mut seconds = 0.0;
+    for k in 0..a.runs {
+        let seed = a.seed.wrapping_add(k as u64);
+        let mut rng = Rng::new(seed, "montecarlo.nees");
+        let effects = matched_effects(truth_cfg, a.dvl_beam_noise, &mut rng)?;
+        let sim_cfg = SimConfig {
+            scenario: scenario.clone(),
+            effects,
+            seed,
+            duration_s: a.seconds,
+        };
+        let mut nav: Option<Navigator> = None;
+        let mut epoch = 0usize;
+        let mut last_imu_ns = None;
+        let mut start_ns = 0u64;
+        let summary = sim::simulate(&sim_cfg, |m| {
+            match m {
+                LogMessage::Truth(t) => {
+                    let truth_q = UnitQuaternion::from_euler_angles(
+                        t.euler_rad[0],
+                        t.euler_rad[1],
+                        t.euler_rad[2],
+                    );
+                    let truth_pos = Geodetic {
+                        latitude_rad: t.latitude_rad,
+                        longitude_rad: t.longitude_rad,
+                        height_m: t.height_m,
+                    };
+                    let Some(n) = nav.as_ref() else {
+                        nav = Some(perturbed_start(truth_cfg, filter_cfg, t, &mut rng));
+                        start_ns = t.host_time_ns;
+                        return Ok(());
+                    };
+                    if last_imu_ns != Some(t.host_time_ns) {
+                        return Ok(());
+                    }
+                    let time_s = (t.host_time_ns - start_ns) as f64 * 1e-9;
+                    if time_s < a.skip_seconds {
+                        return Ok(());
+                    }
+                    let s = n.state();
+                    let p = n.covariance();
+                    let block = |i: usize| -> Matrix3<f64> { p.fixed_view::<3, 3>(i, i).into() };
+                    let dp = earth::ned_offset(&truth_pos, &s.position);
+                    let dv = s.velocity_ned - Vector3::from(t.velocity_ned_m_s);
+                    let phi = attitude_error(&s.q_body_to_ned, &truth_q);
+                    let values = [
+                        time_s,
+                        nees(&dp, &block(filter::POS)),
+                        nees(&dv, &block(filter::VEL)),
+                        nees(&phi, &block(filter::ATT)),
+                    ];
+                    if sums.len() <= epoch {
+                        sums.push([0.0; 4]);
+                        counts.push(0);
+                    }
+                    for i in 0..4 {
+                        sums[epoch][i] += values[i];
+                    }
+                    counts[epoch] += 1;
+                    epoch += 1;
+                }
+                LogMessage::Imu(x) => {
+                    if let Some(n) = nav.as_mut()
+                        && n.on_imu(x).is_some()
+                    {
+                        last_imu_ns = Some(x.host_time_ns);
+                    }
+                }
+                LogMessage::Dvl(x) => {
+                    if let Some(n) = nav.as_mut() {
+                        n.on_dvl(x);
+                    }
+                }
+                LogMessage::Depth(x) => {
+                    if let Some(n) = nav.as_mut() {
+                        n.on_depth(x);
+                    }
+                }
+                _ => {}
+            }
+            Ok(())
+        })?;
+        seconds = summary.duration_s;
+    }
+    // Only epochs every run reached.
+    let series: Vec<[f64; 4]> = sums
+        .iter()
+        .zip(&counts)
+        .filter(|(_, c)| **c == a.runs)
+        .map(|(s, c)| {
+            let n = *c as f64;
+            [s[0] / n, s[1] / n, s[2] / n, s[3] / n]
+        })
+        .collect();
+    if series.is_empty() {
+        bail!("no epoch to evaluate (is the run shorter than --skip-seconds?)");
+    }
+    let dof = 3.0 * a.runs as f64;
+    let lower = chi2_quantile(dof, -1.959_964) / a.runs as f64;
+    let upper = chi2_quantile(dof, 1.959_964) / a.runs as f64;
+    let block = |i: usize| {
+        let n = series.len() as f64;
+        let above = series.iter().filter(|s| s[i] > upper).count() as f64 / n;
+        let below = series.iter().filter(|s| s[i] < lower).count() as f64 / n;
+        NeesBlock {
+            mean_anees: series.iter().map(|s| s[i]).sum::<f64>() / n,
+            fraction_inside: 1.0 - above - below,
+            fraction_above: above,
+            fraction_below: below,
+        }
+    };
+    Ok(NeesReport {
+        scenario: scenario.name.clone(),
+        runs: a.runs,
+        epochs: series.len(),
+        seconds_per_run: seconds,
+        lower_bound: lower,
+        upper_bound: upper,
+        position: block(1),
+        velocity: block(2),
+        attitude: block(3),
+        series,
+    })
+}
+
+/// A navigator started from the truth perturbed by a draw from its initial covariance.
+fn perturbed_start(
+    cfg: &NavConfig,
+    filter_cfg: &NavConfig,
+    t: &auvnav_shm_schema::TruthStateV1,
+    rng: &mut Rng,
+) -> Navigator {
+    let dp = Vector3::new(
+        rng.gauss(cfg.initial_position_std_m),
+        rng.gauss(cfg.initial_position_std_m),
+        rng.gauss(cfg.initial_position_std_m),
+    );
+    let dv = Vector3::new(
+        rng.gauss(cfg.initial_velocity_std_m_s),
+        rng.gauss(cfg.initial_velocity_std_m_s),
+        rng.gauss(cfg.initial_velocity_std_m_s),
+    );
+    let tilt = cfg.initial_tilt_std_deg * DEG;
+    let phi = Vector3::new(
+        rng.gauss(tilt),
+        rng.gauss(tilt),
+        rng.gauss(cfg.initial_heading_std_deg * DEG),
+    );
+    let truth_pos = Geodetic {
+        latitude_rad: t.latitude_rad,
+        longitude_rad: t.longitude_rad,
+        height_m: t.height_m,
+    };
+    let mut s = initial_state(
+        t.host_time_ns as f64 * 1e-9,
+        earth::offset_position(&truth_pos, &dp),
+        (Vector3::from(t.velocity_ned_m_s) + dv).into(),
+        t.euler_rad,
+    );
+    s.q_body_to_ned = UnitQuaternion::from_scaled_axis(-phi) * s.q_body_to_ned;
+    Navigator::new(filter_cfg.clone(), s)
+}
+
+/// Runs `auvnav montecarlo nees` and prints the report.
+pub fn run_nees(a: &NeesArgs) -> anyhow::Result<()> {
+    let cfg = match &a.config {
+        Some(p) => crate::replay::ReplayConfig::load(p)?.navigation,
+        None => NavConfig::default(),
+    };
+    let start = std::time::Instant::now();
+    let r = nees_monte_carlo(a, &cfg)?;
+    if let Some(path) = &a.series {
+        let mut text = String::from("time_s,anees_position,anees_velocity,anees_attitude\n");
+        for e in &r.series {
+            text.push_str(&format!("{},{},{},{}\n", e[0], e[1], e[2], e[3]));
+        }
+        std::fs::write(path, text)?;
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+    } else {
+        println!(
+            "NEES Monte Carlo: scenario {}, {} runs of {:.0} s, {} epochs; 95 % bounds of the run-averaged NEES [{:.3}, {:.3}] ({:.1} s wall)",
+            r.scenario,
+            r.runs,
+            r.seconds_per_run,
+            r.epochs,
+            r.lower_bound,
+            r.upper_bound,
+            start.elapsed().as_secs_f64()
+        );
+        for (name, b) in [
+            ("position", &r.position),
+            ("velocity", &r.velocity),
+            ("attitude", &r.attitude),
+        ] {
+            println!(
+                "  {name:9} mean ANEES {:.3} (3 expected), inside {:.1} % of epochs, above {:.1} %, below {:.1} %",
+                b.mean_anees,
+                100.0 * b.fraction_inside,
+                100.0 * b.fraction_above,
+                100.0 * b.fraction_below
+            );
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chi2_quantiles_match_tables() {
+        // Tabulated: chi2(150) 2.5 % = 117.98, 97.5 % = 185.80; chi2(30) 2.5 % = 16.79, 97.5 % = 46.98.
+        assert!((chi2_quantile(150.0, -1.959_964) - 117.98).abs() < 0.1);
+        assert!((chi2_quantile(150.0, 1.959_964) - 185.80).abs() < 0.1);
+        assert!((chi2_quantile(30.0, -1.959_964) - 16.79).abs() < 0.1);
+        assert!((chi2_quantile(30.0, 1.959_964) - 46.98).abs() < 0.1);
+    }
+}
