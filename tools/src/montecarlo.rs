@@ -100,8 +100,24 @@ fn nees(e: &Vector3<f64>, p: &Matrix3<f64>) -> f64 {
 /// The simulation effects matching the filter's noise model, with biases drawn for one run.
 fn matched_effects(cfg: &NavConfig, dvl_beam_noise: f64, rng: &mut Rng) -> anyhow::Result<Effects> {
     let mut e = Effects::default();
-    let gb = cfg.initial_gyro_bias_std_deg_h;
-    let ab = cfg.initial_accel_bias_std_ug;
+    // A Gauss-Markov bias with sigma s and correlation time T grows like a random walk of
+    // density sqrt(2 s^2 / T) for t << T: pick s so the densities agree. The simulator starts
+    // the Gauss-Markov state from its stationary spread s, so the constant part is drawn with
+    // the rest of the initial uncertainty, sqrt(P0 - s^2).
+    let tau = 1.0e6;
+    e.set("imu.bias_correlation_time", &[tau])?;
+    let gyro_gm = cfg.gyro_bias_walk_deg_h_sqrt_h / 60.0 * (tau / 2.0).sqrt();
+    let accel_gm = cfg.accel_bias_walk_ug_sqrt_h / 60.0 * (tau / 2.0).sqrt();
+    if gyro_gm > cfg.initial_gyro_bias_std_deg_h || accel_gm > cfg.initial_accel_bias_std_ug {
+        bail!(
+            "the bias walk over the correlation time exceeds the initial bias uncertainty; \
+             raise initial_gyro_bias_std_deg_h / initial_accel_bias_std_ug"
+        );
+    }
+    e.set("imu.gyro_bias_instability", &[gyro_gm])?;
+    e.set("imu.accel_bias_instability", &[accel_gm])?;
+    let gb = (cfg.initial_gyro_bias_std_deg_h.powi(2) - gyro_gm.powi(2)).sqrt();
+    let ab = (cfg.initial_accel_bias_std_ug.powi(2) - accel_gm.powi(2)).sqrt();
     e.set(
         "imu.gyro_bias",
         &[rng.gauss(gb), rng.gauss(gb), rng.gauss(gb)],
@@ -117,20 +133,6 @@ fn matched_effects(cfg: &NavConfig, dvl_beam_noise: f64, rng: &mut Rng) -> anyho
     e.set(
         "imu.velocity_random_walk",
         &[cfg.accel_velocity_random_walk_m_s_sqrt_h],
-    )?;
-    // A Gauss-Markov bias with sigma s and correlation time T grows like a random walk of
-    // density sqrt(2 s^2 / T) for t << T: pick s so the densities agree.
-    let tau = 1.0e6;
-    e.set("imu.bias_correlation_time", &[tau])?;
-    let gyro_walk = cfg.gyro_bias_walk_deg_h_sqrt_h / 60.0; // deg/h per sqrt(s)
-    e.set(
-        "imu.gyro_bias_instability",
-        &[gyro_walk * (tau / 2.0).sqrt()],
-    )?;
-    let accel_walk = cfg.accel_bias_walk_ug_sqrt_h / 60.0;
-    e.set(
-        "imu.accel_bias_instability",
-        &[accel_walk * (tau / 2.0).sqrt()],
     )?;
     e.set("dvl.noise", &[dvl_beam_noise])?;
     e.set("depth.noise", &[cfg.depth_std_m])?;

@@ -78,6 +78,34 @@ pub struct ReplayCounts {
     pub truth_late: u64,
 }
 
+/// Estimated parameters at the end of a replay.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FinalParameters {
+    pub gyro_bias_deg_h: [f64; 3],
+    pub accel_bias_ug: [f64; 3],
+    /// DVL mounting roll, pitch, yaw w.r.t. the body (deg).
+    pub dvl_mount_deg: [f64; 3],
+    pub dvl_scale_factor: f64,
+    pub dvl_lever_arm_m: [f64; 3],
+    pub dvl_time_offset_s: f64,
+}
+
+impl FinalParameters {
+    pub fn of(nav: &Navigator) -> FinalParameters {
+        let (bg, ba) = nav.imu_biases();
+        let d = nav.dvl_parameters();
+        let (r, p, y) = nalgebra::Rotation3::from_matrix_unchecked(d.c_dvl_to_body).euler_angles();
+        FinalParameters {
+            gyro_bias_deg_h: (bg * 3600.0).map(f64::to_degrees).into(),
+            accel_bias_ug: (ba / 9.806_65e-6).into(),
+            dvl_mount_deg: [r.to_degrees(), p.to_degrees(), y.to_degrees()],
+            dvl_scale_factor: d.scale,
+            dvl_lever_arm_m: d.lever_arm_m.into(),
+            dvl_time_offset_s: d.time_offset_s,
+        }
+    }
+}
+
 /// Where the initial state came from, stated in the output.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct InitialReport {
@@ -351,6 +379,9 @@ pub struct ReplayReport {
     pub real_time_factor: f64,
     pub counts: ReplayCounts,
     pub navigator: NavCounters,
+    /// IMU biases and DVL installation at the end of the replay (estimated where the
+    /// configuration switches their states on, otherwise as configured).
+    pub final_parameters: Option<FinalParameters>,
     /// Why the log ended early, when it did (for example a truncated file).
     pub log_error: Option<String>,
 }
@@ -519,6 +550,7 @@ pub fn run(a: &ReplayArgs) -> anyhow::Result<ReplayReport> {
         real_time_factor: if wall > 0.0 { log_seconds / wall } else { 0.0 },
         counts: replay.counts,
         navigator: replay.nav_counters(),
+        final_parameters: replay.navigator().map(FinalParameters::of),
         log_error,
     })
 }
