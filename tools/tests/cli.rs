@@ -266,3 +266,61 @@ fn demo_runs_a_voyage_through_the_core_and_reports_accuracy() {
         "{v}"
     );
 }
+
+#[test]
+fn replaying_a_log_twice_gives_identical_files_and_reports_accuracy() {
+    let dir = temp_dir("replay");
+    let log = dir.join("turns.mcap");
+    let log_s = log.to_string_lossy().to_string();
+    let o = auvnav(&[
+        "sim",
+        "--scenario",
+        "turns",
+        "--seed",
+        "5",
+        "--duration",
+        "120",
+        "--out",
+        &log_s,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut outputs = Vec::new();
+    for k in 0..2 {
+        let csv = dir.join(format!("nav{k}.csv"));
+        let o = auvnav(&["replay", &log_s, "--out", &csv.to_string_lossy(), "--json"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+        let acc = &v["accuracy"];
+        assert!(
+            acc["horizontal_error_final_m"].as_f64().expect("final") < 2.0,
+            "{v}"
+        );
+        assert!(
+            acc["distance_travelled_m"].as_f64().expect("distance") > 200.0,
+            "{v}"
+        );
+        assert_eq!(v["samples_processed"].as_u64(), Some(24_000), "{v}");
+        assert!(v["real_time_factor"].as_f64().expect("rtf") > 0.0);
+        let nav = std::fs::read(&csv).expect("solution csv");
+        let diag = std::fs::read(dir.join(format!("nav{k}.diagnostics.csv"))).expect("diagnostics");
+        assert!(nav.len() > 1_000_000 && diag.len() > 10_000);
+        outputs.push((nav, diag));
+    }
+    assert!(outputs[0] == outputs[1], "two replays of one log differ");
+    // MCAP output carries the solution, the diagnostics and the truth.
+    let out = dir.join("nav.mcap");
+    let o = auvnav(&["replay", &log_s, "--out", &out.to_string_lossy()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut reader = auvnav_tools::log::LogReader::open(&out).expect("open");
+    let mut topics = std::collections::BTreeMap::new();
+    while let Some(m) = reader.next_message().expect("read") {
+        *topics.entry(m.topic.to_string()).or_insert(0u64) += 1;
+    }
+    assert_eq!(topics.get("nav/solution"), Some(&24_001), "{topics:?}");
+    assert!(topics.get("nav/aid_diagnostics").is_some_and(|&n| n > 100));
+    assert!(topics.get("truth").is_some_and(|&n| n > 100));
+    // A missing log is a clear error.
+    let o = auvnav(&["replay", &dir.join("absent.mcap").to_string_lossy()]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("absent.mcap"), "{}", stderr(&o));
+}
