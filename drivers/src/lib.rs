@@ -1,1 +1,5 @@
+//! auvnav device drivers: pure protocol decoders and encoders (bytes in, frames out; no I/O, no
+//! clock), and the driver processes built on them.
 
+pub mod framing;
+pub mod pd0;

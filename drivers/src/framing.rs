@@ -1,0 +1,128 @@
+//! What every stream decoder shares: a bounded input buffer and the counters a driver reports in
+//! its health message.
+
+use serde::Serialize;
+
+/// Counters of a stream decoder.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct DecoderStats {
+    /// Bytes pushed in.
+    pub bytes: u64,
+    /// Frames decoded (checksum good).
+    pub frames: u64,
+    /// Frames whose checksum failed (the decoder resynchronises after them).
+    pub checksum_errors: u64,
+    /// Times the decoder had to search for the next frame start.
+    pub resyncs: u64,
+    /// Bytes thrown away while searching for a frame start (including failed frames).
+    pub bytes_skipped: u64,
+    /// Frames with a good checksum whose content could not be used (bad lengths, offsets).
+    pub malformed: u64,
+    /// Bytes dropped because the buffer was full (the reader fell behind).
+    pub overflow_bytes: u64,
+}
+
+/// A byte buffer with a hard capacity; the oldest bytes go first when it overflows.
+#[derive(Debug, Clone)]
+pub struct BoundedBuffer {
+    data: Vec<u8>,
+    start: usize,
+    capacity: usize,
+}
+
+impl BoundedBuffer {
+    pub fn new(capacity: usize) -> Self {
+        BoundedBuffer {
+            data: Vec::with_capacity(capacity.min(1 << 16)),
+            start: 0,
+            capacity,
+        }
+    }
+
+    /// Appends `bytes`, dropping the oldest bytes beyond the capacity; returns how many were
+    /// dropped.
+    pub fn push(&mut self, bytes: &[u8]) -> u64 {
+        self.compact();
+        self.data.extend_from_slice(bytes);
+        let excess = self.len().saturating_sub(self.capacity);
+        self.start += excess;
+        excess as u64
+    }
+
+    /// The bytes not yet consumed.
+    pub fn as_slice(&self) -> &[u8] {
+        &self.data[self.start..]
+    }
+
+    pub fn len(&self) -> usize {
+        self.data.len() - self.start
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Drops `n` bytes from the front.
+    pub fn consume(&mut self, n: usize) {
+        self.start += n.min(self.len());
+    }
+
+    fn compact(&mut self) {
+        if self.start > 0 && (self.start >= self.data.len() / 2 || self.start > 1 << 16) {
+            self.data.drain(..self.start);
+            self.start = 0;
+        }
+    }
+}
+
+/// Little-endian readers that return `None` instead of panicking past the end.
+pub(crate) trait ReadLe {
+    fn u8_at(&self, i: usize) -> Option<u8>;
+    fn u16_at(&self, i: usize) -> Option<u16>;
+    fn i16_at(&self, i: usize) -> Option<i16>;
+    fn u32_at(&self, i: usize) -> Option<u32>;
+    fn i32_at(&self, i: usize) -> Option<i32>;
+    fn f32_at(&self, i: usize) -> Option<f32>;
+    fn f64_at(&self, i: usize) -> Option<f64>;
+}
+
+impl ReadLe for [u8] {
+    fn u8_at(&self, i: usize) -> Option<u8> {
+        self.get(i).copied()
+    }
+    fn u16_at(&self, i: usize) -> Option<u16> {
+        Some(u16::from_le_bytes(self.get(i..i + 2)?.try_into().ok()?))
+    }
+    fn i16_at(&self, i: usize) -> Option<i16> {
+        Some(i16::from_le_bytes(self.get(i..i + 2)?.try_into().ok()?))
+    }
+    fn u32_at(&self, i: usize) -> Option<u32> {
+        Some(u32::from_le_bytes(self.get(i..i + 4)?.try_into().ok()?))
+    }
+    fn i32_at(&self, i: usize) -> Option<i32> {
+        Some(i32::from_le_bytes(self.get(i..i + 4)?.try_into().ok()?))
+    }
+    fn f32_at(&self, i: usize) -> Option<f32> {
+        Some(f32::from_le_bytes(self.get(i..i + 4)?.try_into().ok()?))
+    }
+    fn f64_at(&self, i: usize) -> Option<f64> {
+        Some(f64::from_le_bytes(self.get(i..i + 8)?.try_into().ok()?))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bounded_buffer_keeps_the_newest_bytes() {
+        let mut b = BoundedBuffer::new(4);
+        assert_eq!(b.push(&[1, 2, 3]), 0);
+        assert_eq!(b.push(&[4, 5, 6]), 2);
+        assert_eq!(b.as_slice(), &[3, 4, 5, 6]);
+        b.consume(3);
+        assert_eq!(b.as_slice(), &[6]);
+        b.consume(10);
+        assert!(b.is_empty());
+    }
+}
