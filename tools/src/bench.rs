@@ -255,3 +255,89 @@ pub fn accuracy(scenario_name: &str, seeds: u64, json: bool) -> anyhow::Result<(
     }
     Ok(())
 }
+
+#[derive(Debug, Serialize)]
+pub struct DecodeBench {
+    pub protocol: &'static str,
+    pub frames: u64,
+    pub bytes: u64,
+    pub runs_wall_s: Vec<f64>,
+    pub median_wall_s: f64,
+    pub megabytes_per_second: f64,
+    pub frames_per_second: f64,
+}
+
+/// Decoder throughput: a synthetic stream of navigation ensembles (fixed leader, variable
+/// leader, bottom track) fed in 4 KiB reads.
+pub fn decode(repeat: usize, json: bool) -> anyhow::Result<()> {
+    use auvnav_drivers::pd0::{self, BottomTrack, Ensemble, Pd0Decoder, VariableLeader};
+    let mut stream = Vec::new();
+    let n = 100_000u32;
+    for k in 0..n {
+        let e = Ensemble {
+            variable: Some(VariableLeader {
+                ensemble_number: k,
+                rtc: [26, 11, 22, 6, 0, (k % 60) as u8, 0],
+                rtc_y2k: Some([20, 26, 11, 22, 6, 0, (k % 60) as u8, 0]),
+                bit_result: 0,
+                sound_speed_m_s: 1500.0,
+                depth_m: 20.0,
+                heading_deg: f64::from(k % 36000) * 0.01,
+                pitch_deg: 1.0,
+                roll_deg: -0.5,
+                salinity_ppt: 35.0,
+                temperature_c: 12.5,
+                pressure_pa: Some(2.0e5),
+            }),
+            bottom_track: Some(BottomTrack {
+                pings_per_ensemble: 1,
+                range_m: [Some(30.0), Some(31.0), Some(29.5), Some(30.5)],
+                velocity_m_s: [Some(-1.5), Some(0.01), Some(0.02), Some(0.0)],
+                correlation: [250; 4],
+                evaluation_amplitude: [60; 4],
+                percent_good: [100; 4],
+                max_depth_m: 200.0,
+            }),
+            ..Default::default()
+        };
+        stream.extend(pd0::encode_ensemble(&e));
+    }
+    let mut runs = Vec::new();
+    let mut frames = 0;
+    for _ in 0..repeat.max(1) {
+        let t = std::time::Instant::now();
+        let mut d = Pd0Decoder::new();
+        for chunk in stream.chunks(4096) {
+            d.push(chunk);
+            while let Some(r) = d.next_ensemble() {
+                std::hint::black_box(&r);
+            }
+        }
+        runs.push(t.elapsed().as_secs_f64());
+        frames = d.stats.frames;
+    }
+    let m = median(&runs);
+    let out = DecodeBench {
+        protocol: "pd0",
+        frames,
+        bytes: stream.len() as u64,
+        runs_wall_s: runs,
+        median_wall_s: m,
+        megabytes_per_second: stream.len() as f64 / m / 1e6,
+        frames_per_second: frames as f64 / m,
+    };
+    if json {
+        println!("{}", serde_json::to_string_pretty(&out)?);
+    } else {
+        println!(
+            "decode {}: {} frames, {:.1} MB in {:.3} s (median): {:.0} MB/s, {:.0} frames/s",
+            out.protocol,
+            out.frames,
+            out.bytes as f64 / 1e6,
+            out.median_wall_s,
+            out.megabytes_per_second,
+            out.frames_per_second
+        );
+    }
+    Ok(())
+}

@@ -1,6 +1,7 @@
 pub mod accuracy;
 pub mod bench;
 pub mod csv;
+pub mod decode;
 pub mod demo;
 pub mod import;
 pub mod log;

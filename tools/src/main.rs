@@ -25,6 +25,8 @@ enum Command {
     Demo(auvnav_tools::demo::DemoArgs),
     /// Run a log through the navigation core; with a truth channel, report the accuracy.
     Replay(auvnav_tools::replay::ReplayArgs),
+    /// Decode a captured device byte stream (one JSON object per frame with --json).
+    Decode(auvnav_tools::decode::DecodeArgs),
     /// Turn a measured data set into a log.
     Import {
         #[command(subcommand)]
@@ -57,6 +59,13 @@ enum ImportWhat {
 
 #[derive(Subcommand)]
 enum BenchWhat {
+    /// Decoder throughput per protocol (MB/s).
+    Decode {
+        #[arg(long, default_value_t = 5)]
+        repeat: usize,
+        #[arg(long)]
+        json: bool,
+    },
     /// INS/DVL/depth accuracy on a simulated scenario (default: the 6 km survey) over seeds.
     Accuracy {
         #[arg(long, default_value = "survey")]
@@ -229,6 +238,7 @@ fn main() -> std::process::ExitCode {
         Command::Sim(a) => run_sim(a),
         Command::Demo(a) => auvnav_tools::demo::run(&a),
         Command::Replay(a) => run_replay(&a),
+        Command::Decode(a) => auvnav_tools::decode::run(&a).map(|_| ()),
         Command::Montecarlo { what } => match what {
             MonteCarloWhat::Nees(a) => auvnav_tools::montecarlo::run_nees(&a),
         },
@@ -241,6 +251,7 @@ fn main() -> std::process::ExitCode {
                 repeat,
                 json,
             } => auvnav_tools::bench::sim(hours, repeat, json),
+            BenchWhat::Decode { repeat, json } => auvnav_tools::bench::decode(repeat, json),
             BenchWhat::Accuracy {
                 scenario,
                 seeds,

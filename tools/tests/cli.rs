@@ -324,3 +324,54 @@ fn replaying_a_log_twice_gives_identical_files_and_reports_accuracy() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("absent.mcap"), "{}", stderr(&o));
 }
+
+#[test]
+fn decode_prints_one_json_object_per_frame_and_counts_garbage() {
+    use auvnav_drivers::pd0::{BottomTrack, Ensemble, encode_ensemble};
+    let dir = temp_dir("decode");
+    let mut bytes = b"\x7f\x7fgarbage before the first frame".to_vec();
+    for k in 0..3 {
+        let e = Ensemble {
+            bottom_track: Some(BottomTrack {
+                pings_per_ensemble: 1,
+                range_m: [Some(10.0 + f64::from(k)), None, Some(11.0), Some(12.0)],
+                velocity_m_s: [Some(0.5), Some(-0.25), Some(0.0), None],
+                correlation: [250; 4],
+                evaluation_amplitude: [60; 4],
+                percent_good: [100; 4],
+                max_depth_m: 200.0,
+            }),
+            ..Default::default()
+        };
+        bytes.extend(encode_ensemble(&e));
+        bytes.extend_from_slice(&[0x7f, 0x00, 0x13]);
+    }
+    let file = dir.join("capture.pd0");
+    std::fs::write(&file, &bytes).expect("write");
+    let o = auvnav(&[
+        "decode",
+        "--protocol",
+        "pd0",
+        &file.to_string_lossy(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    let lines: Vec<serde_json::Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("json line"))
+        .collect();
+    assert_eq!(lines.len(), 4, "{text}");
+    assert_eq!(lines[1]["bottom_track"]["range_m"][0], 11.0);
+    assert!(lines[0]["bottom_track"]["range_m"][1].is_null());
+    let s = &lines[3]["summary"];
+    assert_eq!(s["frames"], 3);
+    assert!(s["bytes_skipped"].as_u64().expect("skipped") >= 30, "{s}");
+    let o = auvnav(&[
+        "decode",
+        "--protocol",
+        "pd0",
+        &dir.join("absent").to_string_lossy(),
+    ]);
+    assert!(!o.status.success() && stderr(&o).contains("absent"));
+}
