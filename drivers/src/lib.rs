@@ -2,4 +2,7 @@
 //! clock), and the driver processes built on them.
 
 pub mod framing;
+pub mod kvh;
 pub mod pd0;
+pub mod wldvl;
+pub mod xsens;

@@ -12,6 +12,23 @@ use std::path::PathBuf;
 pub enum Protocol {
     /// Teledyne RDI PD0 (DVL/ADCP ensembles).
     Pd0,
+    /// Water Linked DVL serial protocol (wrz, wru, wrp, ...).
+    Wldvl,
+    /// KVH 1750/1775 IMU, formats A and B.
+    Kvh1750,
+    /// Xsens MTi XBus / MTData2.
+    Xsens,
+}
+
+impl Protocol {
+    pub fn name(self) -> &'static str {
+        match self {
+            Protocol::Pd0 => "pd0",
+            Protocol::Wldvl => "wldvl",
+            Protocol::Kvh1750 => "kvh1750",
+            Protocol::Xsens => "xsens",
+        }
+    }
 }
 
 #[derive(clap::Args, Debug, Clone)]
@@ -33,39 +50,70 @@ struct Summary<'a> {
     protocol: &'static str,
 }
 
-/// Decodes the file in 64 KiB reads (as a driver would see the bytes) and returns the counters.
+/// Decodes the file in 1 KiB reads (as a driver would see the bytes) and returns the counters.
 pub fn run(a: &DecodeArgs) -> anyhow::Result<DecoderStats> {
     let bytes = std::fs::read(&a.file).with_context(|| format!("reading {}", a.file.display()))?;
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
     let mut first: Option<String> = None;
     let mut last: Option<String> = None;
+    let mut emit = |line: String, out: &mut dyn Write| -> anyhow::Result<()> {
+        if a.json {
+            writeln!(out, "{line}")?;
+        } else {
+            if first.is_none() {
+                first = Some(line.clone());
+            }
+            last = Some(line);
+        }
+        Ok(())
+    };
+    let chunks = bytes.chunks(1024);
     let stats = match a.protocol {
         Protocol::Pd0 => {
             let mut d = Pd0Decoder::new();
-            let mut emit =
-                |e: &auvnav_drivers::pd0::Ensemble, out: &mut dyn Write| -> anyhow::Result<()> {
-                    let line = serde_json::to_string(e)?;
-                    if a.json {
-                        writeln!(out, "{line}")?;
-                    } else {
-                        if first.is_none() {
-                            first = Some(line.clone());
-                        }
-                        last = Some(line);
-                    }
-                    Ok(())
-                };
-            for chunk in bytes.chunks(1 << 16) {
+            for chunk in chunks {
                 d.push(chunk);
                 while let Some(r) = d.next_ensemble() {
                     if let Ok(e) = r {
-                        emit(&e, &mut out)?;
+                        emit(serde_json::to_string(&e)?, &mut out)?;
                     }
                 }
             }
             for e in d.finish() {
-                emit(&e, &mut out)?;
+                emit(serde_json::to_string(&e)?, &mut out)?;
+            }
+            d.stats
+        }
+        Protocol::Wldvl => {
+            let mut d = auvnav_drivers::wldvl::WlDecoder::new();
+            for chunk in chunks {
+                d.push(chunk);
+                while let Some(r) = d.next_frame() {
+                    if let Ok(f) = r {
+                        emit(serde_json::to_string(&f)?, &mut out)?;
+                    }
+                }
+            }
+            d.stats
+        }
+        Protocol::Kvh1750 => {
+            let mut d = auvnav_drivers::kvh::KvhDecoder::new();
+            for chunk in chunks {
+                d.push(chunk);
+                while let Some(f) = d.next_sample() {
+                    emit(serde_json::to_string(&f)?, &mut out)?;
+                }
+            }
+            d.stats
+        }
+        Protocol::Xsens => {
+            let mut d = auvnav_drivers::xsens::XbusDecoder::new();
+            for chunk in chunks {
+                d.push(chunk);
+                while let Some(f) = d.next_message() {
+                    emit(serde_json::to_string(&f)?, &mut out)?;
+                }
             }
             d.stats
         }
@@ -73,7 +121,7 @@ pub fn run(a: &DecodeArgs) -> anyhow::Result<DecoderStats> {
     let summary = Summary {
         summary: &stats,
         file: a.file.display().to_string(),
-        protocol: "pd0",
+        protocol: a.protocol.name(),
     };
     if a.json {
         writeln!(out, "{}", serde_json::to_string(&summary)?)?;
