@@ -1,0 +1,180 @@
+//! Properties of the Water Linked, KVH and Xsens decoders: encode -> decode is the identity,
+//! chunking does not change the frames, garbage between frames is counted and never decoded.
+
+use auvnav_drivers::kvh::{self, KvhDecoder, KvhSample};
+use auvnav_drivers::wldvl::{self, Transducer, Velocity, WlDecoder, WlFrame};
+use auvnav_drivers::xsens::{self, MtData2, XbusDecoder, XbusMessage};
+use proptest::prelude::*;
+
+/// Values that survive the fixed decimal printing of the Water Linked format.
+fn milli(x: i32) -> f64 {
+    f64::from(x) / 1000.0
+}
+
+prop_compose! {
+    fn wl_frame()(
+        kind in 0u8..2,
+        v in proptest::array::uniform3(-5000i32..5000),
+        valid in any::<bool>(),
+        alt in 0i32..20000,
+        cov in proptest::array::uniform9(0u32..1000),
+        tov in any::<u32>(),
+        id in 0u8..4,
+        rssi in -120i32..0,
+    ) -> WlFrame {
+        if kind == 0 {
+            WlFrame::Velocity(Velocity {
+                velocity_m_s: v.map(milli),
+                valid,
+                altitude_m: f64::from(alt / 10) / 100.0,
+                figure_of_merit_m_s: milli(v[0].abs()),
+                covariance: cov.map(|c| f64::from(c) * 1e-4),
+                time_of_validity_us: u64::from(tov),
+                time_of_transmission_us: u64::from(tov) + 7,
+                time_since_last_ms: f64::from(alt / 100),
+                status: u32::from(valid),
+            })
+        } else {
+            WlFrame::Transducer(Transducer {
+                id,
+                velocity_m_s: milli(v[1]),
+                distance_m: f64::from(alt / 10) / 100.0,
+                rssi_dbm: f64::from(rssi),
+                noise_dbm: f64::from(rssi - 30),
+            })
+        }
+    }
+}
+
+prop_compose! {
+    fn kvh_sample()(
+        g in proptest::array::uniform3(-1.0f32..1.0),
+        a in proptest::array::uniform3(-3.0f32..3.0),
+        status in any::<u8>(),
+        seq in 0u8..128,
+        temp in any::<i16>(),
+        ts in proptest::option::of(any::<u32>()),
+    ) -> KvhSample {
+        KvhSample { gyro: g, accel: a, status, sequence: seq, temperature_raw: temp, timestamp_us: ts }
+    }
+}
+
+prop_compose! {
+    fn mtdata2()(
+        c in any::<u16>(),
+        t in any::<u32>(),
+        s in any::<u32>(),
+        a in proptest::array::uniform3(-100.0f32..100.0),
+        w in proptest::array::uniform3(-10.0f32..10.0),
+        dv in proptest::array::uniform3(-1.0f32..1.0),
+        dq in proptest::array::uniform4(-1.0f32..1.0),
+    ) -> MtData2 {
+        MtData2 {
+            packet_counter: Some(c),
+            sample_time_fine: Some(t),
+            status_word: Some(s),
+            acceleration: Some(a.map(f64::from)),
+            rate_of_turn: Some(w.map(f64::from)),
+            delta_v: Some(dv.map(f64::from)),
+            delta_q: Some(dq.map(f64::from)),
+            ..Default::default()
+        }
+    }
+}
+
+fn feed<D, T>(
+    bytes: &[u8],
+    chunks: &[usize],
+    d: &mut D,
+    push: impl Fn(&mut D, &[u8]),
+    pull: impl Fn(&mut D) -> Option<T>,
+) -> Vec<T> {
+    let mut out = Vec::new();
+    let (mut at, mut k) = (0, 0);
+    while at < bytes.len() {
+        let n = chunks[k % chunks.len()].max(1).min(bytes.len() - at);
+        push(d, &bytes[at..at + n]);
+        at += n;
+        k += 1;
+        while let Some(f) = pull(d) {
+            out.push(f);
+        }
+    }
+    out
+}
+
+/// Garbage that contains no frame start of any of the three protocols.
+fn garbage() -> impl Strategy<Value = Vec<u8>> {
+    proptest::collection::vec(any::<u8>(), 0..40).prop_map(|v| {
+        v.into_iter()
+            .filter(|b| ![b'w', 0xfe, 0xfa].contains(b))
+            .collect()
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    #[test]
+    fn water_linked_round_trip_any_chunking(
+        frames in proptest::collection::vec(wl_frame(), 1..10),
+        junk in garbage(),
+        chunks in proptest::collection::vec(1usize..64, 1..6),
+    ) {
+        let mut bytes = junk.clone();
+        bytes.push(b'\n');
+        for f in &frames {
+            bytes.extend(wldvl::encode(f));
+        }
+        let mut d = WlDecoder::new();
+        let out = feed(&bytes, &chunks, &mut d, |d, b| d.push(b), |d| d.next_frame());
+        let out: Vec<WlFrame> = out.into_iter().filter_map(Result::ok).collect();
+        prop_assert_eq!(&out, &frames);
+        prop_assert_eq!(d.stats.frames, frames.len() as u64);
+    }
+
+    #[test]
+    fn kvh_round_trip_any_chunking(
+        samples in proptest::collection::vec(kvh_sample(), 1..10),
+        junk in garbage(),
+        chunks in proptest::collection::vec(1usize..64, 1..6),
+    ) {
+        let mut bytes = junk.clone();
+        for s in &samples {
+            bytes.extend(kvh::encode(s));
+        }
+        let mut d = KvhDecoder::new();
+        let out = feed(&bytes, &chunks, &mut d, |d, b| d.push(b), |d| d.next_sample());
+        prop_assert_eq!(&out, &samples);
+        prop_assert_eq!(d.stats.bytes_skipped, junk.len() as u64);
+    }
+
+    #[test]
+    fn xsens_round_trip_any_chunking_and_a_corrupted_frame_is_dropped(
+        msgs in proptest::collection::vec(mtdata2(), 2..10),
+        victim in 0usize..10,
+        junk in garbage(),
+        chunks in proptest::collection::vec(1usize..64, 1..6),
+    ) {
+        let victim = victim % msgs.len();
+        let mut bytes = junk.clone();
+        for (i, m) in msgs.iter().enumerate() {
+            let mut f = xsens::encode_mtdata2(m);
+            if i == victim {
+                let k = f.len() - 2;
+                f[k] ^= 0x10;
+            }
+            bytes.extend(f);
+        }
+        let mut d = XbusDecoder::new();
+        let out = feed(&bytes, &chunks, &mut d, |d, b| d.push(b), |d| d.next_message());
+        let expected: Vec<XbusMessage> = msgs
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| *i != victim)
+            .map(|(_, m)| XbusMessage::MtData2(m.clone()))
+            .collect();
+        prop_assert_eq!(out, expected);
+        prop_assert!(d.stats.checksum_errors >= 1);
+    }
+}
