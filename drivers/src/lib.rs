@@ -4,5 +4,6 @@
 pub mod framing;
 pub mod kvh;
 pub mod pd0;
+pub mod seatrac;
 pub mod wldvl;
 pub mod xsens;

@@ -18,6 +18,8 @@ pub enum Protocol {
     Kvh1750,
     /// Xsens MTi XBus / MTData2.
     Xsens,
+    /// Blueprint SeaTrac USBL serial command interface.
+    Seatrac,
 }
 
 impl Protocol {
@@ -27,6 +29,7 @@ impl Protocol {
             Protocol::Wldvl => "wldvl",
             Protocol::Kvh1750 => "kvh1750",
             Protocol::Xsens => "xsens",
+            Protocol::Seatrac => "seatrac",
         }
     }
 }
@@ -103,6 +106,18 @@ pub fn run(a: &DecodeArgs) -> anyhow::Result<DecoderStats> {
                 d.push(chunk);
                 while let Some(f) = d.next_sample() {
                     emit(serde_json::to_string(&f)?, &mut out)?;
+                }
+            }
+            d.stats
+        }
+        Protocol::Seatrac => {
+            let mut d = auvnav_drivers::seatrac::SeatracDecoder::new();
+            for chunk in chunks {
+                d.push(chunk);
+                while let Some(r) = d.next_frame() {
+                    if let Ok(f) = r {
+                        emit(serde_json::to_string(&f)?, &mut out)?;
+                    }
                 }
             }
             d.stats

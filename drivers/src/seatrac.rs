@@ -1,0 +1,434 @@
+//! Blueprint Subsea SeaTrac (X110/X150) serial command interface.
+//!
+//! Framing: `$` (beacon to host) or `#` (host to beacon), the message as upper-case ASCII hex —
+//! command ID (CID) byte, payload bytes, then a CRC-16/ARC of the binary CID and payload, low
+//! byte first — and CR LF. Decoded: `CID_STATUS` (0x10; environment, attitude, magnetometer
+//! calibration fields as the output flags select), `CID_SYS_INFO` (0x02; uptime, section,
+//! hardware part, revision and serial), and the position-fix record `ACOFIX_T` carried by
+//! `CID_PING_RESP` (0x42) and `CID_XCVR_FIX` (0x39): attitude, depth, sound speed, RSSI, then the
+//! range, USBL (per-channel RSSI, azimuth, elevation, fit error) and position blocks its flags
+//! announce. Other CIDs are returned with their raw payload.
+
+use crate::framing::{BoundedBuffer, DecoderStats, ReadLe};
+use serde::Serialize;
+
+pub const CID_SYS_INFO: u8 = 0x02;
+pub const CID_STATUS: u8 = 0x10;
+pub const CID_XCVR_FIX: u8 = 0x39;
+pub const CID_PING_RESP: u8 = 0x42;
+/// Longest line accepted (the largest SeaTrac message is well under 256 binary bytes).
+pub const MAX_LINE: usize = 1024;
+
+/// CRC-16/ARC: polynomial 0x8005 reflected (0xA001), initial 0, no final xor.
+pub fn crc16_arc(bytes: &[u8]) -> u16 {
+    let mut crc = 0u16;
+    for &b in bytes {
+        crc ^= u16::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 != 0 {
+                (crc >> 1) ^ 0xa001
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    crc
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Environment {
+    pub supply_v: f64,
+    pub temperature_c: f64,
+    /// Pressure (bar).
+    pub pressure_bar: f64,
+    pub depth_m: f64,
+    pub sound_speed_m_s: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Status {
+    pub output_flags: u8,
+    /// Beacon time stamp (ms since power-up).
+    pub timestamp_ms: u64,
+    pub environment: Option<Environment>,
+    /// Yaw, pitch, roll (deg).
+    pub attitude_deg: Option<[f64; 3]>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SysInfo {
+    pub uptime_s: u32,
+    pub section: u8,
+    pub hardware_part: u16,
+    pub hardware_revision: u8,
+    pub serial_number: u32,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FixRange {
+    /// 16 kHz timer counts between request and response.
+    pub count: u32,
+    /// Two-way travel time with internal offsets removed (s).
+    pub travel_time_s: f64,
+    /// Slant range (m).
+    pub distance_m: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FixUsbl {
+    /// Received signal strength per receiver channel (dB).
+    pub channel_rssi_db: Vec<f64>,
+    pub azimuth_deg: f64,
+    pub elevation_deg: f64,
+    pub fit_error: f64,
+}
+
+/// `ACOFIX_T`: an acoustic range/position fix.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct AcoFix {
+    pub destination_id: u8,
+    pub source_id: u8,
+    pub flags: u8,
+    pub message_type: u8,
+    /// Local beacon yaw (magnetic), pitch, roll (deg).
+    pub attitude_deg: [f64; 3],
+    pub local_depth_m: f64,
+    pub sound_speed_m_s: f64,
+    pub rssi_db: f64,
+    pub range: Option<FixRange>,
+    pub usbl: Option<FixUsbl>,
+    /// Easting, northing, depth of the remote beacon relative to the local one (m).
+    pub position_m: Option<[f64; 3]>,
+}
+
+impl AcoFix {
+    pub const RANGE_VALID: u8 = 1 << 0;
+    pub const USBL_VALID: u8 = 1 << 1;
+    pub const POSITION_VALID: u8 = 1 << 2;
+    pub const POSITION_ENHANCED: u8 = 1 << 3;
+    pub const POSITION_FILTER_ERROR: u8 = 1 << 4;
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "message", rename_all = "snake_case")]
+pub enum SeatracMessage {
+    Status(Status),
+    SysInfo(SysInfo),
+    /// `CID_PING_RESP` or `CID_XCVR_FIX`.
+    Fix {
+        cid: u8,
+        fix: AcoFix,
+    },
+    /// Another CID: its payload bytes.
+    Other {
+        cid: u8,
+        payload: Vec<u8>,
+    },
+}
+
+/// One decoded line: direction and message.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SeatracFrame {
+    /// True for `$` (beacon to host), false for `#` (host to beacon).
+    pub from_beacon: bool,
+    pub message: SeatracMessage,
+}
+
+fn deci(v: i16) -> f64 {
+    f64::from(v) * 0.1
+}
+
+fn status(p: &[u8]) -> Option<Status> {
+    let flags = p.u8_at(0)?;
+    let timestamp_ms = u64::from(p.u32_at(1)?) | (u64::from(p.u32_at(5)?) << 32);
+    let mut at = 9;
+    let environment = if flags & 1 != 0 {
+        let e = Environment {
+            supply_v: f64::from(p.u16_at(at)?) * 1e-3,
+            temperature_c: deci(p.i16_at(at + 2)?),
+            pressure_bar: f64::from(p.i32_at(at + 4)?) * 1e-3,
+            depth_m: f64::from(p.i32_at(at + 8)?) * 0.1,
+            sound_speed_m_s: f64::from(p.u16_at(at + 12)?) * 0.1,
+        };
+        at += 14;
+        Some(e)
+    } else {
+        None
+    };
+    let attitude_deg = if flags & 2 != 0 {
+        Some([
+            deci(p.i16_at(at)?),
+            deci(p.i16_at(at + 2)?),
+            deci(p.i16_at(at + 4)?),
+        ])
+    } else {
+        None
+    };
+    Some(Status {
+        output_flags: flags,
+        timestamp_ms,
+        environment,
+        attitude_deg,
+    })
+}
+
+fn sys_info(p: &[u8]) -> Option<SysInfo> {
+    Some(SysInfo {
+        uptime_s: p.u32_at(0)?,
+        section: p.u8_at(4)?,
+        hardware_part: p.u16_at(5)?,
+        hardware_revision: p.u8_at(7)?,
+        serial_number: p.u32_at(8)?,
+    })
+}
+
+/// Decodes an `ACOFIX_T` record; `None` when a block its flags announce is missing.
+pub fn aco_fix(p: &[u8]) -> Option<AcoFix> {
+    let flags = p.u8_at(2)?;
+    let mut at = 16;
+    let range = if flags & AcoFix::RANGE_VALID != 0 {
+        let r = FixRange {
+            count: p.u32_at(at)?,
+            travel_time_s: f64::from(p.i32_at(at + 4)?) * 1e-7,
+            distance_m: f64::from(p.u16_at(at + 8)?) * 0.1,
+        };
+        at += 10;
+        Some(r)
+    } else {
+        None
+    };
+    let usbl = if flags & AcoFix::USBL_VALID != 0 {
+        let n = usize::from(p.u8_at(at)?);
+        if n > 4 {
+            return None;
+        }
+        let channel_rssi_db = (0..n)
+            .map(|i| p.i16_at(at + 1 + 2 * i).map(deci))
+            .collect::<Option<Vec<_>>>()?;
+        let b = at + 1 + 2 * n;
+        let u = FixUsbl {
+            channel_rssi_db,
+            azimuth_deg: deci(p.i16_at(b)?),
+            elevation_deg: deci(p.i16_at(b + 2)?),
+            fit_error: f64::from(p.i16_at(b + 4)?) * 0.01,
+        };
+        at = b + 6;
+        Some(u)
+    } else {
+        None
+    };
+    let position_m = if flags & AcoFix::POSITION_VALID != 0 {
+        Some([
+            deci(p.i16_at(at)?),
+            deci(p.i16_at(at + 2)?),
+            deci(p.i16_at(at + 4)?),
+        ])
+    } else {
+        None
+    };
+    Some(AcoFix {
+        destination_id: p.u8_at(0)?,
+        source_id: p.u8_at(1)?,
+        flags,
+        message_type: p.u8_at(3)?,
+        attitude_deg: [deci(p.i16_at(4)?), deci(p.i16_at(6)?), deci(p.i16_at(8)?)],
+        local_depth_m: f64::from(p.u16_at(10)?) * 0.1,
+        sound_speed_m_s: f64::from(p.u16_at(12)?) * 0.1,
+        rssi_db: deci(p.i16_at(14)?),
+        range,
+        usbl,
+        position_m,
+    })
+}
+
+/// Encodes an `ACOFIX_T` record (the inverse of [`aco_fix`]; values rounded to the wire units).
+pub fn encode_aco_fix(f: &AcoFix) -> Vec<u8> {
+    let d = |x: f64| ((x * 10.0).round() as i16).to_le_bytes();
+    let mut p = vec![f.destination_id, f.source_id, f.flags, f.message_type];
+    for a in f.attitude_deg {
+        p.extend_from_slice(&d(a));
+    }
+    p.extend_from_slice(&((f.local_depth_m * 10.0).round() as u16).to_le_bytes());
+    p.extend_from_slice(&((f.sound_speed_m_s * 10.0).round() as u16).to_le_bytes());
+    p.extend_from_slice(&d(f.rssi_db));
+    if let Some(r) = &f.range {
+        p.extend_from_slice(&r.count.to_le_bytes());
+        p.extend_from_slice(&((r.travel_time_s * 1e7).round() as i32).to_le_bytes());
+        p.extend_from_slice(&((r.distance_m * 10.0).round() as u16).to_le_bytes());
+    }
+    if let Some(u) = &f.usbl {
+        p.push(u.channel_rssi_db.len() as u8);
+        for r in &u.channel_rssi_db {
+            p.extend_from_slice(&d(*r));
+        }
+        p.extend_from_slice(&d(u.azimuth_deg));
+        p.extend_from_slice(&d(u.elevation_deg));
+        p.extend_from_slice(&((u.fit_error * 100.0).round() as i16).to_le_bytes());
+    }
+    if let Some(pos) = f.position_m {
+        for x in pos {
+            p.extend_from_slice(&d(x));
+        }
+    }
+    p
+}
+
+/// Frames `cid` + `payload` as a beacon-to-host line.
+pub fn encode_line(cid: u8, payload: &[u8]) -> Vec<u8> {
+    let mut bin = vec![cid];
+    bin.extend_from_slice(payload);
+    let crc = crc16_arc(&bin);
+    bin.extend_from_slice(&crc.to_le_bytes());
+    let mut line = String::from("$");
+    for b in bin {
+        line.push_str(&format!("{b:02X}"));
+    }
+    line.push_str("\r\n");
+    line.into_bytes()
+}
+
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum SeatracError {
+    #[error("CRC {found:04x}, computed {computed:04x}")]
+    Checksum { found: u16, computed: u16 },
+    #[error("malformed line: {0}")]
+    Malformed(&'static str),
+}
+
+fn hex_value(c: u8) -> Option<u8> {
+    match c {
+        b'0'..=b'9' => Some(c - b'0'),
+        b'A'..=b'F' => Some(c - b'A' + 10),
+        b'a'..=b'f' => Some(c - b'a' + 10),
+        _ => None,
+    }
+}
+
+fn parse_line(line: &[u8]) -> Result<SeatracFrame, SeatracError> {
+    let from_beacon = line[0] == b'$';
+    let hex = &line[1..];
+    if hex.len() < 6 || !hex.len().is_multiple_of(2) {
+        return Err(SeatracError::Malformed("length"));
+    }
+    let bin = hex
+        .chunks(2)
+        .map(|c| Some(hex_value(c[0])? << 4 | hex_value(c[1])?))
+        .collect::<Option<Vec<u8>>>()
+        .ok_or(SeatracError::Malformed("not hex"))?;
+    let (body, crc) = bin.split_at(bin.len() - 2);
+    let found = u16::from_le_bytes([crc[0], crc[1]]);
+    let computed = crc16_arc(body);
+    if found != computed {
+        return Err(SeatracError::Checksum { found, computed });
+    }
+    let (cid, payload) = (body[0], &body[1..]);
+    // Host-to-beacon lines are commands: reported raw.
+    let message = match cid {
+        CID_STATUS if from_beacon => {
+            SeatracMessage::Status(status(payload).ok_or(SeatracError::Malformed("status"))?)
+        }
+        CID_SYS_INFO if from_beacon && !payload.is_empty() => {
+            SeatracMessage::SysInfo(sys_info(payload).ok_or(SeatracError::Malformed("sys info"))?)
+        }
+        CID_PING_RESP | CID_XCVR_FIX if from_beacon => SeatracMessage::Fix {
+            cid,
+            fix: aco_fix(payload).ok_or(SeatracError::Malformed("fix"))?,
+        },
+        _ => SeatracMessage::Other {
+            cid,
+            payload: payload.to_vec(),
+        },
+    };
+    Ok(SeatracFrame {
+        from_beacon,
+        message,
+    })
+}
+
+/// Incremental line decoder.
+#[derive(Debug, Clone)]
+pub struct SeatracDecoder {
+    buf: BoundedBuffer,
+    pub stats: DecoderStats,
+}
+
+impl Default for SeatracDecoder {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl SeatracDecoder {
+    pub fn new() -> Self {
+        SeatracDecoder {
+            buf: BoundedBuffer::new(4 * MAX_LINE),
+            stats: DecoderStats::default(),
+        }
+    }
+
+    pub fn push(&mut self, bytes: &[u8]) {
+        self.stats.bytes += bytes.len() as u64;
+        self.stats.overflow_bytes += self.buf.push(bytes);
+    }
+
+    pub fn next_frame(&mut self) -> Option<Result<SeatracFrame, SeatracError>> {
+        loop {
+            let data = self.buf.as_slice();
+            let Some(start) = data.iter().position(|&b| b == b'$' || b == b'#') else {
+                let n = data.len();
+                if data.iter().any(|&b| b != b'\r' && b != b'\n') {
+                    self.stats.resyncs += 1;
+                    self.stats.bytes_skipped += n as u64;
+                }
+                self.buf.consume(n);
+                return None;
+            };
+            if start > 0 {
+                if data[..start].iter().any(|&b| b != b'\r' && b != b'\n') {
+                    self.stats.resyncs += 1;
+                    self.stats.bytes_skipped += start as u64;
+                }
+                self.buf.consume(start);
+                continue;
+            }
+            // A line ends at CR/LF; a new start character inside it means the line was cut.
+            let end = data[1..]
+                .iter()
+                .position(|&b| matches!(b, b'\r' | b'\n' | b'$' | b'#'))
+                .map(|p| p + 1);
+            let Some(end) = end else {
+                if data.len() > MAX_LINE {
+                    self.stats.malformed += 1;
+                    self.stats.bytes_skipped += data.len() as u64;
+                    let n = data.len();
+                    self.buf.consume(n);
+                }
+                return None;
+            };
+            let result = parse_line(&data[..end]);
+            match &result {
+                Ok(_) => self.stats.frames += 1,
+                Err(SeatracError::Checksum { .. }) => {
+                    self.stats.checksum_errors += 1;
+                    self.stats.bytes_skipped += end as u64;
+                }
+                Err(SeatracError::Malformed(_)) => {
+                    self.stats.malformed += 1;
+                    self.stats.bytes_skipped += end as u64;
+                }
+            }
+            self.buf.consume(end);
+            return Some(result);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crc16_arc_check_value() {
+        assert_eq!(crc16_arc(b"123456789"), 0xbb3d);
+    }
+}
