@@ -22,6 +22,15 @@ pub struct DecoderStats {
     pub overflow_bytes: u64,
 }
 
+/// Room every decoder buffer keeps for one read on top of its largest frame: a driver reading
+/// up to this many bytes at a time never overflows a decoder it drains after each read.
+pub const READ_ALLOWANCE: usize = 64 * 1024;
+
+/// Buffer capacity for a protocol whose frames are at most `max_frame` bytes.
+pub fn capacity_for(max_frame: usize) -> usize {
+    2 * max_frame + READ_ALLOWANCE
+}
+
 /// A byte buffer with a hard capacity; the oldest bytes go first when it overflows.
 #[derive(Debug, Clone)]
 pub struct BoundedBuffer {

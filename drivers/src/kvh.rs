@@ -7,7 +7,7 @@
 //! rates or angle increments, in radians or degrees, is the unit's configuration (=ROTFMT,
 //! =ROTUNITS), not part of the message: the driver configuration says which.
 
-use crate::framing::{BoundedBuffer, DecoderStats};
+use crate::framing::{BoundedBuffer, DecoderStats, capacity_for};
 use serde::Serialize;
 
 pub const HEADER_A: [u8; 4] = [0xfe, 0x81, 0xff, 0x55];
@@ -110,7 +110,7 @@ impl Default for KvhDecoder {
 impl KvhDecoder {
     pub fn new() -> Self {
         KvhDecoder {
-            buf: BoundedBuffer::new(4096),
+            buf: BoundedBuffer::new(capacity_for(LEN_B)),
             stats: DecoderStats::default(),
             searching: false,
         }

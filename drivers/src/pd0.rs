@@ -18,7 +18,7 @@
 //! velocity over the ground is the negative: [`BottomTrack::vehicle_velocity_m_s`] returns it.
 //! Raw values are kept as recorded; -32768 (velocity) and 0 (range) mean "no value" and are `None`.
 
-use crate::framing::{BoundedBuffer, DecoderStats, ReadLe};
+use crate::framing::{BoundedBuffer, DecoderStats, ReadLe, capacity_for};
 use serde::Serialize;
 
 pub const SYNC: [u8; 2] = [0x7f, 0x7f];
@@ -502,7 +502,7 @@ impl Default for Pd0Decoder {
 impl Pd0Decoder {
     pub fn new() -> Self {
         Pd0Decoder {
-            buf: BoundedBuffer::new(2 * MAX_ENSEMBLE),
+            buf: BoundedBuffer::new(capacity_for(MAX_ENSEMBLE)),
             stats: DecoderStats::default(),
             searching: false,
         }

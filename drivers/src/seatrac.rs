@@ -9,7 +9,7 @@
 //! range, USBL (per-channel RSSI, azimuth, elevation, fit error) and position blocks its flags
 //! announce. Other CIDs are returned with their raw payload.
 
-use crate::framing::{BoundedBuffer, DecoderStats, ReadLe};
+use crate::framing::{BoundedBuffer, DecoderStats, ReadLe, capacity_for};
 use serde::Serialize;
 
 pub const CID_SYS_INFO: u8 = 0x02;
@@ -361,7 +361,7 @@ impl Default for SeatracDecoder {
 impl SeatracDecoder {
     pub fn new() -> Self {
         SeatracDecoder {
-            buf: BoundedBuffer::new(4 * MAX_LINE),
+            buf: BoundedBuffer::new(capacity_for(MAX_LINE)),
             stats: DecoderStats::default(),
         }
     }

@@ -7,7 +7,7 @@
 //! Other `w` lines with a good checksum (command responses such as `wrc`, `wrv`) are returned as
 //! [`WlFrame::Other`]. The DVL frame is x forward, y right, z down, velocities of the vehicle.
 
-use crate::framing::{BoundedBuffer, DecoderStats};
+use crate::framing::{BoundedBuffer, DecoderStats, capacity_for};
 use serde::Serialize;
 
 /// Longest line accepted; a longer run without a newline is discarded and counted.
@@ -198,7 +198,7 @@ impl Default for WlDecoder {
 impl WlDecoder {
     pub fn new() -> Self {
         WlDecoder {
-            buf: BoundedBuffer::new(4 * MAX_LINE),
+            buf: BoundedBuffer::new(capacity_for(MAX_LINE)),
             stats: DecoderStats::default(),
         }
     }

@@ -7,7 +7,7 @@
 //! floating-point data (bits 0–1: f32, fixed 12.20, fixed 16.32, f64) and the frame (bits 2–3:
 //! ENU, NED, NWU).
 
-use crate::framing::{BoundedBuffer, DecoderStats};
+use crate::framing::{BoundedBuffer, DecoderStats, capacity_for};
 use serde::Serialize;
 
 pub const PREAMBLE: u8 = 0xfa;
@@ -304,7 +304,7 @@ impl Default for XbusDecoder {
 impl XbusDecoder {
     pub fn new() -> Self {
         XbusDecoder {
-            buf: BoundedBuffer::new(4 * (MAX_PAYLOAD + 7)),
+            buf: BoundedBuffer::new(capacity_for(MAX_PAYLOAD + 7)),
             stats: DecoderStats::default(),
             searching: false,
         }

@@ -178,3 +178,61 @@ proptest! {
         prop_assert!(d.stats.checksum_errors >= 1);
     }
 }
+
+#[test]
+fn reads_of_64_kib_never_overflow_a_decoder_drained_after_each_read() {
+    use auvnav_drivers::framing::READ_ALLOWANCE;
+    let n = 20_000;
+    let wl: Vec<u8> = (0..n)
+        .flat_map(|k| {
+            wldvl::encode(&WlFrame::Transducer(Transducer {
+                id: (k % 4) as u8,
+                velocity_m_s: 0.5,
+                distance_m: 10.0,
+                rssi_dbm: -40.0,
+                noise_dbm: -90.0,
+            }))
+        })
+        .collect();
+    let mut d = WlDecoder::new();
+    let out = feed(
+        &wl,
+        &[READ_ALLOWANCE],
+        &mut d,
+        |d, b| d.push(b),
+        |d| d.next_frame(),
+    );
+    assert_eq!((out.len(), d.stats.overflow_bytes), (n, 0));
+    let sample = KvhSample {
+        gyro: [0.0; 3],
+        accel: [0.0, 0.0, 1.0],
+        status: 0x77,
+        sequence: 1,
+        temperature_raw: 20,
+        timestamp_us: Some(5),
+    };
+    let kv: Vec<u8> = (0..n).flat_map(|_| kvh::encode(&sample)).collect();
+    let mut d = KvhDecoder::new();
+    let out = feed(
+        &kv,
+        &[READ_ALLOWANCE],
+        &mut d,
+        |d, b| d.push(b),
+        |d| d.next_sample(),
+    );
+    assert_eq!((out.len(), d.stats.overflow_bytes), (n, 0));
+    let m = MtData2 {
+        packet_counter: Some(1),
+        ..Default::default()
+    };
+    let xs: Vec<u8> = (0..n).flat_map(|_| xsens::encode_mtdata2(&m)).collect();
+    let mut d = XbusDecoder::new();
+    let out = feed(
+        &xs,
+        &[READ_ALLOWANCE],
+        &mut d,
+        |d, b| d.push(b),
+        |d| d.next_message(),
+    );
+    assert_eq!((out.len(), d.stats.overflow_bytes), (n, 0));
+}
