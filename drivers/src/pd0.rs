@@ -491,6 +491,9 @@ pub struct Pd0Decoder {
     buf: BoundedBuffer,
     pub stats: DecoderStats,
     searching: bool,
+    /// While waiting for a long ensemble: where the search for a later complete ensemble
+    /// resumes (bytes before it were already examined), so each byte is scanned about once.
+    resume: usize,
 }
 
 impl Default for Pd0Decoder {
@@ -505,6 +508,7 @@ impl Pd0Decoder {
             buf: BoundedBuffer::new(capacity_for(MAX_ENSEMBLE)),
             stats: DecoderStats::default(),
             searching: false,
+            resume: 1,
         }
     }
 
@@ -514,6 +518,7 @@ impl Pd0Decoder {
     }
 
     fn skip(&mut self, n: usize) {
+        self.resume = 1;
         if !self.searching {
             self.searching = true;
             self.stats.resyncs += 1;
@@ -553,13 +558,16 @@ impl Pd0Decoder {
                 // Waiting for the rest. A corrupted length field could make us wait for up to
                 // 64 KiB of later frames: if a complete, checksum-valid ensemble already starts
                 // inside the pending bytes, this header is bogus.
-                match next_valid_frame(data, 1) {
-                    Some(at) => {
+                match next_valid_frame(data, self.resume) {
+                    Scan::Found(at) => {
                         self.stats.checksum_errors += 1;
                         self.skip(at);
                         continue;
                     }
-                    None => return None,
+                    Scan::NotYet(resume) => {
+                        self.resume = resume.max(1);
+                        return None;
+                    }
                 }
             }
             let stored = data.u16_at(n).unwrap_or(0);
@@ -570,6 +578,7 @@ impl Pd0Decoder {
             }
             let result = decode_ensemble(&data[..n + 2]);
             self.buf.consume(n + 2);
+            self.resume = 1;
             self.searching = false;
             match &result {
                 Ok(_) => self.stats.frames += 1,
@@ -580,24 +589,43 @@ impl Pd0Decoder {
     }
 }
 
-/// The offset of the first complete ensemble with a valid checksum at or after `from`.
-fn next_valid_frame(data: &[u8], from: usize) -> Option<usize> {
+/// The result of looking for a later ensemble inside a pending one.
+enum Scan {
+    /// A complete, checksum-valid ensemble starts here.
+    Found(usize),
+    /// None yet; resume the search here when more bytes arrive (the first candidate whose
+    /// ensemble is still incomplete, or the last byte).
+    NotYet(usize),
+}
+
+/// Looks for the first complete ensemble with a valid checksum at or after `from`.
+fn next_valid_frame(data: &[u8], from: usize) -> Scan {
     let mut at = from;
-    while let Some(p) = data.get(at..)?.windows(2).position(|w| w == SYNC) {
+    let mut first_incomplete = None;
+    while let Some(p) = data
+        .get(at..)
+        .and_then(|d| d.windows(2).position(|w| w == SYNC))
+    {
         let start = at + p;
         let f = &data[start..];
-        if let (Some(n), Some(types)) = (f.u16_at(2), f.u8_at(5)) {
-            let n = usize::from(n);
-            if n >= 6 + 2 * usize::from(types)
-                && f.len() >= n + 2
-                && f.u16_at(n) == Some(checksum(&f[..n]))
-            {
-                return Some(start);
+        match (f.u16_at(2), f.u8_at(5)) {
+            (Some(n), Some(types)) => {
+                let n = usize::from(n);
+                if n >= 6 + 2 * usize::from(types) {
+                    if f.len() < n + 2 {
+                        first_incomplete.get_or_insert(start);
+                    } else if f.u16_at(n) == Some(checksum(&f[..n])) {
+                        return Scan::Found(start);
+                    }
+                }
+            }
+            _ => {
+                first_incomplete.get_or_insert(start);
             }
         }
         at = start + 1;
     }
-    None
+    Scan::NotYet(first_incomplete.unwrap_or(data.len().saturating_sub(1)))
 }
 
 impl Pd0Decoder {
@@ -617,8 +645,8 @@ impl Pd0Decoder {
                 return out;
             }
             match next_valid_frame(data, 1) {
-                Some(at) => self.skip(at),
-                None => {
+                Scan::Found(at) => self.skip(at),
+                Scan::NotYet(_) => {
                     let n = data.len();
                     self.skip(n);
                     return out;
