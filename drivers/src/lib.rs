@@ -1,6 +1,7 @@
 //! auvnav device drivers: pure protocol decoders and encoders (bytes in, frames out; no I/O, no
 //! clock), and the driver processes built on them.
 
+pub mod can;
 pub mod framing;
 pub mod kvh;
 pub mod pd0;
