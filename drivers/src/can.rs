@@ -84,6 +84,12 @@ pub struct CanStats {
     pub short_frames: u64,
 }
 
+/// The next (less significant) bit of a Motorola signal: down within a byte, then to bit 7 of
+/// the next byte.
+fn next_motorola_bit(p: u32) -> u32 {
+    if p.is_multiple_of(8) { p + 15 } else { p - 1 }
+}
+
 /// Reads `spec`'s raw value from `data` (bits beyond `data` read as absent: the caller checks
 /// the length first).
 fn extract(data: &[u8], spec: &SignalSpec) -> u64 {
@@ -104,7 +110,7 @@ fn extract(data: &[u8], spec: &SignalSpec) -> u64 {
             let mut p = spec.start_bit;
             for _ in 0..spec.size {
                 raw = (raw << 1) | bit(p);
-                p = if p % 8 == 0 { p + 15 } else { p - 1 };
+                p = next_motorola_bit(p);
             }
         }
     }
@@ -134,7 +140,7 @@ fn insert(data: &mut [u8], spec: &SignalSpec, raw: u64) {
             let mut p = spec.start_bit;
             for i in 0..spec.size {
                 set(p, raw >> (spec.size - 1 - i));
-                p = if p % 8 == 0 { p + 15 } else { p - 1 };
+                p = next_motorola_bit(p);
             }
         }
     }
@@ -147,7 +153,7 @@ fn last_byte(spec: &SignalSpec) -> usize {
         BitOrder::Motorola => {
             let mut p = spec.start_bit;
             for _ in 1..spec.size.max(1) {
-                p = if p % 8 == 0 { p + 15 } else { p - 1 };
+                p = next_motorola_bit(p);
             }
             (p / 8) as usize
         }
