@@ -119,6 +119,37 @@ impl ReadLe for [u8] {
     }
 }
 
+/// What a driver, `auvnav decode` and the benchmarks need from any stream decoder: push bytes,
+/// pull complete frames (frames that fail their checks are counted in the stats and skipped).
+pub trait StreamDecoder {
+    type Frame: serde::Serialize;
+    fn push(&mut self, bytes: &[u8]);
+    fn next_good_frame(&mut self) -> Option<Self::Frame>;
+    /// At the end of a finite capture: frames still recoverable from the buffered bytes.
+    fn finish_capture(&mut self) -> Vec<Self::Frame> {
+        Vec::new()
+    }
+    fn stats(&self) -> &DecoderStats;
+}
+
+/// Feeds `bytes` in reads of `read_size` and hands every frame to `frame`.
+pub fn decode_stream<D: StreamDecoder>(
+    d: &mut D,
+    bytes: &[u8],
+    read_size: usize,
+    mut frame: impl FnMut(D::Frame),
+) {
+    for chunk in bytes.chunks(read_size.max(1)) {
+        d.push(chunk);
+        while let Some(f) = d.next_good_frame() {
+            frame(f);
+        }
+    }
+    for f in d.finish_capture() {
+        frame(f);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -166,6 +166,19 @@ impl KvhDecoder {
     }
 }
 
+impl crate::framing::StreamDecoder for KvhDecoder {
+    type Frame = KvhSample;
+    fn push(&mut self, bytes: &[u8]) {
+        KvhDecoder::push(self, bytes);
+    }
+    fn next_good_frame(&mut self) -> Option<KvhSample> {
+        self.next_sample()
+    }
+    fn stats(&self) -> &DecoderStats {
+        &self.stats
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -660,15 +660,7 @@ impl Pd0Decoder {
 pub fn decode_all(bytes: &[u8]) -> (Vec<Ensemble>, DecoderStats) {
     let mut d = Pd0Decoder::new();
     let mut out = Vec::new();
-    for chunk in bytes.chunks(4096) {
-        d.push(chunk);
-        while let Some(r) = d.next_ensemble() {
-            if let Ok(e) = r {
-                out.push(e);
-            }
-        }
-    }
-    out.extend(d.finish());
+    crate::framing::decode_stream(&mut d, bytes, 4096, |e| out.push(e));
     (out, d.stats)
 }
 
@@ -762,4 +754,25 @@ pub fn encode_ensemble(e: &Ensemble) -> Vec<u8> {
     let sum = checksum(&out);
     out.extend_from_slice(&sum.to_le_bytes());
     out
+}
+
+impl crate::framing::StreamDecoder for Pd0Decoder {
+    type Frame = Ensemble;
+    fn push(&mut self, bytes: &[u8]) {
+        Pd0Decoder::push(self, bytes);
+    }
+    fn next_good_frame(&mut self) -> Option<Ensemble> {
+        loop {
+            match self.next_ensemble()? {
+                Ok(e) => return Some(e),
+                Err(_) => continue,
+            }
+        }
+    }
+    fn finish_capture(&mut self) -> Vec<Self::Frame> {
+        self.finish()
+    }
+    fn stats(&self) -> &DecoderStats {
+        &self.stats
+    }
 }

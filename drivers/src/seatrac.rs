@@ -423,6 +423,23 @@ impl SeatracDecoder {
     }
 }
 
+impl crate::framing::StreamDecoder for SeatracDecoder {
+    type Frame = SeatracFrame;
+    fn push(&mut self, bytes: &[u8]) {
+        SeatracDecoder::push(self, bytes);
+    }
+    fn next_good_frame(&mut self) -> Option<SeatracFrame> {
+        loop {
+            if let Ok(f) = self.next_frame()? {
+                return Some(f);
+            }
+        }
+    }
+    fn stats(&self) -> &DecoderStats {
+        &self.stats
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -355,6 +355,23 @@ pub fn encode(frame: &WlFrame) -> Vec<u8> {
     format!("{body}*{:02x}\r\n", crc8(body.as_bytes())).into_bytes()
 }
 
+impl crate::framing::StreamDecoder for WlDecoder {
+    type Frame = WlFrame;
+    fn push(&mut self, bytes: &[u8]) {
+        WlDecoder::push(self, bytes);
+    }
+    fn next_good_frame(&mut self) -> Option<WlFrame> {
+        loop {
+            if let Ok(f) = self.next_frame()? {
+                return Some(f);
+            }
+        }
+    }
+    fn stats(&self) -> &DecoderStats {
+        &self.stats
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

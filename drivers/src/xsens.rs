@@ -392,3 +392,16 @@ impl XbusDecoder {
         }
     }
 }
+
+impl crate::framing::StreamDecoder for XbusDecoder {
+    type Frame = XbusMessage;
+    fn push(&mut self, bytes: &[u8]) {
+        XbusDecoder::push(self, bytes);
+    }
+    fn next_good_frame(&mut self) -> Option<XbusMessage> {
+        self.next_message()
+    }
+    fn stats(&self) -> &DecoderStats {
+        &self.stats
+    }
+}

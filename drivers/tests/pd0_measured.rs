@@ -7,22 +7,8 @@ use auvnav_drivers::pd0::{self, Ensemble, NmeaBlock};
 use std::collections::HashMap;
 use std::path::PathBuf;
 
-fn shared(rel: &str) -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared")
-        .join(rel);
-    if p.exists() {
-        return Some(p);
-    }
-    if std::env::var("CI").is_ok_and(|v| v == "true") {
-        panic!(
-            "{} is missing: measured data is required under CI",
-            p.display()
-        );
-    }
-    eprintln!("SKIPPED: {} is absent", p.display());
-    None
-}
+mod common;
+use common::shared;
 
 fn decode(path: &PathBuf) -> (Vec<Ensemble>, auvnav_drivers::framing::DecoderStats) {
     pd0::decode_all(&std::fs::read(path).expect("read"))

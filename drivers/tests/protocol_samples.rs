@@ -7,22 +7,8 @@ use auvnav_drivers::wldvl::{self, WlDecoder, WlError, WlFrame};
 use auvnav_drivers::xsens::{self, XbusDecoder, XbusMessage};
 use std::path::PathBuf;
 
-fn shared(rel: &str) -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared")
-        .join(rel);
-    if p.exists() {
-        return Some(p);
-    }
-    if std::env::var("CI").is_ok_and(|v| v == "true") {
-        panic!(
-            "{} is missing: measured data is required under CI",
-            p.display()
-        );
-    }
-    eprintln!("SKIPPED: {} is absent", p.display());
-    None
-}
+mod common;
+use common::shared;
 
 #[test]
 fn water_linked_documentation_examples_decode_with_their_checksums() {

@@ -45,9 +45,7 @@ pub fn sim(hours: f64, repeat: usize, json: bool) -> anyhow::Result<()> {
     }
     let file_bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
     let _ = std::fs::remove_dir_all(&dir);
-    let mut sorted = runs.clone();
-    sorted.sort_by(f64::total_cmp);
-    let median = sorted[sorted.len() / 2];
+    let median = median(&runs);
     let r = &cfg.scenario.rates;
     let out = SimBench {
         simulated_hours: hours,
@@ -267,19 +265,23 @@ pub struct DecodeBench {
     pub frames_per_second: f64,
 }
 
-/// Times `decode_all` over `stream` `repeat` times.
-fn time_decoder(
+/// Times decoding `stream` in 4 KiB reads with a fresh decoder, `repeat` times.
+fn time_decoder<D: auvnav_drivers::framing::StreamDecoder>(
     protocol: &'static str,
     stream: &[u8],
     repeat: usize,
-    decode_all: impl Fn(&[u8]) -> u64,
+    new: impl Fn() -> D,
 ) -> DecodeBench {
     let mut runs = Vec::new();
     let mut frames = 0;
     for _ in 0..repeat.max(1) {
         let t = std::time::Instant::now();
-        frames = decode_all(stream);
+        let mut d = new();
+        auvnav_drivers::framing::decode_stream(&mut d, stream, 4096, |f| {
+            std::hint::black_box(&f);
+        });
         runs.push(t.elapsed().as_secs_f64());
+        frames = d.stats().frames;
     }
     let m = median(&runs);
     DecodeBench {
@@ -332,16 +334,7 @@ pub fn decode(repeat: usize, json: bool) -> anyhow::Result<()> {
         };
         stream.extend(pd0::encode_ensemble(&e));
     }
-    results.push(time_decoder("pd0", &stream, repeat, |s| {
-        let mut d = pd0::Pd0Decoder::new();
-        for c in s.chunks(4096) {
-            d.push(c);
-            while let Some(r) = d.next_ensemble() {
-                std::hint::black_box(&r);
-            }
-        }
-        d.stats.frames
-    }));
+    results.push(time_decoder("pd0", &stream, repeat, pd0::Pd0Decoder::new));
 
     let mut stream = Vec::new();
     for k in 0..n {
@@ -357,16 +350,12 @@ pub fn decode(repeat: usize, json: bool) -> anyhow::Result<()> {
             status: 0,
         })));
     }
-    results.push(time_decoder("wldvl", &stream, repeat, |s| {
-        let mut d = wldvl::WlDecoder::new();
-        for c in s.chunks(4096) {
-            d.push(c);
-            while let Some(r) = d.next_frame() {
-                std::hint::black_box(&r);
-            }
-        }
-        d.stats.frames
-    }));
+    results.push(time_decoder(
+        "wldvl",
+        &stream,
+        repeat,
+        wldvl::WlDecoder::new,
+    ));
 
     let mut stream = Vec::new();
     for k in 0..n {
@@ -379,16 +368,12 @@ pub fn decode(repeat: usize, json: bool) -> anyhow::Result<()> {
             timestamp_us: None,
         }));
     }
-    results.push(time_decoder("kvh1750", &stream, repeat, |s| {
-        let mut d = kvh::KvhDecoder::new();
-        for c in s.chunks(4096) {
-            d.push(c);
-            while let Some(r) = d.next_sample() {
-                std::hint::black_box(&r);
-            }
-        }
-        d.stats.frames
-    }));
+    results.push(time_decoder(
+        "kvh1750",
+        &stream,
+        repeat,
+        kvh::KvhDecoder::new,
+    ));
 
     let mut stream = Vec::new();
     for k in 0..n {
@@ -403,16 +388,12 @@ pub fn decode(repeat: usize, json: bool) -> anyhow::Result<()> {
             ..Default::default()
         }));
     }
-    results.push(time_decoder("xsens", &stream, repeat, |s| {
-        let mut d = xsens::XbusDecoder::new();
-        for c in s.chunks(4096) {
-            d.push(c);
-            while let Some(r) = d.next_message() {
-                std::hint::black_box(&r);
-            }
-        }
-        d.stats.frames
-    }));
+    results.push(time_decoder(
+        "xsens",
+        &stream,
+        repeat,
+        xsens::XbusDecoder::new,
+    ));
 
     let mut stream = Vec::new();
     for k in 0..n {
@@ -445,16 +426,12 @@ pub fn decode(repeat: usize, json: bool) -> anyhow::Result<()> {
             &seatrac::encode_aco_fix(&fix),
         ));
     }
-    results.push(time_decoder("seatrac", &stream, repeat, |s| {
-        let mut d = seatrac::SeatracDecoder::new();
-        for c in s.chunks(4096) {
-            d.push(c);
-            while let Some(r) = d.next_frame() {
-                std::hint::black_box(&r);
-            }
-        }
-        d.stats.frames
-    }));
+    results.push(time_decoder(
+        "seatrac",
+        &stream,
+        repeat,
+        seatrac::SeatracDecoder::new,
+    ));
 
     if json {
         println!("{}", serde_json::to_string_pretty(&results)?);

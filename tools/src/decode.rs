@@ -2,8 +2,7 @@
 //! driver runs, prints one JSON object per frame (with `--json`) and a summary.
 
 use anyhow::Context;
-use auvnav_drivers::framing::DecoderStats;
-use auvnav_drivers::pd0::Pd0Decoder;
+use auvnav_drivers::framing::{DecoderStats, StreamDecoder, decode_stream};
 use serde::Serialize;
 use std::io::Write;
 use std::path::PathBuf;
@@ -55,90 +54,26 @@ struct Summary<'a> {
 
 /// Decodes the file in 1 KiB reads (as a driver would see the bytes) and returns the counters.
 pub fn run(a: &DecodeArgs) -> anyhow::Result<DecoderStats> {
+    use auvnav_drivers::{kvh, pd0, seatrac, wldvl, xsens};
     let bytes = std::fs::read(&a.file).with_context(|| format!("reading {}", a.file.display()))?;
+    let (stats, lines) = match a.protocol {
+        Protocol::Pd0 => frames_as_json(pd0::Pd0Decoder::new(), &bytes)?,
+        Protocol::Wldvl => frames_as_json(wldvl::WlDecoder::new(), &bytes)?,
+        Protocol::Kvh1750 => frames_as_json(kvh::KvhDecoder::new(), &bytes)?,
+        Protocol::Xsens => frames_as_json(xsens::XbusDecoder::new(), &bytes)?,
+        Protocol::Seatrac => frames_as_json(seatrac::SeatracDecoder::new(), &bytes)?,
+    };
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
-    let mut first: Option<String> = None;
-    let mut last: Option<String> = None;
-    let mut emit = |line: String, out: &mut dyn Write| -> anyhow::Result<()> {
-        if a.json {
-            writeln!(out, "{line}")?;
-        } else {
-            if first.is_none() {
-                first = Some(line.clone());
-            }
-            last = Some(line);
-        }
-        Ok(())
-    };
-    let chunks = bytes.chunks(1024);
-    let stats = match a.protocol {
-        Protocol::Pd0 => {
-            let mut d = Pd0Decoder::new();
-            for chunk in chunks {
-                d.push(chunk);
-                while let Some(r) = d.next_ensemble() {
-                    if let Ok(e) = r {
-                        emit(serde_json::to_string(&e)?, &mut out)?;
-                    }
-                }
-            }
-            for e in d.finish() {
-                emit(serde_json::to_string(&e)?, &mut out)?;
-            }
-            d.stats
-        }
-        Protocol::Wldvl => {
-            let mut d = auvnav_drivers::wldvl::WlDecoder::new();
-            for chunk in chunks {
-                d.push(chunk);
-                while let Some(r) = d.next_frame() {
-                    if let Ok(f) = r {
-                        emit(serde_json::to_string(&f)?, &mut out)?;
-                    }
-                }
-            }
-            d.stats
-        }
-        Protocol::Kvh1750 => {
-            let mut d = auvnav_drivers::kvh::KvhDecoder::new();
-            for chunk in chunks {
-                d.push(chunk);
-                while let Some(f) = d.next_sample() {
-                    emit(serde_json::to_string(&f)?, &mut out)?;
-                }
-            }
-            d.stats
-        }
-        Protocol::Seatrac => {
-            let mut d = auvnav_drivers::seatrac::SeatracDecoder::new();
-            for chunk in chunks {
-                d.push(chunk);
-                while let Some(r) = d.next_frame() {
-                    if let Ok(f) = r {
-                        emit(serde_json::to_string(&f)?, &mut out)?;
-                    }
-                }
-            }
-            d.stats
-        }
-        Protocol::Xsens => {
-            let mut d = auvnav_drivers::xsens::XbusDecoder::new();
-            for chunk in chunks {
-                d.push(chunk);
-                while let Some(f) = d.next_message() {
-                    emit(serde_json::to_string(&f)?, &mut out)?;
-                }
-            }
-            d.stats
-        }
-    };
     let summary = Summary {
         summary: &stats,
         file: a.file.display().to_string(),
         protocol: a.protocol.name(),
     };
     if a.json {
+        for l in &lines {
+            writeln!(out, "{l}")?;
+        }
         writeln!(out, "{}", serde_json::to_string(&summary)?)?;
     } else {
         writeln!(
@@ -152,13 +87,30 @@ pub fn run(a: &DecodeArgs) -> anyhow::Result<DecoderStats> {
             stats.bytes_skipped,
             stats.bytes
         )?;
-        if let Some(f) = first {
+        if let Some(f) = lines.first() {
             writeln!(out, "first frame: {f}")?;
         }
-        if let Some(l) = last {
+        if let Some(l) = lines.last() {
             writeln!(out, "last frame:  {l}")?;
         }
     }
     out.flush()?;
     Ok(stats)
+}
+
+/// Every frame of `bytes` as a JSON line, and the decoder's counters.
+fn frames_as_json<D: StreamDecoder>(
+    mut d: D,
+    bytes: &[u8],
+) -> anyhow::Result<(DecoderStats, Vec<String>)> {
+    let mut lines = Vec::new();
+    let mut error = None;
+    decode_stream(&mut d, bytes, 1024, |f| match serde_json::to_string(&f) {
+        Ok(l) => lines.push(l),
+        Err(e) => error = Some(e),
+    });
+    if let Some(e) = error {
+        return Err(e.into());
+    }
+    Ok((*d.stats(), lines))
 }
