@@ -119,6 +119,65 @@ impl ReadLe for [u8] {
     }
 }
 
+/// The input side every stream decoder shares: a bounded buffer sized for the protocol, the
+/// counters, and whether it is searching for a frame start (a resync counts once per search).
+#[derive(Debug, Clone)]
+pub struct FrameBuffer {
+    pub(crate) buf: BoundedBuffer,
+    pub stats: DecoderStats,
+    searching: bool,
+}
+
+impl FrameBuffer {
+    /// A buffer for frames of at most `max_frame` bytes (see [`capacity_for`]).
+    pub fn new(max_frame: usize) -> Self {
+        FrameBuffer {
+            buf: BoundedBuffer::new(capacity_for(max_frame)),
+            stats: DecoderStats::default(),
+            searching: false,
+        }
+    }
+
+    pub fn push(&mut self, bytes: &[u8]) {
+        self.stats.bytes += bytes.len() as u64;
+        self.stats.overflow_bytes += self.buf.push(bytes);
+    }
+
+    /// The bytes not yet consumed.
+    pub fn data(&self) -> &[u8] {
+        self.buf.as_slice()
+    }
+
+    /// Throws away `n` bytes that belong to no frame.
+    pub fn skip(&mut self, n: usize) {
+        if !self.searching {
+            self.searching = true;
+            self.stats.resyncs += 1;
+        }
+        self.stats.bytes_skipped += n as u64;
+        self.buf.consume(n);
+    }
+
+    /// Consumes a frame of `n` bytes that decoded.
+    pub fn take_frame(&mut self, n: usize) {
+        self.buf.consume(n);
+        self.searching = false;
+        self.stats.frames += 1;
+    }
+
+    /// Consumes a delimited frame of `n` bytes that failed its checks (the caller counts why).
+    pub fn reject_frame(&mut self, n: usize) {
+        self.stats.bytes_skipped += n as u64;
+        self.buf.consume(n);
+        self.searching = false;
+    }
+
+    /// Consumes `n` bytes that need no accounting (line ends between frames).
+    pub fn consume(&mut self, n: usize) {
+        self.buf.consume(n);
+    }
+}
+
 /// What a driver, `auvnav decode` and the benchmarks need from any stream decoder: push bytes,
 /// pull complete frames (frames that fail their checks are counted in the stats and skipped).
 pub trait StreamDecoder {

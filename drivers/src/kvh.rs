@@ -7,7 +7,7 @@
 //! rates or angle increments, in radians or degrees, is the unit's configuration (=ROTFMT,
 //! =ROTUNITS), not part of the message: the driver configuration says which.
 
-use crate::framing::{BoundedBuffer, DecoderStats, capacity_for};
+use crate::framing::{DecoderStats, FrameBuffer};
 use serde::Serialize;
 
 pub const HEADER_A: [u8; 4] = [0xfe, 0x81, 0xff, 0x55];
@@ -96,9 +96,7 @@ pub fn encode(s: &KvhSample) -> Vec<u8> {
 /// Incremental decoder for formats A and B.
 #[derive(Debug, Clone)]
 pub struct KvhDecoder {
-    buf: BoundedBuffer,
-    pub stats: DecoderStats,
-    searching: bool,
+    input: FrameBuffer,
 }
 
 impl Default for KvhDecoder {
@@ -110,40 +108,32 @@ impl Default for KvhDecoder {
 impl KvhDecoder {
     pub fn new() -> Self {
         KvhDecoder {
-            buf: BoundedBuffer::new(capacity_for(LEN_B)),
-            stats: DecoderStats::default(),
-            searching: false,
+            input: FrameBuffer::new(LEN_B),
         }
     }
 
     pub fn push(&mut self, bytes: &[u8]) {
-        self.stats.bytes += bytes.len() as u64;
-        self.stats.overflow_bytes += self.buf.push(bytes);
+        self.input.push(bytes);
     }
 
-    fn skip(&mut self, n: usize) {
-        if !self.searching {
-            self.searching = true;
-            self.stats.resyncs += 1;
-        }
-        self.stats.bytes_skipped += n as u64;
-        self.buf.consume(n);
+    pub fn stats(&self) -> &DecoderStats {
+        &self.input.stats
     }
 
     pub fn next_sample(&mut self) -> Option<KvhSample> {
         loop {
-            let data = self.buf.as_slice();
+            let data = self.input.data();
             let pos = data.windows(4).position(|w| w == HEADER_A || w == HEADER_B);
             let Some(pos) = pos else {
                 // Keep up to three bytes that may start a header.
                 let n = data.len().saturating_sub(3);
                 if n > 0 {
-                    self.skip(n);
+                    self.input.skip(n);
                 }
                 return None;
             };
             if pos > 0 {
-                self.skip(pos);
+                self.input.skip(pos);
                 continue;
             }
             let len = if data[3] == HEADER_B[3] { LEN_B } else { LEN_A };
@@ -153,14 +143,12 @@ impl KvhDecoder {
             let stored =
                 u32::from_be_bytes([data[len - 4], data[len - 3], data[len - 2], data[len - 1]]);
             if crc32_mpeg2(&data[..len - 4]) != stored {
-                self.stats.checksum_errors += 1;
-                self.skip(1);
+                self.input.stats.checksum_errors += 1;
+                self.input.skip(1);
                 continue;
             }
             let s = decode(&data[..len]);
-            self.buf.consume(len);
-            self.searching = false;
-            self.stats.frames += 1;
+            self.input.take_frame(len);
             return Some(s);
         }
     }
@@ -175,7 +163,7 @@ impl crate::framing::StreamDecoder for KvhDecoder {
         self.next_sample()
     }
     fn stats(&self) -> &DecoderStats {
-        &self.stats
+        &self.input.stats
     }
 }
 

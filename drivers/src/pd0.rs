@@ -18,7 +18,7 @@
 //! velocity over the ground is the negative: [`BottomTrack::vehicle_velocity_m_s`] returns it.
 //! Raw values are kept as recorded; -32768 (velocity) and 0 (range) mean "no value" and are `None`.
 
-use crate::framing::{BoundedBuffer, DecoderStats, ReadLe, capacity_for};
+use crate::framing::{DecoderStats, FrameBuffer, ReadLe};
 use serde::Serialize;
 
 pub const SYNC: [u8; 2] = [0x7f, 0x7f];
@@ -488,9 +488,7 @@ pub fn decode_ensemble(e: &[u8]) -> Result<Ensemble, Pd0Error> {
 /// Incremental PD0 decoder: push bytes as they arrive, pull ensembles.
 #[derive(Debug, Clone)]
 pub struct Pd0Decoder {
-    buf: BoundedBuffer,
-    pub stats: DecoderStats,
-    searching: bool,
+    input: FrameBuffer,
     /// While waiting for a long ensemble: where the search for a later complete ensemble
     /// resumes (bytes before it were already examined), so each byte is scanned about once.
     resume: usize,
@@ -505,32 +503,28 @@ impl Default for Pd0Decoder {
 impl Pd0Decoder {
     pub fn new() -> Self {
         Pd0Decoder {
-            buf: BoundedBuffer::new(capacity_for(MAX_ENSEMBLE)),
-            stats: DecoderStats::default(),
-            searching: false,
+            input: FrameBuffer::new(MAX_ENSEMBLE),
             resume: 1,
         }
     }
 
     pub fn push(&mut self, bytes: &[u8]) {
-        self.stats.bytes += bytes.len() as u64;
-        self.stats.overflow_bytes += self.buf.push(bytes);
+        self.input.push(bytes);
+    }
+
+    pub fn stats(&self) -> &DecoderStats {
+        &self.input.stats
     }
 
     fn skip(&mut self, n: usize) {
         self.resume = 1;
-        if !self.searching {
-            self.searching = true;
-            self.stats.resyncs += 1;
-        }
-        self.stats.bytes_skipped += n as u64;
-        self.buf.consume(n);
+        self.input.skip(n);
     }
 
     /// The next complete ensemble, or `None` when more bytes are needed.
     pub fn next_ensemble(&mut self) -> Option<Result<Ensemble, Pd0Error>> {
         loop {
-            let data = self.buf.as_slice();
+            let data = self.input.data();
             let Some(pos) = data.windows(2).position(|w| w == SYNC) else {
                 // Keep a trailing 0x7F: it may be the first half of a sync.
                 let keep = usize::from(data.last() == Some(&SYNC[0]));
@@ -560,7 +554,7 @@ impl Pd0Decoder {
                 // inside the pending bytes, this header is bogus.
                 match next_valid_frame(data, self.resume) {
                     Scan::Found(at) => {
-                        self.stats.checksum_errors += 1;
+                        self.input.stats.checksum_errors += 1;
                         self.skip(at);
                         continue;
                     }
@@ -572,17 +566,18 @@ impl Pd0Decoder {
             }
             let stored = data.u16_at(n).unwrap_or(0);
             if checksum(&data[..n]) != stored {
-                self.stats.checksum_errors += 1;
+                self.input.stats.checksum_errors += 1;
                 self.skip(1);
                 continue;
             }
             let result = decode_ensemble(&data[..n + 2]);
-            self.buf.consume(n + 2);
             self.resume = 1;
-            self.searching = false;
             match &result {
-                Ok(_) => self.stats.frames += 1,
-                Err(_) => self.stats.malformed += 1,
+                Ok(_) => self.input.take_frame(n + 2),
+                Err(_) => {
+                    self.input.stats.malformed += 1;
+                    self.input.reject_frame(n + 2);
+                }
             }
             return Some(result);
         }
@@ -640,7 +635,7 @@ impl Pd0Decoder {
                     out.push(e);
                 }
             }
-            let data = self.buf.as_slice();
+            let data = self.input.data();
             if data.is_empty() {
                 return out;
             }
@@ -661,7 +656,7 @@ pub fn decode_all(bytes: &[u8]) -> (Vec<Ensemble>, DecoderStats) {
     let mut d = Pd0Decoder::new();
     let mut out = Vec::new();
     crate::framing::decode_stream(&mut d, bytes, 4096, |e| out.push(e));
-    (out, d.stats)
+    (out, d.input.stats)
 }
 
 /// Encodes the fixed leader, variable leader and bottom track of `e` (the blocks a DVL emits
@@ -773,6 +768,6 @@ impl crate::framing::StreamDecoder for Pd0Decoder {
         self.finish()
     }
     fn stats(&self) -> &DecoderStats {
-        &self.stats
+        &self.input.stats
     }
 }

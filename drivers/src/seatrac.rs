@@ -9,7 +9,7 @@
 //! range, USBL (per-channel RSSI, azimuth, elevation, fit error) and position blocks its flags
 //! announce. Other CIDs are returned with their raw payload.
 
-use crate::framing::{BoundedBuffer, DecoderStats, ReadLe, capacity_for};
+use crate::framing::{DecoderStats, FrameBuffer, ReadLe};
 use serde::Serialize;
 
 pub const CID_SYS_INFO: u8 = 0x02;
@@ -348,8 +348,7 @@ fn parse_line(line: &[u8]) -> Result<SeatracFrame, SeatracError> {
 /// Incremental line decoder.
 #[derive(Debug, Clone)]
 pub struct SeatracDecoder {
-    buf: BoundedBuffer,
-    pub stats: DecoderStats,
+    input: FrameBuffer,
 }
 
 impl Default for SeatracDecoder {
@@ -361,34 +360,32 @@ impl Default for SeatracDecoder {
 impl SeatracDecoder {
     pub fn new() -> Self {
         SeatracDecoder {
-            buf: BoundedBuffer::new(capacity_for(MAX_LINE)),
-            stats: DecoderStats::default(),
+            input: FrameBuffer::new(MAX_LINE),
         }
     }
 
     pub fn push(&mut self, bytes: &[u8]) {
-        self.stats.bytes += bytes.len() as u64;
-        self.stats.overflow_bytes += self.buf.push(bytes);
+        self.input.push(bytes);
+    }
+
+    pub fn stats(&self) -> &DecoderStats {
+        &self.input.stats
     }
 
     pub fn next_frame(&mut self) -> Option<Result<SeatracFrame, SeatracError>> {
+        let line_end = |b: &u8| *b == b'\r' || *b == b'\n';
         loop {
-            let data = self.buf.as_slice();
-            let Some(start) = data.iter().position(|&b| b == b'$' || b == b'#') else {
-                let n = data.len();
-                if data.iter().any(|&b| b != b'\r' && b != b'\n') {
-                    self.stats.resyncs += 1;
-                    self.stats.bytes_skipped += n as u64;
+            let data = self.input.data();
+            let start = data.iter().position(|&b| b == b'$' || b == b'#');
+            let gap = start.unwrap_or(data.len());
+            if gap > 0 {
+                // Line ends between frames are not garbage.
+                if data[..gap].iter().all(line_end) {
+                    self.input.consume(gap);
+                } else {
+                    self.input.skip(gap);
                 }
-                self.buf.consume(n);
-                return None;
-            };
-            if start > 0 {
-                if data[..start].iter().any(|&b| b != b'\r' && b != b'\n') {
-                    self.stats.resyncs += 1;
-                    self.stats.bytes_skipped += start as u64;
-                }
-                self.buf.consume(start);
+                start?;
                 continue;
             }
             // A line ends at CR/LF; a new start character inside it means the line was cut.
@@ -398,26 +395,23 @@ impl SeatracDecoder {
                 .map(|p| p + 1);
             let Some(end) = end else {
                 if data.len() > MAX_LINE {
-                    self.stats.malformed += 1;
-                    self.stats.bytes_skipped += data.len() as u64;
                     let n = data.len();
-                    self.buf.consume(n);
+                    self.input.stats.malformed += 1;
+                    self.input.reject_frame(n);
                 }
                 return None;
             };
             let result = parse_line(&data[..end]);
             match &result {
-                Ok(_) => self.stats.frames += 1,
-                Err(SeatracError::Checksum { .. }) => {
-                    self.stats.checksum_errors += 1;
-                    self.stats.bytes_skipped += end as u64;
-                }
-                Err(SeatracError::Malformed(_)) => {
-                    self.stats.malformed += 1;
-                    self.stats.bytes_skipped += end as u64;
+                Ok(_) => self.input.take_frame(end),
+                Err(e) => {
+                    match e {
+                        SeatracError::Checksum { .. } => self.input.stats.checksum_errors += 1,
+                        SeatracError::Malformed(_) => self.input.stats.malformed += 1,
+                    }
+                    self.input.reject_frame(end);
                 }
             }
-            self.buf.consume(end);
             return Some(result);
         }
     }
@@ -436,7 +430,7 @@ impl crate::framing::StreamDecoder for SeatracDecoder {
         }
     }
     fn stats(&self) -> &DecoderStats {
-        &self.stats
+        &self.input.stats
     }
 }
 

@@ -7,7 +7,7 @@
 //! Other `w` lines with a good checksum (command responses such as `wrc`, `wrv`) are returned as
 //! [`WlFrame::Other`]. The DVL frame is x forward, y right, z down, velocities of the vehicle.
 
-use crate::framing::{BoundedBuffer, DecoderStats, capacity_for};
+use crate::framing::{DecoderStats, FrameBuffer};
 use serde::Serialize;
 
 /// Longest line accepted; a longer run without a newline is discarded and counted.
@@ -185,8 +185,7 @@ pub enum WlError {
 /// Incremental line decoder.
 #[derive(Debug, Clone)]
 pub struct WlDecoder {
-    buf: BoundedBuffer,
-    pub stats: DecoderStats,
+    input: FrameBuffer,
 }
 
 impl Default for WlDecoder {
@@ -198,30 +197,26 @@ impl Default for WlDecoder {
 impl WlDecoder {
     pub fn new() -> Self {
         WlDecoder {
-            buf: BoundedBuffer::new(capacity_for(MAX_LINE)),
-            stats: DecoderStats::default(),
+            input: FrameBuffer::new(MAX_LINE),
         }
     }
 
     pub fn push(&mut self, bytes: &[u8]) {
-        self.stats.bytes += bytes.len() as u64;
-        self.stats.overflow_bytes += self.buf.push(bytes);
+        self.input.push(bytes);
     }
 
-    fn skip(&mut self, n: usize) {
-        self.stats.resyncs += 1;
-        self.stats.bytes_skipped += n as u64;
-        self.buf.consume(n);
+    pub fn stats(&self) -> &DecoderStats {
+        &self.input.stats
     }
 
     /// The next line's frame, or `None` when no complete line is buffered.
     pub fn next_frame(&mut self) -> Option<Result<WlFrame, WlError>> {
         loop {
-            let data = self.buf.as_slice();
+            let data = self.input.data();
             let Some(start) = data.iter().position(|&b| b == b'w') else {
                 let n = data.len();
                 if n > 0 {
-                    self.skip(n);
+                    self.input.skip(n);
                 }
                 return None;
             };
@@ -229,15 +224,15 @@ impl WlDecoder {
                 // Line ends (CR, LF) between frames are not garbage.
                 let junk = data[..start].iter().any(|&b| b != b'\r' && b != b'\n');
                 if junk {
-                    self.skip(start);
+                    self.input.skip(start);
                 } else {
-                    self.buf.consume(start);
+                    self.input.consume(start);
                 }
                 continue;
             }
             let Some(end) = data.iter().position(|&b| b == b'\n' || b == b'\r') else {
                 if data.len() > MAX_LINE {
-                    self.skip(data.len());
+                    self.input.skip(data.len());
                 }
                 return None;
             };
@@ -271,19 +266,13 @@ impl WlDecoder {
             };
             let consumed = end + 1;
             match &result {
-                Ok(_) => {
-                    self.stats.frames += 1;
-                    self.buf.consume(consumed);
-                }
-                Err(WlError::Checksum { .. }) => {
-                    self.stats.checksum_errors += 1;
-                    self.stats.bytes_skipped += consumed as u64;
-                    self.buf.consume(consumed);
-                }
-                Err(WlError::Malformed(_)) => {
-                    self.stats.malformed += 1;
-                    self.stats.bytes_skipped += consumed as u64;
-                    self.buf.consume(consumed);
+                Ok(_) => self.input.take_frame(consumed),
+                Err(e) => {
+                    match e {
+                        WlError::Checksum { .. } => self.input.stats.checksum_errors += 1,
+                        WlError::Malformed(_) => self.input.stats.malformed += 1,
+                    }
+                    self.input.reject_frame(consumed);
                 }
             }
             return Some(result);
@@ -368,7 +357,7 @@ impl crate::framing::StreamDecoder for WlDecoder {
         }
     }
     fn stats(&self) -> &DecoderStats {
-        &self.stats
+        &self.input.stats
     }
 }
 

@@ -7,7 +7,7 @@
 //! floating-point data (bits 0–1: f32, fixed 12.20, fixed 16.32, f64) and the frame (bits 2–3:
 //! ENU, NED, NWU).
 
-use crate::framing::{BoundedBuffer, DecoderStats, capacity_for};
+use crate::framing::{DecoderStats, FrameBuffer};
 use serde::Serialize;
 
 pub const PREAMBLE: u8 = 0xfa;
@@ -290,9 +290,7 @@ pub fn encode_mtdata2(m: &MtData2) -> Vec<u8> {
 /// Incremental XBus decoder.
 #[derive(Debug, Clone)]
 pub struct XbusDecoder {
-    buf: BoundedBuffer,
-    pub stats: DecoderStats,
-    searching: bool,
+    input: FrameBuffer,
 }
 
 impl Default for XbusDecoder {
@@ -304,31 +302,23 @@ impl Default for XbusDecoder {
 impl XbusDecoder {
     pub fn new() -> Self {
         XbusDecoder {
-            buf: BoundedBuffer::new(capacity_for(MAX_PAYLOAD + 7)),
-            stats: DecoderStats::default(),
-            searching: false,
+            input: FrameBuffer::new(MAX_PAYLOAD + 7),
         }
     }
 
     pub fn push(&mut self, bytes: &[u8]) {
-        self.stats.bytes += bytes.len() as u64;
-        self.stats.overflow_bytes += self.buf.push(bytes);
+        self.input.push(bytes);
     }
 
-    fn skip(&mut self, n: usize) {
-        if !self.searching {
-            self.searching = true;
-            self.stats.resyncs += 1;
-        }
-        self.stats.bytes_skipped += n as u64;
-        self.buf.consume(n);
+    pub fn stats(&self) -> &DecoderStats {
+        &self.input.stats
     }
 
     /// The next message; `None` when more bytes are needed. MTData2 payloads that do not parse
     /// are counted as malformed and skipped.
     pub fn next_message(&mut self) -> Option<XbusMessage> {
         loop {
-            let data = self.buf.as_slice();
+            let data = self.input.data();
             let Some(pos) = data
                 .windows(2)
                 .position(|w| w[0] == PREAMBLE && w[1] == BUS_ID)
@@ -336,12 +326,12 @@ impl XbusDecoder {
                 let keep = usize::from(data.last() == Some(&PREAMBLE));
                 let n = data.len() - keep;
                 if n > 0 {
-                    self.skip(n);
+                    self.input.skip(n);
                 }
                 return None;
             };
             if pos > 0 {
-                self.skip(pos);
+                self.input.skip(pos);
                 continue;
             }
             if data.len() < 4 {
@@ -356,7 +346,7 @@ impl XbusDecoder {
                 (usize::from(data[3]), 4)
             };
             if len > MAX_PAYLOAD {
-                self.skip(1);
+                self.input.skip(1);
                 continue;
             }
             let total = head + len + 1;
@@ -364,27 +354,26 @@ impl XbusDecoder {
                 return None;
             }
             if !checksum_ok(&data[1..total]) {
-                self.stats.checksum_errors += 1;
-                self.skip(1);
+                self.input.stats.checksum_errors += 1;
+                self.input.skip(1);
                 continue;
             }
             let mid = data[2];
             let payload = data[head..head + len].to_vec();
-            self.buf.consume(total);
-            self.searching = false;
             if mid == MID_MTDATA2 {
                 match decode_mtdata2(&payload) {
                     Some(m) => {
-                        self.stats.frames += 1;
+                        self.input.take_frame(total);
                         return Some(XbusMessage::MtData2(m));
                     }
                     None => {
-                        self.stats.malformed += 1;
+                        self.input.stats.malformed += 1;
+                        self.input.reject_frame(total);
                         continue;
                     }
                 }
             }
-            self.stats.frames += 1;
+            self.input.take_frame(total);
             return Some(XbusMessage::Other(OtherMessage {
                 message_id: mid,
                 payload,
@@ -402,6 +391,6 @@ impl crate::framing::StreamDecoder for XbusDecoder {
         self.next_message()
     }
     fn stats(&self) -> &DecoderStats {
-        &self.stats
+        &self.input.stats
     }
 }

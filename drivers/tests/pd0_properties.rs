@@ -197,7 +197,7 @@ fn decode_stream(
         }
     }
     out.extend(d.finish());
-    (out, d.stats)
+    (out, *d.stats())
 }
 
 proptest! {
