@@ -2,6 +2,7 @@
 //! clock), and the driver processes built on them.
 
 pub mod can;
+pub mod convert;
 pub mod framing;
 pub mod kvh;
 pub mod pd0;
