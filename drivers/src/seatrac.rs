@@ -138,6 +138,15 @@ fn deci(v: i16) -> f64 {
     f64::from(v) * 0.1
 }
 
+/// Three consecutive i16 values in tenths.
+fn deci3(p: &[u8], at: usize) -> Option<[f64; 3]> {
+    Some([
+        deci(p.i16_at(at)?),
+        deci(p.i16_at(at + 2)?),
+        deci(p.i16_at(at + 4)?),
+    ])
+}
+
 fn status(p: &[u8]) -> Option<Status> {
     let flags = p.u8_at(0)?;
     let timestamp_ms = u64::from(p.u32_at(1)?) | (u64::from(p.u32_at(5)?) << 32);
@@ -156,11 +165,7 @@ fn status(p: &[u8]) -> Option<Status> {
         None
     };
     let attitude_deg = if flags & 2 != 0 {
-        Some([
-            deci(p.i16_at(at)?),
-            deci(p.i16_at(at + 2)?),
-            deci(p.i16_at(at + 4)?),
-        ])
+        Some(deci3(p, at)?)
     } else {
         None
     };
@@ -218,11 +223,7 @@ pub fn aco_fix(p: &[u8]) -> Option<AcoFix> {
         None
     };
     let position_m = if flags & AcoFix::POSITION_VALID != 0 {
-        Some([
-            deci(p.i16_at(at)?),
-            deci(p.i16_at(at + 2)?),
-            deci(p.i16_at(at + 4)?),
-        ])
+        Some(deci3(p, at)?)
     } else {
         None
     };
@@ -231,7 +232,7 @@ pub fn aco_fix(p: &[u8]) -> Option<AcoFix> {
         source_id: p.u8_at(1)?,
         flags,
         message_type: p.u8_at(3)?,
-        attitude_deg: [deci(p.i16_at(4)?), deci(p.i16_at(6)?), deci(p.i16_at(8)?)],
+        attitude_deg: deci3(p, 4)?,
         local_depth_m: f64::from(p.u16_at(10)?) * 0.1,
         sound_speed_m_s: f64::from(p.u16_at(12)?) * 0.1,
         rssi_db: deci(p.i16_at(14)?),

@@ -15,13 +15,7 @@ fn simulate(scenario: Scenario) -> Vec<LogMessage> {
         seed: 11,
         duration_s: None,
     };
-    let mut out = Vec::new();
-    sim::simulate(&cfg, |m| {
-        out.push(*m);
-        Ok(())
-    })
-    .expect("simulate");
-    out
+    sim::simulate_to_vec(&cfg).expect("simulate").0
 }
 
 fn position(t: &TruthStateV1) -> Geodetic {

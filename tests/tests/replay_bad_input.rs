@@ -17,13 +17,7 @@ fn messages(seconds: f64) -> Vec<LogMessage> {
         seed: 7,
         duration_s: Some(seconds),
     };
-    let mut out = Vec::new();
-    sim::simulate(&cfg, |m| {
-        out.push(*m);
-        Ok(())
-    })
-    .expect("simulate");
-    out
+    sim::simulate_to_vec(&cfg).expect("simulate").0
 }
 
 fn write(path: &Path, msgs: &[LogMessage]) {

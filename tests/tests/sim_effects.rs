@@ -5,7 +5,7 @@ use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, TruthStateV1, UsblFixV1};
 use auvnav_tools::log::LogMessage;
 use auvnav_tools::sim::effects::Effects;
 use auvnav_tools::sim::scenario::Scenario;
-use auvnav_tools::sim::{SimConfig, StationGeometry, simulate};
+use auvnav_tools::sim::{SimConfig, StationGeometry, simulate_to_vec};
 use nalgebra::{UnitQuaternion, Vector3};
 
 fn run(scenario: &str, settings: &[(&str, &[f64])], duration: Option<f64>) -> Vec<LogMessage> {
@@ -20,13 +20,7 @@ fn run(scenario: &str, settings: &[(&str, &[f64])], duration: Option<f64>) -> Ve
         seed: 42,
         duration_s: duration,
     };
-    let mut out = Vec::new();
-    simulate(&cfg, |m| {
-        out.push(*m);
-        Ok(())
-    })
-    .expect("simulate");
-    out
+    simulate_to_vec(&cfg).expect("simulate").0
 }
 
 fn c_body_to_ned(t: &TruthStateV1) -> nalgebra::Matrix3<f64> {

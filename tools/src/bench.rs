@@ -141,11 +141,7 @@ pub fn replay(hours: f64, repeat: usize, json: bool) -> anyhow::Result<()> {
             runs.push(t.elapsed().as_secs_f64());
             log_seconds = r.log_seconds;
         }
-        let mut messages = Vec::new();
-        sim::simulate(&cfg, |m| {
-            messages.push(*m);
-            Ok(())
-        })?;
+        let (messages, _) = sim::simulate_to_vec(&cfg)?;
         let mut core_runs = Vec::new();
         for _ in 0..repeat.max(1) {
             let t = std::time::Instant::now();

@@ -46,11 +46,6 @@ pub fn run_voyage(
     nav_cfg: NavConfig,
     mut csv: Option<&mut dyn std::io::Write>,
 ) -> anyhow::Result<(SimSummary, Accuracy, NavCounters)> {
-    let mut messages = Vec::new();
-    let summary = sim::simulate(cfg, |m| {
-        messages.push(*m);
-        Ok(())
-    })?;
     let mut replay = Replay::new(
         &ReplayConfig {
             navigation: nav_cfg,
@@ -61,14 +56,15 @@ pub fn run_voyage(
     if let Some(w) = csv.as_deref_mut() {
         writeln!(w, "{}", crate::csv::NAV_HEADER)?;
     }
-    for m in &messages {
+    // Each simulated message goes straight into the navigator: nothing is held in memory.
+    let summary = sim::simulate(cfg, |m| {
         replay.process(m, &mut |o| {
             if let (Output::Solution(s), Some(w)) = (o, csv.as_deref_mut()) {
                 crate::csv::write_nav_row(w, s)?;
             }
             Ok(())
-        })?;
-    }
+        })
+    })?;
     Ok((
         summary,
         replay.accuracy().unwrap_or_default(),

@@ -176,6 +176,16 @@ fn divider(imu_hz: u32, hz: u32) -> u64 {
     imu_hz.checked_div(hz).map(u64::from).unwrap_or(0)
 }
 
+/// Runs the simulation and keeps every message in memory, in time order.
+pub fn simulate_to_vec(cfg: &SimConfig) -> anyhow::Result<(Vec<LogMessage>, SimSummary)> {
+    let mut out = Vec::new();
+    let summary = simulate(cfg, |m| {
+        out.push(*m);
+        Ok(())
+    })?;
+    Ok((out, summary))
+}
+
 /// Runs the simulation, handing every message to `sink` in time order (truth on [`LogMessage::Truth`]).
 pub fn simulate<F>(cfg: &SimConfig, mut sink: F) -> anyhow::Result<SimSummary>
 where
