@@ -2,8 +2,11 @@
 //! passes the host time at read return and the sequence number.
 
 use crate::kvh::KvhSample;
+use crate::pd0::{CoordinateSystem, Ensemble};
+use crate::seatrac::AcoFix;
 use crate::wldvl::Velocity;
-use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1};
+use crate::xsens::MtData2;
+use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, UsblFixV1};
 use serde::{Deserialize, Serialize};
 
 /// Standard gravity, for accelerometers that report in g (m/s^2).
@@ -29,11 +32,11 @@ pub fn water_linked_velocity(v: &Velocity, host_time_ns: u64, sequence: u64) -> 
             v.covariance[4].max(0.0).sqrt(),
             v.covariance[8].max(0.0).sqrt(),
         ],
-        beam_velocity_m_s: [f64::NAN; 4],
-        beam_range_m: [f64::NAN; 4],
+        beam_velocity_m_s: [0.0; 4],
+        beam_range_m: [0.0; 4],
         altitude_m: v.altitude_m,
         figure_of_merit_m_s: v.figure_of_merit_m_s,
-        sound_speed_m_s: f64::NAN,
+        sound_speed_m_s: 0.0,
         validity: DvlVelocityV1::VALID_DEVICE_TIME,
         beams_used: 0,
     };
@@ -119,6 +122,255 @@ pub fn kvh_sample(s: &KvhSample, cfg: &KvhConfig, host_time_ns: u64, sequence: u
         temperature_c,
         status,
     }
+}
+
+/// Days from 1970-01-01 to a proleptic Gregorian date (H. Hinnant's `days_from_civil`).
+pub fn days_from_civil(year: i64, month: u32, day: u32) -> i64 {
+    let y = if month <= 2 { year - 1 } else { year };
+    let era = y.div_euclid(400);
+    let yoe = y - era * 400;
+    let m = i64::from(month);
+    let doy = (153 * (if m > 2 { m - 3 } else { m + 9 }) + 2) / 5 + i64::from(day) - 1;
+    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+    era * 146_097 + doe - 719_468
+}
+
+/// The inverse of [`days_from_civil`]: (year, month, day).
+pub fn civil_from_days(days: i64) -> (i64, u32, u32) {
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = (doy - (153 * mp + 2) / 5 + 1) as u32;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    (year, month, day)
+}
+
+/// PD0's real-time clock (two-digit year from 2000, month, day, hour, minute, second,
+/// hundredths) as nanoseconds since 2000-01-01 00:00; `None` for an impossible date.
+pub fn pd0_rtc_ns(rtc: &[u8; 7]) -> Option<u64> {
+    let [yy, mo, dd, hh, mi, ss, cs] = *rtc;
+    if !(1..=12).contains(&mo)
+        || !(1..=31).contains(&dd)
+        || hh > 23
+        || mi > 59
+        || ss > 59
+        || cs > 99
+    {
+        return None;
+    }
+    let days = days_from_civil(2000 + i64::from(yy), u32::from(mo), u32::from(dd))
+        - days_from_civil(2000, 1, 1);
+    let s = ((days * 24 + i64::from(hh)) * 60 + i64::from(mi)) * 60 + i64::from(ss);
+    u64::try_from(s)
+        .ok()
+        .map(|s| s * 1_000_000_000 + u64::from(cs) * 10_000_000)
+}
+
+/// An RDI PD0 ensemble as a DVL message, or `None` when it has no bottom-track block.
+///
+/// Axes: RDI instrument and ship coordinates are x starboard, y forward, z up (beam 3 forward,
+/// transducer down); the schema's DVL frame is x forward, y starboard, z down, so
+/// `[x, y, z]_dvl = [y, x, -z]_rdi`. PD0 records the bottom's velocity relative to the
+/// instrument; the vehicle's is its negative. Earth-coordinate velocities are not in the DVL
+/// frame and beam-coordinate ones are not transformed here: for both only the beam data are
+/// published and the velocity is marked invalid. Ranges: PD0 gives vertical range per beam;
+/// the schema's slant range is vertical / cos(beam angle). PD0 carries no latency, so the time
+/// of validity is the read time minus `latency_s` from the driver configuration.
+pub fn pd0_velocity(
+    e: &Ensemble,
+    host_time_ns: u64,
+    latency_s: f64,
+    sequence: u64,
+) -> Option<DvlVelocityV1> {
+    let bt = e.bottom_track.as_ref()?;
+    let latency_ns = (latency_s.max(0.0) * 1e9) as u64;
+    let mut m = DvlVelocityV1 {
+        host_time_ns,
+        sequence,
+        validity_time_ns: host_time_ns.saturating_sub(latency_ns),
+        ..Default::default()
+    };
+    let system = e
+        .fixed
+        .as_ref()
+        .map_or(CoordinateSystem::Beam, |f| f.coordinate_system);
+    let beam_angle = e.fixed.as_ref().and_then(|f| f.beam_angle_deg);
+    match system {
+        CoordinateSystem::Instrument | CoordinateSystem::Ship => {
+            if let Some(v) = bt.vehicle_velocity_m_s()
+                && v.iter().all(|x| x.abs() < 20.0)
+            {
+                m.velocity_dvl_m_s = [v[1], v[0], -v[2]];
+                m.validity |= DvlVelocityV1::VALID_VELOCITY;
+                m.beams_used = 3;
+                if let Some(err) = bt.velocity_m_s[3] {
+                    m.figure_of_merit_m_s = err.abs();
+                    m.validity |= DvlVelocityV1::VALID_FOM;
+                    m.beams_used = 4;
+                }
+            }
+        }
+        CoordinateSystem::Beam => {
+            for (i, v) in bt.velocity_m_s.iter().enumerate() {
+                if let Some(v) = v
+                    && v.abs() < 20.0
+                {
+                    m.beam_velocity_m_s[i] = *v;
+                    m.validity |= DvlVelocityV1::VALID_BEAM_VELOCITY << i;
+                    m.beams_used += 1;
+                }
+            }
+        }
+        CoordinateSystem::Earth => {}
+    }
+    let mut vertical = Vec::with_capacity(4);
+    for (i, r) in bt.range_m.iter().enumerate() {
+        if let Some(r) = r
+            && *r > 0.0
+            && *r <= 1000.0
+        {
+            vertical.push(*r);
+            if let Some(a) = beam_angle {
+                m.beam_range_m[i] = r / a.to_radians().cos();
+                m.validity |= DvlVelocityV1::VALID_BEAM_RANGE << i;
+            }
+        }
+    }
+    if !vertical.is_empty() {
+        m.altitude_m = vertical.iter().sum::<f64>() / vertical.len() as f64;
+        m.validity |= DvlVelocityV1::VALID_ALTITUDE;
+    }
+    if let Some(v) = &e.variable {
+        if (1375.0..=1650.0).contains(&v.sound_speed_m_s) {
+            m.sound_speed_m_s = v.sound_speed_m_s;
+            m.validity |= DvlVelocityV1::VALID_SOUND_SPEED;
+        }
+        if let Some(t) = pd0_rtc_ns(&v.rtc) {
+            m.device_time_ns = t;
+            m.validity |= DvlVelocityV1::VALID_DEVICE_TIME;
+        }
+    }
+    Some(m)
+}
+
+/// An Xsens MTData2 message as an IMU message, or `None` when it carries neither
+/// delta-q/delta-v nor rate of turn/acceleration. Increments are preferred (they integrate
+/// the full-rate signal); their interval is `1 / rate_hz` of the configured output rate.
+/// Delta-q becomes the rotation vector 2·atan2(|q_v|, q_w)·q_v/|q_v|. The device time is the
+/// sample time fine (100 us units).
+pub fn xsens_sample(
+    d: &MtData2,
+    rate_hz: f64,
+    host_time_ns: u64,
+    sequence: u64,
+) -> Option<ImuSampleV1> {
+    let interval_s = if rate_hz > 0.0 {
+        1.0 / rate_hz
+    } else {
+        f64::NAN
+    };
+    let mut m = ImuSampleV1 {
+        host_time_ns,
+        sequence,
+        interval_s,
+        ..Default::default()
+    };
+    if let (Some(q), Some(dv)) = (d.delta_q, d.delta_v) {
+        let n = (q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
+        let angle = 2.0 * n.atan2(q[0]);
+        let k = if n > 1e-15 { angle / n } else { 2.0 };
+        m.angular = [q[1] * k, q[2] * k, q[3] * k];
+        m.specific = dv;
+        m.status |= ImuSampleV1::STATUS_INCREMENTS;
+    } else if let (Some(w), Some(a)) = (d.rate_of_turn, d.acceleration) {
+        m.angular = w;
+        m.specific = a;
+    } else {
+        return None;
+    }
+    if m.angular.iter().all(|x| x.is_finite()) {
+        m.status |= ImuSampleV1::STATUS_GYRO_VALID;
+    }
+    if m.specific.iter().all(|x| x.is_finite()) {
+        m.status |= ImuSampleV1::STATUS_ACCEL_VALID;
+    }
+    if let Some(t) = d.temperature_c
+        && (-60.0..=120.0).contains(&t)
+    {
+        m.temperature_c = t as f32;
+        m.status |= ImuSampleV1::STATUS_TEMPERATURE_VALID;
+    }
+    if let Some(t) = d.sample_time_fine {
+        m.device_time_ns = u64::from(t) * 100_000;
+        m.status |= ImuSampleV1::STATUS_DEVICE_TIME_VALID;
+    }
+    Some(m)
+}
+
+/// A SeaTrac `ACOFIX_T` as a USBL message.
+///
+/// The slant range is the device's; the one-way travel time is range / sound speed (this
+/// avoids the question of which internal offsets the device's own time field includes).
+/// Azimuth and elevation are taken as the schema defines them (azimuth from array x towards y,
+/// elevation positive above the array's horizontal plane) — an assumption, as the sign of the
+/// device's elevation is not stated in the material at hand. The device's position (easting,
+/// northing, depth relative to the local beacon, attitude-compensated) is written as the
+/// array-frame position `[northing, easting, depth]`: exact when the array frame is the
+/// beacon's levelled, north-aligned frame, which is the frame the device reports in. SeaTrac
+/// reports no range differences. `beacon_id` is the remote beacon (the fix's source).
+pub fn seatrac_fix(f: &AcoFix, host_time_ns: u64, latency_s: f64, sequence: u64) -> UsblFixV1 {
+    let latency_ns = (latency_s.max(0.0) * 1e9) as u64;
+    let mut m = UsblFixV1 {
+        host_time_ns,
+        sequence,
+        validity_time_ns: host_time_ns.saturating_sub(latency_ns),
+        beacon_id: u32::from(f.source_id),
+        ..Default::default()
+    };
+    let c = f.sound_speed_m_s;
+    if (1375.0..=1650.0).contains(&c) {
+        m.sound_speed_m_s = c;
+        m.validity |= UsblFixV1::VALID_SOUND_SPEED;
+    }
+    if let Some(r) = &f.range
+        && r.distance_m > 0.0
+        && r.distance_m <= 10_000.0
+    {
+        m.slant_range_m = r.distance_m;
+        if m.validity & UsblFixV1::VALID_SOUND_SPEED != 0 {
+            m.travel_time_s = r.distance_m / c;
+        }
+        m.validity |= UsblFixV1::VALID_RANGE;
+    }
+    if let Some(u) = &f.usbl {
+        let az = u.azimuth_deg.to_radians();
+        let el = u.elevation_deg.to_radians();
+        if az.abs() <= std::f64::consts::TAU && el.abs() <= std::f64::consts::FRAC_PI_2 {
+            m.azimuth_rad = (az + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+                - std::f64::consts::PI;
+            m.elevation_rad = el;
+            m.validity |= UsblFixV1::VALID_ANGLES;
+        }
+        if !u.channel_rssi_db.is_empty() {
+            for (dst, src) in m.rssi_db.iter_mut().zip(&u.channel_rssi_db) {
+                *dst = *src as f32;
+            }
+            m.validity |= UsblFixV1::VALID_RSSI;
+        }
+        if u.fit_error.is_finite() && (0.0..=1000.0).contains(&u.fit_error) {
+            m.fit_error_m = u.fit_error as f32;
+            m.validity |= UsblFixV1::VALID_FIT_ERROR;
+        }
+    }
+    if let Some([east, north, depth]) = f.position_m {
+        m.position_array_m = [north, east, depth];
+        m.validity |= UsblFixV1::VALID_POSITION;
+    }
+    m
 }
 
 #[cfg(test)]

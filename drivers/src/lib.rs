@@ -3,6 +3,8 @@
 
 pub mod can;
 pub mod convert;
+pub mod device;
+pub mod emulate;
 pub mod framing;
 pub mod kvh;
 pub mod pd0;

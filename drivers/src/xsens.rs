@@ -253,7 +253,7 @@ pub fn frame(message_id: u8, payload: &[u8]) -> Vec<u8> {
 }
 
 /// Encodes the fields of `m` that an IMU emulator needs (packet counter, sample time, status,
-/// acceleration, rate of turn, delta-v, delta-q) as f32 packets in an MTData2 frame.
+/// temperature, acceleration, rate of turn, delta-v, delta-q) as f32 packets in an MTData2 frame.
 pub fn encode_mtdata2(m: &MtData2) -> Vec<u8> {
     let mut p = Vec::new();
     let mut put = |id: u16, data: &[u8]| {
@@ -271,6 +271,9 @@ pub fn encode_mtdata2(m: &MtData2) -> Vec<u8> {
     }
     if let Some(s) = m.status_word {
         put(xdi::STATUS_WORD, &s.to_be_bytes());
+    }
+    if let Some(t) = m.temperature_c {
+        put(xdi::TEMPERATURE, &f32s(&[t]));
     }
     if let Some(a) = m.acceleration {
         put(xdi::ACCELERATION, &f32s(&a));

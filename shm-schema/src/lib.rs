@@ -19,6 +19,7 @@
 //! The zero-copy derive of iceoryx2 emits `unsafe impl`, so this crate cannot forbid unsafe code;
 //! it contains no hand-written `unsafe`.
 
+pub mod bus;
 pub mod qos;
 pub mod topic;
 
@@ -123,6 +124,15 @@ macro_rules! message {
             }
             fn host_time(&self) -> HostTime {
                 HostTime(self.host_time_ns)
+            }
+        }
+
+        impl crate::bus::Sequenced for $name {
+            fn set_sequence(&mut self, sequence: u64) {
+                self.sequence = sequence;
+            }
+            fn sequence(&self) -> u64 {
+                self.sequence
             }
         }
     };
@@ -603,6 +613,36 @@ message! {
     }
 }
 
+/// Bytes per [`RawBytesV1`] message.
+pub const RAW_CHUNK: usize = 1024;
+
+message! {
+    /// A chunk of the bytes a driver read from its device, exactly as read, for the recorder
+    /// (raw capture). A read longer than the chunk size is split into consecutive messages with the
+    /// same host time.
+    #[type_name("auvnav/RawBytes/v1")]
+    #[schema_name("auvnav_msgs/msg/RawBytesV1")]
+    pub struct RawBytesV1 {
+        /// Host time at read return (ns, CLOCK_MONOTONIC).
+        pub host_time_ns: u64,
+        /// Sequence number assigned by the publisher.
+        pub sequence: u64,
+        /// Number of valid bytes in `data` (0..1024).
+        pub length: u32,
+        /// Reserved, zero.
+        pub reserved: u32,
+        /// The bytes; only the first `length` are valid.
+        pub data: [u8; 1024],
+    }
+}
+
+impl RawBytesV1 {
+    /// The valid bytes.
+    pub fn bytes(&self) -> &[u8] {
+        &self.data[..(self.length as usize).min(RAW_CHUNK)]
+    }
+}
+
 /// Every message type with its log schema, for tools that list or validate schemas.
 pub fn all_schemas() -> Vec<(&'static str, &'static str, String)> {
     fn entry<T: Message>() -> (&'static str, &'static str, String) {
@@ -619,5 +659,6 @@ pub fn all_schemas() -> Vec<(&'static str, &'static str, String)> {
         entry::<AidDiagnosticsV1>(),
         entry::<ProcessHealthV1>(),
         entry::<TruthStateV1>(),
+        entry::<RawBytesV1>(),
     ]
 }

@@ -41,3 +41,11 @@ pub const HEALTH: ServiceQos = ServiceQos {
     max_publishers: 16,
     max_subscribers: 8,
 };
+
+/// Raw device bytes for the recorder: one chunk per read, so fewer slots than a 1 kHz topic.
+pub const RAW: ServiceQos = ServiceQos {
+    subscriber_max_buffer_size: 128,
+    history_size: 0,
+    max_publishers: 2,
+    max_subscribers: 4,
+};

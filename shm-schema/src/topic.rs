@@ -20,6 +20,10 @@ pub const NAV_SOLUTION: &str = "nav/solution";
 pub const NAV_AID_DIAGNOSTICS: &str = "nav/aid_diagnostics";
 /// Process health of every process ([`crate::ProcessHealthV1`]).
 pub const HEALTH: &str = "health";
+/// Raw device bytes of one driver ([`crate::RawBytesV1`]): `raw/<driver name>`.
+pub fn raw(driver: &str) -> String {
+    format!("raw/{driver}")
+}
 /// Simulated truth (log only, [`crate::TruthStateV1`]).
 pub const TRUTH: &str = "truth";
 

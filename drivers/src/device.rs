@@ -1,0 +1,274 @@
+//! One device on a serial line: its protocol's stream decoder followed by the conversion to the
+//! schema message the driver publishes. Pure (no I/O, no clock): the driver passes the host time
+//! at read return.
+
+use crate::convert::{self, KvhConfig};
+use crate::framing::DecoderStats;
+use crate::kvh::KvhDecoder;
+use crate::pd0::Pd0Decoder;
+use crate::seatrac::{SeatracDecoder, SeatracMessage};
+use crate::wldvl::{WlDecoder, WlFrame};
+use crate::xsens::{XbusDecoder, XbusMessage};
+use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, UsblFixV1};
+use serde::{Deserialize, Serialize};
+
+/// A serial protocol the drivers speak.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Protocol {
+    /// Teledyne RDI PD0 (binary ensembles).
+    Pd0,
+    /// Water Linked DVL serial protocol (`wrz` velocity reports).
+    Wldvl,
+    /// KVH 1750/1775 IMU binary messages (formats A and B).
+    Kvh1750,
+    /// Xsens MTi XBus MTData2.
+    Xsens,
+    /// Blueprint Subsea SeaTrac USBL (`CID_XCVR_FIX`, `CID_PING_RESP`).
+    Seatrac,
+}
+
+impl Protocol {
+    pub const ALL: [Protocol; 5] = [
+        Protocol::Pd0,
+        Protocol::Wldvl,
+        Protocol::Kvh1750,
+        Protocol::Xsens,
+        Protocol::Seatrac,
+    ];
+
+    /// The name used in configuration files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Protocol::Pd0 => "pd0",
+            Protocol::Wldvl => "wldvl",
+            Protocol::Kvh1750 => "kvh1750",
+            Protocol::Xsens => "xsens",
+            Protocol::Seatrac => "seatrac",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Protocol> {
+        Protocol::ALL.into_iter().find(|p| p.name() == name)
+    }
+
+    /// The class of device that speaks it.
+    pub fn class(self) -> DeviceClass {
+        match self {
+            Protocol::Pd0 | Protocol::Wldvl => DeviceClass::Dvl,
+            Protocol::Kvh1750 | Protocol::Xsens => DeviceClass::Imu,
+            Protocol::Seatrac => DeviceClass::Usbl,
+        }
+    }
+}
+
+/// What a device measures, and so which topic its driver publishes on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DeviceClass {
+    Dvl,
+    Imu,
+    Usbl,
+}
+
+impl DeviceClass {
+    pub fn name(self) -> &'static str {
+        match self {
+            DeviceClass::Dvl => "dvl",
+            DeviceClass::Imu => "imu",
+            DeviceClass::Usbl => "usbl",
+        }
+    }
+}
+
+/// Settings the byte stream does not carry.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ProtocolSettings {
+    /// Time from validity to the end of the frame on the line, for protocols that do not report it
+    /// (PD0, SeaTrac) (s, 0..10, default 0).
+    pub latency_s: f64,
+    /// Xsens output data rate: the integration interval of delta-q/delta-v is its inverse (Hz,
+    /// default 400).
+    pub xsens_rate_hz: f64,
+    /// KVH output configuration (=ROTFMT, =ROTUNITS, =TEMPUNITS, rate).
+    pub kvh: KvhConfig,
+}
+
+impl Default for ProtocolSettings {
+    fn default() -> Self {
+        ProtocolSettings {
+            latency_s: 0.0,
+            xsens_rate_hz: 400.0,
+            kvh: KvhConfig {
+                increments: false,
+                degrees: false,
+                rate_hz: 1000.0,
+                temperature_centi: false,
+            },
+        }
+    }
+}
+
+/// A message for the bus.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Output {
+    Imu(ImuSampleV1),
+    Dvl(DvlVelocityV1),
+    Usbl(UsblFixV1),
+}
+
+enum Inner {
+    Pd0(Pd0Decoder),
+    Wldvl(WlDecoder),
+    Kvh(KvhDecoder),
+    Xsens(XbusDecoder),
+    Seatrac(SeatracDecoder),
+}
+
+/// Counters beyond the stream decoder's.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct DeviceCounters {
+    /// Good frames that carry nothing to publish (configuration replies, status, other reports).
+    pub other_frames: u64,
+    /// Samples the device numbered but that never arrived (gaps in its own counter).
+    pub device_gaps: u64,
+}
+
+/// The decoder and conversion of one device.
+pub struct DeviceDecoder {
+    protocol: Protocol,
+    settings: ProtocolSettings,
+    inner: Inner,
+    last_counter: Option<u16>,
+    counters: DeviceCounters,
+}
+
+impl DeviceDecoder {
+    pub fn new(protocol: Protocol, settings: ProtocolSettings) -> Self {
+        let inner = match protocol {
+            Protocol::Pd0 => Inner::Pd0(Pd0Decoder::new()),
+            Protocol::Wldvl => Inner::Wldvl(WlDecoder::new()),
+            Protocol::Kvh1750 => Inner::Kvh(KvhDecoder::new()),
+            Protocol::Xsens => Inner::Xsens(XbusDecoder::new()),
+            Protocol::Seatrac => Inner::Seatrac(SeatracDecoder::new()),
+        };
+        DeviceDecoder {
+            protocol,
+            settings,
+            inner,
+            last_counter: None,
+            counters: DeviceCounters::default(),
+        }
+    }
+
+    pub fn protocol(&self) -> Protocol {
+        self.protocol
+    }
+
+    /// Appends bytes read from the line.
+    pub fn push(&mut self, bytes: &[u8]) {
+        match &mut self.inner {
+            Inner::Pd0(d) => d.push(bytes),
+            Inner::Wldvl(d) => d.push(bytes),
+            Inner::Kvh(d) => d.push(bytes),
+            Inner::Xsens(d) => d.push(bytes),
+            Inner::Seatrac(d) => d.push(bytes),
+        }
+    }
+
+    /// The stream decoder's counters.
+    pub fn stats(&self) -> DecoderStats {
+        *match &self.inner {
+            Inner::Pd0(d) => d.stats(),
+            Inner::Wldvl(d) => d.stats(),
+            Inner::Kvh(d) => d.stats(),
+            Inner::Xsens(d) => d.stats(),
+            Inner::Seatrac(d) => d.stats(),
+        }
+    }
+
+    pub fn counters(&self) -> DeviceCounters {
+        self.counters
+    }
+
+    /// Counts a gap in a device counter that wraps at `modulus`.
+    fn device_counter(&mut self, counter: u16, modulus: u32) {
+        if let Some(last) = self.last_counter {
+            let step = (u32::from(counter) + modulus - u32::from(last)) % modulus;
+            if step > 1 {
+                self.counters.device_gaps += u64::from(step - 1);
+            }
+        }
+        self.last_counter = Some(counter);
+    }
+
+    /// The next message to publish from the bytes pushed so far, stamped `host_time_ns` (the
+    /// time the read that completed it returned). The sequence number is left 0: the publisher
+    /// assigns it.
+    pub fn next_output(&mut self, host_time_ns: u64) -> Option<Output> {
+        let s = self.settings;
+        loop {
+            match &mut self.inner {
+                Inner::Pd0(d) => match d.next_ensemble()? {
+                    Ok(e) => {
+                        if let Some(m) = convert::pd0_velocity(&e, host_time_ns, s.latency_s, 0) {
+                            return Some(Output::Dvl(m));
+                        }
+                        self.counters.other_frames += 1;
+                    }
+                    Err(_) => continue,
+                },
+                Inner::Wldvl(d) => match d.next_frame()? {
+                    Ok(WlFrame::Velocity(v)) => {
+                        return Some(Output::Dvl(convert::water_linked_velocity(
+                            &v,
+                            host_time_ns,
+                            0,
+                        )));
+                    }
+                    Ok(_) => self.counters.other_frames += 1,
+                    Err(_) => continue,
+                },
+                Inner::Kvh(d) => {
+                    let sample = d.next_sample()?;
+                    self.device_counter(u16::from(sample.sequence), 128);
+                    return Some(Output::Imu(convert::kvh_sample(
+                        &sample,
+                        &s.kvh,
+                        host_time_ns,
+                        0,
+                    )));
+                }
+                Inner::Xsens(d) => match d.next_message()? {
+                    XbusMessage::MtData2(m) => {
+                        if let Some(c) = m.packet_counter {
+                            self.device_counter(c, 1 << 16);
+                        }
+                        if let Some(out) =
+                            convert::xsens_sample(&m, s.xsens_rate_hz, host_time_ns, 0)
+                        {
+                            return Some(Output::Imu(out));
+                        }
+                        self.counters.other_frames += 1;
+                    }
+                    XbusMessage::Other(_) => self.counters.other_frames += 1,
+                },
+                Inner::Seatrac(d) => match d.next_frame()? {
+                    Ok(f) => match f.message {
+                        SeatracMessage::Fix { fix, .. } if f.from_beacon => {
+                            return Some(Output::Usbl(convert::seatrac_fix(
+                                &fix,
+                                host_time_ns,
+                                s.latency_s,
+                                0,
+                            )));
+                        }
+                        _ => self.counters.other_frames += 1,
+                    },
+                    Err(_) => continue,
+                },
+            }
+        }
+    }
+}

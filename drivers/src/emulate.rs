@@ -1,0 +1,474 @@
+//! Device emulation: schema messages encoded in the devices' own protocols, the inverse of
+//! [`crate::convert`]. The emulator (`auvnav emulate`) plays a log's messages through these into
+//! pseudo-terminals; decoding the bytes with the driver's conversion gives the message back up to
+//! the protocol's resolution (PD0 1 mm/s, SeaTrac 0.1 m and 0.1°, KVH and Xsens f32).
+
+use crate::convert::{KvhConfig, STANDARD_GRAVITY, civil_from_days, days_from_civil};
+use crate::kvh::{self, KvhSample};
+use crate::pd0::{self, BottomTrack, CoordinateSystem, Ensemble, FixedLeader, VariableLeader};
+use crate::seatrac::{self, AcoFix, FixRange, FixUsbl};
+use crate::wldvl::{self, Velocity, WlFrame};
+use crate::xsens::{self, MtData2};
+use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, UsblFixV1};
+
+/// System configuration word of the emulated PD0 DVL: 600 kHz, convex, 30° beams, down-looking,
+/// 4-beam Janus.
+pub const PD0_SYSTEM_CONFIGURATION: u16 = 0x4000 | 0x0200 | 0x0008 | 0x0003;
+/// EX command byte of the emulated PD0 DVL: instrument coordinates.
+pub const PD0_COORDINATE_TRANSFORM: u8 = 0x08;
+/// Beam angle of the emulated PD0 DVL (deg).
+pub const PD0_BEAM_ANGLE_DEG: f64 = 30.0;
+
+/// The device time of a DVL message in ns (its own, or the time of validity).
+fn dvl_device_time_ns(m: &DvlVelocityV1) -> u64 {
+    if m.validity & DvlVelocityV1::VALID_DEVICE_TIME != 0 {
+        m.device_time_ns
+    } else {
+        m.validity_time_ns
+    }
+}
+
+/// PD0's real-time clock for a time in ns since 2000-01-01.
+pub fn pd0_rtc(ns: u64) -> [u8; 7] {
+    let total_cs = ns / 10_000_000;
+    let cs = (total_cs % 100) as u8;
+    let s = total_cs / 100;
+    let days = (s / 86_400) as i64;
+    let sod = s % 86_400;
+    let (y, mo, d) = civil_from_days(days + days_from_civil(2000, 1, 1));
+    [
+        (y - 2000).rem_euclid(100) as u8,
+        mo as u8,
+        d as u8,
+        (sod / 3600) as u8,
+        (sod / 60 % 60) as u8,
+        (sod % 60) as u8,
+        cs,
+    ]
+}
+
+/// A DVL message as a PD0 ensemble (fixed leader, variable leader, bottom track) of an
+/// instrument-coordinate 4-beam DVL. Invalid velocity is written as PD0's -32768.
+pub fn pd0_from_dvl(m: &DvlVelocityV1, ensemble_number: u32) -> Vec<u8> {
+    let valid = m.validity & DvlVelocityV1::VALID_VELOCITY != 0;
+    let v = m.velocity_dvl_m_s;
+    // Schema [x fwd, y stbd, z down] (vehicle) -> RDI [x stbd, y fwd, z up] (bottom).
+    let rdi = [-v[1], -v[0], v[2]];
+    let mut velocity = [None; 4];
+    if valid {
+        for i in 0..3 {
+            velocity[i] = Some(rdi[i]);
+        }
+        velocity[3] = Some(if m.validity & DvlVelocityV1::VALID_FOM != 0 {
+            m.figure_of_merit_m_s
+        } else {
+            0.0
+        });
+    }
+    let cos = PD0_BEAM_ANGLE_DEG.to_radians().cos();
+    let range_m = std::array::from_fn(|i| {
+        if m.validity & (DvlVelocityV1::VALID_BEAM_RANGE << i) != 0 {
+            Some(m.beam_range_m[i] * cos)
+        } else if m.validity & DvlVelocityV1::VALID_ALTITUDE != 0 {
+            Some(m.altitude_m)
+        } else {
+            None
+        }
+    });
+    let e = Ensemble {
+        fixed: Some(FixedLeader {
+            firmware_version: 51,
+            firmware_revision: 1,
+            system_configuration: PD0_SYSTEM_CONFIGURATION,
+            beams: 4,
+            cells: 0,
+            pings_per_ensemble: 1,
+            cell_size_m: 1.0,
+            blank_m: 0.5,
+            coordinate_transform: PD0_COORDINATE_TRANSFORM,
+            coordinate_system: CoordinateSystem::Instrument,
+            heading_alignment_deg: 0.0,
+            heading_bias_deg: 0.0,
+            sensor_source: 0,
+            sensors_available: 0,
+            bin1_distance_m: 1.0,
+            transmit_pulse_m: 1.0,
+            serial_number: Some(1),
+            beam_angle_deg: Some(PD0_BEAM_ANGLE_DEG),
+            upward_looking: false,
+            frequency_khz: Some(600),
+        }),
+        variable: Some(VariableLeader {
+            ensemble_number,
+            rtc: pd0_rtc(dvl_device_time_ns(m)),
+            rtc_y2k: None,
+            bit_result: 0,
+            sound_speed_m_s: if m.validity & DvlVelocityV1::VALID_SOUND_SPEED != 0 {
+                m.sound_speed_m_s
+            } else {
+                1500.0
+            },
+            depth_m: 0.0,
+            heading_deg: 0.0,
+            pitch_deg: 0.0,
+            roll_deg: 0.0,
+            salinity_ppt: 35.0,
+            temperature_c: 10.0,
+            pressure_pa: None,
+        }),
+        bottom_track: Some(BottomTrack {
+            pings_per_ensemble: 1,
+            range_m,
+            velocity_m_s: velocity,
+            correlation: [200; 4],
+            evaluation_amplitude: [100; 4],
+            percent_good: [if valid { 100 } else { 0 }; 4],
+            max_depth_m: 200.0,
+        }),
+        ..Default::default()
+    };
+    pd0::encode_ensemble(&e)
+}
+
+/// A DVL message as a Water Linked `wrz` line. The device clock is the message's device time (or
+/// time of validity) in microseconds; time of transmission = validity + `latency_s`.
+pub fn wrz_from_dvl(m: &DvlVelocityV1, latency_s: f64) -> Vec<u8> {
+    let tov_us = dvl_device_time_ns(m) / 1000;
+    let var = |i: usize| {
+        if m.validity & DvlVelocityV1::VALID_STD != 0 {
+            m.velocity_std_m_s[i] * m.velocity_std_m_s[i]
+        } else {
+            0.0
+        }
+    };
+    let v = Velocity {
+        velocity_m_s: m.velocity_dvl_m_s,
+        valid: m.validity & DvlVelocityV1::VALID_VELOCITY != 0,
+        altitude_m: if m.validity & DvlVelocityV1::VALID_ALTITUDE != 0 {
+            m.altitude_m
+        } else {
+            -1.0
+        },
+        figure_of_merit_m_s: m.figure_of_merit_m_s,
+        covariance: [var(0), 0.0, 0.0, 0.0, var(1), 0.0, 0.0, 0.0, var(2)],
+        time_of_validity_us: tov_us,
+        time_of_transmission_us: tov_us + (latency_s.max(0.0) * 1e6).round() as u64,
+        time_since_last_ms: 0.0,
+        status: 0,
+    };
+    wldvl::encode(&WlFrame::Velocity(v))
+}
+
+/// An IMU message as a KVH 1750 message (format B when the sample has a device time) in the
+/// units `cfg` describes; `counter` is the unit's 8-bit sequence.
+pub fn kvh_from_imu(m: &ImuSampleV1, cfg: &KvhConfig, counter: u8) -> Vec<u8> {
+    let angle_scale = if cfg.degrees {
+        180.0 / std::f64::consts::PI
+    } else {
+        1.0
+    };
+    let mut status = 0u8;
+    if m.status & ImuSampleV1::STATUS_GYRO_VALID != 0 {
+        status |= 0x07;
+    }
+    if m.status & ImuSampleV1::STATUS_ACCEL_VALID != 0 {
+        status |= 0x70;
+    }
+    let temperature = if cfg.temperature_centi {
+        f64::from(m.temperature_c) * 100.0
+    } else {
+        f64::from(m.temperature_c)
+    };
+    let s = KvhSample {
+        gyro: m.angular.map(|g| (g * angle_scale) as f32),
+        accel: m.specific.map(|a| (a / STANDARD_GRAVITY) as f32),
+        status,
+        sequence: counter,
+        temperature_raw: temperature.round().clamp(-32768.0, 32767.0) as i16,
+        timestamp_us: (m.status & ImuSampleV1::STATUS_DEVICE_TIME_VALID != 0)
+            .then_some((m.device_time_ns / 1000) as u32),
+    };
+    kvh::encode(&s)
+}
+
+/// An IMU message as an Xsens MTData2 message: delta-q/delta-v in increment mode, rate of turn
+/// and acceleration otherwise, with packet counter, sample time fine and temperature.
+pub fn xsens_from_imu(m: &ImuSampleV1, packet_counter: u16) -> Vec<u8> {
+    let mut d = MtData2 {
+        packet_counter: Some(packet_counter),
+        sample_time_fine: (m.status & ImuSampleV1::STATUS_DEVICE_TIME_VALID != 0)
+            .then_some((m.device_time_ns / 100_000) as u32),
+        temperature_c: (m.status & ImuSampleV1::STATUS_TEMPERATURE_VALID != 0)
+            .then_some(f64::from(m.temperature_c)),
+        ..Default::default()
+    };
+    if m.status & ImuSampleV1::STATUS_INCREMENTS != 0 {
+        let a = m.angular;
+        let angle = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+        let (w, k) = if angle > 1e-15 {
+            ((angle / 2.0).cos(), (angle / 2.0).sin() / angle)
+        } else {
+            (1.0, 0.5)
+        };
+        d.delta_q = Some([w, a[0] * k, a[1] * k, a[2] * k]);
+        d.delta_v = Some(m.specific);
+    } else {
+        d.rate_of_turn = Some(m.angular);
+        d.acceleration = Some(m.specific);
+    }
+    xsens::encode_mtdata2(&d)
+}
+
+/// A USBL message as a SeaTrac `CID_XCVR_FIX` line (the inverse of
+/// [`crate::convert::seatrac_fix`]; `position_array_m` is `[northing, easting, depth]`).
+pub fn seatrac_from_usbl(m: &UsblFixV1, local_id: u8) -> Vec<u8> {
+    let c = if m.validity & UsblFixV1::VALID_SOUND_SPEED != 0 {
+        m.sound_speed_m_s
+    } else {
+        1500.0
+    };
+    let mut flags = 0;
+    let range = (m.validity & UsblFixV1::VALID_RANGE != 0).then(|| {
+        flags |= AcoFix::RANGE_VALID;
+        let two_way = 2.0 * m.slant_range_m / c;
+        FixRange {
+            count: (two_way * 16_000.0).round() as u32,
+            travel_time_s: two_way,
+            distance_m: m.slant_range_m,
+        }
+    });
+    let usbl = (m.validity & UsblFixV1::VALID_ANGLES != 0).then(|| {
+        flags |= AcoFix::USBL_VALID;
+        FixUsbl {
+            channel_rssi_db: if m.validity & UsblFixV1::VALID_RSSI != 0 {
+                m.rssi_db.iter().map(|&r| f64::from(r)).collect()
+            } else {
+                Vec::new()
+            },
+            azimuth_deg: m.azimuth_rad.to_degrees(),
+            elevation_deg: m.elevation_rad.to_degrees(),
+            fit_error: f64::from(m.fit_error_m),
+        }
+    });
+    let position_m = (m.validity & UsblFixV1::VALID_POSITION != 0).then(|| {
+        flags |= AcoFix::POSITION_VALID;
+        let [n, e, d] = m.position_array_m;
+        [e, n, d]
+    });
+    let fix = AcoFix {
+        destination_id: local_id,
+        source_id: m.beacon_id.min(255) as u8,
+        flags,
+        message_type: 0,
+        attitude_deg: [0.0; 3],
+        local_depth_m: 0.0,
+        sound_speed_m_s: c,
+        rssi_db: 0.0,
+        range,
+        usbl,
+        position_m,
+    };
+    seatrac::encode_line(seatrac::CID_XCVR_FIX, &seatrac::encode_aco_fix(&fix))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::device::{DeviceDecoder, Output, Protocol, ProtocolSettings};
+
+    fn decode_one(protocol: Protocol, settings: ProtocolSettings, bytes: &[u8]) -> Output {
+        let mut d = DeviceDecoder::new(protocol, settings);
+        d.push(bytes);
+        let out = d.next_output(5_000_000_000).expect("one message");
+        assert!(d.next_output(0).is_none());
+        assert_eq!(d.stats().checksum_errors, 0);
+        out
+    }
+
+    fn dvl() -> DvlVelocityV1 {
+        DvlVelocityV1 {
+            host_time_ns: 5_000_000_000,
+            device_time_ns: 812_345_670_000_000,
+            validity_time_ns: 5_000_000_000,
+            velocity_dvl_m_s: [1.234, -0.056, 0.011],
+            velocity_std_m_s: [0.01, 0.01, 0.02],
+            altitude_m: 12.5,
+            figure_of_merit_m_s: 0.004,
+            sound_speed_m_s: 1502.0,
+            validity: DvlVelocityV1::VALID_VELOCITY
+                | DvlVelocityV1::VALID_ALTITUDE
+                | DvlVelocityV1::VALID_FOM
+                | DvlVelocityV1::VALID_SOUND_SPEED
+                | DvlVelocityV1::VALID_DEVICE_TIME
+                | DvlVelocityV1::VALID_STD,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn pd0_round_trip_keeps_velocity_altitude_and_clock() {
+        let m = dvl();
+        let Output::Dvl(back) = decode_one(
+            Protocol::Pd0,
+            ProtocolSettings::default(),
+            &pd0_from_dvl(&m, 77),
+        ) else {
+            panic!("not a DVL message")
+        };
+        for i in 0..3 {
+            assert!((back.velocity_dvl_m_s[i] - m.velocity_dvl_m_s[i]).abs() <= 0.0005);
+        }
+        assert!((back.altitude_m - 12.5).abs() < 0.01);
+        assert_eq!(back.device_time_ns, 812_345_670_000_000);
+        assert_eq!(back.sound_speed_m_s, 1502.0);
+        assert_eq!(back.beams_used, 4);
+        // A slant range is the vertical one over cos 30°.
+        assert!((back.beam_range_m[0] - 12.5 / 30f64.to_radians().cos()).abs() < 0.01);
+        let invalid = DvlVelocityV1 {
+            validity: DvlVelocityV1::VALID_ALTITUDE,
+            ..m
+        };
+        let Output::Dvl(back) = decode_one(
+            Protocol::Pd0,
+            ProtocolSettings::default(),
+            &pd0_from_dvl(&invalid, 78),
+        ) else {
+            panic!("not a DVL message")
+        };
+        assert_eq!(back.validity & DvlVelocityV1::VALID_VELOCITY, 0);
+    }
+
+    #[test]
+    fn water_linked_round_trip_keeps_latency() {
+        let m = dvl();
+        let Output::Dvl(back) = decode_one(
+            Protocol::Wldvl,
+            ProtocolSettings::default(),
+            &wrz_from_dvl(&m, 0.15),
+        ) else {
+            panic!("not a DVL message")
+        };
+        assert_eq!(back.validity_time_ns, 5_000_000_000 - 150_000_000);
+        for i in 0..3 {
+            assert!((back.velocity_dvl_m_s[i] - m.velocity_dvl_m_s[i]).abs() <= 0.0005);
+            assert!((back.velocity_std_m_s[i] - m.velocity_std_m_s[i]).abs() < 1e-6);
+        }
+    }
+
+    fn imu(status: u32) -> ImuSampleV1 {
+        ImuSampleV1 {
+            host_time_ns: 5_000_000_000,
+            device_time_ns: 123_456_700_000,
+            angular: [0.01, -0.2, 0.003],
+            specific: [0.1, -0.05, -9.81],
+            interval_s: 0.0025,
+            temperature_c: 21.5,
+            status: status
+                | ImuSampleV1::STATUS_GYRO_VALID
+                | ImuSampleV1::STATUS_ACCEL_VALID
+                | ImuSampleV1::STATUS_TEMPERATURE_VALID
+                | ImuSampleV1::STATUS_DEVICE_TIME_VALID,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn xsens_round_trip_in_rate_and_increment_mode() {
+        for status in [0, ImuSampleV1::STATUS_INCREMENTS] {
+            let mut m = imu(status);
+            if status != 0 {
+                m.angular = m.angular.map(|w| w * 0.0025);
+                m.specific = m.specific.map(|a| a * 0.0025);
+            }
+            let settings = ProtocolSettings {
+                xsens_rate_hz: 400.0,
+                ..Default::default()
+            };
+            let Output::Imu(back) = decode_one(Protocol::Xsens, settings, &xsens_from_imu(&m, 9))
+            else {
+                panic!("not an IMU message")
+            };
+            assert_eq!(back.status, m.status);
+            assert_eq!(back.device_time_ns, m.device_time_ns);
+            assert_eq!(back.interval_s, 0.0025);
+            for i in 0..3 {
+                let tol = 1e-6 * m.angular[i].abs().max(1e-9);
+                assert!((back.angular[i] - m.angular[i]).abs() <= tol, "{i}");
+                assert!((back.specific[i] - m.specific[i]).abs() <= 1e-6 * m.specific[i].abs());
+            }
+        }
+    }
+
+    #[test]
+    fn kvh_round_trip_and_counter_gaps_are_counted() {
+        let m = imu(0);
+        let settings = ProtocolSettings::default();
+        let mut d = DeviceDecoder::new(Protocol::Kvh1750, settings);
+        for counter in [126u8, 127, 0, 3] {
+            d.push(&kvh_from_imu(&m, &settings.kvh, counter));
+        }
+        let mut n = 0;
+        while let Some(Output::Imu(back)) = d.next_output(1) {
+            n += 1;
+            assert_eq!(back.device_time_ns, m.device_time_ns);
+            for i in 0..3 {
+                assert!((back.angular[i] - m.angular[i]).abs() <= 1e-7 * m.angular[i].abs());
+                assert!((back.specific[i] - m.specific[i]).abs() <= 1e-6 * m.specific[i].abs());
+            }
+        }
+        assert_eq!(n, 4);
+        assert_eq!(d.counters().device_gaps, 2);
+    }
+
+    #[test]
+    fn seatrac_round_trip_at_device_resolution() {
+        let m = UsblFixV1 {
+            host_time_ns: 5_000_000_000,
+            validity_time_ns: 5_000_000_000,
+            slant_range_m: 123.4,
+            azimuth_rad: (-35.2f64).to_radians(),
+            elevation_rad: (12.3f64).to_radians(),
+            position_array_m: [-80.1, 60.2, 55.5],
+            sound_speed_m_s: 1490.5,
+            rssi_db: [-60.0, -61.5, -59.0, -62.0],
+            fit_error_m: 0.25,
+            beacon_id: 15,
+            validity: UsblFixV1::VALID_RANGE
+                | UsblFixV1::VALID_ANGLES
+                | UsblFixV1::VALID_POSITION
+                | UsblFixV1::VALID_SOUND_SPEED
+                | UsblFixV1::VALID_RSSI
+                | UsblFixV1::VALID_FIT_ERROR,
+            ..Default::default()
+        };
+        let Output::Usbl(back) = decode_one(
+            Protocol::Seatrac,
+            ProtocolSettings::default(),
+            &seatrac_from_usbl(&m, 1),
+        ) else {
+            panic!("not a USBL message")
+        };
+        assert_eq!(back.validity, m.validity);
+        assert!((back.slant_range_m - m.slant_range_m).abs() < 0.051);
+        assert!((back.travel_time_s - 123.4 / 1490.5).abs() < 1e-4);
+        assert!((back.azimuth_rad - m.azimuth_rad).abs() < 0.051f64.to_radians());
+        assert!((back.elevation_rad - m.elevation_rad).abs() < 0.051f64.to_radians());
+        for i in 0..3 {
+            assert!((back.position_array_m[i] - m.position_array_m[i]).abs() < 0.051);
+        }
+        assert_eq!(back.beacon_id, 15);
+        assert_eq!(back.rssi_db, m.rssi_db);
+    }
+
+    #[test]
+    fn pd0_clock_round_trips_through_calendar_dates() {
+        for ns in [
+            0u64,
+            86_399_990_000_000,
+            1_700_000_000_120_000_000,
+            2_000_000_000_990_000_000,
+        ] {
+            assert_eq!(crate::convert::pd0_rtc_ns(&pd0_rtc(ns)), Some(ns));
+        }
+    }
+}

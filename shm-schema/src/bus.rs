@@ -1,0 +1,256 @@
+//! The shared-memory bus: one iceoryx2 node per process, a publish-subscribe service per topic
+//! and, beside it, an event service with the same name that publishers notify after each send so
+//! that subscribers can sleep until data arrives (instead of polling).
+//!
+//! Every service is opened with the [`crate::qos`] settings of its topic class, so publishers and
+//! subscribers always agree. Sequence numbers are assigned here: a publisher numbers its messages
+//! 0, 1, 2, …, and a subscriber counts the gaps (messages lost to a full buffer).
+
+use crate::Message;
+use crate::qos::ServiceQos;
+use crate::topic::service_name;
+use iceoryx2::node::NodeWaitFailure;
+use iceoryx2::prelude::*;
+use std::time::Duration;
+
+/// An error of the bus, with the service or node it concerns.
+#[derive(Debug)]
+pub struct BusError(pub String);
+
+impl std::fmt::Display for BusError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for BusError {}
+
+fn err(what: impl std::fmt::Display, e: impl std::fmt::Debug) -> BusError {
+    BusError(format!("{what}: {e:?}"))
+}
+
+/// A process's connection to the bus: its iceoryx2 node and the deployment prefix of its service
+/// names.
+pub struct Bus {
+    node: Node<ipc::Service>,
+    prefix: String,
+}
+
+impl Bus {
+    /// Creates the node `name` (shown in iceoryx2's node list). SIGINT and SIGTERM are caught by
+    /// iceoryx2 and reported by [`Bus::termination_requested`]. Dead nodes of killed processes are
+    /// cleaned up when services are opened.
+    pub fn new(name: &str, prefix: &str) -> Result<Bus, BusError> {
+        let node_name: NodeName = name
+            .try_into()
+            .map_err(|e| err(format!("node name {name:?}"), e))?;
+        let node = NodeBuilder::new()
+            .name(&node_name)
+            .create::<ipc::Service>()
+            .map_err(|e| err(format!("creating node {name:?}"), e))?;
+        // The first wait installs the signal handlers.
+        let bus = Bus {
+            node,
+            prefix: prefix.to_string(),
+        };
+        let _ = bus.termination_requested();
+        Ok(bus)
+    }
+
+    /// The deployment prefix.
+    pub fn prefix(&self) -> &str {
+        &self.prefix
+    }
+
+    /// True once SIGTERM or SIGINT was received (reported once per signal).
+    pub fn termination_requested(&self) -> bool {
+        matches!(
+            self.node.wait(Duration::ZERO),
+            Err(NodeWaitFailure::TerminationRequest | NodeWaitFailure::Interrupt)
+        )
+    }
+
+    /// Removes the resources of dead processes (nodes killed without cleanup).
+    pub fn cleanup_dead_nodes(&self) {
+        let _ = self.node.try_cleanup_dead_nodes();
+    }
+
+    fn names(&self, topic: &str) -> Result<(ServiceName, String), BusError> {
+        let full = service_name(&self.prefix, topic);
+        let name: ServiceName = full
+            .as_str()
+            .try_into()
+            .map_err(|e| err(format!("service name {full:?}"), e))?;
+        Ok((name, full))
+    }
+
+    fn event(&self, name: &ServiceName, full: &str) -> Result<PortFactoryEvent, BusError> {
+        self.node
+            .service_builder(name)
+            .event()
+            .max_notifiers(16)
+            .max_listeners(16)
+            .open_or_create()
+            .map_err(|e| err(format!("event service {full:?}"), e))
+    }
+
+    fn pubsub<T: Message>(
+        &self,
+        name: &ServiceName,
+        full: &str,
+        qos: ServiceQos,
+    ) -> Result<PortFactoryPubSub<T>, BusError> {
+        self.node
+            .service_builder(name)
+            .publish_subscribe::<T>()
+            .enable_safe_overflow(true)
+            .subscriber_max_buffer_size(qos.subscriber_max_buffer_size)
+            .history_size(qos.history_size)
+            .max_publishers(qos.max_publishers)
+            .max_subscribers(qos.max_subscribers)
+            .open_or_create()
+            .map_err(|e| err(format!("service {full:?} ({})", T::TYPE_NAME), e))
+    }
+
+    /// A publisher of `T` on `topic`.
+    pub fn publisher<T: Message>(
+        &self,
+        topic: &str,
+        qos: ServiceQos,
+    ) -> Result<BusPublisher<T>, BusError> {
+        let (name, full) = self.names(topic)?;
+        let service = self.pubsub::<T>(&name, &full, qos)?;
+        let publisher = service
+            .publisher_builder()
+            .create()
+            .map_err(|e| err(format!("publisher on {full:?}"), e))?;
+        let notifier = self
+            .event(&name, &full)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| err(format!("notifier on {full:?}"), e))?;
+        Ok(BusPublisher {
+            publisher,
+            notifier,
+            sequence: 0,
+            service: full,
+        })
+    }
+
+    /// A subscriber of `T` on `topic`. It is connected once created; call
+    /// [`BusSubscriber::receive`] regularly (also when not notified) so that its side of the
+    /// connection is established before the first publish.
+    pub fn subscriber<T: Message>(
+        &self,
+        topic: &str,
+        qos: ServiceQos,
+    ) -> Result<BusSubscriber<T>, BusError> {
+        let (name, full) = self.names(topic)?;
+        let service = self.pubsub::<T>(&name, &full, qos)?;
+        let subscriber = service
+            .subscriber_builder()
+            .create()
+            .map_err(|e| err(format!("subscriber on {full:?}"), e))?;
+        let listener = self
+            .event(&name, &full)?
+            .listener_builder()
+            .create()
+            .map_err(|e| err(format!("listener on {full:?}"), e))?;
+        let _ = subscriber.receive();
+        Ok(BusSubscriber {
+            subscriber,
+            listener,
+            next_sequence: None,
+            gaps: 0,
+            service: full,
+        })
+    }
+}
+
+type PortFactoryEvent = iceoryx2::service::port_factory::event::PortFactory<ipc::Service>;
+type PortFactoryPubSub<T> =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>;
+
+/// Publishes `T` and wakes the subscribers.
+pub struct BusPublisher<T: Message> {
+    publisher: iceoryx2::port::publisher::Publisher<ipc::Service, T, ()>,
+    notifier: iceoryx2::port::notifier::Notifier<ipc::Service>,
+    sequence: u64,
+    service: String,
+}
+
+/// What a message type needs so the bus can number it.
+pub trait Sequenced {
+    fn set_sequence(&mut self, sequence: u64);
+    fn sequence(&self) -> u64;
+}
+
+impl<T: Message + Sequenced> BusPublisher<T> {
+    /// Numbers `msg` with the next sequence number, sends it and notifies. Returns the sequence
+    /// number used.
+    pub fn publish(&mut self, mut msg: T) -> Result<u64, BusError> {
+        let sequence = self.sequence;
+        msg.set_sequence(sequence);
+        self.publisher
+            .send_copy(msg)
+            .map_err(|e| err(format!("send on {:?}", self.service), e))?;
+        self.sequence += 1;
+        self.notifier
+            .notify()
+            .map_err(|e| err(format!("notify on {:?}", self.service), e))?;
+        Ok(sequence)
+    }
+
+    /// The number of messages published so far.
+    pub fn published(&self) -> u64 {
+        self.sequence
+    }
+}
+
+/// Receives `T`, counting sequence gaps.
+pub struct BusSubscriber<T: Message> {
+    subscriber: iceoryx2::port::subscriber::Subscriber<ipc::Service, T, ()>,
+    listener: iceoryx2::port::listener::Listener<ipc::Service>,
+    next_sequence: Option<u64>,
+    gaps: u64,
+    service: String,
+}
+
+impl<T: Message + Sequenced> BusSubscriber<T> {
+    /// The next message, if one is waiting (a copy: the types are small).
+    pub fn receive(&mut self) -> Result<Option<T>, BusError> {
+        let sample = self
+            .subscriber
+            .receive()
+            .map_err(|e| err(format!("receive on {:?}", self.service), e))?;
+        Ok(sample.map(|s| {
+            let msg = *s.payload();
+            let seq = msg.sequence();
+            if let Some(expected) = self.next_sequence
+                && seq > expected
+            {
+                self.gaps += seq - expected;
+            }
+            self.next_sequence = Some(seq + 1);
+            msg
+        }))
+    }
+
+    /// Sleeps until a publisher notifies or `timeout` passes; returns the notifications seen.
+    pub fn wait(&self, timeout: Duration) -> Result<u64, BusError> {
+        self.listener
+            .timed_wait(|_| {}, timeout)
+            .map_err(|e| err(format!("wait on {:?}", self.service), e))
+    }
+
+    /// The listener, to attach to a WaitSet.
+    pub fn listener(&self) -> &iceoryx2::port::listener::Listener<ipc::Service> {
+        &self.listener
+    }
+
+    /// Messages missed so far according to the sequence numbers (count). A publisher restart
+    /// (sequence back to 0) is not a gap.
+    pub fn gaps(&self) -> u64 {
+        self.gaps
+    }
+}
