@@ -2,6 +2,7 @@
 //! clock), and the driver processes built on them.
 
 pub mod can;
+pub mod clock;
 pub mod convert;
 pub mod device;
 pub mod emulate;
@@ -9,5 +10,6 @@ pub mod framing;
 pub mod kvh;
 pub mod pd0;
 pub mod seatrac;
+pub mod serial_driver;
 pub mod wldvl;
 pub mod xsens;

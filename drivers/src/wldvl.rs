@@ -264,6 +264,14 @@ impl WlDecoder {
                 }
                 _ => Err(WlError::Malformed("line".into())),
             };
+            if result.is_err()
+                && let Some(next) = line[1..].iter().position(|&b| b == b'w')
+            {
+                // Garbage that happened to contain a `w` ran into a real line: drop the garbage
+                // and try again from the next start rather than losing the line.
+                self.input.skip(next + 1);
+                continue;
+            }
             let consumed = end + 1;
             match &result {
                 Ok(_) => self.input.take_frame(consumed),
@@ -368,5 +376,30 @@ mod tests {
     #[test]
     fn crc8_check_value() {
         assert_eq!(crc8(b"123456789"), 0xf4);
+    }
+
+    #[test]
+    fn garbage_with_a_w_before_a_line_does_not_cost_the_line() {
+        let v = Velocity {
+            velocity_m_s: [1.0, 0.0, 0.1],
+            valid: true,
+            altitude_m: 3.0,
+            figure_of_merit_m_s: 0.01,
+            covariance: [0.0; 9],
+            time_of_validity_us: 1,
+            time_of_transmission_us: 2,
+            time_since_last_ms: 100.0,
+            status: 0,
+        };
+        let mut bytes = b"\x13w7\xffwq".to_vec();
+        bytes.extend(encode(&WlFrame::Velocity(v.clone())));
+        let mut d = WlDecoder::new();
+        d.push(&bytes);
+        match d.next_frame() {
+            Some(Ok(WlFrame::Velocity(got))) => assert_eq!(got.velocity_m_s, v.velocity_m_s),
+            other => panic!("expected the velocity line, got {other:?}"),
+        }
+        assert_eq!(d.stats().checksum_errors + d.stats().malformed, 0);
+        assert_eq!(d.stats().bytes_skipped, 6);
     }
 }

@@ -3,6 +3,7 @@ pub mod bench;
 pub mod csv;
 pub mod decode;
 pub mod demo;
+pub mod emulate;
 pub mod import;
 pub mod log;
 pub mod montecarlo;

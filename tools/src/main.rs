@@ -27,6 +27,8 @@ enum Command {
     Replay(auvnav_tools::replay::ReplayArgs),
     /// Decode a captured device byte stream (one JSON object per frame with --json).
     Decode(auvnav_tools::decode::DecodeArgs),
+    /// Play a log's sensor messages into pseudo-terminals in the devices' protocols.
+    Emulate(auvnav_tools::emulate::EmulateArgs),
     /// Turn a measured data set into a log.
     Import {
         #[command(subcommand)]
@@ -239,6 +241,7 @@ fn main() -> std::process::ExitCode {
         Command::Demo(a) => auvnav_tools::demo::run(&a),
         Command::Replay(a) => run_replay(&a),
         Command::Decode(a) => auvnav_tools::decode::run(&a).map(|_| ()),
+        Command::Emulate(a) => auvnav_tools::emulate::run(&a).map(|_| ()),
         Command::Montecarlo { what } => match what {
             MonteCarloWhat::Nees(a) => auvnav_tools::montecarlo::run_nees(&a),
         },

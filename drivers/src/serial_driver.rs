@@ -1,0 +1,565 @@
+//! The serial driver process (`auvnav-dvl`, `auvnav-imu`, `auvnav-usbl`): owns one serial port,
+//! stamps every read with the host clock at read return, decodes the device's protocol and
+//! publishes the messages on the bus, reports its health, and survives the line: garbage is
+//! counted and dropped by the decoder, a silent device is reported, a device that disappears is
+//! reopened with exponential back-off, and the process stops cleanly on SIGTERM/SIGINT.
+
+use crate::clock::monotonic_ns;
+use crate::device::{DeviceClass, DeviceDecoder, Output, Protocol, ProtocolSettings};
+use auvnav_shm_schema::bus::{Bus, BusError, BusPublisher};
+use auvnav_shm_schema::{
+    DvlVelocityV1, ImuSampleV1, ProcessHealthV1, ProcessState, RAW_CHUNK, RawBytesV1, UsblFixV1,
+    qos, topic,
+};
+use serde::{Deserialize, Serialize};
+use std::io::Read;
+use std::time::Duration;
+
+/// Parity of the serial line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum Parity {
+    #[default]
+    None,
+    Odd,
+    Even,
+}
+
+/// The serial line (`[serial]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SerialConfig {
+    /// Device path, e.g. `/dev/ttyUSB0` or a stable link such as `/dev/serial/by-id/...`.
+    pub port: String,
+    /// Baud rate (bit/s, default 115200).
+    #[serde(default = "default_baud")]
+    pub baud: u32,
+    /// Data bits (5..8, default 8).
+    #[serde(default = "default_data_bits")]
+    pub data_bits: u8,
+    /// Parity (`none`, `odd`, `even`; default none).
+    #[serde(default)]
+    pub parity: Parity,
+    /// Stop bits (1 or 2, default 1).
+    #[serde(default = "default_stop_bits")]
+    pub stop_bits: u8,
+}
+
+fn default_baud() -> u32 {
+    115_200
+}
+fn default_data_bits() -> u8 {
+    8
+}
+fn default_stop_bits() -> u8 {
+    1
+}
+
+/// Timing of reads, health and reconnection (`[timing]`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TimingConfig {
+    /// Longest a read waits for bytes (s, 0.001..1, default 0.05).
+    pub read_timeout_s: f64,
+    /// No byte for this long and the device is reported silent: health state `reconnecting`,
+    /// `timeouts` + 1 (s, > read_timeout_s, default 2).
+    pub silence_timeout_s: f64,
+    /// First wait before reopening a lost port (s, default 0.1); doubles per failed attempt…
+    pub reconnect_initial_s: f64,
+    /// …up to this (s, default 5).
+    pub reconnect_max_s: f64,
+    /// Period of the health message (s, 0.05..60, default 1).
+    pub health_period_s: f64,
+}
+
+impl Default for TimingConfig {
+    fn default() -> Self {
+        TimingConfig {
+            read_timeout_s: 0.05,
+            silence_timeout_s: 2.0,
+            reconnect_initial_s: 0.1,
+            reconnect_max_s: 5.0,
+            health_period_s: 1.0,
+        }
+    }
+}
+
+/// How the device is installed on the vehicle (`[mounting]`): metadata for the navigation
+/// configuration and the log, not applied by the driver (messages stay in the device frame).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct MountingConfig {
+    /// Device frame to body frame rotation as roll, pitch, yaw (deg).
+    pub rotation_rpy_deg: [f64; 3],
+    /// Device origin in the body frame (m, FRD).
+    pub lever_arm_m: [f64; 3],
+}
+
+/// A serial driver's configuration file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SerialDriverConfig {
+    /// Process name in the health message and the raw-capture topic `raw/<name>` (default: the
+    /// device class, `dvl`, `imu` or `usbl`; at most 32 bytes).
+    #[serde(default)]
+    pub name: Option<String>,
+    /// Service-name prefix of the deployment (default `auvnav`).
+    #[serde(default = "default_prefix")]
+    pub prefix: String,
+    /// The device's protocol (`pd0`, `wldvl`, `kvh1750`, `xsens`, `seatrac`).
+    pub protocol: Protocol,
+    /// Publish every byte read on `raw/<name>` for the recorder (default false).
+    #[serde(default)]
+    pub raw_capture: bool,
+    pub serial: SerialConfig,
+    #[serde(default)]
+    pub settings: ProtocolSettings,
+    #[serde(default)]
+    pub timing: TimingConfig,
+    #[serde(default)]
+    pub mounting: MountingConfig,
+}
+
+fn default_prefix() -> String {
+    topic::DEFAULT_PREFIX.to_string()
+}
+
+/// A configuration problem, naming the key.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("reading {path}: {source}")]
+    Read {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("{path}: {message}")]
+    Parse { path: String, message: String },
+    #[error("{path}: {key} = {value}: {expected}")]
+    Range {
+        path: String,
+        key: &'static str,
+        value: String,
+        expected: String,
+    },
+}
+
+impl SerialDriverConfig {
+    /// Reads and checks a configuration file for a driver of `class`.
+    pub fn load(path: &str, class: DeviceClass) -> Result<SerialDriverConfig, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_string(),
+            source,
+        })?;
+        let cfg: SerialDriverConfig = toml::from_str(&text).map_err(|e| ConfigError::Parse {
+            path: path.to_string(),
+            message: e.to_string(),
+        })?;
+        cfg.check(path, class)?;
+        Ok(cfg)
+    }
+
+    /// Range checks; `path` names the file in the error.
+    pub fn check(&self, path: &str, class: DeviceClass) -> Result<(), ConfigError> {
+        let range = |key: &'static str, value: String, expected: String| ConfigError::Range {
+            path: path.to_string(),
+            key,
+            value,
+            expected,
+        };
+        if self.protocol.class() != class {
+            let allowed: Vec<_> = Protocol::ALL
+                .iter()
+                .filter(|p| p.class() == class)
+                .map(|p| p.name())
+                .collect();
+            return Err(range(
+                "protocol",
+                self.protocol.name().to_string(),
+                format!("a {} driver speaks {}", class.name(), allowed.join(" or ")),
+            ));
+        }
+        let s = &self.serial;
+        if !(50..=4_000_000).contains(&s.baud) {
+            return Err(range(
+                "serial.baud",
+                s.baud.to_string(),
+                "50..=4000000".into(),
+            ));
+        }
+        if !(5..=8).contains(&s.data_bits) {
+            return Err(range(
+                "serial.data_bits",
+                s.data_bits.to_string(),
+                "5..=8".into(),
+            ));
+        }
+        if !(1..=2).contains(&s.stop_bits) {
+            return Err(range(
+                "serial.stop_bits",
+                s.stop_bits.to_string(),
+                "1 or 2".into(),
+            ));
+        }
+        let t = &self.timing;
+        let checks: [(&'static str, f64, f64, f64); 5] = [
+            ("timing.read_timeout_s", t.read_timeout_s, 0.001, 1.0),
+            (
+                "timing.silence_timeout_s",
+                t.silence_timeout_s,
+                t.read_timeout_s,
+                3600.0,
+            ),
+            (
+                "timing.reconnect_initial_s",
+                t.reconnect_initial_s,
+                0.001,
+                60.0,
+            ),
+            (
+                "timing.reconnect_max_s",
+                t.reconnect_max_s,
+                t.reconnect_initial_s,
+                600.0,
+            ),
+            ("timing.health_period_s", t.health_period_s, 0.05, 60.0),
+        ];
+        for (key, v, lo, hi) in checks {
+            if !(v.is_finite() && v >= lo && v <= hi) {
+                return Err(range(key, v.to_string(), format!("{lo}..={hi} s")));
+            }
+        }
+        let st = &self.settings;
+        if !(st.latency_s.is_finite() && (0.0..=10.0).contains(&st.latency_s)) {
+            return Err(range(
+                "settings.latency_s",
+                st.latency_s.to_string(),
+                "0..=10 s".into(),
+            ));
+        }
+        if !(st.xsens_rate_hz.is_finite() && st.xsens_rate_hz > 0.0 && st.xsens_rate_hz <= 4000.0) {
+            return Err(range(
+                "settings.xsens_rate_hz",
+                st.xsens_rate_hz.to_string(),
+                "0 < x <= 4000 Hz".into(),
+            ));
+        }
+        if !(st.kvh.rate_hz.is_finite() && st.kvh.rate_hz > 0.0 && st.kvh.rate_hz <= 10_000.0) {
+            return Err(range(
+                "settings.kvh.rate_hz",
+                st.kvh.rate_hz.to_string(),
+                "0 < x <= 10000 Hz".into(),
+            ));
+        }
+        if self
+            .name
+            .as_ref()
+            .is_some_and(|n| n.is_empty() || n.len() > 32)
+        {
+            return Err(range(
+                "name",
+                format!("{:?}", self.name),
+                "1..=32 bytes".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The process name.
+    pub fn process_name(&self) -> String {
+        self.name
+            .clone()
+            .unwrap_or_else(|| self.protocol.class().name().to_string())
+    }
+}
+
+/// Opens the serial port in raw mode (serialport configures termios raw) with the line settings
+/// and read timeout, exclusively.
+pub fn open_port(
+    s: &SerialConfig,
+    read_timeout: Duration,
+) -> Result<serialport::TTYPort, serialport::Error> {
+    use serialport::{DataBits, FlowControl, StopBits};
+    let data_bits = match s.data_bits {
+        5 => DataBits::Five,
+        6 => DataBits::Six,
+        7 => DataBits::Seven,
+        _ => DataBits::Eight,
+    };
+    let parity = match s.parity {
+        Parity::None => serialport::Parity::None,
+        Parity::Odd => serialport::Parity::Odd,
+        Parity::Even => serialport::Parity::Even,
+    };
+    let stop_bits = if s.stop_bits == 2 {
+        StopBits::Two
+    } else {
+        StopBits::One
+    };
+    serialport::new(&s.port, s.baud)
+        .data_bits(data_bits)
+        .parity(parity)
+        .stop_bits(stop_bits)
+        .flow_control(FlowControl::None)
+        .timeout(read_timeout)
+        .open_native()
+}
+
+/// The publisher of the driver's device class.
+enum DataPublisher {
+    Imu(BusPublisher<ImuSampleV1>),
+    Dvl(BusPublisher<DvlVelocityV1>),
+    Usbl(BusPublisher<UsblFixV1>),
+}
+
+impl DataPublisher {
+    fn new(bus: &Bus, class: DeviceClass) -> Result<Self, BusError> {
+        Ok(match class {
+            DeviceClass::Imu => DataPublisher::Imu(bus.publisher(topic::IMU, qos::SENSOR)?),
+            DeviceClass::Dvl => DataPublisher::Dvl(bus.publisher(topic::DVL, qos::SENSOR)?),
+            DeviceClass::Usbl => DataPublisher::Usbl(bus.publisher(topic::USBL, qos::SENSOR)?),
+        })
+    }
+
+    /// Publishes `out`; false when it is not of this publisher's class (never, by construction).
+    fn publish(&mut self, out: Output) -> Result<bool, BusError> {
+        match (self, out) {
+            (DataPublisher::Imu(p), Output::Imu(m)) => p.publish(m).map(|_| true),
+            (DataPublisher::Dvl(p), Output::Dvl(m)) => p.publish(m).map(|_| true),
+            (DataPublisher::Usbl(p), Output::Usbl(m)) => p.publish(m).map(|_| true),
+            _ => Ok(false),
+        }
+    }
+}
+
+/// Why the driver stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum DriverError {
+    #[error("shared memory: {0}")]
+    Bus(#[from] BusError),
+}
+
+/// Health counters and state, published as [`ProcessHealthV1`].
+#[derive(Debug, Clone, Copy, Default)]
+struct Health {
+    published: u64,
+    timeouts: u64,
+    reconnects: u64,
+    publish_errors: u64,
+    open_failures: u64,
+}
+
+/// Runs the driver until SIGTERM/SIGINT. Progress and problems go to stderr, one line each.
+pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
+    let name = cfg.process_name();
+    let class = cfg.protocol.class();
+    let bus = Bus::new(&name, &cfg.prefix)?;
+    let mut data = DataPublisher::new(&bus, class)?;
+    let mut health_pub = bus.publisher::<ProcessHealthV1>(topic::HEALTH, qos::HEALTH)?;
+    let mut raw_pub = if cfg.raw_capture {
+        Some(bus.publisher::<RawBytesV1>(&topic::raw(&name), qos::RAW)?)
+    } else {
+        None
+    };
+    let t = cfg.timing;
+    let read_timeout = Duration::from_secs_f64(t.read_timeout_s);
+    let silence_ns = (t.silence_timeout_s * 1e9) as u64;
+    let health_ns = (t.health_period_s * 1e9) as u64;
+    let mut decoder = DeviceDecoder::new(cfg.protocol, cfg.settings);
+    let mut health = Health::default();
+    let mut port: Option<serialport::TTYPort> = None;
+    let mut state = ProcessState::Starting;
+    let mut ever_open = false;
+    let mut backoff_s = t.reconnect_initial_s;
+    let mut next_attempt = 0u64;
+    let mut last_bytes = monotonic_ns();
+    let mut silent = false;
+    let mut next_health = 0u64;
+    let mut last_open_error = String::new();
+    let mut buf = vec![0u8; 64 * 1024];
+    eprintln!(
+        "{name}: {} on {} at {} baud, publishing on {}/{} (mounting rpy {:?} deg, lever arm {:?} m)",
+        cfg.protocol.name(),
+        cfg.serial.port,
+        cfg.serial.baud,
+        cfg.prefix,
+        class.name(),
+        cfg.mounting.rotation_rpy_deg,
+        cfg.mounting.lever_arm_m,
+    );
+    let publish_health = |hp: &mut BusPublisher<ProcessHealthV1>,
+                          h: &Health,
+                          d: &DeviceDecoder,
+                          state: ProcessState| {
+        let s = d.stats();
+        let c = d.counters();
+        let mut m = ProcessHealthV1 {
+            host_time_ns: monotonic_ns(),
+            frames: h.published,
+            checksum_errors: s.checksum_errors,
+            resyncs: s.resyncs,
+            bytes_skipped: s.bytes_skipped + s.overflow_bytes,
+            timeouts: h.timeouts,
+            reconnects: h.reconnects,
+            drops: c.device_gaps + h.publish_errors,
+            invalid: s.malformed,
+            pid: std::process::id(),
+            state: state as u32,
+            ..Default::default()
+        };
+        m.set_name(&name);
+        hp.publish(m)
+    };
+    loop {
+        if bus.termination_requested() {
+            break;
+        }
+        let now = monotonic_ns();
+        if now >= next_health {
+            publish_health(&mut health_pub, &health, &decoder, state)?;
+            next_health = now + health_ns;
+        }
+        let Some(p) = port.as_mut() else {
+            if now < next_attempt {
+                std::thread::sleep(Duration::from_nanos((next_attempt - now).min(20_000_000)));
+                continue;
+            }
+            match open_port(&cfg.serial, read_timeout) {
+                Ok(p) => {
+                    if ever_open {
+                        health.reconnects += 1;
+                        eprintln!("{name}: {} reopened", cfg.serial.port);
+                    }
+                    ever_open = true;
+                    port = Some(p);
+                    backoff_s = t.reconnect_initial_s;
+                    last_bytes = monotonic_ns();
+                    silent = false;
+                    last_open_error.clear();
+                }
+                Err(e) => {
+                    health.open_failures += 1;
+                    let msg = e.to_string();
+                    if msg != last_open_error {
+                        eprintln!(
+                            "{name}: cannot open {}: {msg}; retrying with back-off up to {} s",
+                            cfg.serial.port, t.reconnect_max_s
+                        );
+                        last_open_error = msg;
+                    }
+                    state = ProcessState::Reconnecting;
+                    next_attempt = now + (backoff_s * 1e9) as u64;
+                    backoff_s = (backoff_s * 2.0).min(t.reconnect_max_s);
+                }
+            }
+            continue;
+        };
+        match p.read(&mut buf) {
+            Ok(0) => {
+                eprintln!("{name}: {} hung up", cfg.serial.port);
+                port = None;
+                state = ProcessState::Reconnecting;
+                next_attempt = monotonic_ns();
+            }
+            Ok(n) => {
+                let host_ns = monotonic_ns();
+                last_bytes = host_ns;
+                if silent {
+                    eprintln!("{name}: data again on {}", cfg.serial.port);
+                    silent = false;
+                }
+                if let Some(rp) = raw_pub.as_mut() {
+                    for chunk in buf[..n].chunks(RAW_CHUNK) {
+                        let mut m = RawBytesV1 {
+                            host_time_ns: host_ns,
+                            length: chunk.len() as u32,
+                            ..Default::default()
+                        };
+                        m.data[..chunk.len()].copy_from_slice(chunk);
+                        if rp.publish(m).is_err() {
+                            health.publish_errors += 1;
+                        }
+                    }
+                }
+                decoder.push(&buf[..n]);
+                while let Some(out) = decoder.next_output(host_ns) {
+                    match data.publish(out) {
+                        Ok(true) => health.published += 1,
+                        Ok(false) | Err(_) => health.publish_errors += 1,
+                    }
+                }
+                state = ProcessState::Running;
+            }
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::TimedOut
+                        | std::io::ErrorKind::WouldBlock
+                        | std::io::ErrorKind::Interrupted
+                ) =>
+            {
+                if !silent && monotonic_ns().saturating_sub(last_bytes) > silence_ns {
+                    silent = true;
+                    health.timeouts += 1;
+                    state = ProcessState::Reconnecting;
+                    eprintln!(
+                        "{name}: no data on {} for {} s",
+                        cfg.serial.port, t.silence_timeout_s
+                    );
+                }
+            }
+            Err(e) => {
+                eprintln!("{name}: {} lost: {e}", cfg.serial.port);
+                port = None;
+                state = ProcessState::Reconnecting;
+                next_attempt = monotonic_ns() + (backoff_s * 1e9) as u64;
+            }
+        }
+    }
+    eprintln!(
+        "{name}: stopping; {} messages published, {} checksum errors, {} reconnects",
+        health.published,
+        decoder.stats().checksum_errors,
+        health.reconnects
+    );
+    publish_health(&mut health_pub, &health, &decoder, ProcessState::Stopping)?;
+    Ok(())
+}
+
+/// Command line of the serial drivers.
+#[derive(Debug, clap::Parser)]
+pub struct SerialDriverArgs {
+    /// The driver's TOML configuration (see docs/drivers.md).
+    #[arg(long)]
+    pub config: String,
+    /// Check the configuration, print it with defaults filled in, and exit.
+    #[arg(long)]
+    pub check_config: bool,
+}
+
+/// `main` of `auvnav-dvl`, `auvnav-imu` and `auvnav-usbl`: exit 0 after a clean stop, 2 for a
+/// configuration error, 1 for a shared-memory failure.
+pub fn main_for(class: DeviceClass) -> std::process::ExitCode {
+    use clap::Parser;
+    let args = SerialDriverArgs::parse();
+    let cfg = match SerialDriverConfig::load(&args.config, class) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("auvnav-{}: {e}", class.name());
+            return std::process::ExitCode::from(2);
+        }
+    };
+    if args.check_config {
+        match toml::to_string_pretty(&cfg) {
+            Ok(s) => print!("{s}"),
+            Err(e) => eprintln!("auvnav-{}: {e}", class.name()),
+        }
+        return std::process::ExitCode::SUCCESS;
+    }
+    match run(&cfg) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("auvnav-{}: {e}", class.name());
+            std::process::ExitCode::from(1)
+        }
+    }
+}

@@ -1,0 +1,480 @@
+//! `auvnav emulate`: plays a log's sensor messages into pseudo-terminals in the devices' own
+//! protocols, in real time or faster, so that the drivers run against "devices" without hardware.
+//!
+//! Each emulated device gets a pseudo-terminal pair; the driver opens the slave side. With
+//! `--link-dir DIR` a stable symbolic link `DIR/<device>` points at the slave (as udev's
+//! `/dev/serial/by-id` links do for real adapters); an unplug closes the pair and a replug creates
+//! a new one and moves the link, so a driver configured with the link finds the device again.
+//!
+//! Faults: `--corrupt P` flips a bit in a byte in the middle of a frame (probability per frame),
+//! `--drop P` leaves a frame out, `--garbage P` writes 1–64 random bytes before a frame,
+//! `--pause DEVICE,AT,FOR` stops writing (a silent device) and `--unplug DEVICE,AT,FOR` closes the
+//! pseudo-terminal (times in seconds of log time from the first message). Every fault is counted
+//! in the summary, so a test can check the driver against what was played.
+
+use crate::log::{LogMessage, LogReader};
+use crate::sim::rng::Rng;
+use anyhow::{Context, bail};
+use auvnav_drivers::convert::KvhConfig;
+use auvnav_drivers::device::{DeviceClass, Protocol};
+use auvnav_drivers::emulate as enc;
+use serde::Serialize;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+#[derive(Debug, clap::Args)]
+pub struct EmulateArgs {
+    /// The log to play (MCAP, as written by `auvnav sim` or the recorder).
+    pub log: PathBuf,
+    /// Emulate the DVL in this protocol (pd0 or wldvl).
+    #[arg(long)]
+    pub dvl: Option<String>,
+    /// Emulate the IMU in this protocol (kvh1750 or xsens).
+    #[arg(long)]
+    pub imu: Option<String>,
+    /// Emulate the USBL in this protocol (seatrac).
+    #[arg(long)]
+    pub usbl: Option<String>,
+    /// Play this many times faster than real time (0.01..1000).
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+    /// Keep stable links DIR/dvl, DIR/imu, DIR/usbl to the pseudo-terminals (needed by --unplug).
+    #[arg(long)]
+    pub link_dir: Option<PathBuf>,
+    /// Wait this long after creating the terminals before playing, so drivers can open them (s).
+    #[arg(long, default_value_t = 1.0)]
+    pub start_delay: f64,
+    /// Play only this many seconds of the log.
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Probability per frame of one corrupted byte.
+    #[arg(long, default_value_t = 0.0)]
+    pub corrupt: f64,
+    /// Probability per frame of leaving the frame out.
+    #[arg(long, default_value_t = 0.0)]
+    pub drop: f64,
+    /// Probability per frame of 1–64 random bytes written before it.
+    #[arg(long, default_value_t = 0.0)]
+    pub garbage: f64,
+    /// DEVICE,AT,FOR: the device goes silent at AT s for FOR s (repeatable).
+    #[arg(long, value_name = "DEVICE,AT,FOR")]
+    pub pause: Vec<String>,
+    /// DEVICE,AT,FOR: the device's pseudo-terminal is closed at AT s and a new one appears FOR s
+    /// later (repeatable; needs --link-dir).
+    #[arg(long, value_name = "DEVICE,AT,FOR")]
+    pub unplug: Vec<String>,
+    /// Seed of the fault injection.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Output as JSON lines (terminals, events, summary) instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// What was played into one device.
+#[derive(Debug, Clone, Default, Serialize, PartialEq, Eq)]
+pub struct DeviceSummary {
+    pub device: String,
+    pub protocol: String,
+    /// Messages of the device's class in the log (within the played duration).
+    pub messages: u64,
+    /// Frames written intact.
+    pub written: u64,
+    /// Frames written with a corrupted byte.
+    pub corrupted: u64,
+    /// Frames left out by --drop.
+    pub dropped: u64,
+    /// Frames not written while paused.
+    pub paused: u64,
+    /// Frames not written while unplugged.
+    pub unplugged: u64,
+    /// Frames (whole or partly) not accepted by the terminal within 1 s (reader not keeping up).
+    pub blocked: u64,
+    /// Random bytes written between frames.
+    pub garbage_bytes: u64,
+    /// Bytes written in total.
+    pub bytes: u64,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Window {
+    at_s: f64,
+    for_s: f64,
+}
+
+impl Window {
+    fn contains(&self, t: f64) -> bool {
+        t >= self.at_s && t < self.at_s + self.for_s
+    }
+}
+
+fn parse_window(spec: &str, option: &str) -> anyhow::Result<(DeviceClass, Window)> {
+    let parts: Vec<&str> = spec.split(',').collect();
+    let [dev, at, dur] = parts[..] else {
+        bail!("--{option} {spec:?}: expected DEVICE,AT,FOR (e.g. dvl,10,3)");
+    };
+    let class = match dev {
+        "dvl" => DeviceClass::Dvl,
+        "imu" => DeviceClass::Imu,
+        "usbl" => DeviceClass::Usbl,
+        _ => bail!("--{option} {spec:?}: device must be dvl, imu or usbl"),
+    };
+    let num = |s: &str, what: &str| -> anyhow::Result<f64> {
+        let v: f64 = s
+            .parse()
+            .with_context(|| format!("--{option} {spec:?}: {what} {s:?} is not a number"))?;
+        if !(v.is_finite() && v >= 0.0) {
+            bail!("--{option} {spec:?}: {what} must be >= 0 s");
+        }
+        Ok(v)
+    };
+    Ok((
+        class,
+        Window {
+            at_s: num(at, "AT")?,
+            for_s: num(dur, "FOR")?,
+        },
+    ))
+}
+
+/// One emulated device: its pseudo-terminal, encoder state and fault schedule.
+struct Device {
+    class: DeviceClass,
+    protocol: Protocol,
+    master: Option<serialport::TTYPort>,
+    // The slave stays open here so that the terminal exists while no driver has it open.
+    slave: Option<serialport::TTYPort>,
+    link: Option<PathBuf>,
+    pauses: Vec<Window>,
+    unplugs: Vec<Window>,
+    counter: u32,
+    kvh: KvhConfig,
+    summary: DeviceSummary,
+}
+
+impl Device {
+    fn plug(&mut self) -> anyhow::Result<String> {
+        let (master, slave) =
+            serialport::TTYPort::pair().context("creating a pseudo-terminal pair")?;
+        let path = slave
+            .name()
+            .context("the pseudo-terminal has no slave path")?;
+        let mut master = master;
+        use serialport::SerialPort;
+        master
+            .set_timeout(Duration::from_secs(1))
+            .context("setting the terminal's write timeout")?;
+        if let Some(link) = &self.link {
+            // Replace the link atomically: a driver never sees it missing or half-written.
+            let tmp = link.with_extension("new");
+            let _ = std::fs::remove_file(&tmp);
+            std::os::unix::fs::symlink(&path, &tmp)
+                .with_context(|| format!("linking {} to {path}", tmp.display()))?;
+            std::fs::rename(&tmp, link)
+                .with_context(|| format!("moving the link to {}", link.display()))?;
+        }
+        self.master = Some(master);
+        self.slave = Some(slave);
+        Ok(path)
+    }
+
+    fn unplug(&mut self) {
+        self.master = None;
+        self.slave = None;
+    }
+
+    fn encode(&mut self, m: &LogMessage) -> Option<Vec<u8>> {
+        let bytes = match (self.protocol, m) {
+            (Protocol::Pd0, LogMessage::Dvl(d)) => enc::pd0_from_dvl(d, self.counter),
+            (Protocol::Wldvl, LogMessage::Dvl(d)) => enc::wrz_from_dvl(d, 0.0),
+            (Protocol::Kvh1750, LogMessage::Imu(s)) => {
+                let mut cfg = self.kvh;
+                cfg.increments = s.status & auvnav_shm_schema::ImuSampleV1::STATUS_INCREMENTS != 0;
+                enc::kvh_from_imu(s, &cfg, (self.counter % 128) as u8)
+            }
+            (Protocol::Xsens, LogMessage::Imu(s)) => {
+                enc::xsens_from_imu(s, (self.counter % 65_536) as u16)
+            }
+            (Protocol::Seatrac, LogMessage::Usbl(u)) => enc::seatrac_from_usbl(u, 1),
+            _ => return None,
+        };
+        self.counter = self.counter.wrapping_add(1);
+        Some(bytes)
+    }
+}
+
+/// Line printed for each terminal (and again after a replug).
+#[derive(Serialize)]
+struct TerminalLine<'a> {
+    event: &'a str,
+    device: &'a str,
+    protocol: &'a str,
+    path: &'a str,
+    link: Option<String>,
+    at_s: f64,
+}
+
+fn say(json: bool, line: &TerminalLine) {
+    if json {
+        println!("{}", serde_json::to_string(line).unwrap_or_default());
+    } else {
+        println!(
+            "{} {} ({}): {}{}",
+            line.event,
+            line.device,
+            line.protocol,
+            line.path,
+            line.link
+                .as_ref()
+                .map(|l| format!(" (link {l})"))
+                .unwrap_or_default()
+        );
+    }
+    let _ = std::io::stdout().flush();
+}
+
+fn protocol_for(class: DeviceClass, name: &Option<String>) -> anyhow::Result<Option<Protocol>> {
+    let Some(name) = name else { return Ok(None) };
+    match Protocol::from_name(name) {
+        Some(p) if p.class() == class => Ok(Some(p)),
+        _ => {
+            let allowed: Vec<_> = Protocol::ALL
+                .iter()
+                .filter(|p| p.class() == class)
+                .map(|p| p.name())
+                .collect();
+            bail!(
+                "--{} {name:?}: expected {}",
+                class.name(),
+                allowed.join(" or ")
+            )
+        }
+    }
+}
+
+/// Runs the emulator; returns the per-device summary (also printed).
+pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
+    if !(a.speed.is_finite() && (0.01..=1000.0).contains(&a.speed)) {
+        bail!("--speed {}: expected 0.01..=1000", a.speed);
+    }
+    for (name, p) in [
+        ("corrupt", a.corrupt),
+        ("drop", a.drop),
+        ("garbage", a.garbage),
+    ] {
+        if !(0.0..=1.0).contains(&p) {
+            bail!("--{name} {p}: expected a probability 0..=1");
+        }
+    }
+    if !(a.start_delay.is_finite() && (0.0..=600.0).contains(&a.start_delay)) {
+        bail!("--start-delay {}: expected 0..=600 s", a.start_delay);
+    }
+    let mut devices = Vec::new();
+    for (class, name) in [
+        (DeviceClass::Dvl, &a.dvl),
+        (DeviceClass::Imu, &a.imu),
+        (DeviceClass::Usbl, &a.usbl),
+    ] {
+        if let Some(protocol) = protocol_for(class, name)? {
+            devices.push(Device {
+                class,
+                protocol,
+                master: None,
+                slave: None,
+                link: a.link_dir.as_ref().map(|d| d.join(class.name())),
+                pauses: Vec::new(),
+                unplugs: Vec::new(),
+                counter: 0,
+                kvh: KvhConfig {
+                    increments: false,
+                    degrees: false,
+                    rate_hz: 0.0,
+                    temperature_centi: false,
+                },
+                summary: DeviceSummary {
+                    device: class.name().to_string(),
+                    protocol: protocol.name().to_string(),
+                    ..Default::default()
+                },
+            });
+        }
+    }
+    if devices.is_empty() {
+        bail!("nothing to emulate: give at least one of --dvl, --imu, --usbl");
+    }
+    for (specs, option) in [(&a.pause, "pause"), (&a.unplug, "unplug")] {
+        for spec in specs {
+            let (class, w) = parse_window(spec, option)?;
+            let Some(d) = devices.iter_mut().find(|d| d.class == class) else {
+                bail!("--{option} {spec:?}: {} is not emulated", class.name());
+            };
+            if option == "pause" {
+                d.pauses.push(w);
+            } else {
+                d.unplugs.push(w);
+            }
+        }
+    }
+    if devices.iter().any(|d| !d.unplugs.is_empty()) && a.link_dir.is_none() {
+        bail!("--unplug needs --link-dir: a replugged device gets a new terminal path");
+    }
+    if let Some(dir) = &a.link_dir {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let mut reader =
+        LogReader::open(&a.log).with_context(|| format!("opening {}", a.log.display()))?;
+    // Pairs are created one at a time (serialport's pair() is not thread-safe).
+    for d in &mut devices {
+        let path = d.plug()?;
+        say(
+            a.json,
+            &TerminalLine {
+                event: "terminal",
+                device: d.class.name(),
+                protocol: d.protocol.name(),
+                path: &path,
+                link: d.link.as_ref().map(|l| l.display().to_string()),
+                at_s: 0.0,
+            },
+        );
+    }
+    std::thread::sleep(Duration::from_secs_f64(a.start_delay));
+    let mut rng = Rng::new(a.seed, "emulate");
+    let start = Instant::now();
+    let mut first_ns: Option<u64> = None;
+    while let Some(raw) = reader.next_message().context("reading the log")? {
+        let m = raw.decode_any().context("decoding a log message")?;
+        let (class, host_ns) = match &m {
+            LogMessage::Imu(s) => (DeviceClass::Imu, s.host_time_ns),
+            LogMessage::Dvl(s) => (DeviceClass::Dvl, s.host_time_ns),
+            LogMessage::Usbl(s) => (DeviceClass::Usbl, s.host_time_ns),
+            _ => continue,
+        };
+        let Some(d) = devices.iter_mut().find(|d| d.class == class) else {
+            continue;
+        };
+        let t0 = *first_ns.get_or_insert(host_ns);
+        let t = host_ns.saturating_sub(t0) as f64 * 1e-9;
+        if a.duration.is_some_and(|dur| t > dur) {
+            break;
+        }
+        // Unplug and replug at the window edges.
+        let unplugged = d.unplugs.iter().any(|w| w.contains(t));
+        if unplugged && d.master.is_some() {
+            d.unplug();
+            say(
+                a.json,
+                &TerminalLine {
+                    event: "unplugged",
+                    device: d.class.name(),
+                    protocol: d.protocol.name(),
+                    path: "",
+                    link: d.link.as_ref().map(|l| l.display().to_string()),
+                    at_s: t,
+                },
+            );
+        } else if !unplugged && d.master.is_none() {
+            let path = d.plug()?;
+            say(
+                a.json,
+                &TerminalLine {
+                    event: "replugged",
+                    device: d.class.name(),
+                    protocol: d.protocol.name(),
+                    path: &path,
+                    link: d.link.as_ref().map(|l| l.display().to_string()),
+                    at_s: t,
+                },
+            );
+        }
+        let Some(mut bytes) = d.encode(&m) else {
+            continue;
+        };
+        d.summary.messages += 1;
+        let due = start + Duration::from_secs_f64(t / a.speed);
+        let now = Instant::now();
+        if due > now {
+            std::thread::sleep(due - now);
+        }
+        if unplugged {
+            d.summary.unplugged += 1;
+            continue;
+        }
+        if d.pauses.iter().any(|w| w.contains(t)) {
+            d.summary.paused += 1;
+            continue;
+        }
+        if rng.uniform() < a.drop {
+            d.summary.dropped += 1;
+            continue;
+        }
+        let mut out = Vec::with_capacity(bytes.len() + 64);
+        if rng.uniform() < a.garbage {
+            let n = 1 + (rng.next_u64() % 64) as usize;
+            out.extend((0..n).map(|_| rng.next_u64() as u8));
+            d.summary.garbage_bytes += n as u64;
+        }
+        let corrupt = rng.uniform() < a.corrupt;
+        if corrupt {
+            // A byte in the middle third: never the sync bytes, length fields or line end, so
+            // exactly this frame is lost. XOR 1 keeps ASCII printable and never makes CR/LF.
+            let i = bytes.len() / 3 + (rng.next_u64() as usize) % (bytes.len() / 3).max(1);
+            bytes[i] ^= 0x01;
+        }
+        out.extend_from_slice(&bytes);
+        let Some(master) = d.master.as_mut() else {
+            continue;
+        };
+        match master.write_all(&out) {
+            Ok(()) => {
+                d.summary.bytes += out.len() as u64;
+                if corrupt {
+                    d.summary.corrupted += 1;
+                } else {
+                    d.summary.written += 1;
+                }
+            }
+            Err(_) => d.summary.blocked += 1,
+        }
+    }
+    let summaries: Vec<DeviceSummary> = devices.iter().map(|d| d.summary.clone()).collect();
+    if a.json {
+        println!(
+            "{}",
+            serde_json::json!({ "event": "summary", "devices": summaries })
+        );
+    } else {
+        for s in &summaries {
+            println!(
+                "{} ({}): {} messages, {} written, {} corrupted, {} dropped, {} paused, {} unplugged, {} blocked, {} garbage bytes",
+                s.device,
+                s.protocol,
+                s.messages,
+                s.written,
+                s.corrupted,
+                s.dropped,
+                s.paused,
+                s.unplugged,
+                s.blocked,
+                s.garbage_bytes
+            );
+        }
+    }
+    // Give the drivers time to read the last bytes before the terminals close.
+    std::thread::sleep(Duration::from_millis(300));
+    if let Some(dir) = &a.link_dir {
+        for d in &devices {
+            if let Some(l) = &d.link {
+                let _ = std::fs::remove_file(l);
+            }
+        }
+        let _ = std::fs::remove_dir(dir);
+    }
+    Ok(summaries)
+}
+
+/// Used by tests: the link path of a device under a link directory.
+pub fn link_path(dir: &Path, class: DeviceClass) -> PathBuf {
+    dir.join(class.name())
+}
