@@ -281,7 +281,12 @@ mod tests {
         d.push(bytes);
         let out = d.next_output(5_000_000_000).expect("one message");
         assert!(d.next_output(0).is_none());
-        assert_eq!(d.stats().checksum_errors, 0);
+        let s = d.stats();
+        assert_eq!(
+            (s.checksum_errors, s.malformed, s.bytes_skipped),
+            (0, 0, 0),
+            "{s:?}"
+        );
         out
     }
 

@@ -214,8 +214,11 @@ impl WlDecoder {
         loop {
             let data = self.input.data();
             let Some(start) = data.iter().position(|&b| b == b'w') else {
+                // Keep nothing: no frame can start here. Line ends are not garbage.
                 let n = data.len();
-                if n > 0 {
+                if data.iter().all(|&b| b == b'\r' || b == b'\n') {
+                    self.input.consume(n);
+                } else {
                     self.input.skip(n);
                 }
                 return None;
