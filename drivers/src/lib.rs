@@ -2,6 +2,7 @@
 //! clock), and the driver processes built on them.
 
 pub mod can;
+pub mod can_driver;
 pub mod clock;
 pub mod convert;
 pub mod device;

@@ -1,0 +1,5 @@
+//! `auvnav-can`: the CAN sensor driver process. See `auvnav_drivers::can_driver`.
+
+fn main() -> std::process::ExitCode {
+    auvnav_drivers::can_driver::main()
+}
