@@ -1,6 +1,7 @@
 //! `auvnav bench`: throughput figures.
 
 use crate::sim::{self, SimConfig, scenario::Scenario};
+use anyhow::Context;
 use serde::Serialize;
 
 #[derive(Debug, Serialize)]
@@ -295,7 +296,7 @@ fn time_decoder<D: auvnav_drivers::framing::StreamDecoder>(
 /// variable leader + bottom track, Water Linked `wrz`, KVH format A, Xsens MTData2 with
 /// counter/time/status/acceleration/rate/delta-v/delta-q, SeaTrac fixes with range, USBL and
 /// position) fed in 4 KiB reads, as a driver reads a serial port.
-pub fn decode(repeat: usize, json: bool) -> anyhow::Result<()> {
+pub fn decode(repeat: usize, pty_seconds: f64, json: bool) -> anyhow::Result<()> {
     use auvnav_drivers::{kvh, pd0, seatrac, wldvl, xsens};
     let n = 100_000u32;
     let mut results = Vec::new();
@@ -429,9 +430,36 @@ pub fn decode(repeat: usize, json: bool) -> anyhow::Result<()> {
         seatrac::SeatracDecoder::new,
     ));
 
+    let mut latency = Vec::new();
+    if pty_seconds > 0.0 {
+        for rate in [200.0, 1000.0] {
+            latency.push(pty_latency(rate, pty_seconds)?);
+        }
+    }
     if json {
-        println!("{}", serde_json::to_string_pretty(&results)?);
+        println!(
+            "{}",
+            serde_json::to_string_pretty(
+                &serde_json::json!({ "throughput": results, "pty_latency": latency })
+            )?
+        );
     } else {
+        for l in &latency {
+            println!(
+                "pty {} at {} Hz: {}/{} frames; write->read p50 {:.0} us p99 {:.0} us; read->subscriber p50 {:.0} us p99 {:.0} us; total p50 {:.0} us p99 {:.0} us max {:.0} us",
+                l.protocol,
+                l.rate_hz,
+                l.frames_received,
+                l.frames_written,
+                l.pty_to_read_us.p50,
+                l.pty_to_read_us.p99,
+                l.read_to_subscriber_us.p50,
+                l.read_to_subscriber_us.p99,
+                l.total_us.p50,
+                l.total_us.p99,
+                l.total_us.max
+            );
+        }
         for out in &results {
             println!(
                 "decode {:8}: {} frames, {:.1} MB in {:.3} s (median of {}): {:.0} MB/s, {:.0} frames/s",
@@ -446,4 +474,168 @@ pub fn decode(repeat: usize, json: bool) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// Latency through a real pseudo-terminal and a real driver process at one frame rate.
+#[derive(Debug, Clone, Serialize)]
+pub struct PtyLatency {
+    pub protocol: String,
+    pub rate_hz: f64,
+    pub frames_written: u64,
+    pub frames_received: u64,
+    /// Write call of the frame → the driver's read returned (its host time stamp): the
+    /// terminal and the driver's wake-up (µs).
+    pub pty_to_read_us: Percentiles,
+    /// Read return → message received by a subscriber in another process: decode, publish and
+    /// the shared-memory hop with event wake-up (µs).
+    pub read_to_subscriber_us: Percentiles,
+    /// Write call → message received by the subscriber: an upper bound of byte arrival →
+    /// publish (µs).
+    pub total_us: Percentiles,
+}
+
+/// p50, p99 and maximum.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Percentiles {
+    pub p50: f64,
+    pub p99: f64,
+    pub max: f64,
+}
+
+fn percentiles(mut v: Vec<f64>) -> Percentiles {
+    if v.is_empty() {
+        return Percentiles {
+            p50: f64::NAN,
+            p99: f64::NAN,
+            max: f64::NAN,
+        };
+    }
+    v.sort_by(f64::total_cmp);
+    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+    Percentiles {
+        p50: at(0.5),
+        p99: at(0.99),
+        max: v[v.len() - 1],
+    }
+}
+
+/// Plays KVH 1750 frames (format B, the frame index in the device time stamp) into a
+/// pseudo-terminal read by a real `auvnav-imu` process, and times each frame from its write call
+/// to its arrival at a subscriber in this process.
+pub fn pty_latency(rate_hz: f64, seconds: f64) -> anyhow::Result<PtyLatency> {
+    use auvnav_drivers::clock::monotonic_ns;
+    use auvnav_shm_schema::bus::Bus;
+    use auvnav_shm_schema::{ImuSampleV1, qos, topic};
+    use std::io::Write;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::time::{Duration, Instant};
+
+    let exe = std::env::current_exe()?;
+    let driver = exe
+        .parent()
+        .context("executable directory")?
+        .join("auvnav-imu");
+    if !driver.exists() {
+        anyhow::bail!(
+            "{} not found: build the drivers (cargo build --release -p auvnav-drivers)",
+            driver.display()
+        );
+    }
+    let tag = format!("benchpty{}r{}", std::process::id(), rate_hz as u64);
+    let dir = std::env::temp_dir().join(&tag);
+    std::fs::create_dir_all(&dir)?;
+    let (mut master, slave) = serialport::TTYPort::pair().context("pseudo-terminal")?;
+    use serialport::SerialPort;
+    let slave_path = slave.name().context("slave path")?;
+    let cfg = dir.join("imu.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "prefix = \"{tag}\"\nprotocol = \"kvh1750\"\n[serial]\nport = \"{slave_path}\"\n\
+             baud = 921600\n[settings.kvh]\nincrements = false\ndegrees = false\n\
+             rate_hz = {rate_hz}\ntemperature_centi = false\n"
+        ),
+    )?;
+    let done = std::sync::Arc::new(AtomicBool::new(false));
+    let ready = std::sync::Arc::new(AtomicBool::new(false));
+    // The subscriber lives in its own thread (iceoryx2 ports stay on the thread that made them).
+    let sub_thread = {
+        let done = done.clone();
+        let ready = ready.clone();
+        let tag = tag.clone();
+        std::thread::spawn(move || -> anyhow::Result<Vec<(u64, u64, u64)>> {
+            let bus = Bus::new(&format!("{tag}sub"), &tag)?;
+            let mut sub = bus.subscriber::<ImuSampleV1>(topic::IMU, qos::SENSOR)?;
+            ready.store(true, Ordering::SeqCst);
+            let mut got = Vec::new();
+            while !done.load(Ordering::SeqCst) {
+                sub.wait(Duration::from_millis(20))?;
+                while let Some(m) = sub.receive()? {
+                    got.push((m.device_time_ns / 1000, m.host_time_ns, monotonic_ns()));
+                }
+            }
+            Ok(got)
+        })
+    };
+    while !ready.load(Ordering::SeqCst) {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let mut child = std::process::Command::new(&driver)
+        .arg("--config")
+        .arg(&cfg)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .with_context(|| format!("starting {}", driver.display()))?;
+    // Let the driver open the terminal and its publisher connect.
+    std::thread::sleep(Duration::from_millis(1500));
+    let n = (rate_hz * seconds).round() as u64;
+    let mut written = vec![0u64; n as usize];
+    let start = Instant::now();
+    for i in 0..n {
+        let due = start + Duration::from_secs_f64(i as f64 / rate_hz);
+        let now = Instant::now();
+        if due > now {
+            std::thread::sleep(due - now);
+        }
+        let frame = auvnav_drivers::kvh::encode(&auvnav_drivers::kvh::KvhSample {
+            gyro: [1e-4, 0.0, 0.0],
+            accel: [0.0, 0.0, -1.0],
+            status: 0x77,
+            sequence: (i % 128) as u8,
+            temperature_raw: 20,
+            timestamp_us: Some(i as u32),
+        });
+        written[i as usize] = monotonic_ns();
+        master.write_all(&frame)?;
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    let _ = nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(child.id() as i32),
+        nix::sys::signal::Signal::SIGTERM,
+    );
+    let _ = child.wait();
+    done.store(true, Ordering::SeqCst);
+    let got = sub_thread
+        .join()
+        .map_err(|_| anyhow::anyhow!("subscriber thread panicked"))??;
+    drop(slave);
+    let _ = std::fs::remove_dir_all(&dir);
+    let (mut pty, mut hop, mut total) = (Vec::new(), Vec::new(), Vec::new());
+    for (idx, read_ns, recv_ns) in &got {
+        let Some(&w) = written.get(*idx as usize) else {
+            continue;
+        };
+        pty.push(read_ns.saturating_sub(w) as f64 * 1e-3);
+        hop.push(recv_ns.saturating_sub(*read_ns) as f64 * 1e-3);
+        total.push(recv_ns.saturating_sub(w) as f64 * 1e-3);
+    }
+    Ok(PtyLatency {
+        protocol: "kvh1750".into(),
+        rate_hz,
+        frames_written: n,
+        frames_received: got.len() as u64,
+        pty_to_read_us: percentiles(pty),
+        read_to_subscriber_us: percentiles(hop),
+        total_us: percentiles(total),
+    })
 }

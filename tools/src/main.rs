@@ -65,6 +65,10 @@ enum BenchWhat {
     Decode {
         #[arg(long, default_value_t = 5)]
         repeat: usize,
+        /// Seconds of frames per rate (200 Hz, 1 kHz) for the pseudo-terminal → driver →
+        /// subscriber latency; 0 skips it.
+        #[arg(long, default_value_t = 10.0)]
+        pty_seconds: f64,
         #[arg(long)]
         json: bool,
     },
@@ -254,7 +258,11 @@ fn main() -> std::process::ExitCode {
                 repeat,
                 json,
             } => auvnav_tools::bench::sim(hours, repeat, json),
-            BenchWhat::Decode { repeat, json } => auvnav_tools::bench::decode(repeat, json),
+            BenchWhat::Decode {
+                repeat,
+                pty_seconds,
+                json,
+            } => auvnav_tools::bench::decode(repeat, pty_seconds, json),
             BenchWhat::Accuracy {
                 scenario,
                 seeds,
