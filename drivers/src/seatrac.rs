@@ -14,10 +14,12 @@ use serde::Serialize;
 
 pub const CID_SYS_INFO: u8 = 0x02;
 pub const CID_STATUS: u8 = 0x10;
+pub const CID_XCVR_USBL: u8 = 0x38;
 pub const CID_XCVR_FIX: u8 = 0x39;
 pub const CID_PING_RESP: u8 = 0x42;
-/// Longest line accepted (the largest SeaTrac message is well under 256 binary bytes).
-pub const MAX_LINE: usize = 1024;
+/// Longest line accepted: the USBL diagnostic message carries its correlation samples (typically
+/// 140 f32) and is the largest, about 600 binary bytes = 1 200 hex characters.
+pub const MAX_LINE: usize = 4096;
 
 /// CRC-16/ARC: polynomial 0x8005 reflected (0xA001), initial 0, no final xor.
 pub fn crc16_arc(bytes: &[u8]) -> u16 {
@@ -109,11 +111,101 @@ impl AcoFix {
     pub const POSITION_FILTER_ERROR: u8 = 1 << 4;
 }
 
+/// `CID_XCVR_USBL` (0x38): the signal's cross-correlation, per-channel signal strength and the
+/// phase angles across the array's baselines from which the beacon computed the direction.
+///
+/// Layout (little-endian): xcor_sig_peak f32, xcor_threshold f32, xcor_cross_point u16,
+/// xcor_cross_mag f32, xcor_detect u16, xcor_length u16, xcor_data f32[xcor_length], channels
+/// u8, channel_rssi i16[channels] (0.1 dB), baselines u8, phase_angle f32[baselines],
+/// signal_azimuth i16 (0.1°), signal_elevation i16 (0.1°), signal_fit_error f32. Taken from the
+/// open decoders, which agree with one another; no captured frame is public, so the tests use
+/// synthetic frames. The phase angles are reported as the beacon gives them (units not stated).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct UsblDiagnostic {
+    pub xcor_signal_peak: f32,
+    pub xcor_threshold: f32,
+    pub xcor_cross_point: u16,
+    pub xcor_cross_magnitude: f32,
+    pub xcor_detect: u16,
+    pub xcor_data: Vec<f32>,
+    /// Received signal strength per receiver channel (dB).
+    pub channel_rssi_db: Vec<f64>,
+    /// Phase angle per hydrophone baseline.
+    pub phase_angle: Vec<f32>,
+    pub azimuth_deg: f64,
+    pub elevation_deg: f64,
+    pub fit_error: f32,
+}
+
+/// Decodes a `CID_XCVR_USBL` payload; `None` when it is shorter than its counts announce or
+/// longer than they account for.
+pub fn usbl_diagnostic(p: &[u8]) -> Option<UsblDiagnostic> {
+    let n = usize::from(p.u16_at(16)?);
+    let mut at = 18;
+    let xcor_data = (0..n)
+        .map(|i| p.f32_at(at + 4 * i))
+        .collect::<Option<Vec<_>>>()?;
+    at += 4 * n;
+    let channels = usize::from(p.u8_at(at)?);
+    let channel_rssi_db = (0..channels)
+        .map(|i| p.i16_at(at + 1 + 2 * i).map(deci))
+        .collect::<Option<Vec<_>>>()?;
+    at += 1 + 2 * channels;
+    let baselines = usize::from(p.u8_at(at)?);
+    let phase_angle = (0..baselines)
+        .map(|i| p.f32_at(at + 1 + 4 * i))
+        .collect::<Option<Vec<_>>>()?;
+    at += 1 + 4 * baselines;
+    let d = UsblDiagnostic {
+        xcor_signal_peak: p.f32_at(0)?,
+        xcor_threshold: p.f32_at(4)?,
+        xcor_cross_point: p.u16_at(8)?,
+        xcor_cross_magnitude: p.f32_at(10)?,
+        xcor_detect: p.u16_at(14)?,
+        xcor_data,
+        channel_rssi_db,
+        phase_angle,
+        azimuth_deg: deci(p.i16_at(at)?),
+        elevation_deg: deci(p.i16_at(at + 2)?),
+        fit_error: p.f32_at(at + 4)?,
+    };
+    (p.len() == at + 8).then_some(d)
+}
+
+/// Encodes a `CID_XCVR_USBL` payload (the inverse of [`usbl_diagnostic`]).
+pub fn encode_usbl_diagnostic(d: &UsblDiagnostic) -> Vec<u8> {
+    let deci = |x: f64| ((x * 10.0).round() as i16).to_le_bytes();
+    let mut p = Vec::new();
+    p.extend_from_slice(&d.xcor_signal_peak.to_le_bytes());
+    p.extend_from_slice(&d.xcor_threshold.to_le_bytes());
+    p.extend_from_slice(&d.xcor_cross_point.to_le_bytes());
+    p.extend_from_slice(&d.xcor_cross_magnitude.to_le_bytes());
+    p.extend_from_slice(&d.xcor_detect.to_le_bytes());
+    p.extend_from_slice(&(d.xcor_data.len() as u16).to_le_bytes());
+    for x in &d.xcor_data {
+        p.extend_from_slice(&x.to_le_bytes());
+    }
+    p.push(d.channel_rssi_db.len() as u8);
+    for r in &d.channel_rssi_db {
+        p.extend_from_slice(&deci(*r));
+    }
+    p.push(d.phase_angle.len() as u8);
+    for a in &d.phase_angle {
+        p.extend_from_slice(&a.to_le_bytes());
+    }
+    p.extend_from_slice(&deci(d.azimuth_deg));
+    p.extend_from_slice(&deci(d.elevation_deg));
+    p.extend_from_slice(&d.fit_error.to_le_bytes());
+    p
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(tag = "message", rename_all = "snake_case")]
 pub enum SeatracMessage {
     Status(Status),
     SysInfo(SysInfo),
+    /// `CID_XCVR_USBL`: the USBL receiver's diagnostic for one signal.
+    UsblDiagnostic(UsblDiagnostic),
     /// `CID_PING_RESP` or `CID_XCVR_FIX`.
     Fix {
         cid: u8,
@@ -134,8 +226,10 @@ pub struct SeatracFrame {
     pub message: SeatracMessage,
 }
 
+/// A value in tenths (divided, not multiplied by 0.1, so that -608 reads as the nearest double
+/// to -60.8).
 fn deci(v: i16) -> f64 {
-    f64::from(v) * 0.1
+    f64::from(v) / 10.0
 }
 
 /// Three consecutive i16 values in tenths.
@@ -331,6 +425,9 @@ fn parse_line(line: &[u8]) -> Result<SeatracFrame, SeatracError> {
         CID_SYS_INFO if from_beacon && !payload.is_empty() => {
             SeatracMessage::SysInfo(sys_info(payload).ok_or(SeatracError::Malformed("sys info"))?)
         }
+        CID_XCVR_USBL if from_beacon => SeatracMessage::UsblDiagnostic(
+            usbl_diagnostic(payload).ok_or(SeatracError::Malformed("usbl diagnostic"))?,
+        ),
         CID_PING_RESP | CID_XCVR_FIX if from_beacon => SeatracMessage::Fix {
             cid,
             fix: aco_fix(payload).ok_or(SeatracError::Malformed("fix"))?,
@@ -442,5 +539,55 @@ mod tests {
     #[test]
     fn crc16_arc_check_value() {
         assert_eq!(crc16_arc(b"123456789"), 0xbb3d);
+    }
+
+    fn diagnostic() -> UsblDiagnostic {
+        UsblDiagnostic {
+            xcor_signal_peak: 812.5,
+            xcor_threshold: 120.0,
+            xcor_cross_point: 77,
+            xcor_cross_magnitude: 130.25,
+            xcor_detect: 81,
+            xcor_data: (0..140).map(|i| (i as f32 * 0.37).sin() * 500.0).collect(),
+            channel_rssi_db: vec![-61.2, -60.8, -62.0, -61.5],
+            phase_angle: vec![0.5, -1.25, 2.0, -0.75, 0.1, 3.0],
+            azimuth_deg: 123.4,
+            elevation_deg: -41.7,
+            fit_error: 0.125,
+        }
+    }
+
+    /// Synthetic: built from the layout of the open decoders (no captured frame is public).
+    #[test]
+    fn usbl_diagnostic_round_trips_through_a_line() {
+        let d = diagnostic();
+        let line = encode_line(CID_XCVR_USBL, &encode_usbl_diagnostic(&d));
+        assert!(line.len() > 1024 && line.len() < MAX_LINE);
+        let mut dec = SeatracDecoder::new();
+        // Fed in small chunks, as a serial port delivers it.
+        for chunk in line.chunks(7) {
+            dec.push(chunk);
+        }
+        match dec.next_frame() {
+            Some(Ok(SeatracFrame {
+                from_beacon: true,
+                message: SeatracMessage::UsblDiagnostic(got),
+            })) => assert_eq!(got, d),
+            other => panic!("expected the diagnostic, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_diagnostic_shorter_or_longer_than_its_counts_is_malformed() {
+        let p = encode_usbl_diagnostic(&diagnostic());
+        for bad in [p[..p.len() - 1].to_vec(), [p.clone(), vec![0]].concat()] {
+            let mut dec = SeatracDecoder::new();
+            dec.push(&encode_line(CID_XCVR_USBL, &bad));
+            assert!(matches!(
+                dec.next_frame(),
+                Some(Err(SeatracError::Malformed(_)))
+            ));
+            assert_eq!(dec.stats().malformed, 1);
+        }
     }
 }
