@@ -2,7 +2,9 @@
 //! messages, so the same ordered inputs give bit-identical outputs.
 #![forbid(unsafe_code)]
 
+pub mod csv;
 pub mod earth;
 pub mod filter;
 pub mod navigator;
+pub mod session;
 pub mod strapdown;

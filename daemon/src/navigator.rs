@@ -67,6 +67,11 @@ pub struct NavConfig {
     pub dvl_timeout_s: f64,
     /// IMU gaps longer than this many nominal intervals are bridged and counted (count). Default 10.
     pub imu_max_gap_intervals: f64,
+    /// Integrate each IMU sample over the difference of the device's time stamps (when both
+    /// samples carry one and it is between 0 and 1 s) instead of the host's read times: removes
+    /// the read-time jitter of a live serial line, and keeps the integration right when a log is
+    /// played faster than real time. Default false (host time, as recorded logs are stamped).
+    pub imu_dt_from_device_time: bool,
     /// DVL time offset: the velocity stamped at t is the vehicle's at t - offset (s). Default 0.
     pub dvl_time_offset_s: f64,
     /// Estimate the DVL mounting angles (parameter states). Default false.
@@ -123,6 +128,7 @@ impl Default for NavConfig {
             covariance_interval_s: 0.05,
             dvl_timeout_s: 5.0,
             imu_max_gap_intervals: 10.0,
+            imu_dt_from_device_time: false,
             dvl_time_offset_s: 0.0,
             estimate_dvl_mounting: false,
             initial_dvl_mounting_std_deg: 1.0,
@@ -182,6 +188,7 @@ pub struct Navigator {
     accel_bias: Vector3<f64>,
     dvl: DvlParameters,
     last_imu_ns: Option<u64>,
+    last_imu_device_ns: Option<u64>,
     last_omega_ib: Vector3<f64>,
     last_f_body: Vector3<f64>,
     pending_dt: f64,
@@ -241,6 +248,7 @@ impl Navigator {
             accel_bias: Vector3::zeros(),
             dvl,
             last_imu_ns: None,
+            last_imu_device_ns: None,
             last_omega_ib: Vector3::zeros(),
             last_f_body: Vector3::zeros(),
             pending_dt: 0.0,
@@ -272,6 +280,14 @@ impl Navigator {
         (self.gyro_bias, self.accel_bias)
     }
 
+    /// Takes `m` as the sample the navigation starts at: its times are where the integration of
+    /// the next sample begins (it is not integrated itself).
+    pub fn start_at_imu(&mut self, m: &ImuSampleV1) {
+        self.last_imu_ns = Some(m.host_time_ns);
+        self.last_imu_device_ns =
+            (m.status & ImuSampleV1::STATUS_DEVICE_TIME_VALID != 0).then_some(m.device_time_ns);
+    }
+
     /// Processes one IMU sample; returns the solution at its time, or `None` if it was skipped.
     pub fn on_imu(&mut self, m: &ImuSampleV1) -> Option<NavSolutionV1> {
         let t_ns = m.host_time_ns;
@@ -290,11 +306,26 @@ impl Navigator {
         }
         let state_ns = (self.sd.state.time_s * 1e9).round() as u64;
         let last = self.last_imu_ns.unwrap_or(state_ns);
-        if t_ns <= last {
+        let device_ns =
+            (m.status & ImuSampleV1::STATUS_DEVICE_TIME_VALID != 0).then_some(m.device_time_ns);
+        // With device time, samples completed by one read (same host time) are still ordered
+        // and integrated over their own intervals.
+        let device_dt = match (
+            self.cfg.imu_dt_from_device_time,
+            device_ns,
+            self.last_imu_device_ns,
+        ) {
+            (true, Some(now), Some(prev)) if now > prev && now - prev < 1_000_000_000 => {
+                Some((now - prev) as f64 * 1e-9)
+            }
+            _ => None,
+        };
+        if (device_dt.is_none() && t_ns <= last) || t_ns < last {
             self.counters.imu_out_of_order += 1;
             return None;
         }
-        let mut dt = (t_ns - last) as f64 * 1e-9;
+        let mut dt = device_dt.unwrap_or((t_ns - last) as f64 * 1e-9);
+        self.last_imu_device_ns = device_ns;
         if dt > self.cfg.imu_max_gap_intervals * m.interval_s {
             self.counters.imu_gaps += 1;
             // Bridge the gap with the sample's own rates over its nominal interval only; the

@@ -137,6 +137,19 @@ impl Bus {
         })
     }
 
+    /// A listener on `topic`'s event service, separate from any subscriber, for a WaitSet that
+    /// wakes a process when any of its topics receives data.
+    pub fn listener(
+        &self,
+        topic: &str,
+    ) -> Result<iceoryx2::port::listener::Listener<ipc::Service>, BusError> {
+        let (name, full) = self.names(topic)?;
+        self.event(&name, &full)?
+            .listener_builder()
+            .create()
+            .map_err(|e| err(format!("listener on {full:?}"), e))
+    }
+
     /// A subscriber of `T` on `topic`. It is connected once created; call
     /// [`BusSubscriber::receive`] regularly (also when not notified) so that its side of the
     /// connection is established before the first publish.

@@ -17,9 +17,10 @@
 //! process runs on, or simulated time in a simulated log) and device time (the sensor's own clock).
 //!
 //! The zero-copy derive of iceoryx2 emits `unsafe impl`, so this crate cannot forbid unsafe code;
-//! it contains no hand-written `unsafe`.
+//! it contains no hand-written `unsafe`. The host clock is read through `nix` (safe wrappers).
 
 pub mod bus;
+pub mod clock;
 pub mod qos;
 pub mod topic;
 

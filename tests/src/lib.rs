@@ -8,7 +8,7 @@ pub mod processes {
     use std::time::{Duration, Instant};
 
     /// The path of a workspace binary built for this test run (`target/<profile>/<name>`). The
-    /// first call brings the binaries of the driver and tool packages up to date with one
+    /// first call brings the binaries of the driver, daemon and tool packages up to date with one
     /// `cargo build` (a no-op after `cargo test --workspace`; needed when only this package's
     /// tests were built, or a binary would be stale).
     pub fn binary(name: &str) -> PathBuf {

@@ -44,6 +44,7 @@ fn all_segments_replay_within_the_accuracy_target() {
         for (_, m) in &messages {
             replay.process(m, &mut |_| Ok(())).expect("replay");
         }
+        replay.finish(&mut |_| Ok(())).expect("replay");
         let acc = replay.accuracy().expect("truth channel");
         let ratio = 100.0 * acc.horizontal_error_final_m / acc.distance_travelled_m;
         eprintln!(

@@ -150,6 +150,7 @@ pub fn replay(hours: f64, repeat: usize, json: bool) -> anyhow::Result<()> {
             for m in &messages {
                 replay.process(m, &mut |_| Ok(()))?;
             }
+            replay.finish(&mut |_| Ok(()))?;
             std::hint::black_box(replay.accuracy());
             core_runs.push(t.elapsed().as_secs_f64());
         }

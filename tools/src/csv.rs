@@ -1,33 +1,4 @@
-//! CSV output of navigation solutions. Floats are written with Rust's shortest round-trip
-//! formatting, so equal solutions give byte-identical files.
+//! CSV output of navigation solutions: the core's writer (`auvnav_core::csv`), shared with the
+//! daemon so that live and replayed solutions give byte-identical files.
 
-use auvnav_shm_schema::NavSolutionV1;
-use std::io::Write;
-
-pub const NAV_HEADER: &str = "time_ns,sequence,latitude_rad,longitude_rad,height_m,v_n_m_s,v_e_m_s,v_d_m_s,roll_rad,pitch_rad,yaw_rad,std_n_m,std_e_m,std_d_m,mode,sensor_health";
-
-pub fn write_nav_row(w: &mut dyn Write, s: &NavSolutionV1) -> std::io::Result<()> {
-    let [vn, ve, vd] = s.velocity_ned_m_s;
-    let [r, p, y] = s.euler_rad;
-    let [sn, se, sd] = s.position_std_ned_m;
-    writeln!(
-        w,
-        "{},{},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{},{}",
-        s.host_time_ns,
-        s.sequence,
-        s.latitude_rad,
-        s.longitude_rad,
-        s.height_m,
-        vn,
-        ve,
-        vd,
-        r,
-        p,
-        y,
-        sn,
-        se,
-        sd,
-        s.mode,
-        s.sensor_health
-    )
-}
+pub use auvnav_core::csv::*;

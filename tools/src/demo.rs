@@ -1,6 +1,8 @@
-//! `auvnav demo`: simulates a voyage and runs it through the navigation core (the same
-//! [`auvnav_core::navigator::Navigator`] the daemon and replay use), then prints the accuracy
-//! against the simulated truth. Until the daemon and drivers exist, this runs in one process.
+//! `auvnav demo`: simulates a voyage and runs it through the on-board chain as real processes
+//! (emulated devices on pseudo-terminals, drivers, daemon, recorder; see [`crate::live`]), or,
+//! with `--in-process`, straight through the navigation core (the same
+//! [`auvnav_core::navigator::Navigator`] the daemon and replay use); then prints the accuracy
+//! against the simulated truth.
 
 use crate::accuracy::Accuracy;
 use crate::replay::{Output, Replay, ReplayConfig};
@@ -12,16 +14,24 @@ use std::path::PathBuf;
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct DemoArgs {
-    /// Simulated seconds (default: the whole scenario).
+    /// Simulated seconds (default: 120 with processes, the whole scenario in process).
     #[arg(long)]
     pub seconds: Option<f64>,
+    /// Play the voyage this many times faster than real time (processes only).
+    #[arg(long, default_value_t = 4.0)]
+    pub speed: f64,
+    /// Run the voyage through the navigation core in this process (no drivers, daemon or
+    /// shared memory): fast, for the whole scenario.
+    #[arg(long)]
+    pub in_process: bool,
     /// Built-in scenario or scenario file.
     #[arg(long, default_value = "lawnmower")]
     pub scenario: String,
     /// Random seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Write the simulated log (sim.mcap) and the navigation solution (nav.csv) here.
+    /// Write the logs and solutions here (processes: voyage.mcap, record.mcap, live_nav.csv,
+    /// replay_nav.csv and each process's log; in process: sim.mcap and nav.csv).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Print the result as JSON.
@@ -49,7 +59,7 @@ pub fn run_voyage(
     let mut replay = Replay::new(
         &ReplayConfig {
             navigation: nav_cfg,
-            initial: None,
+            ..Default::default()
         },
         100.0,
     );
@@ -57,14 +67,14 @@ pub fn run_voyage(
         writeln!(w, "{}", crate::csv::NAV_HEADER)?;
     }
     // Each simulated message goes straight into the navigator: nothing is held in memory.
-    let summary = sim::simulate(cfg, |m| {
-        replay.process(m, &mut |o| {
-            if let (Output::Solution(s), Some(w)) = (o, csv.as_deref_mut()) {
-                crate::csv::write_nav_row(w, s)?;
-            }
-            Ok(())
-        })
-    })?;
+    let mut write = |o: Output| {
+        if let (Output::Solution(s), Some(w)) = (o, csv.as_deref_mut()) {
+            crate::csv::write_nav_row(w, s)?;
+        }
+        Ok(())
+    };
+    let summary = sim::simulate(cfg, |m| replay.process(m, &mut write))?;
+    replay.finish(&mut write)?;
     Ok((
         summary,
         replay.accuracy().unwrap_or_default(),
@@ -73,6 +83,9 @@ pub fn run_voyage(
 }
 
 pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
+    if !a.in_process {
+        return run_processes(a);
+    }
     let scenario = Scenario::load(&a.scenario)?;
     let effects = scenario.effects()?;
     let cfg = SimConfig {
@@ -137,6 +150,54 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
                 dir.join("nav.csv").display()
             );
         }
+    }
+    Ok(())
+}
+
+fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
+    let r = crate::live::run_live(
+        &a.scenario,
+        a.seed,
+        a.seconds.unwrap_or(120.0),
+        a.speed,
+        a.out.as_deref(),
+    )?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+    } else {
+        let acc = &r.accuracy;
+        println!(
+            "auvnav demo: scenario {} (seed {}), {:.0} s simulated at {}x, {:.0} m travelled",
+            r.scenario, r.seed, r.simulated_seconds, r.speed, acc.distance_travelled_m
+        );
+        println!(
+            "  processes: emulated PD0 DVL, KVH 1750 IMU, SeaTrac USBL on pseudo-terminals; \
+             auvnav-dvl, -imu, -usbl, -can (depth); auvnavd; auvnav record"
+        );
+        println!(
+            "  live solution: {} rows; horizontal error final {:.2} m, max {:.2} m, CEP50 {:.2} m; heading RMS {:.3} deg",
+            r.solutions,
+            acc.horizontal_error_final_m,
+            acc.horizontal_error_max_m,
+            acc.horizontal_error_cep50_m,
+            acc.heading_error_rms_deg
+        );
+        println!(
+            "  replay of the recording byte-identical to the live solution: {}",
+            if r.replay_identical { "yes" } else { "NO" }
+        );
+        println!(
+            "  clean stop of every process: {}; {:.1} s wall",
+            if r.clean_stop { "yes" } else { "NO" },
+            r.wall_seconds
+        );
+        println!("  log: {}  live solution: {}", r.record, r.live_nav_csv);
+        for (name, line) in &r.process_reports {
+            println!("    {name}: {line}");
+        }
+    }
+    if !r.replay_identical || !r.clean_stop {
+        anyhow::bail!("the live run did not reproduce or did not stop cleanly (see above)");
     }
     Ok(())
 }

@@ -247,6 +247,60 @@ impl<W: Write + Seek> LogWriter<W> {
         Ok(())
     }
 
+    /// Copies a message read from another log (its encoded bytes and log time) onto the same
+    /// topic; the schema must be one of ours.
+    pub fn write_raw(&mut self, m: &RawLogMessage) -> Result<(), LogError> {
+        let id = match self.channels.get(&*m.topic) {
+            Some(&(id, schema)) if schema == &*m.schema_name => id,
+            Some(&(_, schema)) => {
+                return Err(LogError::BadMessage {
+                    topic: m.topic.to_string(),
+                    reason: format!("declared as {schema}, copied as {}", m.schema_name),
+                });
+            }
+            None => {
+                let (type_name, schema_name, definition) = auvnav_shm_schema::all_schemas()
+                    .into_iter()
+                    .find(|(_, s, _)| *s == &*m.schema_name)
+                    .ok_or_else(|| LogError::BadMessage {
+                        topic: m.topic.to_string(),
+                        reason: format!("unknown schema {}", m.schema_name),
+                    })?;
+                let schema_id = match self.schemas.get(schema_name) {
+                    Some(&id) => id,
+                    None => {
+                        let id = self.writer.add_schema(
+                            schema_name,
+                            "ros2msg",
+                            definition.as_bytes(),
+                        )?;
+                        self.schemas.insert(schema_name, id);
+                        id
+                    }
+                };
+                let metadata = BTreeMap::from([("type_name".to_string(), type_name.to_string())]);
+                let id = self
+                    .writer
+                    .add_channel(schema_id, &m.topic, "cdr", &metadata)?;
+                self.channels.insert(m.topic.to_string(), (id, schema_name));
+                id
+            }
+        };
+        let seq = self.sequences.entry(id).or_insert(0);
+        *seq = seq.wrapping_add(1);
+        self.writer.write_to_known_channel(
+            &MessageHeader {
+                channel_id: id,
+                sequence: *seq,
+                log_time: m.log_time_ns,
+                publish_time: m.log_time_ns,
+            },
+            &m.data,
+        )?;
+        self.messages += 1;
+        Ok(())
+    }
+
     /// Messages written so far.
     pub fn messages(&self) -> u64 {
         self.messages

@@ -29,6 +29,8 @@ enum Command {
     Decode(auvnav_tools::decode::DecodeArgs),
     /// Play a log's sensor messages into pseudo-terminals in the devices' protocols.
     Emulate(auvnav_tools::emulate::EmulateArgs),
+    /// Record every topic of a deployment to a log (MCAP); or recover a killed recorder's log.
+    Record(auvnav_tools::record::RecordArgs),
     /// Turn a measured data set into a log.
     Import {
         #[command(subcommand)]
@@ -246,6 +248,7 @@ fn main() -> std::process::ExitCode {
         Command::Replay(a) => run_replay(&a),
         Command::Decode(a) => auvnav_tools::decode::run(&a).map(|_| ()),
         Command::Emulate(a) => auvnav_tools::emulate::run(&a).map(|_| ()),
+        Command::Record(a) => auvnav_tools::record::run(&a).map(|_| ()),
         Command::Montecarlo { what } => match what {
             MonteCarloWhat::Nees(a) => auvnav_tools::montecarlo::run_nees(&a),
         },

@@ -325,7 +325,7 @@ fn perturbed_start(
 /// Runs `auvnav montecarlo nees` and prints the report.
 pub fn run_nees(a: &NeesArgs) -> anyhow::Result<()> {
     let cfg = match &a.config {
-        Some(p) => crate::replay::ReplayConfig::load(p)?.navigation,
+        Some(p) => crate::replay::load_config(p)?.navigation,
         None => NavConfig::default(),
     };
     let start = std::time::Instant::now();

@@ -11,41 +11,24 @@ use crate::accuracy::{Accuracy, AccuracyTracker};
 use crate::log::{LogError, LogHeader, LogMessage, LogReader, write_log_atomically};
 use anyhow::{Context, bail};
 use auvnav_core::earth::Geodetic;
-use auvnav_core::navigator::{NavConfig, NavCounters, Navigator, initial_state};
-use auvnav_core::strapdown::NavState;
+use auvnav_core::navigator::{NavCounters, Navigator, initial_state};
+use auvnav_core::session::{Session, SessionOutput};
 use auvnav_shm_schema::{AidDiagnosticsV1, NavSolutionV1, TruthStateV1, topic};
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-/// Initial state given in the replay configuration (instead of the log's truth channel).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct InitialState {
-    pub latitude_deg: f64,
-    pub longitude_deg: f64,
-    pub height_m: f64,
-    #[serde(default)]
-    pub velocity_ned_m_s: [f64; 3],
-    /// Roll, pitch, yaw (deg).
-    pub euler_deg: [f64; 3],
-}
+pub use auvnav_core::session::{InitialReport, InitialState};
 
-/// The replay configuration file: `[navigation]` (the core's [`NavConfig`]) and an optional
-/// `[initial]` state.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct ReplayConfig {
-    pub navigation: NavConfig,
-    pub initial: Option<InitialState>,
-}
+/// The replay configuration file: `[navigation]` (the core's `NavConfig`) and an optional
+/// `[initial]` state — the same file the daemon's `[navigation]`/`[initial]` tables hold.
+pub type ReplayConfig = auvnav_core::session::SessionConfig;
 
-impl ReplayConfig {
-    pub fn load(path: &Path) -> anyhow::Result<ReplayConfig> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("reading configuration {}", path.display()))?;
-        toml::from_str(&text).with_context(|| format!("configuration {}", path.display()))
-    }
+/// Reads a replay configuration file.
+pub fn load_config(path: &Path) -> anyhow::Result<ReplayConfig> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading configuration {}", path.display()))?;
+    toml::from_str(&text).with_context(|| format!("configuration {}", path.display()))
 }
 
 /// One output of the navigator.
@@ -106,24 +89,9 @@ impl FinalParameters {
     }
 }
 
-/// Where the initial state came from, stated in the output.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct InitialReport {
-    pub source: &'static str,
-    pub time_s: f64,
-    pub latitude_deg: f64,
-    pub longitude_deg: f64,
-    pub height_m: f64,
-    pub velocity_ned_m_s: [f64; 3],
-    pub euler_deg: [f64; 3],
-}
-
 /// The replay state machine, fed one message at a time.
 pub struct Replay {
-    cfg: NavConfig,
-    configured_initial: Option<InitialState>,
-    nav: Option<Navigator>,
-    initial: Option<InitialReport>,
+    session: Session,
     tracker: AccuracyTracker,
     has_truth: bool,
     prev_solution: Option<NavSolutionV1>,
@@ -136,10 +104,7 @@ pub struct Replay {
 impl Replay {
     pub fn new(cfg: &ReplayConfig, min_distance_m: f64) -> Replay {
         Replay {
-            cfg: cfg.navigation.clone(),
-            configured_initial: cfg.initial.clone(),
-            nav: None,
-            initial: None,
+            session: Session::new(cfg),
             tracker: AccuracyTracker::new(min_distance_m),
             has_truth: false,
             prev_solution: None,
@@ -151,32 +116,30 @@ impl Replay {
     }
 
     pub fn navigator(&self) -> Option<&Navigator> {
-        self.nav.as_ref()
+        self.session.navigator()
     }
 
-    fn start(
-        &mut self,
-        state: NavState,
-        source: &'static str,
-        out: &mut dyn FnMut(Output) -> anyhow::Result<()>,
-    ) -> anyhow::Result<()> {
-        let e = state.euler();
-        self.initial = Some(InitialReport {
-            source,
-            time_s: state.time_s,
-            latitude_deg: state.position.latitude_rad.to_degrees(),
-            longitude_deg: state.position.longitude_rad.to_degrees(),
-            height_m: state.position.height_m,
-            velocity_ned_m_s: state.velocity_ned.into(),
-            euler_deg: e.map(f64::to_degrees),
-        });
-        let mut nav = Navigator::new(self.cfg.clone(), state);
-        let t_ns = (state.time_s * 1e9).round() as u64;
-        let sol = nav.solution(t_ns);
-        out(Output::Solution(&sol))?;
-        self.prev_solution = Some(sol);
-        self.nav = Some(nav);
-        Ok(())
+    /// Passes the session's outputs on, following the solutions for the truth comparison.
+    fn forward<'o>(
+        prev: &'o mut Option<NavSolutionV1>,
+        pending: &'o mut Option<TruthStateV1>,
+        tracker: &'o mut AccuracyTracker,
+        out: &'o mut dyn FnMut(Output) -> anyhow::Result<()>,
+    ) -> impl FnMut(SessionOutput) -> anyhow::Result<()> + 'o {
+        move |o| match o {
+            SessionOutput::Solution(sol) => {
+                out(Output::Solution(sol))?;
+                if let (Some(t), Some(p)) = (*pending, *prev)
+                    && sol.host_time_ns >= t.host_time_ns
+                {
+                    tracker.add(&interpolate(&p, sol, t.host_time_ns), &t);
+                    *pending = None;
+                }
+                *prev = Some(*sol);
+                Ok(())
+            }
+            SessionOutput::Diagnostics(d) => out(Output::Diagnostics(d)),
+        }
     }
 
     /// Processes one message in log order; outputs go to `out`.
@@ -186,13 +149,20 @@ impl Replay {
         out: &mut dyn FnMut(Output) -> anyhow::Result<()>,
     ) -> anyhow::Result<()> {
         self.counts.messages += 1;
+        let mut fwd = Self::forward(
+            &mut self.prev_solution,
+            &mut self.pending_truth,
+            &mut self.tracker,
+            out,
+        );
         match m {
             LogMessage::Truth(t) => {
+                drop(fwd);
                 self.counts.truth += 1;
                 self.has_truth = true;
                 out(Output::Truth(t))?;
                 self.note_time(t.host_time_ns);
-                if self.nav.is_none() && self.configured_initial.is_none() {
+                if !self.session.started() && !self.session.has_configured_initial() {
                     let state = initial_state(
                         t.host_time_ns as f64 * 1e-9,
                         Geodetic {
@@ -203,66 +173,60 @@ impl Replay {
                         t.velocity_ned_m_s,
                         t.euler_rad,
                     );
-                    self.start(state, "first record of the truth channel", out)?;
+                    let mut fwd = Self::forward(
+                        &mut self.prev_solution,
+                        &mut self.pending_truth,
+                        &mut self.tracker,
+                        out,
+                    );
+                    self.session
+                        .start(state, "first record of the truth channel", &mut fwd)?;
                 }
                 self.compare(t);
             }
             LogMessage::Imu(x) => {
                 self.counts.imu += 1;
+                self.session.on_imu(x, &mut fwd)?;
+                drop(fwd);
                 self.note_time(x.host_time_ns);
-                if self.nav.is_none()
-                    && let Some(i) = self.configured_initial.clone()
-                {
-                    let state = initial_state(
-                        x.host_time_ns as f64 * 1e-9,
-                        Geodetic {
-                            latitude_rad: i.latitude_deg.to_radians(),
-                            longitude_rad: i.longitude_deg.to_radians(),
-                            height_m: i.height_m,
-                        },
-                        i.velocity_ned_m_s,
-                        i.euler_deg.map(f64::to_radians),
-                    );
-                    self.start(state, "[initial] table of the configuration", out)?;
-                    return Ok(());
-                }
-                let Some(nav) = self.nav.as_mut() else {
-                    self.counts.before_start += 1;
-                    return Ok(());
-                };
-                if let Some(sol) = nav.on_imu(x) {
-                    out(Output::Solution(&sol))?;
-                    self.on_solution(sol);
-                }
             }
             LogMessage::Dvl(x) => {
                 self.counts.dvl += 1;
+                drop(fwd);
+                self.session.on_dvl(x);
                 self.note_time(x.host_time_ns);
-                match self.nav.as_mut() {
-                    Some(nav) => out(Output::Diagnostics(&nav.on_dvl(x)))?,
-                    None => self.counts.before_start += 1,
-                }
             }
             LogMessage::Depth(x) => {
                 self.counts.depth += 1;
+                drop(fwd);
+                self.session.on_depth(x);
                 self.note_time(x.host_time_ns);
-                match self.nav.as_mut() {
-                    Some(nav) => out(Output::Diagnostics(&nav.on_depth(x)))?,
-                    None => self.counts.before_start += 1,
-                }
             }
             LogMessage::Gnss(x) => {
                 self.counts.gnss += 1;
+                drop(fwd);
+                self.session.on_gnss(x);
                 self.note_time(x.host_time_ns);
-                match self.nav.as_mut() {
-                    Some(nav) => out(Output::Diagnostics(&nav.on_gnss(x)))?,
-                    None => self.counts.before_start += 1,
-                }
             }
             LogMessage::Unknown => self.counts.unknown += 1,
             _ => self.counts.unused += 1,
         }
+        self.counts.before_start = self.session.before_start;
         Ok(())
+    }
+
+    /// Applies the aid messages still waiting for an IMU sample: call at the end of the input.
+    pub fn finish(
+        &mut self,
+        out: &mut dyn FnMut(Output) -> anyhow::Result<()>,
+    ) -> anyhow::Result<()> {
+        let mut fwd = Self::forward(
+            &mut self.prev_solution,
+            &mut self.pending_truth,
+            &mut self.tracker,
+            out,
+        );
+        self.session.finish(&mut fwd)
     }
 
     fn note_time(&mut self, t_ns: u64) {
@@ -287,28 +251,20 @@ impl Replay {
         }
     }
 
-    fn on_solution(&mut self, sol: NavSolutionV1) {
-        if let (Some(t), Some(prev)) = (self.pending_truth, self.prev_solution)
-            && sol.host_time_ns >= t.host_time_ns
-        {
-            self.tracker
-                .add(&interpolate(&prev, &sol, t.host_time_ns), &t);
-            self.pending_truth = None;
-        }
-        self.prev_solution = Some(sol);
-    }
-
     /// The accuracy against the truth channel, when the log has one.
     pub fn accuracy(&self) -> Option<Accuracy> {
         self.has_truth.then(|| self.tracker.result())
     }
 
     pub fn initial(&self) -> Option<&InitialReport> {
-        self.initial.as_ref()
+        self.session.initial()
     }
 
     pub fn nav_counters(&self) -> NavCounters {
-        self.nav.as_ref().map(|n| n.counters).unwrap_or_default()
+        self.session
+            .navigator()
+            .map(|n| n.counters)
+            .unwrap_or_default()
     }
 
     /// Log time covered by the messages seen (s).
@@ -370,6 +326,8 @@ pub struct ReplayArgs {
 #[derive(Debug, Clone, Serialize)]
 pub struct ReplayReport {
     pub log: String,
+    /// Where the configuration came from (a file, the log header, or the defaults).
+    pub configuration: String,
     pub initial_state: Option<InitialReport>,
     /// Present when the log has a truth channel.
     pub accuracy: Option<Accuracy>,
@@ -401,8 +359,12 @@ pub fn run_log(
     loop {
         let raw = match reader.next_message() {
             Ok(Some(raw)) => raw,
-            Ok(None) => return Ok((header, None)),
+            Ok(None) => {
+                replay.finish(out)?;
+                return Ok((header, None));
+            }
             Err(e @ (LogError::Truncated | LogError::Mcap(_))) => {
+                replay.finish(out)?;
                 return Ok((header, Some(e.to_string())));
             }
             Err(e) => return Err(e).with_context(|| format!("reading {}", log.display())),
@@ -425,36 +387,43 @@ pub fn diagnostics_csv_path(nav_csv: &Path) -> PathBuf {
     nav_csv.with_extension("diagnostics.csv")
 }
 
-pub const DIAGNOSTICS_HEADER: &str = "time_ns,sequence,source,dimension,flags,observation_0,observation_1,observation_2,innovation_0,innovation_1,innovation_2,innovation_variance_0,innovation_variance_1,innovation_variance_2,test_ratio";
+pub use auvnav_core::csv::{DIAGNOSTICS_HEADER, write_diagnostics_row};
 
-fn write_diagnostics_row(w: &mut dyn Write, d: &AidDiagnosticsV1) -> std::io::Result<()> {
-    writeln!(
-        w,
-        "{},{},{},{},{},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?}",
-        d.host_time_ns,
-        d.sequence,
-        d.source,
-        d.dimension,
-        d.flags,
-        d.observation[0],
-        d.observation[1],
-        d.observation[2],
-        d.innovation[0],
-        d.innovation[1],
-        d.innovation[2],
-        d.innovation_variance[0],
-        d.innovation_variance[1],
-        d.innovation_variance[2],
-        d.test_ratio
-    )
+/// The navigation part (`aid_delay_s`, `[navigation]`, `[initial]`) of a configuration that
+/// may hold more (the daemon's, embedded in a recording's header).
+pub fn session_config_from_toml(text: &str) -> anyhow::Result<ReplayConfig> {
+    let table: toml::Table = toml::from_str(text).context("parsing the embedded configuration")?;
+    let mut keep = toml::Table::new();
+    for key in ["aid_delay_s", "navigation", "initial"] {
+        if let Some(v) = table.get(key) {
+            keep.insert(key.to_string(), v.clone());
+        }
+    }
+    keep.try_into()
+        .context("the embedded configuration's navigation tables")
+}
+
+/// The configuration a replay runs with, and where it came from.
+pub fn replay_config(a: &ReplayArgs) -> anyhow::Result<(ReplayConfig, String)> {
+    if let Some(p) = &a.config {
+        return Ok((load_config(p)?, p.display().to_string()));
+    }
+    // A recording carries the daemon's configuration: replay with it, as the daemon ran.
+    let header = LogReader::open(&a.log)
+        .and_then(|mut r| r.read_header())
+        .with_context(|| format!("reading {}", a.log.display()))?;
+    if header.producer == "auvnav record" && !header.config.trim().is_empty() {
+        return Ok((
+            session_config_from_toml(&header.config)?,
+            "the log header (embedded by auvnav record)".to_string(),
+        ));
+    }
+    Ok((ReplayConfig::default(), "defaults".to_string()))
 }
 
 /// Runs `auvnav replay`.
 pub fn run(a: &ReplayArgs) -> anyhow::Result<ReplayReport> {
-    let cfg = match &a.config {
-        Some(p) => ReplayConfig::load(p)?,
-        None => ReplayConfig::default(),
-    };
+    let (cfg, config_source) = replay_config(a)?;
     if !(a.min_distance.is_finite() && a.min_distance >= 0.0) {
         bail!("--min-distance {}: must be >= 0 m", a.min_distance);
     }
@@ -542,6 +511,7 @@ pub fn run(a: &ReplayArgs) -> anyhow::Result<ReplayReport> {
     let log_seconds = replay.duration_s();
     Ok(ReplayReport {
         log: a.log.display().to_string(),
+        configuration: config_source,
         initial_state: replay.initial().cloned(),
         accuracy: replay.accuracy(),
         samples_processed: replay.counts.imu,

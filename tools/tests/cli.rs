@@ -252,7 +252,7 @@ fn every_scenario_log_is_decoded_by_the_python_mcap_reader() {
 
 #[test]
 fn demo_runs_a_voyage_through_the_core_and_reports_accuracy() {
-    let o = auvnav(&["demo", "--seconds", "300", "--json"]);
+    let o = auvnav(&["demo", "--in-process", "--seconds", "300", "--json"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
     let acc = &v["accuracy"];

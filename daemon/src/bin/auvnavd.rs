@@ -1,0 +1,527 @@
+//! `auvnavd`: the fusion daemon. Subscribes to the sensor topics in shared memory, runs the
+//! navigation session in real time, publishes the solution, per-aid diagnostics and its health.
+//!
+//! Processing order (what makes a recording replay bit for bit): IMU samples are processed as
+//! they arrive; an aid message stamped t is applied just before the first IMU sample stamped later
+//! than t + `aid_delay_s` (see `auvnav_core::session`). An aid message that arrives after that IMU
+//! sample was processed is late: counted and applied at the next one.
+
+use auvnav_core::csv;
+use auvnav_core::navigator::NavConfig;
+use auvnav_core::session::{InitialState, Session, SessionConfig, SessionOutput};
+use auvnav_shm_schema::bus::{Bus, BusError, BusPublisher, BusSubscriber};
+use auvnav_shm_schema::clock::monotonic_ns;
+use auvnav_shm_schema::{
+    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, NavSolutionV1,
+    ProcessHealthV1, ProcessState, UsblFixV1, qos, topic,
+};
+use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::process::ExitCode;
+use std::time::Duration;
+
+/// Outputs (`[output]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct OutputConfig {
+    /// Publish every Nth navigation solution (count, 1..1000, default 1 = IMU rate).
+    solution_decimation: u32,
+    /// Also write every solution to this CSV file (the format of `auvnav replay --out F.csv`);
+    /// empty for none (default).
+    nav_csv: String,
+    /// Write every aid diagnostic to this CSV file; empty for none (default).
+    diagnostics_csv: String,
+}
+
+impl Default for OutputConfig {
+    fn default() -> Self {
+        OutputConfig {
+            solution_decimation: 1,
+            nav_csv: String::new(),
+            diagnostics_csv: String::new(),
+        }
+    }
+}
+
+/// Deadlines after which a silent sensor is reported lost (`[deadlines]`; s, 0 = none).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct Deadlines {
+    /// IMU (s, default 0.1).
+    imu_s: f64,
+    /// DVL (s, default 3).
+    dvl_s: f64,
+    /// Depth (s, default 3).
+    depth_s: f64,
+    /// USBL (s, default 0: fixes come when the station pings).
+    usbl_s: f64,
+    /// GNSS (s, default 0: only at the surface).
+    gnss_s: f64,
+}
+
+impl Default for Deadlines {
+    fn default() -> Self {
+        Deadlines {
+            imu_s: 0.1,
+            dvl_s: 3.0,
+            depth_s: 3.0,
+            usbl_s: 0.0,
+            gnss_s: 0.0,
+        }
+    }
+}
+
+/// `auvnavd`'s configuration file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct DaemonConfig {
+    /// Node name and the name in the health message (default `auvnavd`).
+    #[serde(default = "default_name")]
+    name: String,
+    /// Service-name prefix of the deployment (default `auvnav`).
+    #[serde(default = "default_prefix")]
+    prefix: String,
+    /// Aid delay (s, 0..1, default 0.02): see the module documentation.
+    #[serde(default = "default_aid_delay")]
+    aid_delay_s: f64,
+    /// Health message period (s, 0.05..60, default 1).
+    #[serde(default = "default_health_period")]
+    health_period_s: f64,
+    /// The navigation core's configuration (`auvnav_core::navigator::NavConfig`).
+    #[serde(default)]
+    navigation: NavConfig,
+    /// Initial state; required until in-motion alignment is available.
+    initial: Option<InitialState>,
+    #[serde(default)]
+    output: OutputConfig,
+    #[serde(default)]
+    deadlines: Deadlines,
+}
+
+fn default_name() -> String {
+    "auvnavd".into()
+}
+fn default_prefix() -> String {
+    topic::DEFAULT_PREFIX.into()
+}
+fn default_aid_delay() -> f64 {
+    0.02
+}
+fn default_health_period() -> f64 {
+    1.0
+}
+
+impl DaemonConfig {
+    fn load(path: &str) -> Result<DaemonConfig, String> {
+        let text = std::fs::read_to_string(path).map_err(|e| format!("reading {path}: {e}"))?;
+        let cfg: DaemonConfig = toml::from_str(&text).map_err(|e| format!("{path}: {e}"))?;
+        let range = |key: &str, v: f64, lo: f64, hi: f64| {
+            if v.is_finite() && v >= lo && v <= hi {
+                Ok(())
+            } else {
+                Err(format!("{path}: {key} = {v}: expected {lo}..={hi}"))
+            }
+        };
+        range("aid_delay_s", cfg.aid_delay_s, 0.0, 1.0)?;
+        range("health_period_s", cfg.health_period_s, 0.05, 60.0)?;
+        range(
+            "output.solution_decimation",
+            f64::from(cfg.output.solution_decimation),
+            1.0,
+            1000.0,
+        )?;
+        let d = &cfg.deadlines;
+        for (k, v) in [
+            ("deadlines.imu_s", d.imu_s),
+            ("deadlines.dvl_s", d.dvl_s),
+            ("deadlines.depth_s", d.depth_s),
+            ("deadlines.usbl_s", d.usbl_s),
+            ("deadlines.gnss_s", d.gnss_s),
+        ] {
+            range(k, v, 0.0, 3600.0)?;
+        }
+        if cfg.initial.is_none() {
+            return Err(format!(
+                "{path}: [initial] is required: the daemon does not yet align itself"
+            ));
+        }
+        Ok(cfg)
+    }
+
+    fn session(&self) -> SessionConfig {
+        SessionConfig {
+            aid_delay_s: self.aid_delay_s,
+            navigation: self.navigation.clone(),
+            initial: self.initial.clone(),
+        }
+    }
+}
+
+#[derive(clap::Parser)]
+#[command(name = "auvnavd", about = "auvnav fusion daemon", version)]
+struct Args {
+    /// The daemon's TOML configuration.
+    #[arg(long)]
+    config: Option<String>,
+    /// Check the configuration, print it with defaults filled in, and exit.
+    #[arg(long, value_name = "FILE")]
+    check_config: Option<String>,
+}
+
+/// A watched sensor: last arrival and whether it is reported lost.
+struct Watch {
+    name: &'static str,
+    deadline_ns: u64,
+    last_ns: u64,
+    lost: bool,
+}
+
+impl Watch {
+    fn new(name: &'static str, deadline_s: f64, now: u64) -> Watch {
+        Watch {
+            name,
+            deadline_ns: (deadline_s * 1e9) as u64,
+            last_ns: now,
+            lost: false,
+        }
+    }
+    fn seen(&mut self, now: u64) {
+        if self.lost {
+            eprintln!("auvnavd: {} back", self.name);
+            self.lost = false;
+        }
+        self.last_ns = now;
+    }
+    /// True when the sensor just became lost.
+    fn check(&mut self, now: u64) -> bool {
+        if self.deadline_ns > 0 && !self.lost && now.saturating_sub(self.last_ns) > self.deadline_ns
+        {
+            self.lost = true;
+            eprintln!(
+                "auvnavd: {} lost (nothing for {:.2} s)",
+                self.name,
+                self.deadline_ns as f64 * 1e-9
+            );
+            return true;
+        }
+        false
+    }
+}
+
+struct Csv {
+    w: std::io::BufWriter<std::fs::File>,
+}
+
+impl Csv {
+    fn create(path: &str, header: &str) -> Result<Option<Csv>, String> {
+        if path.is_empty() {
+            return Ok(None);
+        }
+        let f = std::fs::File::create(path).map_err(|e| format!("creating {path}: {e}"))?;
+        let mut w = std::io::BufWriter::new(f);
+        writeln!(w, "{header}").map_err(|e| format!("writing {path}: {e}"))?;
+        Ok(Some(Csv { w }))
+    }
+}
+
+struct Outputs {
+    solution: BusPublisher<NavSolutionV1>,
+    diagnostics: BusPublisher<AidDiagnosticsV1>,
+    nav_csv: Option<Csv>,
+    diag_csv: Option<Csv>,
+    decimation: u64,
+    solutions: u64,
+    published: u64,
+    errors: u64,
+}
+
+impl Outputs {
+    fn on(&mut self, o: SessionOutput) -> Result<(), std::io::Error> {
+        match o {
+            SessionOutput::Solution(s) => {
+                if let Some(c) = self.nav_csv.as_mut() {
+                    csv::write_nav_row(&mut c.w, s)?;
+                }
+                if self.solutions.is_multiple_of(self.decimation) {
+                    match self.solution.publish(*s) {
+                        Ok(_) => self.published += 1,
+                        Err(_) => self.errors += 1,
+                    }
+                }
+                self.solutions += 1;
+            }
+            SessionOutput::Diagnostics(d) => {
+                if let Some(c) = self.diag_csv.as_mut() {
+                    csv::write_diagnostics_row(&mut c.w, d)?;
+                }
+                if self.diagnostics.publish(*d).is_err() {
+                    self.errors += 1;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        if let Some(c) = self.nav_csv.as_mut() {
+            c.w.flush()?;
+        }
+        if let Some(c) = self.diag_csv.as_mut() {
+            c.w.flush()?;
+        }
+        Ok(())
+    }
+}
+
+fn drain<T: auvnav_shm_schema::Message + auvnav_shm_schema::bus::Sequenced>(
+    sub: &mut BusSubscriber<T>,
+    into: &mut Vec<T>,
+) -> Result<(), BusError> {
+    while let Some(m) = sub.receive()? {
+        into.push(m);
+    }
+    Ok(())
+}
+
+fn run(cfg: &DaemonConfig) -> Result<(), String> {
+    let e = |x: BusError| x.to_string();
+    let bus = Bus::new(&cfg.name, &cfg.prefix).map_err(e)?;
+    // Resources left by a killed predecessor (or killed drivers) are removed before opening.
+    bus.cleanup_dead_nodes();
+    let mut imu = bus
+        .subscriber::<ImuSampleV1>(topic::IMU, qos::SENSOR)
+        .map_err(e)?;
+    let mut dvl = bus
+        .subscriber::<DvlVelocityV1>(topic::DVL, qos::SENSOR)
+        .map_err(e)?;
+    let mut depth = bus
+        .subscriber::<DepthV1>(topic::DEPTH, qos::SENSOR)
+        .map_err(e)?;
+    let mut gnss = bus
+        .subscriber::<GnssFixV1>(topic::GNSS, qos::SENSOR)
+        .map_err(e)?;
+    let mut usbl = bus
+        .subscriber::<UsblFixV1>(topic::USBL, qos::SENSOR)
+        .map_err(e)?;
+    let listeners = [
+        topic::IMU,
+        topic::DVL,
+        topic::DEPTH,
+        topic::GNSS,
+        topic::USBL,
+    ]
+    .iter()
+    .map(|t| bus.listener(t))
+    .collect::<Result<Vec<_>, _>>()
+    .map_err(e)?;
+    let mut out = Outputs {
+        solution: bus
+            .publisher::<NavSolutionV1>(topic::NAV_SOLUTION, qos::NAVIGATION)
+            .map_err(e)?,
+        diagnostics: bus
+            .publisher::<AidDiagnosticsV1>(topic::NAV_AID_DIAGNOSTICS, qos::NAVIGATION)
+            .map_err(e)?,
+        nav_csv: Csv::create(&cfg.output.nav_csv, csv::NAV_HEADER)?,
+        diag_csv: Csv::create(&cfg.output.diagnostics_csv, csv::DIAGNOSTICS_HEADER)?,
+        decimation: u64::from(cfg.output.solution_decimation.max(1)),
+        solutions: 0,
+        published: 0,
+        errors: 0,
+    };
+    let mut health_pub = bus
+        .publisher::<ProcessHealthV1>(topic::HEALTH, qos::HEALTH)
+        .map_err(e)?;
+    let waitset = WaitSetBuilder::new()
+        .create::<ipc::Service>()
+        .map_err(|x| format!("creating the WaitSet: {x:?}"))?;
+    let _guards = listeners
+        .iter()
+        .map(|l| waitset.attach_notification(l))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|x| format!("attaching a listener: {x:?}"))?;
+    let _tick = waitset
+        .attach_interval(Duration::from_millis(50))
+        .map_err(|x| format!("attaching the tick: {x:?}"))?;
+    let mut session = Session::new(&cfg.session());
+    let now = monotonic_ns();
+    let d = &cfg.deadlines;
+    let mut watches = [
+        Watch::new("imu", d.imu_s, now),
+        Watch::new("dvl", d.dvl_s, now),
+        Watch::new("depth", d.depth_s, now),
+        Watch::new("usbl", d.usbl_s, now),
+        Watch::new("gnss", d.gnss_s, now),
+    ];
+    let mut missed_deadlines = 0u64;
+    let mut usbl_unused = 0u64;
+    let health_ns = (cfg.health_period_s * 1e9) as u64;
+    let mut next_health = 0u64;
+    let mut next_flush = now + 1_000_000_000;
+    let (mut imus, mut dvls, mut depths, mut gnsss, mut usbls) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut state = ProcessState::Starting;
+    eprintln!(
+        "auvnavd: running under {}/ (aid delay {} s, solution every {} IMU samples)",
+        cfg.prefix, cfg.aid_delay_s, cfg.output.solution_decimation
+    );
+    let publish_health = |hp: &mut BusPublisher<ProcessHealthV1>,
+                          out: &Outputs,
+                          session: &Session,
+                          gaps: u64,
+                          missed: u64,
+                          state: ProcessState| {
+        let mut m = ProcessHealthV1 {
+            host_time_ns: monotonic_ns(),
+            frames: out.published,
+            timeouts: missed,
+            drops: gaps + session.late_aids + out.errors,
+            invalid: session.before_start,
+            pid: std::process::id(),
+            state: state as u32,
+            ..Default::default()
+        };
+        m.set_name(&cfg.name);
+        hp.publish(m).map(|_| ())
+    };
+    let result = loop {
+        let r = waitset.wait_and_process_once(|_| CallbackProgression::Continue);
+        match r {
+            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => break Ok(()),
+            Ok(_) => {}
+            Err(x) => break Err(format!("waiting: {x:?}")),
+        }
+        for l in &listeners {
+            let _ = l.try_wait(|_| {});
+        }
+        let now = monotonic_ns();
+        // Aids first, so that IMU samples arriving in the same wake-up find them queued.
+        let step = (|| -> Result<(), BusError> {
+            drain(&mut dvl, &mut dvls)?;
+            drain(&mut depth, &mut depths)?;
+            drain(&mut gnss, &mut gnsss)?;
+            drain(&mut usbl, &mut usbls)?;
+            drain(&mut imu, &mut imus)?;
+            Ok(())
+        })();
+        if let Err(x) = step {
+            break Err(x.to_string());
+        }
+        for (w, n) in watches.iter_mut().zip([
+            imus.len(),
+            dvls.len(),
+            depths.len(),
+            usbls.len(),
+            gnsss.len(),
+        ]) {
+            if n > 0 {
+                w.seen(now);
+            }
+            if w.check(now) {
+                missed_deadlines += 1;
+            }
+        }
+        for m in dvls.drain(..) {
+            session.on_dvl(&m);
+        }
+        for m in depths.drain(..) {
+            session.on_depth(&m);
+        }
+        for m in gnsss.drain(..) {
+            session.on_gnss(&m);
+        }
+        // USBL fusion is not in the core yet: counted.
+        usbl_unused += usbls.len() as u64;
+        usbls.clear();
+        let mut io_error = None;
+        for m in imus.drain(..) {
+            if let Err(x) = session.on_imu(&m, &mut |o| out.on(o)) {
+                io_error = Some(x);
+                break;
+            }
+        }
+        if let Some(x) = io_error {
+            break Err(format!("writing the CSV output: {x}"));
+        }
+        if session.started() {
+            state = ProcessState::Running;
+        }
+        if now >= next_flush {
+            if let Err(x) = out.flush() {
+                break Err(format!("flushing the CSV output: {x}"));
+            }
+            bus.cleanup_dead_nodes();
+            next_flush = now + 1_000_000_000;
+        }
+        if now >= next_health {
+            let gaps = imu.gaps() + dvl.gaps() + depth.gaps() + gnss.gaps();
+            if let Err(x) = publish_health(
+                &mut health_pub,
+                &out,
+                &session,
+                gaps,
+                missed_deadlines,
+                state,
+            ) {
+                break Err(x.to_string());
+            }
+            next_health = now + health_ns;
+        }
+    };
+    let _ = session.finish(&mut |o| out.on(o));
+    let flushed = out.flush();
+    let gaps = imu.gaps() + dvl.gaps() + depth.gaps() + gnss.gaps();
+    let _ = publish_health(
+        &mut health_pub,
+        &out,
+        &session,
+        gaps,
+        missed_deadlines,
+        ProcessState::Stopping,
+    );
+    eprintln!(
+        "auvnavd: stopping; {} solutions ({} published), {} late aid messages, {} lost on the bus, {} missed deadlines, {} USBL fixes not used",
+        out.solutions, out.published, session.late_aids, gaps, missed_deadlines, usbl_unused
+    );
+    result?;
+    flushed.map_err(|x| format!("flushing the CSV output: {x}"))
+}
+
+fn main() -> ExitCode {
+    use clap::Parser;
+    let args = Args::parse();
+    if let Some(path) = &args.check_config {
+        return match DaemonConfig::load(path) {
+            Ok(cfg) => {
+                match toml::to_string_pretty(&cfg) {
+                    Ok(s) => print!("{s}"),
+                    Err(x) => eprintln!("auvnavd: {x}"),
+                }
+                ExitCode::SUCCESS
+            }
+            Err(x) => {
+                eprintln!("auvnavd: {x}");
+                ExitCode::from(2)
+            }
+        };
+    }
+    let Some(path) = &args.config else {
+        eprintln!("auvnavd: --config FILE is required (or --check-config FILE)");
+        return ExitCode::from(2);
+    };
+    let cfg = match DaemonConfig::load(path) {
+        Ok(c) => c,
+        Err(x) => {
+            eprintln!("auvnavd: {x}");
+            return ExitCode::from(2);
+        }
+    };
+    match run(&cfg) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(x) => {
+            eprintln!("auvnavd: {x}");
+            ExitCode::from(1)
+        }
+    }
+}

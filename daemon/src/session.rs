@@ -1,0 +1,284 @@
+//! A navigation session: the navigator together with how it starts, fed sensor messages one at a
+//! time. The daemon runs it on live messages and `auvnav replay` on a log's, in the same order, so
+//! that the same messages give the same solutions bit for bit.
+
+use crate::earth::Geodetic;
+use crate::navigator::{NavConfig, Navigator, initial_state};
+use crate::strapdown::NavState;
+use auvnav_shm_schema::{
+    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, NavSolutionV1,
+};
+use serde::{Deserialize, Serialize};
+
+/// An initial state given in the configuration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InitialState {
+    /// Latitude (deg, WGS-84).
+    pub latitude_deg: f64,
+    /// Longitude (deg).
+    pub longitude_deg: f64,
+    /// Height above the ellipsoid (m; negative below it).
+    pub height_m: f64,
+    /// Velocity (m/s, NED; default 0).
+    #[serde(default)]
+    pub velocity_ned_m_s: [f64; 3],
+    /// Roll, pitch, yaw (deg).
+    pub euler_deg: [f64; 3],
+}
+
+impl InitialState {
+    /// The navigation state at `time_s`.
+    pub fn state(&self, time_s: f64) -> NavState {
+        initial_state(
+            time_s,
+            Geodetic {
+                latitude_rad: self.latitude_deg.to_radians(),
+                longitude_rad: self.longitude_deg.to_radians(),
+                height_m: self.height_m,
+            },
+            self.velocity_ned_m_s,
+            self.euler_deg.map(f64::to_radians),
+        )
+    }
+}
+
+/// The navigation part of a configuration: `[navigation]` (the core's [`NavConfig`]), an
+/// optional `[initial]` state and the aid delay.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SessionConfig {
+    /// An aid message stamped t is applied just before the first IMU sample stamped later than
+    /// t + aid_delay_s (s, 0..1; default 0). Live, the delay gives aid messages from other
+    /// processes time to arrive before the IMU passes them, so the order of processing depends
+    /// only on the time stamps, and a replay of the recording reproduces it exactly; the daemon
+    /// uses 0.02 s.
+    pub aid_delay_s: f64,
+    pub navigation: NavConfig,
+    pub initial: Option<InitialState>,
+}
+
+/// One output of the session.
+#[derive(Debug, Clone, Copy)]
+pub enum SessionOutput<'a> {
+    Solution(&'a NavSolutionV1),
+    Diagnostics(&'a AidDiagnosticsV1),
+}
+
+/// Where the initial state came from, stated in the outputs of the tools.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct InitialReport {
+    pub source: &'static str,
+    pub time_s: f64,
+    pub latitude_deg: f64,
+    pub longitude_deg: f64,
+    pub height_m: f64,
+    pub velocity_ned_m_s: [f64; 3],
+    pub euler_deg: [f64; 3],
+}
+
+/// An aid message waiting for its turn.
+#[derive(Debug, Clone, Copy)]
+enum Aid {
+    Dvl(DvlVelocityV1),
+    Depth(DepthV1),
+    Gnss(GnssFixV1),
+}
+
+impl Aid {
+    /// Order of processing: time stamp, then kind, then the publisher's sequence number.
+    fn key(&self) -> (u64, u8, u64) {
+        match self {
+            Aid::Dvl(m) => (m.host_time_ns, 0, m.sequence),
+            Aid::Depth(m) => (m.host_time_ns, 1, m.sequence),
+            Aid::Gnss(m) => (m.host_time_ns, 2, m.sequence),
+        }
+    }
+}
+
+struct Pending(Aid);
+
+impl PartialEq for Pending {
+    fn eq(&self, o: &Self) -> bool {
+        self.0.key() == o.0.key()
+    }
+}
+impl Eq for Pending {}
+impl PartialOrd for Pending {
+    fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl Ord for Pending {
+    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
+        // Reversed: the heap pops the earliest first.
+        o.0.key().cmp(&self.0.key())
+    }
+}
+
+/// The navigator, its start and the order in which aid messages meet the IMU stream.
+pub struct Session {
+    cfg: NavConfig,
+    configured_initial: Option<InitialState>,
+    nav: Option<Navigator>,
+    initial: Option<InitialReport>,
+    aid_delay_ns: u64,
+    pending: std::collections::BinaryHeap<Pending>,
+    last_imu_ns: u64,
+    /// Sensor messages before the initial state was known (skipped).
+    pub before_start: u64,
+    /// Aid messages that arrived after the IMU had passed their time + delay (applied at the
+    /// next IMU sample; a replay cannot reproduce their timing exactly).
+    pub late_aids: u64,
+}
+
+impl Session {
+    pub fn new(cfg: &SessionConfig) -> Session {
+        Session {
+            cfg: cfg.navigation.clone(),
+            configured_initial: cfg.initial.clone(),
+            nav: None,
+            initial: None,
+            aid_delay_ns: (cfg.aid_delay_s.clamp(0.0, 1.0) * 1e9).round() as u64,
+            pending: std::collections::BinaryHeap::new(),
+            last_imu_ns: 0,
+            before_start: 0,
+            late_aids: 0,
+        }
+    }
+
+    /// Aid messages queued and not yet applied.
+    pub fn pending_aids(&self) -> usize {
+        self.pending.len()
+    }
+
+    pub fn navigator(&self) -> Option<&Navigator> {
+        self.nav.as_ref()
+    }
+
+    pub fn initial(&self) -> Option<&InitialReport> {
+        self.initial.as_ref()
+    }
+
+    /// The configuration gives the initial state (otherwise the caller starts the session).
+    pub fn has_configured_initial(&self) -> bool {
+        self.configured_initial.is_some()
+    }
+
+    pub fn started(&self) -> bool {
+        self.nav.is_some()
+    }
+
+    /// Starts navigating from `state`; the initial solution goes to `out`.
+    pub fn start<E>(
+        &mut self,
+        state: NavState,
+        source: &'static str,
+        out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
+    ) -> Result<(), E> {
+        let e = state.euler();
+        self.initial = Some(InitialReport {
+            source,
+            time_s: state.time_s,
+            latitude_deg: state.position.latitude_rad.to_degrees(),
+            longitude_deg: state.position.longitude_rad.to_degrees(),
+            height_m: state.position.height_m,
+            velocity_ned_m_s: state.velocity_ned.into(),
+            euler_deg: e.map(f64::to_degrees),
+        });
+        let mut nav = Navigator::new(self.cfg.clone(), state);
+        let t_ns = (state.time_s * 1e9).round() as u64;
+        let sol = nav.solution(t_ns);
+        out(SessionOutput::Solution(&sol))?;
+        self.nav = Some(nav);
+        Ok(())
+    }
+
+    /// An IMU sample. Aid messages due before it are applied first. With a configured initial
+    /// state, the first sample starts the session at its time (and is not integrated: there is
+    /// no interval before it).
+    pub fn on_imu<E>(
+        &mut self,
+        x: &ImuSampleV1,
+        out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
+    ) -> Result<(), E> {
+        while let Some(p) = self.pending.peek() {
+            if p.0.key().0.saturating_add(self.aid_delay_ns) >= x.host_time_ns {
+                break;
+            }
+            let Some(Pending(aid)) = self.pending.pop() else {
+                break;
+            };
+            self.apply(aid, out)?;
+        }
+        self.last_imu_ns = self.last_imu_ns.max(x.host_time_ns);
+        if self.nav.is_none()
+            && let Some(i) = self.configured_initial.clone()
+        {
+            let state = i.state(x.host_time_ns as f64 * 1e-9);
+            self.start(state, "[initial] table of the configuration", out)?;
+            if let Some(nav) = self.nav.as_mut() {
+                nav.start_at_imu(x);
+            }
+            return Ok(());
+        }
+        let Some(nav) = self.nav.as_mut() else {
+            self.before_start += 1;
+            return Ok(());
+        };
+        if let Some(sol) = nav.on_imu(x) {
+            out(SessionOutput::Solution(&sol))?;
+        }
+        Ok(())
+    }
+
+    fn apply<E>(
+        &mut self,
+        aid: Aid,
+        out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
+    ) -> Result<(), E> {
+        let Some(nav) = self.nav.as_mut() else {
+            self.before_start += 1;
+            return Ok(());
+        };
+        let d = match aid {
+            Aid::Dvl(m) => nav.on_dvl(&m),
+            Aid::Depth(m) => nav.on_depth(&m),
+            Aid::Gnss(m) => nav.on_gnss(&m),
+        };
+        out(SessionOutput::Diagnostics(&d))
+    }
+
+    /// Applies the aid messages still queued (at the end of a log, or when the daemon stops).
+    pub fn finish<E>(
+        &mut self,
+        out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
+    ) -> Result<(), E> {
+        while let Some(Pending(aid)) = self.pending.pop() {
+            self.apply(aid, out)?;
+        }
+        Ok(())
+    }
+
+    fn queue(&mut self, aid: Aid) {
+        if aid.key().0.saturating_add(self.aid_delay_ns) < self.last_imu_ns {
+            self.late_aids += 1;
+        }
+        self.pending.push(Pending(aid));
+    }
+
+    /// A DVL message (applied before the first IMU sample after its time + the aid delay).
+    pub fn on_dvl(&mut self, x: &DvlVelocityV1) {
+        self.queue(Aid::Dvl(*x));
+    }
+
+    /// A depth message (queued like DVL).
+    pub fn on_depth(&mut self, x: &DepthV1) {
+        self.queue(Aid::Depth(*x));
+    }
+
+    /// A GNSS fix (queued like DVL).
+    pub fn on_gnss(&mut self, x: &GnssFixV1) {
+        self.queue(Aid::Gnss(*x));
+    }
+}

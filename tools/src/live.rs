@@ -1,0 +1,434 @@
+//! `auvnav demo` with real processes: simulates a voyage, then runs the on-board chain on it —
+//! device emulators on pseudo-terminals, the serial drivers, the CAN driver fed from a candump
+//! log, the fusion daemon and the recorder, each its own process talking through shared memory —
+//! stops them cleanly and reports the live navigation accuracy against the simulated truth. It
+//! then replays the recording through `auvnav replay` and says whether the replayed solution is
+//! byte-identical to the live one.
+
+use crate::accuracy::{Accuracy, AccuracyTracker};
+use crate::log::{LogMessage, LogReader};
+use crate::replay::interpolate;
+use crate::sim::{self, SimConfig, scenario::Scenario};
+use anyhow::{Context, bail};
+use auvnav_drivers::can::DbcDecoder;
+use auvnav_drivers::can_driver::SAMPLE_DBC;
+use auvnav_shm_schema::{NavSolutionV1, TruthStateV1};
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// What the live demo reports.
+#[derive(Debug, Serialize)]
+pub struct LiveResult {
+    pub scenario: String,
+    pub seed: u64,
+    pub simulated_seconds: f64,
+    pub speed: f64,
+    pub directory: String,
+    pub record: String,
+    pub live_nav_csv: String,
+    pub solutions: u64,
+    pub accuracy: Accuracy,
+    /// `auvnav replay DIR/record.mcap --out DIR/replay_nav.csv` gave a byte-identical file.
+    pub replay_identical: bool,
+    /// Every process stopped cleanly (exit status 0 after SIGTERM).
+    pub clean_stop: bool,
+    pub wall_seconds: f64,
+    /// Per-process last lines of standard error (their summaries).
+    pub process_reports: Vec<(String, String)>,
+}
+
+struct Process {
+    name: String,
+    child: Child,
+    stderr: PathBuf,
+}
+
+impl Process {
+    fn spawn(name: &str, dir: &Path, cmd: &mut Command) -> anyhow::Result<Process> {
+        let stderr = dir.join(format!("{name}.log"));
+        let file = std::fs::File::create(&stderr)?;
+        let child = cmd
+            .stdout(Stdio::null())
+            .stderr(file)
+            .spawn()
+            .with_context(|| format!("starting {name}"))?;
+        Ok(Process {
+            name: name.to_string(),
+            child,
+            stderr,
+        })
+    }
+
+    /// SIGTERM, then wait; SIGKILL after `timeout`. True for a clean exit.
+    fn stop(&mut self, timeout: Duration) -> bool {
+        let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
+        let _ = nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM);
+        self.wait(timeout)
+    }
+
+    fn wait(&mut self, timeout: Duration) -> bool {
+        let end = Instant::now() + timeout;
+        while Instant::now() < end {
+            if let Ok(Some(s)) = self.child.try_wait() {
+                return s.success();
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        false
+    }
+
+    fn report(&self) -> String {
+        std::fs::read_to_string(&self.stderr)
+            .unwrap_or_default()
+            .lines()
+            .last()
+            .unwrap_or_default()
+            .to_string()
+    }
+}
+
+impl Drop for Process {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+/// A workspace binary next to this program.
+fn sibling(name: &str) -> anyhow::Result<PathBuf> {
+    let exe = std::env::current_exe()?;
+    let path = exe.parent().context("executable directory")?.join(name);
+    if !path.exists() {
+        bail!(
+            "{} not found: the demo runs the drivers and the daemon as processes; build them \
+             with `cargo build --release` (all binaries), or run `auvnav demo --in-process`",
+            path.display()
+        );
+    }
+    Ok(path)
+}
+
+/// Parses the solution CSV written by the daemon or the replay.
+pub fn read_nav_csv(path: &Path) -> anyhow::Result<Vec<NavSolutionV1>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        if f.len() != 16 {
+            bail!(
+                "{}:{}: {} fields, expected 16",
+                path.display(),
+                i + 1,
+                f.len()
+            );
+        }
+        let n = |k: usize| -> anyhow::Result<f64> {
+            f[k].parse()
+                .with_context(|| format!("{}:{}: field {k}", path.display(), i + 1))
+        };
+        out.push(NavSolutionV1 {
+            host_time_ns: f[0].parse()?,
+            sequence: f[1].parse()?,
+            latitude_rad: n(2)?,
+            longitude_rad: n(3)?,
+            height_m: n(4)?,
+            velocity_ned_m_s: [n(5)?, n(6)?, n(7)?],
+            euler_rad: [n(8)?, n(9)?, n(10)?],
+            position_std_ned_m: [n(11)?, n(12)?, n(13)?],
+            mode: f[14].parse()?,
+            sensor_health: f[15].parse()?,
+            ..Default::default()
+        });
+    }
+    Ok(out)
+}
+
+/// Compares live solutions (host time) with the simulated truth (simulated time). The daemon
+/// starts at the first IMU sample it receives: host time `h0` is simulated time `t0`; later times
+/// map at the playback speed.
+pub fn live_accuracy(
+    nav: &[NavSolutionV1],
+    truth: &[TruthStateV1],
+    t0_ns: u64,
+    speed: f64,
+) -> Accuracy {
+    let mut tracker = AccuracyTracker::new(100.0);
+    let Some(first) = nav.first() else {
+        return tracker.result();
+    };
+    let h0 = first.host_time_ns;
+    let mut k = 0;
+    for t in truth {
+        if t.host_time_ns < t0_ns {
+            continue;
+        }
+        let h = h0 + ((t.host_time_ns - t0_ns) as f64 / speed) as u64;
+        while k + 1 < nav.len() && nav[k + 1].host_time_ns < h {
+            k += 1;
+        }
+        if k + 1 >= nav.len() {
+            break;
+        }
+        let sol = interpolate(&nav[k], &nav[k + 1], h);
+        tracker.add(&sol, t);
+    }
+    tracker.result()
+}
+
+fn write_candump(path: &Path, depths: &[auvnav_shm_schema::DepthV1]) -> anyhow::Result<()> {
+    let dbc = DbcDecoder::from_dbc(SAMPLE_DBC)?;
+    let mut text = String::new();
+    for (i, d) in depths.iter().enumerate() {
+        let bar = (101_325.0 + 1025.0 * 9.806_65 * d.depth_m) / 1e5;
+        let f = dbc
+            .encode(
+                "PressureSensor",
+                &[
+                    ("Pressure", bar),
+                    ("Temperature", 10.0),
+                    ("Counter", (i % 256) as f64),
+                ],
+            )
+            .context("encoding a pressure frame")?;
+        let hex: String = f.data.iter().map(|b| format!("{b:02X}")).collect();
+        let t = d.host_time_ns as f64 * 1e-9;
+        writeln!(text, "({t:.6}) can0 {:03X}#{hex}", f.id)?;
+    }
+    std::fs::write(path, text)?;
+    Ok(())
+}
+
+/// Runs the live demo.
+pub fn run_live(
+    scenario_name: &str,
+    seed: u64,
+    seconds: f64,
+    speed: f64,
+    out: Option<&Path>,
+) -> anyhow::Result<LiveResult> {
+    if !(speed.is_finite() && (0.1..=20.0).contains(&speed)) {
+        bail!("--speed {speed}: expected 0.1..=20");
+    }
+    if !(seconds.is_finite() && seconds > 1.0) {
+        bail!("--seconds {seconds}: expected more than 1 s");
+    }
+    let binaries = [
+        "auvnavd",
+        "auvnav-dvl",
+        "auvnav-imu",
+        "auvnav-usbl",
+        "auvnav-can",
+    ]
+    .iter()
+    .map(|b| sibling(b))
+    .collect::<anyhow::Result<Vec<_>>>()?;
+    let [daemon, dvl_bin, imu_bin, usbl_bin, can_bin] = &binaries[..] else {
+        bail!("binaries");
+    };
+    let me = std::env::current_exe()?;
+    let start = Instant::now();
+    let dir = match out {
+        Some(d) => d.to_path_buf(),
+        None => std::env::temp_dir().join(format!("auvnav-demo-{}", std::process::id())),
+    };
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let prefix = format!("demo{}", std::process::id());
+
+    // 1. The voyage.
+    let scenario = Scenario::load(scenario_name)?;
+    let effects = scenario.effects()?;
+    let rates = scenario.rates.clone();
+    let cfg = SimConfig {
+        scenario,
+        effects,
+        seed,
+        duration_s: Some(seconds),
+    };
+    let voyage = dir.join("voyage.mcap");
+    sim::simulate_to_log(&cfg, &voyage)?;
+    let mut truth = Vec::new();
+    let mut depths = Vec::new();
+    let mut first_imu_ns = None;
+    let mut reader = LogReader::open(&voyage)?;
+    while let Some(raw) = reader.next_message()? {
+        match raw.decode_any()? {
+            LogMessage::Truth(t) => truth.push(t),
+            LogMessage::Depth(d) => depths.push(d),
+            LogMessage::Imu(i) => {
+                first_imu_ns.get_or_insert(i.host_time_ns);
+            }
+            _ => {}
+        }
+    }
+    let t0 = truth.first().context("the simulation wrote no truth")?;
+    let t0_ns = first_imu_ns.context("the simulation wrote no IMU sample")?;
+    write_candump(&dir.join("depth.candump"), &depths)?;
+
+    // 2. Configurations.
+    let [roll, pitch, yaw] = t0.euler_rad.map(f64::to_degrees);
+    let daemon_cfg = dir.join("auvnavd.toml");
+    std::fs::write(
+        &daemon_cfg,
+        format!(
+            "prefix = \"{prefix}\"\naid_delay_s = 0.02\nhealth_period_s = 0.5\n\n\
+             [navigation]\nimu_dt_from_device_time = true\n\n\
+             [initial]\nlatitude_deg = {:?}\nlongitude_deg = {:?}\nheight_m = {:?}\n\
+             velocity_ned_m_s = {:?}\neuler_deg = [{roll:?}, {pitch:?}, {yaw:?}]\n\n\
+             [output]\nnav_csv = \"{}\"\n",
+            t0.latitude_rad.to_degrees(),
+            t0.longitude_rad.to_degrees(),
+            t0.height_m,
+            t0.velocity_ned_m_s,
+            dir.join("live_nav.csv").display()
+        ),
+    )?;
+    let dev = dir.join("dev");
+    let driver_cfg = |class: &str, protocol: &str, extra: &str| -> anyhow::Result<PathBuf> {
+        let p = dir.join(format!("{class}.toml"));
+        std::fs::write(
+            &p,
+            format!(
+                "prefix = \"{prefix}\"\nprotocol = \"{protocol}\"\n[serial]\nport = \"{}\"\nbaud = 921600\n{extra}\
+                 [timing]\nreconnect_initial_s = 0.02\nreconnect_max_s = 0.5\nhealth_period_s = 0.5\n",
+                dev.join(class).display()
+            ),
+        )?;
+        Ok(p)
+    };
+    let dvl_cfg = driver_cfg("dvl", "pd0", "")?;
+    let imu_cfg = driver_cfg(
+        "imu",
+        "kvh1750",
+        &format!(
+            "[settings.kvh]\nincrements = false\ndegrees = false\nrate_hz = {}\ntemperature_centi = false\n",
+            rates.imu_hz
+        ),
+    )?;
+    let usbl_cfg = driver_cfg("usbl", "seatrac", "")?;
+    let can_cfg = dir.join("can.toml");
+    std::fs::write(
+        &can_cfg,
+        format!("prefix = \"{prefix}\"\nhealth_period_s = 0.5\n"),
+    )?;
+
+    // 3. Processes: recorder and daemon first, so they see every message; then the drivers.
+    let record = dir.join("record.mcap");
+    let mut recorder = Process::spawn(
+        "record",
+        &dir,
+        Command::new(&me)
+            .arg("record")
+            .arg("--out")
+            .arg(&record)
+            .args(["--prefix", &prefix])
+            .arg("--embed-config")
+            .arg(&daemon_cfg),
+    )?;
+    let mut daemon_p = Process::spawn(
+        "auvnavd",
+        &dir,
+        Command::new(daemon).arg("--config").arg(&daemon_cfg),
+    )?;
+    let mut drivers = vec![
+        Process::spawn(
+            "auvnav-dvl",
+            &dir,
+            Command::new(dvl_bin).arg("--config").arg(&dvl_cfg),
+        )?,
+        Process::spawn(
+            "auvnav-imu",
+            &dir,
+            Command::new(imu_bin).arg("--config").arg(&imu_cfg),
+        )?,
+        Process::spawn(
+            "auvnav-usbl",
+            &dir,
+            Command::new(usbl_bin).arg("--config").arg(&usbl_cfg),
+        )?,
+    ];
+    std::thread::sleep(Duration::from_millis(500));
+    let start_delay = 1.5;
+    let mut emulator = Process::spawn(
+        "emulate",
+        &dir,
+        Command::new(&me)
+            .arg("emulate")
+            .arg(&voyage)
+            .args(["--dvl", "pd0", "--imu", "kvh1750", "--usbl", "seatrac"])
+            .args(["--speed", &speed.to_string()])
+            .arg("--link-dir")
+            .arg(&dev)
+            .args(["--start-delay", &start_delay.to_string()]),
+    )?;
+    // The depth sensor's frames start with the other devices' (the emulator's start delay).
+    std::thread::sleep(Duration::from_secs_f64(start_delay));
+    drivers.push(Process::spawn(
+        "auvnav-can",
+        &dir,
+        Command::new(can_bin)
+            .arg("--config")
+            .arg(&can_cfg)
+            .arg("--candump")
+            .arg(dir.join("depth.candump"))
+            .args(["--speed", &speed.to_string()]),
+    )?);
+    let play = Duration::from_secs_f64(seconds / speed + 30.0);
+    let mut clean = emulator.wait(play);
+    std::thread::sleep(Duration::from_millis(500));
+    // 4. Stop: drivers (the CAN replay ends by itself), then the daemon, then the recorder.
+    for d in &mut drivers {
+        let ok = if d.name == "auvnav-can" {
+            d.wait(Duration::from_secs(10))
+        } else {
+            d.stop(Duration::from_secs(10))
+        };
+        clean &= ok;
+    }
+    std::thread::sleep(Duration::from_millis(200));
+    clean &= daemon_p.stop(Duration::from_secs(10));
+    std::thread::sleep(Duration::from_millis(200));
+    clean &= recorder.stop(Duration::from_secs(10));
+    let mut process_reports: Vec<(String, String)> = Vec::new();
+    for p in drivers.iter().chain([&daemon_p, &recorder, &emulator]) {
+        process_reports.push((p.name.clone(), p.report()));
+    }
+
+    // 5. Accuracy of the live solution, and the replay of the recording.
+    let live_csv = dir.join("live_nav.csv");
+    let nav = read_nav_csv(&live_csv)?;
+    let accuracy = live_accuracy(&nav, &truth, t0_ns, speed);
+    let replay_csv = dir.join("replay_nav.csv");
+    let status = Command::new(&me)
+        .arg("replay")
+        .arg(&record)
+        .arg("--out")
+        .arg(&replay_csv)
+        .stdout(Stdio::null())
+        .status()
+        .context("running auvnav replay")?;
+    let replay_identical =
+        status.success() && std::fs::read(&live_csv).ok() == std::fs::read(&replay_csv).ok();
+    Ok(LiveResult {
+        scenario: cfg.scenario.name.clone(),
+        seed,
+        simulated_seconds: seconds,
+        speed,
+        directory: dir.display().to_string(),
+        record: record.display().to_string(),
+        live_nav_csv: live_csv.display().to_string(),
+        solutions: nav.len() as u64,
+        accuracy,
+        replay_identical,
+        clean_stop: clean,
+        wall_seconds: start.elapsed().as_secs_f64(),
+        process_reports,
+    })
+}

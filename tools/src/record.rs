@@ -1,0 +1,303 @@
+//! `auvnav record`: subscribes to every topic of a deployment (and the drivers' raw-byte channels
+//! when asked) and writes them to an MCAP log.
+//!
+//! Crash safety: the log is written in chunks and flushed (and synced to the disk) every
+//! `--flush-s` seconds, so a killed recorder or a power cut loses at most that much; streaming
+//! readers read such a file up to its last flushed chunk, and `auvnav record --recover FILE`
+//! rewrites it as a complete, indexed log. Losses on the bus show as sequence gaps and are
+//! counted per topic. A write error (a full disk) stops the recorder with a report; what was
+//! flushed before stays readable.
+
+use crate::log::{LogError, LogHeader, LogReader, LogWriter, write_log_atomically};
+use anyhow::{Context, bail};
+use auvnav_shm_schema::bus::{Bus, BusSubscriber, Sequenced};
+use auvnav_shm_schema::{
+    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, Message,
+    NavSolutionV1, ProcessHealthV1, RawBytesV1, TruthStateV1, UsblFixV1, qos, topic,
+};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+#[derive(Debug, clap::Args)]
+pub struct RecordArgs {
+    /// The log to write (MCAP).
+    #[arg(long, required_unless_present = "recover")]
+    pub out: Option<PathBuf>,
+    /// Service-name prefix of the deployment.
+    #[arg(long, default_value = topic::DEFAULT_PREFIX)]
+    pub prefix: String,
+    /// Also record the raw bytes of these drivers (`raw/<name>`; repeatable).
+    #[arg(long = "raw", value_name = "DRIVER")]
+    pub raw: Vec<String>,
+    /// Flush and sync the log this often (s, 0.05..60).
+    #[arg(long, default_value_t = 1.0)]
+    pub flush_s: f64,
+    /// Stop after this many seconds (default: run until SIGTERM/SIGINT).
+    #[arg(long)]
+    pub seconds: Option<f64>,
+    /// Store this configuration file (TOML) in the log header, so that `auvnav replay` runs the
+    /// log with the daemon's configuration.
+    #[arg(long)]
+    pub embed_config: Option<PathBuf>,
+    /// Rewrite a log whose writer was killed as a complete, indexed log (to --out, or
+    /// FILE.recovered.mcap), then exit.
+    #[arg(long, value_name = "FILE")]
+    pub recover: Option<PathBuf>,
+    /// Print the summary as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Per-topic counts of a recording.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct TopicCount {
+    pub messages: u64,
+    /// Messages lost on the bus (sequence gaps seen by the recorder's subscriber).
+    pub gaps: u64,
+}
+
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct RecordSummary {
+    pub out: String,
+    pub messages: u64,
+    pub flushes: u64,
+    pub seconds: f64,
+    pub topics: BTreeMap<String, TopicCount>,
+    /// Why recording stopped early (a write error), if it did.
+    pub error: Option<String>,
+}
+
+trait Drain {
+    /// Moves every waiting message into the log; returns how many.
+    fn drain(&mut self, log: &mut LogWriter<BufWriter<std::fs::File>>) -> Result<u64, LogError>;
+    fn topic(&self) -> &str;
+    fn gaps(&self) -> u64;
+}
+
+struct Channel<T: Message + Sequenced> {
+    topic: String,
+    sub: BusSubscriber<T>,
+}
+
+impl<T: Message + Sequenced> Drain for Channel<T> {
+    fn drain(&mut self, log: &mut LogWriter<BufWriter<std::fs::File>>) -> Result<u64, LogError> {
+        let mut n = 0;
+        // A receive error is a bus fault, not a log fault: it ends this drain and is retried.
+        while let Ok(Some(m)) = self.sub.receive() {
+            log.write(&self.topic, &m)?;
+            n += 1;
+        }
+        Ok(n)
+    }
+    fn topic(&self) -> &str {
+        &self.topic
+    }
+    fn gaps(&self) -> u64 {
+        self.sub.gaps()
+    }
+}
+
+fn channel<T: Message + Sequenced + 'static>(
+    bus: &Bus,
+    name: &str,
+    q: qos::ServiceQos,
+) -> anyhow::Result<Box<dyn Drain>> {
+    Ok(Box::new(Channel {
+        topic: name.to_string(),
+        sub: bus.subscriber::<T>(name, q)?,
+    }))
+}
+
+/// Rewrites the readable part of `path` as a complete log at `out`; returns the messages kept.
+pub fn recover(path: &Path, out: &Path) -> anyhow::Result<(u64, Option<String>)> {
+    let mut reader =
+        LogReader::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let header = reader
+        .read_header()
+        .with_context(|| format!("reading the header of {}", path.display()))?;
+    let mut stopped = None;
+    let mut kept = 0;
+    write_log_atomically(out, &header, |w| {
+        loop {
+            match reader.next_message() {
+                Ok(Some(m)) => {
+                    w.write_raw(&m)?;
+                    kept += 1;
+                }
+                Ok(None) => break,
+                Err(e @ (LogError::Truncated | LogError::Mcap(_))) => {
+                    stopped = Some(e.to_string());
+                    break;
+                }
+                Err(e) => return Err(e.into()),
+            }
+        }
+        Ok(())
+    })?;
+    Ok((kept, stopped))
+}
+
+/// Runs `auvnav record`.
+pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
+    if let Some(src) = &a.recover {
+        let out = a
+            .out
+            .clone()
+            .unwrap_or_else(|| src.with_extension("recovered.mcap"));
+        let (kept, stopped) = recover(src, &out)?;
+        let summary = RecordSummary {
+            out: out.display().to_string(),
+            messages: kept,
+            error: stopped,
+            ..Default::default()
+        };
+        print(a.json, &summary);
+        return Ok(summary);
+    }
+    let Some(out) = &a.out else {
+        bail!("--out FILE is required");
+    };
+    if !(a.flush_s.is_finite() && (0.05..=60.0).contains(&a.flush_s)) {
+        bail!("--flush-s {}: expected 0.05..=60 s", a.flush_s);
+    }
+    let config = match &a.embed_config {
+        Some(p) => {
+            std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?
+        }
+        None => String::new(),
+    };
+    let mut header = LogHeader::new("auvnav record", &config);
+    header
+        .notes
+        .insert("record.prefix".into(), a.prefix.clone());
+    let bus = Bus::new(&format!("record{}", std::process::id()), &a.prefix)?;
+    let mut channels: Vec<Box<dyn Drain>> = vec![
+        channel::<ImuSampleV1>(&bus, topic::IMU, qos::SENSOR)?,
+        channel::<DvlVelocityV1>(&bus, topic::DVL, qos::SENSOR)?,
+        channel::<UsblFixV1>(&bus, topic::USBL, qos::SENSOR)?,
+        channel::<DepthV1>(&bus, topic::DEPTH, qos::SENSOR)?,
+        channel::<MagnetometerV1>(&bus, topic::MAGNETOMETER, qos::SENSOR)?,
+        channel::<GnssFixV1>(&bus, topic::GNSS, qos::SENSOR)?,
+        channel::<NavSolutionV1>(&bus, topic::NAV_SOLUTION, qos::NAVIGATION)?,
+        channel::<AidDiagnosticsV1>(&bus, topic::NAV_AID_DIAGNOSTICS, qos::NAVIGATION)?,
+        channel::<ProcessHealthV1>(&bus, topic::HEALTH, qos::HEALTH)?,
+        channel::<TruthStateV1>(&bus, topic::TRUTH, qos::SENSOR)?,
+    ];
+    for r in &a.raw {
+        channels.push(channel::<RawBytesV1>(&bus, &topic::raw(r), qos::RAW)?);
+    }
+    let mut log =
+        LogWriter::create(out, &header).with_context(|| format!("creating {}", out.display()))?;
+    // A second handle to sync the file's data to the disk after each flush.
+    let sync_handle = std::fs::File::open(out).ok();
+    let start = Instant::now();
+    let flush_every = Duration::from_secs_f64(a.flush_s);
+    let mut next_flush = start + flush_every;
+    let mut summary = RecordSummary {
+        out: out.display().to_string(),
+        ..Default::default()
+    };
+    let mut counts = vec![0u64; channels.len()];
+    eprintln!(
+        "auvnav record: {} topics under {}/ -> {}",
+        channels.len(),
+        a.prefix,
+        out.display()
+    );
+    let mut failed: Option<String> = None;
+    'run: loop {
+        if bus.termination_requested() {
+            break;
+        }
+        if a.seconds
+            .is_some_and(|s| start.elapsed().as_secs_f64() >= s)
+        {
+            break;
+        }
+        for (i, c) in channels.iter_mut().enumerate() {
+            match c.drain(&mut log) {
+                Ok(n) => counts[i] += n,
+                Err(e) => {
+                    failed = Some(format!("writing {}: {e}", out.display()));
+                    break 'run;
+                }
+            }
+        }
+        if Instant::now() >= next_flush {
+            if let Err(e) = log.flush() {
+                failed = Some(format!("flushing {}: {e}", out.display()));
+                break;
+            }
+            if let Some(f) = &sync_handle {
+                let _ = f.sync_data();
+            }
+            summary.flushes += 1;
+            next_flush += flush_every;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    if failed.is_none() {
+        for (i, c) in channels.iter_mut().enumerate() {
+            match c.drain(&mut log) {
+                Ok(n) => counts[i] += n,
+                Err(e) => failed = Some(format!("writing {}: {e}", out.display())),
+            }
+        }
+    }
+    summary.seconds = start.elapsed().as_secs_f64();
+    for (i, c) in channels.iter().enumerate() {
+        summary.topics.insert(
+            c.topic().to_string(),
+            TopicCount {
+                messages: counts[i],
+                gaps: c.gaps(),
+            },
+        );
+    }
+    summary.messages = counts.iter().sum();
+    match failed {
+        None => {
+            log.finish()
+                .with_context(|| format!("finishing {}", out.display()))?;
+        }
+        Some(e) => {
+            // Whatever was flushed stays readable; the unfinished tail is not indexed.
+            eprintln!(
+                "auvnav record: {e}; stopped. The log is readable up to its last flush (use \
+                 `auvnav record --recover {}` for an indexed copy).",
+                out.display()
+            );
+            summary.error = Some(e);
+        }
+    }
+    print(a.json, &summary);
+    if summary.error.is_some() {
+        bail!(
+            "recording stopped: {}",
+            summary.error.clone().unwrap_or_default()
+        );
+    }
+    Ok(summary)
+}
+
+fn print(json: bool, s: &RecordSummary) {
+    if json {
+        println!("{}", serde_json::to_string_pretty(s).unwrap_or_default());
+    } else {
+        println!(
+            "auvnav record: {} messages in {:.1} s to {} ({} flushes)",
+            s.messages, s.seconds, s.out, s.flushes
+        );
+        for (t, c) in &s.topics {
+            if c.messages > 0 || c.gaps > 0 {
+                println!("  {t:24} {:>9} messages, {} lost", c.messages, c.gaps);
+            }
+        }
+        if let Some(e) = &s.error {
+            println!("  stopped: {e}");
+        }
+    }
+}
