@@ -111,6 +111,18 @@ fn channel<T: Message + Sequenced + 'static>(
     }))
 }
 
+/// An error with its causes ("writing x: MCAP I/O error: File too large (os error 27)").
+fn with_causes(e: &dyn std::error::Error) -> String {
+    let mut s = e.to_string();
+    let mut source = e.source();
+    while let Some(c) = source {
+        s.push_str(": ");
+        s.push_str(&c.to_string());
+        source = c.source();
+    }
+    s
+}
+
 /// Rewrites the readable part of `path` as a complete log at `out`; returns the messages kept.
 pub fn recover(path: &Path, out: &Path) -> anyhow::Result<(u64, Option<String>)> {
     let mut reader =
@@ -221,14 +233,14 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
             match c.drain(&mut log) {
                 Ok(n) => counts[i] += n,
                 Err(e) => {
-                    failed = Some(format!("writing {}: {e}", out.display()));
+                    failed = Some(format!("writing {}: {}", out.display(), with_causes(&e)));
                     break 'run;
                 }
             }
         }
         if Instant::now() >= next_flush {
             if let Err(e) = log.flush() {
-                failed = Some(format!("flushing {}: {e}", out.display()));
+                failed = Some(format!("flushing {}: {}", out.display(), with_causes(&e)));
                 break;
             }
             if let Some(f) = &sync_handle {
@@ -243,7 +255,7 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
         for (i, c) in channels.iter_mut().enumerate() {
             match c.drain(&mut log) {
                 Ok(n) => counts[i] += n,
-                Err(e) => failed = Some(format!("writing {}: {e}", out.display())),
+                Err(e) => failed = Some(format!("writing {}: {}", out.display(), with_causes(&e))),
             }
         }
     }
