@@ -92,7 +92,11 @@ fn a_killed_recorder_leaves_a_log_readable_to_its_last_flush() {
         .iter()
         .filter(|(t, _)| killed_at.duration_since(*t) > Duration::from_millis(1200))
         .count();
-    assert!(got.len() >= must && must > 500, "{} read, {must} expected", got.len());
+    assert!(
+        got.len() >= must && must > 500,
+        "{} read, {must} expected",
+        got.len()
+    );
     for (k, m) in got.iter().enumerate() {
         assert_eq!(m.angular[0], k as f64, "message {k}");
     }
@@ -112,7 +116,11 @@ fn a_killed_recorder_leaves_a_log_readable_to_its_last_flush() {
     let summary = mcap::read::Summary::read(&std::fs::read(&fixed).expect("read"))
         .expect("summary")
         .expect("an indexed file has a summary");
-    assert!(summary.stats.is_some_and(|s| s.message_count >= got.len() as u64));
+    assert!(
+        summary
+            .stats
+            .is_some_and(|s| s.message_count >= got.len() as u64)
+    );
 }
 
 #[test]
@@ -126,7 +134,9 @@ fn a_full_disk_stops_the_recorder_with_a_report_and_keeps_what_was_flushed() {
     let mut rec = start_recorder(&out, &prefix, "ulimit -f 64; trap '' XFSZ;");
     std::thread::sleep(Duration::from_millis(700));
     publish(&bus, 2000.0, 4.0);
-    let status = rec.wait_for(Duration::from_secs(10)).expect("the recorder stopped by itself");
+    let status = rec
+        .wait_for(Duration::from_secs(10))
+        .expect("the recorder stopped by itself");
     assert!(!status.success());
     let err = std::fs::read_to_string(out.with_extension("err")).expect("stderr");
     assert!(
