@@ -63,6 +63,16 @@ enum ImportWhat {
 
 #[derive(Subcommand)]
 enum BenchWhat {
+    /// End-to-end latency of the on-board chain with real processes: IMU frame on a
+    /// pseudo-terminal to navigation solution, at 200 Hz and 1 kHz, with DVL, USBL and the
+    /// recorder running; daemon and recorder CPU use.
+    E2e {
+        /// Seconds per IMU rate.
+        #[arg(long, default_value_t = 10.0)]
+        seconds: f64,
+        #[arg(long)]
+        json: bool,
+    },
     /// Decoder throughput per protocol (MB/s).
     Decode {
         #[arg(long, default_value_t = 5)]
@@ -261,6 +271,7 @@ fn main() -> std::process::ExitCode {
                 repeat,
                 json,
             } => auvnav_tools::bench::sim(hours, repeat, json),
+            BenchWhat::E2e { seconds, json } => auvnav_tools::bench::e2e_bench(seconds, json),
             BenchWhat::Decode {
                 repeat,
                 pty_seconds,
