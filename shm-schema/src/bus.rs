@@ -249,11 +249,16 @@ impl<T: Message + Sequenced> BusSubscriber<T> {
         }))
     }
 
-    /// Sleeps until a publisher notifies or `timeout` passes; returns the notifications seen.
+    /// Sleeps until a publisher notifies or `timeout` passes; returns the notifications seen. A
+    /// signal (a child process exiting, a SIGINT handled elsewhere) ends the wait early, as a
+    /// wake-up with no notification.
     pub fn wait(&self, timeout: Duration) -> Result<u64, BusError> {
-        self.listener
-            .timed_wait(|_| {}, timeout)
-            .map_err(|e| err(format!("wait on {:?}", self.service), e))
+        use iceoryx2::port::listener::ListenerWaitError;
+        match self.listener.timed_wait(|_| {}, timeout) {
+            Ok(n) => Ok(n),
+            Err(ListenerWaitError::InterruptSignal) => Ok(0),
+            Err(e) => Err(err(format!("wait on {:?}", self.service), e)),
+        }
     }
 
     /// The listener, to attach to a WaitSet.
