@@ -2,6 +2,7 @@
 //! messages, so the same ordered inputs give bit-identical outputs.
 #![forbid(unsafe_code)]
 
+pub mod align;
 pub mod csv;
 pub mod earth;
 pub mod filter;
