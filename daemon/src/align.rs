@@ -94,6 +94,10 @@ pub struct InMotionAligner {
     c_b_b0: Matrix3<f64>,
     int_f: Vector3<f64>,
     epochs: Vec<Epoch>,
+    /// Latest velocity (body axes), held between DVL measurements.
+    v_hold: Vector3<f64>,
+    /// ∫ C_b^b0 v^b dτ: the path in b0 axes.
+    int_v: Vector3<f64>,
     /// Epochs used as vector pairs (every one by default; more only cost time).
     pub min_epoch_spacing_s: f64,
 }
@@ -109,8 +113,15 @@ impl InMotionAligner {
             c_b_b0: Matrix3::identity(),
             int_f: Vector3::zeros(),
             epochs: Vec::new(),
+            v_hold: Vector3::zeros(),
+            int_v: Vector3::zeros(),
             min_epoch_spacing_s: 1.0,
         }
+    }
+
+    /// Velocity epochs kept so far.
+    pub fn epochs(&self) -> usize {
+        self.epochs.len()
     }
 
     /// Seconds of data so far.
@@ -128,6 +139,7 @@ impl InMotionAligner {
         // Midpoint rule: f rotated by half the interval's rotation.
         let half = Rotation3::new(w * (0.5 * dt)).into_inner();
         self.int_f += self.c_b_b0 * half * f * dt;
+        self.int_v += self.c_b_b0 * half * self.v_hold * dt;
         self.c_b_b0 *= Rotation3::new(w * dt).into_inner();
         // Keep it orthonormal.
         self.c_b_b0 = UnitQuaternion::from_matrix(&self.c_b_b0)
@@ -143,6 +155,7 @@ impl InMotionAligner {
         if self.t0.is_none() {
             return;
         }
+        self.v_hold = v_b.unwrap_or_else(Vector3::zeros);
         if let Some(last) = self.epochs.last()
             && self.t - last.t < self.min_epoch_spacing_s
         {
@@ -159,6 +172,15 @@ impl InMotionAligner {
     /// The body-to-NED rotation at the latest IMU time, or `None` before three epochs.
     pub fn solve(&self) -> Option<Matrix3<f64>> {
         self.solve_with_frame().map(|(c, _)| c)
+    }
+
+    /// The attitude and the distance travelled since the start (m, NED at the latest time) from
+    /// the velocities given, or `None` before three epochs.
+    pub fn solve_with_displacement(&self) -> Option<(Matrix3<f64>, Vector3<f64>)> {
+        let (c_b_n, c_n_n0) = self.solve_with_frame()?;
+        // q = C_b0^n0 = C_n^n0 · C_b^n · (C_b^b0)^T at the latest time.
+        let q = c_n_n0 * c_b_n * self.c_b_b0.transpose();
+        Some((c_b_n, c_n_n0.transpose() * q * self.int_v))
     }
 
     /// The solution and C_n^n0 at the latest epoch.

@@ -2,12 +2,14 @@
 //! time. The daemon runs it on live messages and `auvnav replay` on a log's, in the same order, so
 //! that the same messages give the same solutions bit for bit.
 
+use crate::align::InMotionAligner;
 use crate::earth::Geodetic;
 use crate::navigator::{NavConfig, Navigator, initial_state};
 use crate::strapdown::NavState;
 use auvnav_shm_schema::{
-    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, NavSolutionV1,
+    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, NavMode, NavSolutionV1,
 };
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// An initial state given in the configuration.
@@ -43,6 +45,50 @@ impl InitialState {
     }
 }
 
+/// Initial alignment when the attitude is unknown (`[alignment]`): the position is given, the
+/// attitude found by the coarse aligner (`crate::align`), then refined by the navigation filter
+/// with the DVL (fine alignment) until the heading's standard deviation meets the criterion.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AlignmentConfig {
+    /// Latitude (deg, WGS-84).
+    pub latitude_deg: f64,
+    /// Longitude (deg).
+    pub longitude_deg: f64,
+    /// Height above the ellipsoid (m; negative below it).
+    pub height_m: f64,
+    /// Coarse alignment duration (s, 10..3600; default 120).
+    #[serde(default = "default_coarse_s")]
+    pub coarse_s: f64,
+    /// The vehicle is at rest during coarse alignment: velocity epochs are zero and need no DVL
+    /// (default false: DVL-aided in motion).
+    #[serde(default)]
+    pub moored: bool,
+    /// Heading standard deviation handed to the filter after the coarse stage (deg; default 2).
+    #[serde(default = "default_coarse_heading_std")]
+    pub coarse_heading_std_deg: f64,
+    /// Roll/pitch standard deviation handed to the filter (deg; default 0.05).
+    #[serde(default = "default_coarse_tilt_std")]
+    pub coarse_tilt_std_deg: f64,
+    /// Convergence criterion: the mode becomes navigating when the filter's heading standard
+    /// deviation falls below this (deg; default 0.1).
+    #[serde(default = "default_aligned_heading_std")]
+    pub aligned_heading_std_deg: f64,
+}
+
+fn default_coarse_s() -> f64 {
+    120.0
+}
+fn default_coarse_heading_std() -> f64 {
+    2.0
+}
+fn default_coarse_tilt_std() -> f64 {
+    0.05
+}
+fn default_aligned_heading_std() -> f64 {
+    0.1
+}
+
 /// The navigation part of a configuration: `[navigation]` (the core's [`NavConfig`]), an
 /// optional `[initial]` state and the aid delay.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -56,6 +102,8 @@ pub struct SessionConfig {
     pub aid_delay_s: f64,
     pub navigation: NavConfig,
     pub initial: Option<InitialState>,
+    /// Used when `[initial]` is absent.
+    pub alignment: Option<AlignmentConfig>,
 }
 
 /// One output of the session.
@@ -130,6 +178,13 @@ pub struct Session {
     /// Aid messages that arrived after the IMU had passed their time + delay (applied at the
     /// next IMU sample; a replay cannot reproduce their timing exactly).
     pub late_aids: u64,
+    alignment: Option<AlignmentConfig>,
+    aligner: Option<InMotionAligner>,
+    last_omega: Vector3<f64>,
+    last_velocity_body: Option<Vector3<f64>>,
+    aligning_epochs: usize,
+    aligned: bool,
+    align_sequence: u64,
 }
 
 impl Session {
@@ -144,7 +199,19 @@ impl Session {
             last_imu_ns: 0,
             before_start: 0,
             late_aids: 0,
+            alignment: cfg.alignment.clone(),
+            aligner: None,
+            last_omega: Vector3::zeros(),
+            last_velocity_body: None,
+            aligning_epochs: 0,
+            aligned: cfg.alignment.is_none(),
+            align_sequence: 0,
         }
+    }
+
+    /// True while the attitude is being found (coarse or fine stage).
+    pub fn aligning(&self) -> bool {
+        !self.aligned
     }
 
     /// Aid messages queued and not yet applied.
@@ -163,6 +230,11 @@ impl Session {
     /// The configuration gives the initial state (otherwise the caller starts the session).
     pub fn has_configured_initial(&self) -> bool {
         self.configured_initial.is_some()
+    }
+
+    /// The configuration asks for an initial alignment (no `[initial]`).
+    pub fn has_alignment(&self) -> bool {
+        self.configured_initial.is_none() && self.alignment.is_some()
     }
 
     pub fn started(&self) -> bool {
@@ -212,6 +284,9 @@ impl Session {
             self.apply(aid, out)?;
         }
         self.last_imu_ns = self.last_imu_ns.max(x.host_time_ns);
+        if self.nav.is_none() && self.configured_initial.is_none() && self.alignment.is_some() {
+            return self.coarse(x, out);
+        }
         if self.nav.is_none()
             && let Some(i) = self.configured_initial.clone()
         {
@@ -226,10 +301,158 @@ impl Session {
             self.before_start += 1;
             return Ok(());
         };
-        if let Some(sol) = nav.on_imu(x) {
+        if let Some(mut sol) = nav.on_imu(x) {
+            if !self.aligned {
+                // Fine alignment until the heading meets the convergence criterion.
+                let criterion = self
+                    .alignment
+                    .as_ref()
+                    .map_or(0.0, |a| a.aligned_heading_std_deg.to_radians());
+                if sol.attitude_std_rad[2] < criterion {
+                    self.aligned = true;
+                } else {
+                    sol.mode = NavMode::Aligning as u32;
+                }
+            }
             out(SessionOutput::Solution(&sol))?;
         }
         Ok(())
+    }
+
+    /// Rate and specific force of a sample (increments divided by the interval).
+    fn rates(x: &ImuSampleV1) -> (Vector3<f64>, Vector3<f64>) {
+        let (w, f) = (Vector3::from(x.angular), Vector3::from(x.specific));
+        if x.status & ImuSampleV1::STATUS_INCREMENTS != 0 && x.interval_s > 0.0 {
+            (w / x.interval_s, f / x.interval_s)
+        } else {
+            (w, f)
+        }
+    }
+
+    /// The coarse stage: feeds the aligner; at the end hands over to the navigation filter.
+    fn coarse<E>(
+        &mut self,
+        x: &ImuSampleV1,
+        out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
+    ) -> Result<(), E> {
+        let Some(a) = self.alignment.clone() else {
+            return Ok(());
+        };
+        let valid = ImuSampleV1::STATUS_GYRO_VALID | ImuSampleV1::STATUS_ACCEL_VALID;
+        let (w, f) = Self::rates(x);
+        if x.status & valid != valid
+            || !(x.interval_s > 0.0 && x.interval_s < 1.0)
+            || !w.iter().chain(f.iter()).all(|v| v.is_finite())
+        {
+            self.before_start += 1;
+            return Ok(());
+        }
+        let t = x.host_time_ns as f64 * 1e-9;
+        let aligner = self
+            .aligner
+            .get_or_insert_with(|| InMotionAligner::new(a.latitude_deg.to_radians(), a.height_m));
+        aligner.on_imu(t, &w, &f, x.interval_s);
+        self.last_omega = w;
+        if a.moored {
+            aligner.on_velocity(None);
+        } else if let Some(v) = self.last_velocity_body {
+            aligner.on_velocity(Some(v));
+        }
+        let elapsed = aligner.elapsed_s();
+        let epochs = aligner.epochs();
+        let due = elapsed >= a.coarse_s;
+        // Solve at the hand-over and once per new epoch (1 Hz) for the aligning solution.
+        if !due && epochs <= self.aligning_epochs {
+            return Ok(());
+        }
+        let Some((c_b_n, moved)) = aligner.solve_with_displacement() else {
+            return Ok(());
+        };
+        let start = Geodetic {
+            latitude_rad: a.latitude_deg.to_radians(),
+            longitude_rad: a.longitude_deg.to_radians(),
+            height_m: a.height_m,
+        };
+        // The vehicle moved while aligning: dead reckoning with the found attitude.
+        let position = crate::earth::offset_position(&start, &moved);
+        let v_b = if a.moored {
+            Vector3::zeros()
+        } else {
+            self.last_velocity_body.unwrap_or_else(Vector3::zeros)
+        };
+        let state = NavState {
+            time_s: t,
+            position,
+            velocity_ned: c_b_n * v_b,
+            q_body_to_ned: UnitQuaternion::from_matrix(&c_b_n),
+        };
+        if due {
+            // Hand over: the filter starts from the coarse attitude with its uncertainty.
+            let mut cfg = self.cfg.clone();
+            cfg.initial_heading_std_deg = a.coarse_heading_std_deg;
+            cfg.initial_tilt_std_deg = a.coarse_tilt_std_deg;
+            let saved = std::mem::replace(&mut self.cfg, cfg);
+            let r = self.start(state, "in-motion coarse alignment", &mut |o| match o {
+                SessionOutput::Solution(s) => {
+                    let mut s = *s;
+                    s.mode = NavMode::Aligning as u32;
+                    out(SessionOutput::Solution(&s))
+                }
+                other => out(other),
+            });
+            self.cfg = saved;
+            r?;
+            if let Some(nav) = self.nav.as_mut() {
+                nav.start_at_imu(x);
+            }
+            self.aligner = None;
+            return Ok(());
+        }
+        {
+            // One aligning solution per new epoch (1 Hz): the attitude and position so far.
+            self.aligning_epochs = epochs;
+            self.align_sequence += 1;
+            let e = state.euler();
+            let sol = NavSolutionV1 {
+                host_time_ns: x.host_time_ns,
+                sequence: self.align_sequence,
+                latitude_rad: position.latitude_rad,
+                longitude_rad: position.longitude_rad,
+                height_m: position.height_m,
+                velocity_ned_m_s: state.velocity_ned.into(),
+                quaternion_body_to_ned: {
+                    let q = state.q_body_to_ned;
+                    [q.w, q.i, q.j, q.k]
+                },
+                euler_rad: e,
+                mode: NavMode::Aligning as u32,
+                sensor_health: NavSolutionV1::HEALTH_IMU,
+                ..Default::default()
+            };
+            out(SessionOutput::Solution(&sol))?;
+        }
+        Ok(())
+    }
+
+    /// The DVL velocity in body axes during coarse alignment: mounting, scale and lever arm of
+    /// the configuration applied.
+    fn dvl_body_velocity(&self, m: &DvlVelocityV1) -> Option<Vector3<f64>> {
+        if m.validity & DvlVelocityV1::VALID_VELOCITY == 0 {
+            return None;
+        }
+        let v = Vector3::from(m.velocity_dvl_m_s);
+        if !v.iter().all(|x| x.is_finite()) {
+            return None;
+        }
+        let [r, p, y] = self.cfg.dvl_mount_deg.map(f64::to_radians);
+        let c: Matrix3<f64> = Rotation3::from_euler_angles(r, p, y).into_inner();
+        let scale = if self.cfg.dvl_scale_factor > 0.0 {
+            self.cfg.dvl_scale_factor
+        } else {
+            1.0
+        };
+        let lever = Vector3::from(self.cfg.dvl_lever_arm_m);
+        Some(c * v / scale - self.last_omega.cross(&lever))
     }
 
     fn apply<E>(
@@ -237,6 +460,14 @@ impl Session {
         aid: Aid,
         out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
     ) -> Result<(), E> {
+        if self.nav.is_none()
+            && self.aligner.is_some()
+            && let Aid::Dvl(m) = aid
+        {
+            // Coarse alignment takes the DVL's velocity at the next IMU sample.
+            self.last_velocity_body = self.dvl_body_velocity(&m);
+            return Ok(());
+        }
         let Some(nav) = self.nav.as_mut() else {
             self.before_start += 1;
             return Ok(());

@@ -162,7 +162,10 @@ impl Replay {
                 self.has_truth = true;
                 out(Output::Truth(t))?;
                 self.note_time(t.host_time_ns);
-                if !self.session.started() && !self.session.has_configured_initial() {
+                if !self.session.started()
+                    && !self.session.has_configured_initial()
+                    && !self.session.has_alignment()
+                {
                     let state = initial_state(
                         t.host_time_ns as f64 * 1e-9,
                         Geodetic {
@@ -389,12 +392,13 @@ pub fn diagnostics_csv_path(nav_csv: &Path) -> PathBuf {
 
 pub use auvnav_core::csv::{DIAGNOSTICS_HEADER, write_diagnostics_row};
 
-/// The navigation part (`aid_delay_s`, `[navigation]`, `[initial]`) of a configuration that
+/// The navigation part (`aid_delay_s`, `[navigation]`, `[initial]`, `[alignment]`) of a
+/// configuration that
 /// may hold more (the daemon's, embedded in a recording's header).
 pub fn session_config_from_toml(text: &str) -> anyhow::Result<ReplayConfig> {
     let table: toml::Table = toml::from_str(text).context("parsing the embedded configuration")?;
     let mut keep = toml::Table::new();
-    for key in ["aid_delay_s", "navigation", "initial"] {
+    for key in ["aid_delay_s", "navigation", "initial", "alignment"] {
         if let Some(v) = table.get(key) {
             keep.insert(key.to_string(), v.clone());
         }

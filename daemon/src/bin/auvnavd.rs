@@ -8,7 +8,7 @@
 
 use auvnav_core::csv;
 use auvnav_core::navigator::NavConfig;
-use auvnav_core::session::{InitialState, Session, SessionConfig, SessionOutput};
+use auvnav_core::session::{AlignmentConfig, InitialState, Session, SessionConfig, SessionOutput};
 use auvnav_shm_schema::bus::{Bus, BusError, BusPublisher, BusSubscriber};
 use auvnav_shm_schema::clock::monotonic_ns;
 use auvnav_shm_schema::{
@@ -92,8 +92,10 @@ struct DaemonConfig {
     /// The navigation core's configuration (`auvnav_core::navigator::NavConfig`).
     #[serde(default)]
     navigation: NavConfig,
-    /// Initial state; required until in-motion alignment is available.
+    /// Initial state; when absent, `[alignment]` finds the attitude (position given).
     initial: Option<InitialState>,
+    /// Initial alignment (`auvnav_core::session::AlignmentConfig`): used without `[initial]`.
+    alignment: Option<AlignmentConfig>,
     #[serde(default)]
     output: OutputConfig,
     #[serde(default)]
@@ -142,10 +144,36 @@ impl DaemonConfig {
         ] {
             range(k, v, 0.0, 3600.0)?;
         }
-        if cfg.initial.is_none() {
-            return Err(format!(
-                "{path}: [initial] is required: the daemon does not yet align itself"
-            ));
+        match (&cfg.initial, &cfg.alignment) {
+            (None, None) => {
+                return Err(format!(
+                    "{path}: give [initial] (a known state) or [alignment] (a known position; the \
+                     daemon finds the attitude)"
+                ));
+            }
+            (_, Some(a)) => {
+                range("alignment.coarse_s", a.coarse_s, 10.0, 3600.0)?;
+                range(
+                    "alignment.coarse_heading_std_deg",
+                    a.coarse_heading_std_deg,
+                    0.01,
+                    180.0,
+                )?;
+                range(
+                    "alignment.coarse_tilt_std_deg",
+                    a.coarse_tilt_std_deg,
+                    0.001,
+                    10.0,
+                )?;
+                range(
+                    "alignment.aligned_heading_std_deg",
+                    a.aligned_heading_std_deg,
+                    0.001,
+                    10.0,
+                )?;
+                range("alignment.latitude_deg", a.latitude_deg, -89.0, 89.0)?;
+            }
+            _ => {}
         }
         Ok(cfg)
     }
@@ -155,6 +183,7 @@ impl DaemonConfig {
             aid_delay_s: self.aid_delay_s,
             navigation: self.navigation.clone(),
             initial: self.initial.clone(),
+            alignment: self.alignment.clone(),
         }
     }
 }
