@@ -6,6 +6,7 @@ pub mod align;
 pub mod csv;
 pub mod earth;
 pub mod filter;
+pub mod fine_align;
 pub mod navigator;
 pub mod session;
 pub mod strapdown;

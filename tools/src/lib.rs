@@ -1,4 +1,5 @@
 pub mod accuracy;
+pub mod align;
 pub mod bench;
 pub mod csv;
 pub mod decode;

@@ -31,6 +31,8 @@ enum Command {
     Emulate(auvnav_tools::emulate::EmulateArgs),
     /// Record every topic of a deployment to a log (MCAP); or recover a killed recorder's log.
     Record(auvnav_tools::record::RecordArgs),
+    /// S-ALIGN fine-alignment Monte Carlo: error models 1/2/3 on moored, straight, turning runs.
+    Align(auvnav_tools::align::AlignArgs),
     /// Turn a measured data set into a log.
     Import {
         #[command(subcommand)]
@@ -259,6 +261,14 @@ fn main() -> std::process::ExitCode {
         Command::Decode(a) => auvnav_tools::decode::run(&a).map(|_| ()),
         Command::Emulate(a) => auvnav_tools::emulate::run(&a).map(|_| ()),
         Command::Record(a) => auvnav_tools::record::run(&a).map(|_| ()),
+        Command::Align(a) => auvnav_tools::align::run(&a).and_then(|r| {
+            if a.json {
+                println!("{}", serde_json::to_string_pretty(&r)?);
+            } else {
+                auvnav_tools::align::print(&r);
+            }
+            Ok(())
+        }),
         Command::Montecarlo { what } => match what {
             MonteCarloWhat::Nees(a) => auvnav_tools::montecarlo::run_nees(&a),
         },

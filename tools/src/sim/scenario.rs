@@ -164,6 +164,15 @@ pub const BUILTIN: &[(&str, &str)] = &[
     ("docking", include_str!("scenarios/docking.toml")),
     ("moored", include_str!("scenarios/moored.toml")),
     ("survey", include_str!("scenarios/survey.toml")),
+    ("align_moored", include_str!("scenarios/align_moored.toml")),
+    (
+        "align_straight",
+        include_str!("scenarios/align_straight.toml"),
+    ),
+    (
+        "align_turning",
+        include_str!("scenarios/align_turning.toml"),
+    ),
 ];
 
 impl Scenario {

@@ -1,0 +1,394 @@
+//! `auvnav align`: Monte Carlo comparison of the fine-alignment error models of S-ALIGN
+//! (`auvnav_core::fine_align`) on simulated voyages (`align_moored`, `align_straight`,
+//! `align_turning`: 2 m/s, 1200 s). Every run simulates the voyage once with the seed's sensors
+//! and a random DVL installation, then runs each selected model on the same data from the same
+//! perturbed initial state. Runs are spread over the available cores; each run depends only on
+//! its seed, so the result does not depend on the number of threads.
+
+use crate::log::LogMessage;
+use crate::sim::rng::Rng;
+use crate::sim::{self, SimConfig, effects::Effects, scenario::Scenario};
+use anyhow::{Context, bail};
+use auvnav_core::earth::{Geodetic, ned_offset, offset_position};
+use auvnav_core::fine_align::{ErrorModel, FineAlignConfig, FineAligner};
+use auvnav_core::strapdown::NavState;
+use auvnav_shm_schema::{DvlVelocityV1, TruthStateV1};
+use nalgebra::{UnitQuaternion, Vector3};
+use serde::Serialize;
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct AlignArgs {
+    /// Error model(s): 1 (body-frame velocity), 2 (navigation frame + mounting states),
+    /// 3 (navigation frame); repeatable; default all three.
+    #[arg(long = "model")]
+    pub models: Vec<u8>,
+    /// moored, straight or turning.
+    #[arg(long, default_value = "turning")]
+    pub scenario: String,
+    /// Monte Carlo runs.
+    #[arg(long, default_value_t = 220)]
+    pub runs: usize,
+    /// Initial heading error (deg).
+    #[arg(long, default_value_t = 10.0)]
+    pub heading_error: f64,
+    /// DVL mounting angles roll,pitch,yaw (deg), or "random" (1σ = 1° per axis).
+    #[arg(long, default_value = "random")]
+    pub mount: String,
+    /// Seed of the first run (run k uses seed + k).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Seconds of alignment (checkpoints beyond it are left out).
+    #[arg(long, default_value_t = 1200.0)]
+    pub seconds: f64,
+    /// A run has converged when its final heading error is below this (deg).
+    #[arg(long, default_value_t = 1.0)]
+    pub converged_deg: f64,
+    /// Worker threads (default: the available cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Checkpoints (s).
+pub const CHECKPOINTS: [f64; 4] = [60.0, 300.0, 600.0, 1200.0];
+
+/// One model's errors in one run.
+#[derive(Debug, Clone, Default)]
+struct RunResult {
+    /// Roll, pitch, heading errors (deg) at each checkpoint reached.
+    attitude: Vec<[f64; 3]>,
+    position_m: f64,
+    mount_error_deg: Option<[f64; 3]>,
+}
+
+/// One model's statistics over the runs.
+#[derive(Debug, Clone, Serialize)]
+pub struct ModelReport {
+    pub model: u8,
+    /// RMS of the heading error at each checkpoint (deg).
+    pub heading_rms_deg: Vec<(f64, f64)>,
+    pub pitch_rms_deg: Vec<(f64, f64)>,
+    pub roll_rms_deg: Vec<(f64, f64)>,
+    /// RMS horizontal position error at the end (m).
+    pub position_rms_m: f64,
+    /// RMS mounting-angle estimation error per axis at the end (deg); models 1 and 2.
+    pub mount_error_rms_deg: Option<[f64; 3]>,
+    /// Runs whose final heading error exceeds --converged-deg.
+    pub not_converged: usize,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct AlignReport {
+    pub scenario: String,
+    pub runs: usize,
+    pub seconds: f64,
+    pub heading_error_deg: f64,
+    pub mount: String,
+    pub seed: u64,
+    pub models: Vec<ModelReport>,
+    pub wall_seconds: f64,
+}
+
+fn scenario_name(s: &str) -> anyhow::Result<&'static str> {
+    Ok(match s {
+        "moored" => "align_moored",
+        "straight" => "align_straight",
+        "turning" => "align_turning",
+        _ => bail!("--scenario {s:?}: expected moored, straight or turning"),
+    })
+}
+
+fn parse_mount(s: &str) -> anyhow::Result<Option<[f64; 3]>> {
+    if s == "random" {
+        return Ok(None);
+    }
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("--mount {s:?}: expected DEG,DEG,DEG or random"))?;
+    match v[..] {
+        [r, p, y] if v.iter().all(|x| x.is_finite() && x.abs() <= 10.0) => Ok(Some([r, p, y])),
+        _ => bail!("--mount {s:?}: expected three angles within ±10 deg, or random"),
+    }
+}
+
+fn wrap_deg(a: f64) -> f64 {
+    (a + 180.0).rem_euclid(360.0) - 180.0
+}
+
+fn attitude_errors(state: &NavState, t: &TruthStateV1) -> [f64; 3] {
+    let e = state.euler();
+    [0, 1, 2].map(|i| wrap_deg((e[i] - t.euler_rad[i]).to_degrees()))
+}
+
+/// One Monte Carlo run: simulate, then run each model.
+fn run_one(
+    a: &AlignArgs,
+    scenario: &Scenario,
+    models: &[ErrorModel],
+    mount: Option<[f64; 3]>,
+    seed: u64,
+) -> anyhow::Result<Vec<RunResult>> {
+    let mut rng = Rng::new(seed, "align");
+    let sign = |r: &mut Rng| if r.uniform() < 0.5 { -1.0 } else { 1.0 };
+    let mut effects = Effects::default();
+    let gb = [
+        0.01 * sign(&mut rng),
+        0.01 * sign(&mut rng),
+        0.01 * sign(&mut rng),
+    ];
+    let ab = [
+        100.0 * sign(&mut rng),
+        100.0 * sign(&mut rng),
+        100.0 * sign(&mut rng),
+    ];
+    let mount_deg = mount.unwrap_or_else(|| [rng.gauss(1.0), rng.gauss(1.0), rng.gauss(1.0)]);
+    let cfg = FineAlignConfig {
+        initial_heading_std_deg: a.heading_error.abs().max(0.1),
+        ..FineAlignConfig::default()
+    };
+    for (name, v) in [
+        ("imu.gyro_bias", gb.to_vec()),
+        ("imu.accel_bias", ab.to_vec()),
+        ("imu.angle_random_walk", vec![cfg.gyro_arw_deg_sqrt_h]),
+        ("imu.velocity_random_walk", vec![cfg.accel_vrw_m_s_sqrt_h]),
+        // Per-beam noise giving about 0.1 m/s on the horizontal velocity (30° beams).
+        ("dvl.noise", vec![0.1]),
+        ("dvl.mount_roll", vec![mount_deg[0]]),
+        ("dvl.mount_pitch", vec![mount_deg[1]]),
+        ("dvl.mount_yaw", vec![mount_deg[2]]),
+    ] {
+        effects.set(name, &v)?;
+    }
+    let sim_cfg = SimConfig {
+        scenario: scenario.clone(),
+        effects,
+        seed,
+        duration_s: Some(a.seconds),
+    };
+    let (messages, _) = sim::simulate_to_vec(&sim_cfg)?;
+    let t0 = messages
+        .iter()
+        .find_map(|m| match m {
+            LogMessage::Truth(t) => Some(*t),
+            _ => None,
+        })
+        .context("no truth")?;
+    // The seed's initial errors: 10 m position (random direction), 0.1 m/s velocity per axis,
+    // the given heading error, small tilt errors.
+    let dir = rng.uniform() * std::f64::consts::TAU;
+    let start_truth = Geodetic {
+        latitude_rad: t0.latitude_rad,
+        longitude_rad: t0.longitude_rad,
+        height_m: t0.height_m,
+    };
+    let position = offset_position(
+        &start_truth,
+        &Vector3::new(10.0 * dir.cos(), 10.0 * dir.sin(), 0.0),
+    );
+    let velocity = Vector3::from(t0.velocity_ned_m_s)
+        + Vector3::new(rng.gauss(0.1), rng.gauss(0.1), rng.gauss(0.1));
+    let tilt = (cfg.initial_tilt_std_deg).to_radians();
+    let euler = [
+        t0.euler_rad[0] + rng.gauss(tilt),
+        t0.euler_rad[1] + rng.gauss(tilt),
+        t0.euler_rad[2] + a.heading_error.to_radians(),
+    ];
+    let t_start = t0.host_time_ns as f64 * 1e-9;
+    let initial = NavState {
+        time_s: t_start,
+        position,
+        velocity_ned: velocity,
+        q_body_to_ned: UnitQuaternion::from_euler_angles(euler[0], euler[1], euler[2]),
+    };
+    let true_mount = Vector3::from(mount_deg.map(f64::to_radians));
+    let mut out = Vec::new();
+    for &model in models {
+        let mut f = FineAligner::new(model, cfg, initial);
+        let mut result = RunResult::default();
+        let mut next = 0;
+        let mut last_truth = t0;
+        for m in &messages {
+            match m {
+                LogMessage::Imu(x) => {
+                    if x.host_time_ns <= t0.host_time_ns {
+                        continue;
+                    }
+                    f.on_imu(
+                        &Vector3::from(x.angular),
+                        &Vector3::from(x.specific),
+                        x.interval_s,
+                    );
+                }
+                LogMessage::Dvl(d)
+                    if d.validity & DvlVelocityV1::VALID_VELOCITY != 0
+                        && d.host_time_ns > t0.host_time_ns =>
+                {
+                    f.on_dvl(&Vector3::from(d.velocity_dvl_m_s));
+                }
+                LogMessage::Truth(t) => {
+                    last_truth = *t;
+                    let el = (t.host_time_ns - t0.host_time_ns) as f64 * 1e-9;
+                    while next < CHECKPOINTS.len() && el >= CHECKPOINTS[next] - 1e-9 {
+                        result.attitude.push(attitude_errors(f.state(), t));
+                        next += 1;
+                    }
+                }
+                _ => {}
+            }
+        }
+        let end = Geodetic {
+            latitude_rad: last_truth.latitude_rad,
+            longitude_rad: last_truth.longitude_rad,
+            height_m: last_truth.height_m,
+        };
+        let d = ned_offset(&end, &f.state().position);
+        result.position_m = (d.x * d.x + d.y * d.y).sqrt();
+        if model != ErrorModel::Navigation {
+            let e = f.mounting() - true_mount;
+            result.mount_error_deg = Some([e.x, e.y, e.z].map(f64::to_degrees));
+        }
+        out.push(result);
+    }
+    Ok(out)
+}
+
+fn rms(v: impl Iterator<Item = f64>) -> f64 {
+    let (mut s, mut n) = (0.0, 0.0);
+    for x in v {
+        s += x * x;
+        n += 1.0;
+    }
+    if n > 0.0 { (s / n).sqrt() } else { f64::NAN }
+}
+
+/// Runs the Monte Carlo study.
+pub fn run(a: &AlignArgs) -> anyhow::Result<AlignReport> {
+    let start = std::time::Instant::now();
+    if a.runs == 0 {
+        bail!("--runs must be at least 1");
+    }
+    if !(a.heading_error.is_finite() && a.heading_error.abs() <= 90.0) {
+        bail!("--heading-error {}: expected -90..=90 deg", a.heading_error);
+    }
+    if !(a.seconds.is_finite() && (60.0..=1200.0).contains(&a.seconds)) {
+        bail!("--seconds {}: expected 60..=1200", a.seconds);
+    }
+    let mut models = Vec::new();
+    for n in if a.models.is_empty() {
+        vec![1, 2, 3]
+    } else {
+        a.models.clone()
+    } {
+        models.push(
+            ErrorModel::from_number(n)
+                .with_context(|| format!("--model {n}: expected 1, 2 or 3"))?,
+        );
+    }
+    let scenario = Scenario::load(scenario_name(&a.scenario)?)?;
+    let mount = parse_mount(&a.mount)?;
+    let threads = a
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+        .clamp(1, 64);
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let results: Vec<std::sync::Mutex<Option<anyhow::Result<Vec<RunResult>>>>> =
+        (0..a.runs).map(|_| std::sync::Mutex::new(None)).collect();
+    std::thread::scope(|s| {
+        for _ in 0..threads {
+            s.spawn(|| {
+                loop {
+                    let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    if k >= a.runs {
+                        break;
+                    }
+                    let r = run_one(a, &scenario, &models, mount, a.seed.wrapping_add(k as u64));
+                    if let Ok(mut slot) = results[k].lock() {
+                        *slot = Some(r);
+                    }
+                }
+            });
+        }
+    });
+    let mut runs: Vec<Vec<RunResult>> = Vec::with_capacity(a.runs);
+    for slot in results {
+        let r = slot
+            .into_inner()
+            .map_err(|_| anyhow::anyhow!("a worker panicked"))?
+            .context("a run was not done")??;
+        runs.push(r);
+    }
+    let mut reports = Vec::new();
+    for (mi, model) in models.iter().enumerate() {
+        let per = |axis: usize| -> Vec<(f64, f64)> {
+            CHECKPOINTS
+                .iter()
+                .enumerate()
+                .filter(|(c, _)| runs.iter().all(|r| r[mi].attitude.len() > *c))
+                .map(|(c, t)| (*t, rms(runs.iter().map(|r| r[mi].attitude[c][axis]))))
+                .collect()
+        };
+        let mount_error_rms_deg = (model.number() != 3).then(|| {
+            [0, 1, 2].map(|i| {
+                rms(runs
+                    .iter()
+                    .filter_map(|r| r[mi].mount_error_deg.map(|m| m[i])))
+            })
+        });
+        reports.push(ModelReport {
+            model: model.number(),
+            heading_rms_deg: per(2),
+            pitch_rms_deg: per(1),
+            roll_rms_deg: per(0),
+            position_rms_m: rms(runs.iter().map(|r| r[mi].position_m)),
+            mount_error_rms_deg,
+            not_converged: runs
+                .iter()
+                .filter(|r| {
+                    r[mi]
+                        .attitude
+                        .last()
+                        .is_none_or(|e| e[2].abs() >= a.converged_deg || e[2].is_nan())
+                })
+                .count(),
+        });
+    }
+    Ok(AlignReport {
+        scenario: a.scenario.clone(),
+        runs: a.runs,
+        seconds: a.seconds,
+        heading_error_deg: a.heading_error,
+        mount: a.mount.clone(),
+        seed: a.seed,
+        models: reports,
+        wall_seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// Prints the report for people.
+pub fn print(r: &AlignReport) {
+    println!(
+        "auvnav align: {} runs, scenario {}, initial heading error {} deg, mounting {}, {:.0} s",
+        r.runs, r.scenario, r.heading_error_deg, r.mount, r.seconds
+    );
+    for m in &r.models {
+        let h: Vec<String> = m
+            .heading_rms_deg
+            .iter()
+            .map(|(t, v)| format!("{t:.0} s {v:.3}"))
+            .collect();
+        println!(
+            "  model {}: heading RMS {}; position RMS {:.1} m; mounting error RMS {}; not converged {}",
+            m.model,
+            h.join(", "),
+            m.position_rms_m,
+            m.mount_error_rms_deg
+                .map(|x| format!("{:.2}/{:.2}/{:.2} deg", x[0], x[1], x[2]))
+                .unwrap_or_else(|| "-".into()),
+            m.not_converged
+        );
+    }
+    println!("  {:.1} s wall", r.wall_seconds);
+}
