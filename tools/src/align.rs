@@ -50,6 +50,167 @@ pub struct AlignArgs {
     pub json: bool,
 }
 
+/// Measured data: fine alignment on every Snapir segment from the reference attitude with its
+/// heading offset, per model.
+#[derive(Debug, Clone, clap::Args)]
+pub struct AlignMeasuredArgs {
+    /// The Snapir data set directory (../shared/data/snapir-auv).
+    pub dir: std::path::PathBuf,
+    /// Heading offsets of the start (deg; repeatable; default +20 and -45).
+    #[arg(long = "heading-offset", allow_negative_numbers = true)]
+    pub heading_offsets: Vec<f64>,
+    /// Segments (default 1..=13).
+    #[arg(long = "segment")]
+    pub segments: Vec<u32>,
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Heading error against the reference at 100, 200 and 400 s for one segment, offset and model.
+#[derive(Debug, Clone, Serialize)]
+pub struct MeasuredRow {
+    pub segment: u32,
+    pub heading_offset_deg: f64,
+    pub model: u8,
+    /// (seconds, heading error in deg); checkpoints beyond the segment are left out.
+    pub heading_error_deg: Vec<(f64, f64)>,
+}
+
+/// Checkpoints on measured data (s).
+pub const MEASURED_CHECKPOINTS: [f64; 3] = [100.0, 200.0, 400.0];
+
+/// Per model: (model number, [(seconds, heading error in deg)]).
+pub type MeasuredErrors = Vec<(u8, Vec<(f64, f64)>)>;
+
+/// Runs the three models on one measured log (messages in time order, truth = reference).
+pub fn align_measured(
+    messages: &[LogMessage],
+    heading_offset_deg: f64,
+) -> anyhow::Result<MeasuredErrors> {
+    let t0 = messages
+        .iter()
+        .find_map(|m| match m {
+            LogMessage::Truth(t) => Some(*t),
+            _ => None,
+        })
+        .context("the log has no reference (truth) channel")?;
+    let cfg = FineAlignConfig {
+        initial_heading_std_deg: heading_offset_deg.abs().max(1.0),
+        ..FineAlignConfig::default()
+    };
+    let euler = [
+        t0.euler_rad[0],
+        t0.euler_rad[1],
+        t0.euler_rad[2] + heading_offset_deg.to_radians(),
+    ];
+    let initial = NavState {
+        time_s: t0.host_time_ns as f64 * 1e-9,
+        position: Geodetic {
+            latitude_rad: t0.latitude_rad,
+            longitude_rad: t0.longitude_rad,
+            height_m: t0.height_m,
+        },
+        velocity_ned: Vector3::from(t0.velocity_ned_m_s),
+        q_body_to_ned: UnitQuaternion::from_euler_angles(euler[0], euler[1], euler[2]),
+    };
+    let mut out = Vec::new();
+    for model in [
+        ErrorModel::BodyVelocity,
+        ErrorModel::NavigationWithMounting,
+        ErrorModel::Navigation,
+    ] {
+        let mut f = FineAligner::new(model, cfg, initial);
+        let mut next = 0;
+        let mut errs = Vec::new();
+        for m in messages {
+            match m {
+                LogMessage::Imu(x) if x.host_time_ns > t0.host_time_ns && x.interval_s > 0.0 => {
+                    let (mut w, mut a) = (Vector3::from(x.angular), Vector3::from(x.specific));
+                    if x.status & auvnav_shm_schema::ImuSampleV1::STATUS_INCREMENTS != 0 {
+                        w /= x.interval_s;
+                        a /= x.interval_s;
+                    }
+                    f.on_imu(&w, &a, x.interval_s);
+                }
+                LogMessage::Dvl(d)
+                    if d.validity & DvlVelocityV1::VALID_VELOCITY != 0
+                        && d.host_time_ns > t0.host_time_ns =>
+                {
+                    f.on_dvl(&Vector3::from(d.velocity_dvl_m_s));
+                }
+                LogMessage::Truth(t) => {
+                    let el = (t.host_time_ns - t0.host_time_ns) as f64 * 1e-9;
+                    // The reference is 1 Hz and a segment's last record is at 399 s: a checkpoint
+                    // is taken at the first record within one second of it.
+                    while next < MEASURED_CHECKPOINTS.len()
+                        && el >= MEASURED_CHECKPOINTS[next] - 1.0
+                    {
+                        errs.push((MEASURED_CHECKPOINTS[next], attitude_errors(f.state(), t)[2]));
+                        next += 1;
+                    }
+                }
+                _ => {}
+            }
+        }
+        out.push((model.number(), errs));
+    }
+    Ok(out)
+}
+
+/// `auvnav align-measured`: every segment, every offset, every model.
+pub fn run_measured(a: &AlignMeasuredArgs) -> anyhow::Result<Vec<MeasuredRow>> {
+    let offsets = if a.heading_offsets.is_empty() {
+        vec![20.0, -45.0]
+    } else {
+        a.heading_offsets.clone()
+    };
+    let segments = if a.segments.is_empty() {
+        (1..=13).collect()
+    } else {
+        a.segments.clone()
+    };
+    let mut rows = Vec::new();
+    for &segment in &segments {
+        let (tagged, _) = crate::import::snapir_messages(
+            &a.dir,
+            segment,
+            crate::import::TimeBase::Nominal,
+            true,
+        )?;
+        let messages: Vec<LogMessage> = tagged.into_iter().map(|(_, m)| m).collect();
+        for &offset in &offsets {
+            for (model, errs) in align_measured(&messages, offset)? {
+                rows.push(MeasuredRow {
+                    segment,
+                    heading_offset_deg: offset,
+                    model,
+                    heading_error_deg: errs,
+                });
+            }
+        }
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+    } else {
+        println!("segment  offset  model  heading error at 100 / 200 / 400 s (deg)");
+        for r in &rows {
+            let e: Vec<String> = r
+                .heading_error_deg
+                .iter()
+                .map(|(_, v)| format!("{v:8.3}"))
+                .collect();
+            println!(
+                "{:7}  {:6.0}  {:5}  {}",
+                r.segment,
+                r.heading_offset_deg,
+                r.model,
+                e.join(" ")
+            );
+        }
+    }
+    Ok(rows)
+}
+
 /// Checkpoints (s).
 pub const CHECKPOINTS: [f64; 4] = [60.0, 300.0, 600.0, 1200.0];
 

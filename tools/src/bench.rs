@@ -920,3 +920,53 @@ pub fn e2e_bench(seconds: f64, json: bool) -> anyhow::Result<()> {
     }
     Ok(())
 }
+
+/// Wall time of the alignment Monte Carlo for one model.
+#[derive(Debug, Clone, Serialize)]
+pub struct AlignBench {
+    pub model: u8,
+    pub runs: usize,
+    pub seconds_simulated_per_run: f64,
+    pub threads: usize,
+    pub wall_seconds: f64,
+}
+
+/// `auvnav bench align`: the seed's Monte Carlo (turning, 30° heading error, random mounting),
+/// one model at a time (each includes simulating the runs).
+pub fn align(runs: usize, json: bool) -> anyhow::Result<()> {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let mut out = Vec::new();
+    for model in [1u8, 2, 3] {
+        let a = crate::align::AlignArgs {
+            models: vec![model],
+            scenario: "turning".into(),
+            runs,
+            heading_error: 30.0,
+            mount: "random".into(),
+            seed: 1,
+            seconds: 1200.0,
+            converged_deg: 1.0,
+            threads: None,
+            json: false,
+        };
+        let r = crate::align::run(&a)?;
+        out.push(AlignBench {
+            model,
+            runs,
+            seconds_simulated_per_run: 1200.0,
+            threads,
+            wall_seconds: r.wall_seconds,
+        });
+    }
+    if json {
+        println!("{}", serde_json::to_string_pretty(&out)?);
+    } else {
+        for b in &out {
+            println!(
+                "align model {}: {} runs x {:.0} s in {:.1} s on {} threads",
+                b.model, b.runs, b.seconds_simulated_per_run, b.wall_seconds, b.threads
+            );
+        }
+    }
+    Ok(())
+}

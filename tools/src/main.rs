@@ -33,6 +33,8 @@ enum Command {
     Record(auvnav_tools::record::RecordArgs),
     /// S-ALIGN fine-alignment Monte Carlo: error models 1/2/3 on moored, straight, turning runs.
     Align(auvnav_tools::align::AlignArgs),
+    /// S-ALIGN fine alignment on the Snapir segments from the reference heading plus an offset.
+    AlignMeasured(auvnav_tools::align::AlignMeasuredArgs),
     /// Turn a measured data set into a log.
     Import {
         #[command(subcommand)]
@@ -65,6 +67,13 @@ enum ImportWhat {
 
 #[derive(Subcommand)]
 enum BenchWhat {
+    /// Wall time of the S-ALIGN Monte Carlo (220 runs, 1200 s, turning) per error model.
+    Align {
+        #[arg(long, default_value_t = 220)]
+        runs: usize,
+        #[arg(long)]
+        json: bool,
+    },
     /// End-to-end latency of the on-board chain with real processes: IMU frame on a
     /// pseudo-terminal to navigation solution, at 200 Hz and 1 kHz, with DVL, USBL and the
     /// recorder running; daemon and recorder CPU use.
@@ -261,6 +270,7 @@ fn main() -> std::process::ExitCode {
         Command::Decode(a) => auvnav_tools::decode::run(&a).map(|_| ()),
         Command::Emulate(a) => auvnav_tools::emulate::run(&a).map(|_| ()),
         Command::Record(a) => auvnav_tools::record::run(&a).map(|_| ()),
+        Command::AlignMeasured(a) => auvnav_tools::align::run_measured(&a).map(|_| ()),
         Command::Align(a) => auvnav_tools::align::run(&a).and_then(|r| {
             if a.json {
                 println!("{}", serde_json::to_string_pretty(&r)?);
@@ -281,6 +291,7 @@ fn main() -> std::process::ExitCode {
                 repeat,
                 json,
             } => auvnav_tools::bench::sim(hours, repeat, json),
+            BenchWhat::Align { runs, json } => auvnav_tools::bench::align(runs, json),
             BenchWhat::E2e { seconds, json } => auvnav_tools::bench::e2e_bench(seconds, json),
             BenchWhat::Decode {
                 repeat,
