@@ -13,7 +13,7 @@ use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, UsblFixV1};
 use serde::{Deserialize, Serialize};
 
 /// A serial protocol the drivers speak.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Protocol {
     /// Teledyne RDI PD0 (binary ensembles).

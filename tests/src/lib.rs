@@ -1,6 +1,28 @@
 //! Helpers shared by the end-to-end tests: the workspace's binaries, child processes that are
 //! killed when a test fails, and per-test names so concurrent tests never share topics or files.
 
+/// The measured data set `name` under ../shared/data, or `None` (with a message) when it is
+/// absent outside CI; under CI (`CI=true`) its absence is a failure.
+pub fn measured_data(name: &str, probe: &str) -> Option<std::path::PathBuf> {
+    let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/data")
+        .join(name);
+    if dir.join(probe).exists() {
+        return Some(dir);
+    }
+    if std::env::var("CI").is_ok_and(|v| v == "true") {
+        panic!(
+            "{} is missing: measured data is required under CI",
+            dir.display()
+        );
+    }
+    eprintln!(
+        "SKIPPED: {} is absent (measured-data tests need ../shared/data)",
+        dir.display()
+    );
+    None
+}
+
 pub mod processes {
     use std::path::{Path, PathBuf};
     use std::process::{Child, Command, ExitStatus};

@@ -68,30 +68,13 @@ fn model_1_aligns_within_a_tenth_of_a_degree_by_600_s_when_turning_from_30_degre
     assert_eq!(m1.not_converged, 0);
 }
 
-fn snapir_dir() -> Option<std::path::PathBuf> {
-    let dir =
-        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/snapir-auv");
-    if dir.join("imu_01.csv").exists() {
-        return Some(dir);
-    }
-    if std::env::var("CI").is_ok_and(|v| v == "true") {
-        panic!(
-            "{} is missing: measured data is required under CI",
-            dir.display()
-        );
-    }
-    eprintln!(
-        "SKIPPED: {} is absent (measured-data tests need ../shared/data)",
-        dir.display()
-    );
-    None
-}
-
 /// On every measured segment, started 20° and 45° off the reference heading, every model brings
 /// the heading error under 2° by 200 s (the measured figures are in docs/alignment.md).
 #[test]
 fn measured_segments_align_from_large_heading_offsets() {
-    let Some(dir) = snapir_dir() else { return };
+    let Some(dir) = auvnav_tests::measured_data("snapir-auv", "imu_01.csv") else {
+        return;
+    };
     let rows = auvnav_tools::align::run_measured(&auvnav_tools::align::AlignMeasuredArgs {
         dir,
         heading_offsets: vec![20.0, -45.0],

@@ -8,21 +8,7 @@ use auvnav_tools::replay::{Replay, ReplayConfig};
 use std::path::PathBuf;
 
 fn data_dir() -> Option<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/snapir-auv");
-    if dir.join("imu_01.csv").exists() {
-        return Some(dir);
-    }
-    if std::env::var("CI").is_ok_and(|v| v == "true") {
-        panic!(
-            "{} is missing: measured data is required under CI",
-            dir.display()
-        );
-    }
-    eprintln!(
-        "SKIPPED: {} is absent (measured-data tests need ../shared/data)",
-        dir.display()
-    );
-    None
+    auvnav_tests::measured_data("snapir-auv", "imu_01.csv")
 }
 
 #[test]

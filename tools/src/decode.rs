@@ -7,31 +7,8 @@ use serde::Serialize;
 use std::io::Write;
 use std::path::PathBuf;
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Protocol {
-    /// Teledyne RDI PD0 (DVL/ADCP ensembles).
-    Pd0,
-    /// Water Linked DVL serial protocol (wrz, wru, wrp, ...).
-    Wldvl,
-    /// KVH 1750/1775 IMU, formats A and B.
-    Kvh1750,
-    /// Xsens MTi XBus / MTData2.
-    Xsens,
-    /// Blueprint SeaTrac USBL serial command interface.
-    Seatrac,
-}
-
-impl Protocol {
-    pub fn name(self) -> &'static str {
-        match self {
-            Protocol::Pd0 => "pd0",
-            Protocol::Wldvl => "wldvl",
-            Protocol::Kvh1750 => "kvh1750",
-            Protocol::Xsens => "xsens",
-            Protocol::Seatrac => "seatrac",
-        }
-    }
-}
+/// The protocols, as the drivers name them.
+pub use auvnav_drivers::device::Protocol;
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct DecodeArgs {
