@@ -173,6 +173,18 @@ impl FineAligner {
         self.mount
     }
 
+    /// Estimated IMU biases: gyro (rad/s), accelerometer (m/s²).
+    pub fn imu_biases(&self) -> (Vector3<f64>, Vector3<f64>) {
+        (self.gyro_bias, self.accel_bias)
+    }
+
+    /// Standard deviations (diagonal of the covariance) of attitude (rad), velocity (m/s; body
+    /// axes for model 1), position (m), gyro bias (rad/s), accelerometer bias (m/s²).
+    pub fn std_devs(&self) -> [Vector3<f64>; 5] {
+        let d = |i: usize| Vector3::from_fn(|k, _| self.p[(i + k, i + k)].max(0.0).sqrt());
+        [d(PHI), d(DV), d(DP), d(EPS), d(NAB)]
+    }
+
     /// Heading standard deviation (rad).
     pub fn heading_std(&self) -> f64 {
         self.p[(PHI + 2, PHI + 2)].max(0.0).sqrt()

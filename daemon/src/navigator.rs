@@ -275,6 +275,13 @@ impl Navigator {
         &self.dvl
     }
 
+    /// Starts from known IMU bias estimates (an alignment filter's): gyro (rad/s), accelerometer
+    /// (m/s^2).
+    pub fn set_imu_biases(&mut self, gyro: Vector3<f64>, accel: Vector3<f64>) {
+        self.gyro_bias = gyro;
+        self.accel_bias = accel;
+    }
+
     /// The current IMU bias estimates: gyro (rad/s), accelerometer (m/s^2).
     pub fn imu_biases(&self) -> (Vector3<f64>, Vector3<f64>) {
         (self.gyro_bias, self.accel_bias)

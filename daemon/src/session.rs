@@ -4,6 +4,7 @@
 
 use crate::align::InMotionAligner;
 use crate::earth::Geodetic;
+use crate::fine_align::{ErrorModel, FineAlignConfig, FineAligner};
 use crate::navigator::{NavConfig, Navigator, initial_state};
 use crate::strapdown::NavState;
 use auvnav_shm_schema::{
@@ -74,6 +75,17 @@ pub struct AlignmentConfig {
     /// deviation falls below this (deg; default 0.1).
     #[serde(default = "default_aligned_heading_std")]
     pub aligned_heading_std_deg: f64,
+    /// Fine-alignment error model between the coarse stage and navigation: 1 (body-frame
+    /// velocity error, mounting states), 2 (navigation frame, mounting states), 3 (navigation
+    /// frame), or 0 to refine in the navigation filter itself (default 1). With 1–3 the
+    /// navigation filter starts, when the criterion is met, from the alignment filter's state,
+    /// IMU biases, DVL mounting estimate and standard deviations (cross-covariances dropped).
+    #[serde(default = "default_fine_model")]
+    pub fine_model: u8,
+}
+
+fn default_fine_model() -> u8 {
+    1
 }
 
 fn default_coarse_s() -> f64 {
@@ -185,6 +197,7 @@ pub struct Session {
     aligning_epochs: usize,
     aligned: bool,
     align_sequence: u64,
+    fine: Option<FineAligner>,
 }
 
 impl Session {
@@ -206,6 +219,7 @@ impl Session {
             aligning_epochs: 0,
             aligned: cfg.alignment.is_none(),
             align_sequence: 0,
+            fine: None,
         }
     }
 
@@ -285,6 +299,9 @@ impl Session {
         }
         self.last_imu_ns = self.last_imu_ns.max(x.host_time_ns);
         if self.nav.is_none() && self.configured_initial.is_none() && self.alignment.is_some() {
+            if self.fine.is_some() {
+                return self.fine_step(x, out);
+            }
             return self.coarse(x, out);
         }
         if self.nav.is_none()
@@ -386,6 +403,25 @@ impl Session {
             velocity_ned: c_b_n * v_b,
             q_body_to_ned: UnitQuaternion::from_matrix(&c_b_n),
         };
+        if due && let Some(model) = ErrorModel::from_number(a.fine_model) {
+            // Coarse → fine: the alignment filter of the chosen error model.
+            let cfg = FineAlignConfig {
+                dvl_std_m_s: self.cfg.dvl_velocity_std_m_s,
+                gyro_arw_deg_sqrt_h: self.cfg.gyro_angle_random_walk_deg_sqrt_h,
+                accel_vrw_m_s_sqrt_h: self.cfg.accel_velocity_random_walk_m_s_sqrt_h,
+                initial_tilt_std_deg: a.coarse_tilt_std_deg,
+                initial_heading_std_deg: a.coarse_heading_std_deg,
+                initial_velocity_std_m_s: self.cfg.initial_velocity_std_m_s,
+                initial_position_std_m: self.cfg.initial_position_std_m,
+                initial_gyro_bias_std_deg_h: self.cfg.initial_gyro_bias_std_deg_h,
+                initial_accel_bias_std_ug: self.cfg.initial_accel_bias_std_ug,
+                initial_mounting_std_deg: self.cfg.initial_dvl_mounting_std_deg,
+                covariance_interval_s: self.cfg.covariance_interval_s,
+            };
+            self.fine = Some(FineAligner::new(model, cfg, state));
+            self.aligner = None;
+            return Ok(());
+        }
         if due {
             // Hand over: the filter starts from the coarse attitude with its uncertainty.
             let mut cfg = self.cfg.clone();
@@ -434,6 +470,77 @@ impl Session {
         Ok(())
     }
 
+    /// The fine stage: the alignment filter runs until its heading σ meets the criterion, then the
+    /// navigation filter starts from its state.
+    fn fine_step<E>(
+        &mut self,
+        x: &ImuSampleV1,
+        out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
+    ) -> Result<(), E> {
+        let (Some(a), Some(fine)) = (self.alignment.clone(), self.fine.as_mut()) else {
+            return Ok(());
+        };
+        let valid = ImuSampleV1::STATUS_GYRO_VALID | ImuSampleV1::STATUS_ACCEL_VALID;
+        let (w, f) = Self::rates(x);
+        if x.status & valid != valid
+            || !(x.interval_s > 0.0 && x.interval_s < 1.0)
+            || !w.iter().chain(f.iter()).all(|v| v.is_finite())
+        {
+            self.before_start += 1;
+            return Ok(());
+        }
+        fine.on_imu(&w, &f, x.interval_s);
+        self.last_omega = w;
+        let mut state = *fine.state();
+        state.time_s = x.host_time_ns as f64 * 1e-9;
+        let [att, vel, pos, gyro, accel] = fine.std_devs();
+        if fine.heading_std() < a.aligned_heading_std_deg.to_radians() {
+            // Hand over to the navigation filter with the alignment filter's estimates.
+            let deg = 180.0 / std::f64::consts::PI;
+            let mut cfg = self.cfg.clone();
+            cfg.initial_tilt_std_deg = att.x.max(att.y) * deg;
+            cfg.initial_heading_std_deg = att.z * deg;
+            cfg.initial_velocity_std_m_s = vel.max();
+            cfg.initial_position_std_m = pos.x.max(pos.y);
+            cfg.initial_gyro_bias_std_deg_h = gyro.max() * deg * 3600.0;
+            cfg.initial_accel_bias_std_ug = accel.max() / 9.806_65e-6;
+            if fine.model != ErrorModel::Navigation {
+                let m = fine.mounting();
+                cfg.dvl_mount_deg = [m.x * deg, m.y * deg, m.z * deg];
+            }
+            let (bg, ba) = fine.imu_biases();
+            self.fine = None;
+            self.aligned = true;
+            let saved = std::mem::replace(&mut self.cfg, cfg);
+            let r = self.start(state, "in-motion alignment (coarse, then fine)", out);
+            self.cfg = saved;
+            r?;
+            if let Some(nav) = self.nav.as_mut() {
+                nav.set_imu_biases(bg, ba);
+                nav.start_at_imu(x);
+            }
+            return Ok(());
+        }
+        self.align_sequence += 1;
+        let q = state.q_body_to_ned;
+        let sol = NavSolutionV1 {
+            host_time_ns: x.host_time_ns,
+            sequence: self.align_sequence,
+            latitude_rad: state.position.latitude_rad,
+            longitude_rad: state.position.longitude_rad,
+            height_m: state.position.height_m,
+            velocity_ned_m_s: state.velocity_ned.into(),
+            quaternion_body_to_ned: [q.w, q.i, q.j, q.k],
+            euler_rad: state.euler(),
+            position_std_ned_m: pos.into(),
+            attitude_std_rad: att.into(),
+            mode: NavMode::Aligning as u32,
+            sensor_health: NavSolutionV1::HEALTH_IMU,
+            ..Default::default()
+        };
+        out(SessionOutput::Solution(&sol))
+    }
+
     /// The DVL velocity in body axes during coarse alignment: mounting, scale and lever arm of
     /// the configuration applied.
     fn dvl_body_velocity(&self, m: &DvlVelocityV1) -> Option<Vector3<f64>> {
@@ -460,6 +567,18 @@ impl Session {
         aid: Aid,
         out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
     ) -> Result<(), E> {
+        if self.nav.is_none()
+            && let Some(fine) = self.fine.as_mut()
+            && let Aid::Dvl(m) = aid
+        {
+            if m.validity & DvlVelocityV1::VALID_VELOCITY != 0 {
+                let v = Vector3::from(m.velocity_dvl_m_s);
+                if v.iter().all(|x| x.is_finite()) {
+                    fine.on_dvl(&v);
+                }
+            }
+            return Ok(());
+        }
         if self.nav.is_none()
             && self.aligner.is_some()
             && let Aid::Dvl(m) = aid

@@ -159,72 +159,77 @@ fn session_aligns_in_motion_and_hands_over_to_navigation() {
     use auvnav_shm_schema::NavMode;
     use auvnav_tools::replay::{Output, Replay, ReplayConfig};
     let messages = simulate("turns", 600.0, 4, false);
-    let cfg = ReplayConfig {
-        alignment: Some(AlignmentConfig {
-            latitude_deg: 31.0,
-            longitude_deg: 120.0,
-            height_m: -20.0,
-            coarse_s: 120.0,
-            moored: false,
-            coarse_heading_std_deg: 2.0,
-            coarse_tilt_std_deg: 0.05,
-            aligned_heading_std_deg: 0.1,
-        }),
-        ..Default::default()
-    };
-    let mut replay = Replay::new(&cfg, 100.0);
-    let mut modes: Vec<(u64, u32)> = Vec::new();
-    let mut last = None;
-    let mut last_truth = None;
-    for m in &messages {
-        replay
-            .process(m, &mut |o| {
-                if let Output::Solution(s) = o {
-                    if modes.last().is_none_or(|(_, md)| *md != s.mode) {
-                        modes.push((s.host_time_ns, s.mode));
+    // Fine stage by the model-1 alignment filter (the default), and by the navigation filter.
+    for fine_model in [1u8, 0] {
+        let cfg = ReplayConfig {
+            alignment: Some(AlignmentConfig {
+                latitude_deg: 31.0,
+                longitude_deg: 120.0,
+                height_m: -20.0,
+                coarse_s: 120.0,
+                moored: false,
+                coarse_heading_std_deg: 2.0,
+                coarse_tilt_std_deg: 0.05,
+                aligned_heading_std_deg: 0.1,
+                fine_model,
+            }),
+            ..Default::default()
+        };
+        let mut replay = Replay::new(&cfg, 100.0);
+        let mut modes: Vec<(u64, u32)> = Vec::new();
+        let mut last = None;
+        let mut last_truth = None;
+        for m in &messages {
+            replay
+                .process(m, &mut |o| {
+                    if let Output::Solution(s) = o {
+                        if modes.last().is_none_or(|(_, md)| *md != s.mode) {
+                            modes.push((s.host_time_ns, s.mode));
+                        }
+                        last = Some(*s);
                     }
-                    last = Some(*s);
-                }
-                Ok(())
-            })
-            .expect("replay");
-        if let LogMessage::Truth(t) = m {
-            last_truth = Some(*t);
+                    Ok(())
+                })
+                .expect("replay");
+            if let LogMessage::Truth(t) = m {
+                last_truth = Some(*t);
+            }
         }
+        let aligning = NavMode::Aligning as u32;
+        let navigating = NavMode::Navigating as u32;
+        // Aligning until the criterion is met, then navigating: one switch.
+        assert_eq!(
+            modes.iter().map(|m| m.1).collect::<Vec<_>>(),
+            vec![aligning, navigating],
+            "fine model {fine_model}: {modes:?}"
+        );
+        let initial = replay.initial().expect("started");
+        assert!(initial.source.contains("alignment"), "{initial:?}");
+        let (s, t) = (last.expect("solution"), last_truth.expect("truth"));
+        let c = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            s.quaternion_body_to_ned[0],
+            s.quaternion_body_to_ned[1],
+            s.quaternion_body_to_ned[2],
+            s.quaternion_body_to_ned[3],
+        ))
+        .to_rotation_matrix()
+        .into_inner();
+        let e = errors_deg(&c, &t);
+        let acc = replay.accuracy().expect("truth");
+        eprintln!(
+            "fine model {fine_model}: navigating from {:.0} s; final errors roll {:.4} pitch {:.4} heading {:.4} deg, position {:.2} m",
+            modes[1].0 as f64 * 1e-9,
+            e[0],
+            e[1],
+            e[2],
+            acc.horizontal_error_final_m
+        );
+        // The mode says navigating when the heading σ < 0.1°: the error agrees (3σ).
+        assert!(
+            e[2].abs() < 0.3 && e[0].abs() < 0.02 && e[1].abs() < 0.02,
+            "{e:?}"
+        );
+        // Dead reckoning through the alignment, then the filter: no jump left at the end.
+        assert!(acc.horizontal_error_final_m < 3.0, "{acc:?}");
     }
-    let aligning = NavMode::Aligning as u32;
-    let navigating = NavMode::Navigating as u32;
-    assert_eq!(modes.first().map(|m| m.1), Some(aligning), "{modes:?}");
-    assert_eq!(modes.last().map(|m| m.1), Some(navigating), "{modes:?}");
-    // Aligning until the criterion is met, then navigating: one switch.
-    assert_eq!(modes.len(), 2, "{modes:?}");
-    let initial = replay.initial().expect("started");
-    assert_eq!(initial.source, "in-motion coarse alignment");
-    assert!((initial.time_s - 120.0).abs() < 0.1, "{initial:?}");
-    let (s, t) = (last.expect("solution"), last_truth.expect("truth"));
-    let c = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
-        s.quaternion_body_to_ned[0],
-        s.quaternion_body_to_ned[1],
-        s.quaternion_body_to_ned[2],
-        s.quaternion_body_to_ned[3],
-    ))
-    .to_rotation_matrix()
-    .into_inner();
-    let e = errors_deg(&c, &t);
-    let acc = replay.accuracy().expect("truth");
-    eprintln!(
-        "aligned at {:.0} s; final errors roll {:.4} pitch {:.4} heading {:.4} deg, position {:.2} m",
-        modes[1].0 as f64 * 1e-9,
-        e[0],
-        e[1],
-        e[2],
-        acc.horizontal_error_final_m
-    );
-    // The mode says navigating when the filter's heading σ < 0.1°: the error agrees (3σ).
-    assert!(
-        e[2].abs() < 0.3 && e[0].abs() < 0.02 && e[1].abs() < 0.02,
-        "{e:?}"
-    );
-    // Dead reckoning through the coarse stage, then the filter: no jump left at the end.
-    assert!(acc.horizontal_error_final_m < 3.0, "{acc:?}");
 }

@@ -172,6 +172,7 @@ impl DaemonConfig {
                     10.0,
                 )?;
                 range("alignment.latitude_deg", a.latitude_deg, -89.0, 89.0)?;
+                range("alignment.fine_model", f64::from(a.fine_model), 0.0, 3.0)?;
             }
             _ => {}
         }
