@@ -10,3 +10,4 @@ pub mod fine_align;
 pub mod navigator;
 pub mod session;
 pub mod strapdown;
+pub mod usbl;

@@ -1,0 +1,171 @@
+//! USBL measurement models against geometry computed independently, and the unscented update
+//! against the Kalman update on a linear measurement.
+
+use auvnav_core::earth::{A, E2, Geodetic, to_ecef};
+use auvnav_core::usbl::{
+    UnscentedParams, UsblArray, fix_position_ned, predict_tight, range_differences_from_angles,
+    unscented_update,
+};
+use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3};
+
+/// A small deterministic generator for test values (xorshift).
+struct Gen(u64);
+impl Gen {
+    fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.uniform()
+    }
+}
+
+/// ECEF → geodetic by fixed-point iteration on the latitude (independent of the core's code).
+fn ecef_to_geodetic(p: &Vector3<f64>) -> Geodetic {
+    let lon = p.y.atan2(p.x);
+    let rho = (p.x * p.x + p.y * p.y).sqrt();
+    let mut lat = p.z.atan2(rho * (1.0 - E2));
+    let mut h = 0.0;
+    for _ in 0..20 {
+        let n = A / (1.0 - E2 * lat.sin().powi(2)).sqrt();
+        h = rho / lat.cos() - n;
+        lat = p.z.atan2(rho * (1.0 - E2 * n / (n + h)));
+    }
+    Geodetic {
+        latitude_rad: lat,
+        longitude_rad: lon,
+        height_m: h,
+    }
+}
+
+/// NED → ECEF rotation at (lat, lon), written out here rather than taken from the core.
+fn c_ned_to_ecef(lat: f64, lon: f64) -> Matrix3<f64> {
+    let (sl, cl, so, co) = (lat.sin(), lat.cos(), lon.sin(), lon.cos());
+    Matrix3::new(
+        -sl * co,
+        -so,
+        -cl * co,
+        -sl * so,
+        co,
+        -cl * so,
+        cl,
+        0.0,
+        -sl,
+    )
+}
+
+#[test]
+fn tight_model_matches_geometry_computed_in_ecef() {
+    let mut g = Gen(0x5eed_1234_abcd_9876);
+    for _ in 0..200 {
+        let array_pos = Geodetic {
+            latitude_rad: g.range(-60.0, 60.0).to_radians(),
+            longitude_rad: g.range(-180.0, 180.0).to_radians(),
+            height_m: g.range(-100.0, 0.0),
+        };
+        let yaw = g.range(-3.1, 3.1);
+        let b = g.range(0.2, 1.0);
+        let array = UsblArray::level(array_pos, yaw, b);
+        // The responder somewhere within 2 km, below the array.
+        let p_a_true = Vector3::new(
+            g.range(-2000.0, 2000.0),
+            g.range(-2000.0, 2000.0),
+            g.range(1.0, 200.0),
+        );
+        // Independent route: array-frame point → NED (yaw only) → ECEF → geodetic.
+        let c_a_n = Rotation3::from_euler_angles(0.0, 0.0, yaw).into_inner();
+        let ecef_array = to_ecef(&array_pos);
+        let c = c_ned_to_ecef(array_pos.latitude_rad, array_pos.longitude_rad);
+        let responder = ecef_to_geodetic(&(ecef_array + c * (c_a_n * p_a_true)));
+        // Vehicle: responder minus a lever arm in some attitude.
+        let att = Rotation3::from_euler_angles(
+            g.range(-0.2, 0.2),
+            g.range(-0.2, 0.2),
+            g.range(-3.0, 3.0),
+        )
+        .into_inner();
+        let lever = Vector3::new(g.range(-2.0, 2.0), g.range(-1.0, 1.0), g.range(-1.0, 1.0));
+        let resp_ecef = to_ecef(&responder);
+        let c_resp = c_ned_to_ecef(responder.latitude_rad, responder.longitude_rad);
+        let vehicle = ecef_to_geodetic(&(resp_ecef - c_resp * (att * lever)));
+        let p_a = array.responder_in_array(&vehicle, &att, &lever);
+        assert!((p_a - p_a_true).norm() < 1e-6, "{p_a} vs {p_a_true}");
+        // Ranges from each hydrophone, in ECEF.
+        let hyd = |i: usize| ecef_array + c * (c_a_n * array.hydrophones[i]);
+        let range = |x: &Vector3<f64>| (resp_ecef - x).norm();
+        let expected = Vector3::new(
+            (resp_ecef - ecef_array).norm(),
+            range(&hyd(0)) - range(&hyd(2)),
+            range(&hyd(1)) - range(&hyd(3)),
+        );
+        let got = predict_tight(&array, &p_a);
+        assert!((got - expected).norm() < 1e-6, "{got} vs {expected}");
+    }
+}
+
+#[test]
+fn angles_and_fixes_agree_with_the_geometry() {
+    let mut g = Gen(42);
+    let array = UsblArray::level(
+        Geodetic {
+            latitude_rad: 0.54,
+            longitude_rad: 2.09,
+            height_m: -30.0,
+        },
+        0.7,
+        0.5,
+    );
+    for _ in 0..500 {
+        let range = g.range(10.0, 3000.0);
+        let az = g.range(-3.1, 3.1);
+        let el = g.range(-1.5, 0.2);
+        let u = Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), -el.sin());
+        let p_a = range * u;
+        let exact = predict_tight(&array, &p_a);
+        let [d13, d24] = range_differences_from_angles(0.5, az, el);
+        // Far field: error below b²/R.
+        let bound = 0.5 * 0.5 / range;
+        assert!((exact.y - d13).abs() < bound && (exact.z - d24).abs() < bound);
+        // The loose fix is the same point, in NED.
+        let ned = fix_position_ned(&array, range, az, el);
+        assert!((array.c_ned_to_array * ned - p_a).norm() < 1e-9 * range);
+    }
+}
+
+#[test]
+fn unscented_update_equals_the_kalman_update_on_a_linear_measurement() {
+    let mut g = Gen(7);
+    for n in [3usize, 9, 18] {
+        for m in [1usize, 3] {
+            let a = DMatrix::from_fn(n, n, |_, _| g.range(-1.0, 1.0));
+            let p = &a * a.transpose() + DMatrix::identity(n, n) * 0.1;
+            let h = DMatrix::from_fn(m, n, |_, _| g.range(-2.0, 2.0));
+            let c = DVector::from_fn(m, |_, _| g.range(-5.0, 5.0));
+            let r = DMatrix::from_diagonal(&DVector::from_fn(m, |_, _| g.range(0.01, 1.0)));
+            let z = DVector::from_fn(m, |_, _| g.range(-5.0, 5.0));
+            let f = |x: &DVector<f64>| &h * x + &c;
+            for params in [
+                UnscentedParams::default(),
+                UnscentedParams {
+                    alpha: 1e-3,
+                    beta: 2.0,
+                    kappa: 0.0,
+                },
+            ] {
+                let u = unscented_update(&p, &z, &r, &f, params).expect("update");
+                let s = &h * &p * h.transpose() + &r;
+                let k = &p * h.transpose() * s.clone().try_inverse().expect("inverse");
+                let dx = &k * (&z - &c);
+                let p_kf = &p - &k * &s * k.transpose();
+                let scale = p.norm();
+                assert!(
+                    (&u.dx - &dx).norm() < 1e-8 * (1.0 + dx.norm()),
+                    "n {n} m {m}"
+                );
+                assert!((u.p - p_kf).norm() < 1e-8 * scale, "n {n} m {m}");
+            }
+        }
+    }
+}
