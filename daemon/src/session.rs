@@ -336,14 +336,23 @@ impl Session {
         Ok(())
     }
 
-    /// Rate and specific force of a sample (increments divided by the interval).
-    fn rates(x: &ImuSampleV1) -> (Vector3<f64>, Vector3<f64>) {
+    /// Rate and specific force of a sample (increments divided by the interval), or `None` for a
+    /// sample the alignment cannot use (flagged invalid, bad interval, not finite).
+    fn usable_rates(x: &ImuSampleV1) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        let valid = ImuSampleV1::STATUS_GYRO_VALID | ImuSampleV1::STATUS_ACCEL_VALID;
+        if x.status & valid != valid || !(x.interval_s > 0.0 && x.interval_s < 1.0) {
+            return None;
+        }
         let (w, f) = (Vector3::from(x.angular), Vector3::from(x.specific));
-        if x.status & ImuSampleV1::STATUS_INCREMENTS != 0 && x.interval_s > 0.0 {
+        let (w, f) = if x.status & ImuSampleV1::STATUS_INCREMENTS != 0 {
             (w / x.interval_s, f / x.interval_s)
         } else {
             (w, f)
-        }
+        };
+        w.iter()
+            .chain(f.iter())
+            .all(|v| v.is_finite())
+            .then_some((w, f))
     }
 
     /// The coarse stage: feeds the aligner; at the end hands over to the navigation filter.
@@ -355,15 +364,10 @@ impl Session {
         let Some(a) = self.alignment.clone() else {
             return Ok(());
         };
-        let valid = ImuSampleV1::STATUS_GYRO_VALID | ImuSampleV1::STATUS_ACCEL_VALID;
-        let (w, f) = Self::rates(x);
-        if x.status & valid != valid
-            || !(x.interval_s > 0.0 && x.interval_s < 1.0)
-            || !w.iter().chain(f.iter()).all(|v| v.is_finite())
-        {
+        let Some((w, f)) = Self::usable_rates(x) else {
             self.before_start += 1;
             return Ok(());
-        }
+        };
         let t = x.host_time_ns as f64 * 1e-9;
         let aligner = self
             .aligner
@@ -480,15 +484,10 @@ impl Session {
         let (Some(a), Some(fine)) = (self.alignment.clone(), self.fine.as_mut()) else {
             return Ok(());
         };
-        let valid = ImuSampleV1::STATUS_GYRO_VALID | ImuSampleV1::STATUS_ACCEL_VALID;
-        let (w, f) = Self::rates(x);
-        if x.status & valid != valid
-            || !(x.interval_s > 0.0 && x.interval_s < 1.0)
-            || !w.iter().chain(f.iter()).all(|v| v.is_finite())
-        {
+        let Some((w, f)) = Self::usable_rates(x) else {
             self.before_start += 1;
             return Ok(());
-        }
+        };
         fine.on_imu(&w, &f, x.interval_s);
         self.last_omega = w;
         let mut state = *fine.state();

@@ -169,3 +169,65 @@ fn unscented_update_equals_the_kalman_update_on_a_linear_measurement() {
         }
     }
 }
+
+/// Gaussian samples for the adaptive-noise test (Box–Muller on the test generator).
+fn normal(g: &mut Gen) -> f64 {
+    let u1 = g.uniform().max(1e-300);
+    let u2 = g.uniform();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+#[test]
+fn adaptive_noise_converges_to_the_true_variance_and_rejects_outliers() {
+    for seed in [2024, 7, 99] {
+        adaptive_run(seed);
+    }
+}
+
+fn adaptive_run(seed: u64) {
+    use auvnav_core::usbl::AdaptiveNoise;
+    // A slant range to a slowly moving target, a two-state (range, rate) Kalman filter, noise
+    // σ = 0.3 m while the filter starts believing 1 m; 5 % of the fixes are multipath outliers
+    // of 10–50 m.
+    let sigma = 0.3;
+    let mut g = Gen(seed);
+    let dt = 1.0;
+    let f = DMatrix::from_row_slice(2, 2, &[1.0, dt, 0.0, 1.0]);
+    let q = DMatrix::from_row_slice(2, 2, &[1e-4, 0.0, 0.0, 1e-4]);
+    let h = DMatrix::from_row_slice(1, 2, &[1.0, 0.0]);
+    let mut x = DVector::from_vec(vec![100.0, 0.5]);
+    let mut p = DMatrix::identity(2, 2) * 10.0;
+    let mut truth = DVector::from_vec(vec![100.0, 0.5]);
+    let mut noise = AdaptiveNoise::new(DVector::from_element(1, 1.0), 0.995, 1e-4, 1e4, 16.0);
+    let (mut injected, mut accepted_outliers) = (0, 0);
+    for _ in 0..10_000 {
+        truth[0] += truth[1] * dt + 0.01 * normal(&mut g);
+        x = &f * &x;
+        p = &f * &p * f.transpose() + &q;
+        let outlier = g.uniform() < 0.05;
+        let z = truth[0] + sigma * normal(&mut g) + if outlier { g.range(10.0, 50.0) } else { 0.0 };
+        injected += usize::from(outlier);
+        let eps = DVector::from_element(1, z - x[0]);
+        let hph = &h * &p * h.transpose();
+        if noise.observe(&eps, &hph) {
+            accepted_outliers += usize::from(outlier);
+            let s = &hph + noise.covariance();
+            let k = &p * h.transpose() / s[(0, 0)];
+            x += &k * eps[0];
+            p = (DMatrix::identity(2, 2) - &k * &h) * &p;
+        }
+    }
+    let r = noise.variances()[0];
+    eprintln!(
+        "seed {seed}: estimated σ {:.4} m (true {sigma}), {} rejected, {injected} outliers injected, {accepted_outliers} accepted",
+        r.sqrt(),
+        noise.rejected
+    );
+    assert!((r.sqrt() - sigma).abs() < 0.1 * sigma, "σ {}", r.sqrt());
+    assert_eq!(accepted_outliers, 0);
+    // Every outlier rejected, and few good fixes with them (false alarms of a χ² gate at 16).
+    assert!(
+        noise.rejected as usize >= injected && (noise.rejected as usize) < injected + injected / 5
+    );
+    assert_eq!(noise.reopened, 0);
+}
