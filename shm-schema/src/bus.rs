@@ -164,11 +164,7 @@ impl Bus {
             .subscriber_builder()
             .create()
             .map_err(|e| err(format!("subscriber on {full:?}"), e))?;
-        let listener = self
-            .event(&name, &full)?
-            .listener_builder()
-            .create()
-            .map_err(|e| err(format!("listener on {full:?}"), e))?;
+        let listener = self.listener(topic)?;
         let _ = subscriber.receive();
         Ok(BusSubscriber {
             subscriber,
