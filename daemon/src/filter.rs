@@ -14,16 +14,20 @@
 //! biases: random walks driven by the bias-instability noise.
 //!
 //! Parameter states follow the 15 core states: DVL mounting (small rotation, 3), DVL scale factor
-//! (1), DVL lever arm (3) and DVL time offset (1), all "estimate minus truth" and constant in time.
-//! They appear only in measurement models, never in `F`, so the covariance propagation handles
-//! them as a static block: `P_cc <- Phi P_cc Phi^T + Q`, `P_cp <- Phi P_cp`, `P_pp` unchanged. A
-//! parameter state that is switched off has zero variance and zero correlation, so no update can
-//! move it; switching one on costs nothing in the propagation beyond the 15 x 8 cross block.
+//! (1), DVL lever arm (3) and DVL time offset (1), all "estimate minus truth" and constant in time,
+//! then the USBL measurement errors (slant range, two range differences: 3), first-order Gauss–
+//! Markov processes `b' = -b / tau + w` (S-USBL). Parameter states appear only in measurement
+//! models, never in `F`, so the covariance propagation handles them as a block with diagonal
+//! transition `A = diag(a_i)`, `a_i = exp(-dt / tau_i)` (1 for constants):
+//! `P_cc <- Phi P_cc Phi^T + Q`, `P_cp <- Phi P_cp A`, `P_pp <- A P_pp A + diag(s_i^2 (1 - a_i^2))`
+//! with `s_i` the stationary standard deviation. A parameter state that is switched off has zero
+//! variance and zero correlation, so no update can move it; switching one on costs nothing in the
+//! propagation beyond the 15 x 11 cross block.
 
 use nalgebra::{SMatrix, SVector, Vector3};
 
 /// Number of error states.
-pub const N: usize = 23;
+pub const N: usize = 26;
 /// Number of core states (navigation errors and IMU biases) that have dynamics.
 pub const CORE: usize = 15;
 /// Index of the first component of each block.
@@ -40,8 +44,12 @@ pub const DVL_SCALE: usize = 18;
 pub const DVL_LEVER: usize = 19;
 /// DVL time-offset error (s).
 pub const DVL_TIME: usize = 22;
+/// USBL measurement errors: slant range, range differences 1-3 and 2-4 (m), estimate minus truth.
+pub const USBL: usize = 23;
+/// Number of parameter states.
+pub const PARAMS: usize = N - CORE;
 const _: () = assert!(BA + 3 == CORE, "core layout must fill CORE");
-const _: () = assert!(DVL_TIME + 1 == N, "state layout must fill N");
+const _: () = assert!(USBL + 3 == N, "state layout must fill N");
 
 pub type StateVector = SVector<f64, N>;
 pub type Covariance = SMatrix<f64, N, N>;
@@ -70,6 +78,10 @@ pub struct UpdateReport<const M: usize> {
 #[derive(Debug, Clone, PartialEq)]
 pub struct ErrorFilter {
     pub p: Covariance,
+    /// Correlation time of each parameter state (s; infinite: constant).
+    pub param_correlation_s: SVector<f64, PARAMS>,
+    /// Stationary standard deviation of each Gauss–Markov parameter state.
+    pub param_stationary_std: SVector<f64, PARAMS>,
 }
 
 /// The cross-product matrix: `skew(a) * b = a x b`.
@@ -131,7 +143,26 @@ impl ErrorFilter {
     pub fn new(p0_diagonal: &StateVector) -> Self {
         ErrorFilter {
             p: Covariance::from_diagonal(p0_diagonal),
+            param_correlation_s: SVector::repeat(f64::INFINITY),
+            param_stationary_std: SVector::zeros(),
         }
+    }
+
+    /// Makes state `index` (a parameter state) a first-order Gauss–Markov process with correlation
+    /// time `tau_s` and stationary standard deviation `std`, starting from its stationary variance.
+    pub fn set_gauss_markov(&mut self, index: usize, tau_s: f64, std: f64) {
+        assert!(
+            (CORE..N).contains(&index),
+            "only parameter states can be Gauss-Markov"
+        );
+        self.param_correlation_s[index - CORE] = tau_s;
+        self.param_stationary_std[index - CORE] = std;
+        self.p[(index, index)] = std * std;
+    }
+
+    /// The transition factor `exp(-dt / tau)` of each parameter state over `dt`.
+    pub fn param_transition(&self, dt: f64) -> SVector<f64, PARAMS> {
+        self.param_correlation_s.map(|tau| (-dt / tau).exp())
     }
 
     /// Propagates the covariance over `dt` with `F` held constant: `Phi = I + F dt + (F dt)^2/2`,
@@ -156,19 +187,33 @@ impl ErrorFilter {
             qd[(BA + i, BA + i)] = q.accel_bias_walk * q.accel_bias_walk * dt;
         }
         let p_cc: CoreMatrix = self.p.fixed_view::<CORE, CORE>(0, 0).into_owned();
-        let p_cp: SMatrix<f64, CORE, { N - CORE }> = self
-            .p
-            .fixed_view::<CORE, { N - CORE }>(0, CORE)
-            .into_owned();
+        let p_cp: SMatrix<f64, CORE, PARAMS> =
+            self.p.fixed_view::<CORE, PARAMS>(0, CORE).into_owned();
         let p_cc = phi * p_cc * phi.transpose() + qd;
-        let p_cp = phi * p_cp;
+        let a = self.param_transition(dt);
+        let mut p_cp = phi * p_cp;
+        let mut p_pp: SMatrix<f64, PARAMS, PARAMS> =
+            self.p.fixed_view::<PARAMS, PARAMS>(CORE, CORE).into_owned();
+        for j in 0..PARAMS {
+            if a[j] < 1.0 {
+                p_cp.column_mut(j).scale_mut(a[j]);
+                for i in 0..PARAMS {
+                    p_pp[(i, j)] *= a[j];
+                    p_pp[(j, i)] *= a[j];
+                }
+                p_pp[(j, j)] += self.param_stationary_std[j].powi(2) * (1.0 - a[j] * a[j]);
+            }
+        }
         self.p.fixed_view_mut::<CORE, CORE>(0, 0).copy_from(&p_cc);
         self.p
-            .fixed_view_mut::<CORE, { N - CORE }>(0, CORE)
+            .fixed_view_mut::<CORE, PARAMS>(0, CORE)
             .copy_from(&p_cp);
         self.p
-            .fixed_view_mut::<{ N - CORE }, CORE>(CORE, 0)
+            .fixed_view_mut::<PARAMS, CORE>(CORE, 0)
             .copy_from(&p_cp.transpose());
+        self.p
+            .fixed_view_mut::<PARAMS, PARAMS>(CORE, CORE)
+            .copy_from(&p_pp);
         self.symmetrise();
     }
 

@@ -11,11 +11,14 @@
 use crate::earth::{self, Geodetic};
 use crate::filter::{self, DynamicsInputs, ErrorFilter, ProcessNoise, StateVector, skew};
 use crate::strapdown::{ImuIncrement, NavState, Strapdown};
+use crate::usbl::{
+    self, AdaptiveNoise, Coupling, ResponderGeometry, UsblArray, UsblConfig, UsblFilter,
+};
 use auvnav_shm_schema::{
     AidDiagnosticsV1, AidSource, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, NavMode,
-    NavSolutionV1,
+    NavSolutionV1, UsblFixV1,
 };
-use nalgebra::{Matrix3, Rotation3, SMatrix, SVector, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, SMatrix, SVector, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// Chi-square gate, 3 degrees of freedom, 99.9 %.
@@ -103,6 +106,10 @@ pub struct NavConfig {
     /// and the measurement fused: the filter had become too sure of a wrong velocity (s; 0 =
     /// never). Default 5.
     pub dvl_reset_after_s: f64,
+    /// USBL fusion (`[navigation.usbl]`): the station's array, the coupling and the filter.
+    /// Default none: USBL fixes are counted and not used.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub usbl: Option<UsblConfig>,
 }
 
 impl Default for NavConfig {
@@ -143,6 +150,7 @@ impl Default for NavConfig {
             gnss_gate_chi2: GATE_CHI2_3DOF,
             zero_velocity_std_m_s: 0.01,
             dvl_reset_after_s: 5.0,
+            usbl: None,
         }
     }
 }
@@ -173,6 +181,17 @@ pub struct NavCounters {
     pub gnss_invalid: u64,
     pub zero_velocity_fused: u64,
     pub zero_velocity_rejected: u64,
+    pub usbl_fused: u64,
+    /// USBL fixes rejected by the innovation gate.
+    pub usbl_rejected: u64,
+    /// USBL fixes without the fields the coupling needs, or with values out of range.
+    pub usbl_invalid: u64,
+    /// USBL fixes received without a `[navigation.usbl]` configuration.
+    pub usbl_unconfigured: u64,
+    /// Times the USBL gate reopened after a run of rejections.
+    pub usbl_reopened: u64,
+    /// USBL updates that failed numerically (covariance not positive definite).
+    pub usbl_failed: u64,
     /// Aiding messages older than the navigation state (skipped).
     pub aid_late: u64,
 }
@@ -197,7 +216,22 @@ pub struct Navigator {
     dvl_rejected_since_s: Option<f64>,
     solution_sequence: u64,
     diagnostics_sequence: u64,
+    usbl: Option<UsblFusion>,
     pub counters: NavCounters,
+}
+
+/// The USBL fusion state: the surveyed array, the current estimate of the USBL measurement errors
+/// (Gauss–Markov, tight coupling) and the noise estimator.
+#[derive(Debug, Clone)]
+struct UsblFusion {
+    cfg: UsblConfig,
+    array: UsblArray,
+    lever_arm_b: Vector3<f64>,
+    /// Estimated measurement errors [δR, δΔR13, δΔR24] (m), subtracted from the measurement.
+    errors: Vector3<f64>,
+    /// Started at the first usable fix (the loose noise depends on its geometry).
+    noise: Option<AdaptiveNoise>,
+    last_fused_s: Option<f64>,
 }
 
 impl Navigator {
@@ -240,10 +274,36 @@ impl Navigator {
             lever_arm_m: Vector3::from(cfg.dvl_lever_arm_m),
             time_offset_s: cfg.dvl_time_offset_s,
         };
+        let mut kf = ErrorFilter::new(&p0);
+        let usbl = cfg.usbl.as_ref().map(|u| {
+            if u.coupling == Coupling::Tight {
+                kf.set_gauss_markov(
+                    filter::USBL,
+                    u.range_error_correlation_s,
+                    u.range_error_std_m,
+                );
+                for i in 1..3 {
+                    kf.set_gauss_markov(
+                        filter::USBL + i,
+                        u.range_difference_error_correlation_s,
+                        u.range_difference_error_std_m,
+                    );
+                }
+            }
+            UsblFusion {
+                array: u.array(),
+                lever_arm_b: Vector3::from(u.responder_lever_arm_m),
+                errors: Vector3::zeros(),
+                noise: None,
+                last_fused_s: None,
+                cfg: u.clone(),
+            }
+        });
         Navigator {
             noise,
             sd: Strapdown::new(initial),
-            kf: ErrorFilter::new(&p0),
+            kf,
+            usbl,
             gyro_bias: Vector3::zeros(),
             accel_bias: Vector3::zeros(),
             dvl,
@@ -384,6 +444,13 @@ impl Navigator {
         let f = filter::dynamics_matrix(&inputs);
         self.kf
             .predict(&f, &inputs.c_body_to_ned, &self.noise, self.pending_dt);
+        if let Some(u) = self.usbl.as_mut() {
+            // The expected value of a Gauss-Markov error decays with its correlation time.
+            let a = self.kf.param_transition(self.pending_dt);
+            for i in 0..3 {
+                u.errors[i] *= a[filter::USBL - filter::CORE + i];
+            }
+        }
         self.pending_dt = 0.0;
         self.pending_f_ned = Vector3::zeros();
     }
@@ -411,6 +478,9 @@ impl Navigator {
             dx[filter::DVL_LEVER + 2],
         );
         self.dvl.time_offset_s -= dx[filter::DVL_TIME];
+        if let Some(u) = self.usbl.as_mut() {
+            u.errors -= Vector3::new(dx[filter::USBL], dx[filter::USBL + 1], dx[filter::USBL + 2]);
+        }
     }
 
     fn aid_is_late(&mut self, t_ns: u64) -> bool {
@@ -647,6 +717,157 @@ impl Navigator {
         d
     }
 
+    /// Fuses a USBL fix from the docking station by the configured coupling and filter (S-USBL).
+    ///
+    /// Tight: `z = [R, ΔR13, ΔR24]`, predicted from the state by the exact array geometry plus
+    /// the Gauss–Markov error states; loose: the fix as a position in the array's NED frame. The
+    /// update runs over every state with non-zero variance (unscented for ukf/aukf, linearised
+    /// for akf); the innovation passes the gate of the noise estimator before anything is changed,
+    /// so a rejected fix moves neither the state nor the noise estimate.
+    pub fn on_usbl(&mut self, m: &UsblFixV1) -> AidDiagnosticsV1 {
+        let t_ns = m.validity_time_ns;
+        let source = match self.usbl.as_ref().map(|u| u.cfg.coupling) {
+            Some(Coupling::Loose) => AidSource::UsblPosition,
+            _ => AidSource::UsblSlantRange,
+        };
+        let mut d = self.diagnostics(t_ns, source);
+        d.dimension = 3;
+        d.flags = AidDiagnosticsV1::FLAG_REJECTED;
+        let Some(u) = self.usbl.as_ref() else {
+            self.counters.usbl_unconfigured += 1;
+            return d;
+        };
+        let meas = match usbl::measurement(&u.cfg, &u.array, m) {
+            Ok(x) => x,
+            Err(_) => {
+                self.counters.usbl_invalid += 1;
+                return d;
+            }
+        };
+        if self.aid_is_late(t_ns) {
+            return d;
+        }
+        self.propagate_covariance();
+        let Some(u) = self.usbl.as_mut() else {
+            return d;
+        };
+        let s = &self.sd.state;
+        let geometry =
+            ResponderGeometry::new(&u.array, &s.position, &s.c_body_to_ned(), &u.lever_arm_b);
+        let noise = u.noise.get_or_insert_with(|| {
+            let r0 = meas.r.diagonal();
+            let scale = r0.max();
+            let mut n = AdaptiveNoise::new(
+                DVector::from_column_slice(r0.as_slice()),
+                u.cfg.fading,
+                (0.1f64 * 0.1) * r0.min(),
+                1.0e4 * scale,
+                u.cfg.gate_chi2,
+            );
+            n.reopen_after = u.cfg.reopen_after;
+            n.learn = u.cfg.filter != UsblFilter::Ukf;
+            n
+        });
+        // The states the update runs over: every one with non-zero variance.
+        let active: Vec<usize> = (0..filter::N)
+            .filter(|&i| self.kf.p[(i, i)] > 0.0)
+            .collect();
+        let slot = |state: usize| active.iter().position(|&i| i == state);
+        let pos = [0, 1, 2].map(|i| slot(filter::POS + i));
+        let att = [0, 1, 2].map(|i| slot(filter::ATT + i));
+        let err = [0, 1, 2].map(|i| slot(filter::USBL + i));
+        let pick = |dx: &DVector<f64>, idx: &[Option<usize>; 3]| {
+            Vector3::from(idx.map(|k| k.map_or(0.0, |k| dx[k])))
+        };
+        let coupling = u.cfg.coupling;
+        let errors = u.errors;
+        let array = u.array;
+        let c_array_to_ned = u.array.c_ned_to_array.transpose();
+        let h = move |dx: &DVector<f64>| -> DVector<f64> {
+            let p_a = geometry.responder_given_error(&pick(dx, &pos), &pick(dx, &att));
+            let z = match coupling {
+                Coupling::Tight => usbl::predict_tight(&array, &p_a) + errors - pick(dx, &err),
+                Coupling::Loose => c_array_to_ned * p_a,
+            };
+            DVector::from_column_slice(z.as_slice())
+        };
+        let p: DMatrix<f64> = DMatrix::from_fn(active.len(), active.len(), |i, j| {
+            self.kf.p[(active[i], active[j])]
+        });
+        let z = DVector::from_column_slice(meas.z.as_slice());
+        let unscented = u.cfg.unscented();
+        let kind = u.cfg.filter;
+        let update = |r: &DMatrix<f64>| match kind {
+            UsblFilter::Akf => usbl::linearized_update(&p, &z, r, &h),
+            UsblFilter::Ukf | UsblFilter::Aukf => usbl::unscented_update(&p, &z, r, &h, unscented),
+        };
+        // Fixed noise (ukf): the configured covariance, full for the loose fix; adaptive: the
+        // estimator's diagonal.
+        let r_used = if kind == UsblFilter::Ukf {
+            noise.set_variances(&DVector::from_column_slice(meas.r.diagonal().as_slice()));
+            DMatrix::from_column_slice(3, 3, meas.r.as_slice())
+        } else {
+            noise.covariance()
+        };
+        let Some(mut upd) = update(&r_used) else {
+            self.counters.usbl_failed += 1;
+            return d;
+        };
+        let hph = &upd.innovation_cov - &r_used;
+        let reopened = noise.reopened;
+        let accepted = noise.observe(&upd.innovation, &hph);
+        if noise.reopened != reopened {
+            self.counters.usbl_reopened += 1;
+            d.flags |= AidDiagnosticsV1::FLAG_RESET;
+            let r = noise.covariance();
+            match update(&r) {
+                Some(x) => upd = x,
+                None => {
+                    self.counters.usbl_failed += 1;
+                    return d;
+                }
+            }
+        }
+        for i in 0..3 {
+            d.observation[i] = meas.z[i];
+            d.innovation[i] = upd.innovation[i];
+            d.innovation_variance[i] = upd.innovation_cov[(i, i)];
+            d.observation_variance[i] = noise.variances()[i];
+        }
+        let s_inv = upd.innovation_cov.clone().try_inverse();
+        d.test_ratio = s_inv.map_or(f64::INFINITY, |si| {
+            (upd.innovation.transpose() * si * &upd.innovation)[(0, 0)] / GATE_CHI2_3DOF
+        });
+        if !accepted {
+            self.counters.usbl_rejected += 1;
+            return d;
+        }
+        if (0..upd.p.nrows()).any(|i| !(upd.p[(i, i)].is_finite() && upd.p[(i, i)] >= 0.0)) {
+            self.counters.usbl_failed += 1;
+            return d;
+        }
+        let mut dx = StateVector::zeros();
+        for (a, &i) in active.iter().enumerate() {
+            dx[i] = upd.dx[a];
+            for (b, &j) in active.iter().enumerate() {
+                self.kf.p[(i, j)] = upd.p[(a, b)];
+            }
+        }
+        u.last_fused_s = Some(t_ns as f64 * 1e-9);
+        self.correct(&dx);
+        self.counters.usbl_fused += 1;
+        d.flags = AidDiagnosticsV1::FLAG_FUSED | (d.flags & AidDiagnosticsV1::FLAG_RESET);
+        d
+    }
+
+    /// The estimated USBL measurement errors [δR, δΔR13, δΔR24] (m) and the noise variances in
+    /// use, when USBL fusion is configured and has seen a fix.
+    pub fn usbl_estimates(&self) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        let u = self.usbl.as_ref()?;
+        let v = u.noise.as_ref()?.variances();
+        Some((u.errors, Vector3::new(v[0], v[1], v[2])))
+    }
+
     /// The navigation solution now.
     pub fn solution(&mut self, t_ns: u64) -> NavSolutionV1 {
         self.solution_sequence += 1;
@@ -664,6 +885,10 @@ impl Navigator {
         let mut health = NavSolutionV1::HEALTH_IMU;
         if dvl_ok {
             health |= NavSolutionV1::HEALTH_DVL;
+        }
+        let usbl_fused_s = self.usbl.as_ref().and_then(|u| u.last_fused_s);
+        if usbl_fused_s.is_some_and(|t| s.time_s - t <= self.cfg.dvl_timeout_s) {
+            health |= NavSolutionV1::HEALTH_USBL;
         }
         NavSolutionV1 {
             host_time_ns: t_ns,

@@ -450,37 +450,10 @@ pub fn run(a: &AlignArgs) -> anyhow::Result<AlignReport> {
     }
     let scenario = Scenario::load(scenario_name(&a.scenario)?)?;
     let mount = parse_mount(&a.mount)?;
-    let threads = a
-        .threads
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
-        .clamp(1, 64);
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let results: Vec<std::sync::Mutex<Option<anyhow::Result<Vec<RunResult>>>>> =
-        (0..a.runs).map(|_| std::sync::Mutex::new(None)).collect();
-    std::thread::scope(|s| {
-        for _ in 0..threads {
-            s.spawn(|| {
-                loop {
-                    let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                    if k >= a.runs {
-                        break;
-                    }
-                    let r = run_one(a, &scenario, &models, mount, a.seed.wrapping_add(k as u64));
-                    if let Ok(mut slot) = results[k].lock() {
-                        *slot = Some(r);
-                    }
-                }
-            });
-        }
-    });
-    let mut runs: Vec<Vec<RunResult>> = Vec::with_capacity(a.runs);
-    for slot in results {
-        let r = slot
-            .into_inner()
-            .map_err(|_| anyhow::anyhow!("a worker panicked"))?
-            .context("a run was not done")??;
-        runs.push(r);
-    }
+    let threads = a.threads.unwrap_or_else(crate::parallel::default_threads);
+    let runs: Vec<Vec<RunResult>> = crate::parallel::map_runs(a.runs, threads, |k| {
+        run_one(a, &scenario, &models, mount, a.seed.wrapping_add(k as u64))
+    })?;
     let mut reports = Vec::new();
     for (mi, model) in models.iter().enumerate() {
         let per = |axis: usize| -> Vec<(f64, f64)> {

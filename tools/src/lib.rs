@@ -9,6 +9,8 @@ pub mod import;
 pub mod live;
 pub mod log;
 pub mod montecarlo;
+pub mod parallel;
 pub mod record;
 pub mod replay;
 pub mod sim;
+pub mod usbl;

@@ -35,6 +35,9 @@ enum Command {
     Align(auvnav_tools::align::AlignArgs),
     /// S-ALIGN fine alignment on the Snapir segments from the reference heading plus an offset.
     AlignMeasured(auvnav_tools::align::AlignMeasuredArgs),
+    /// S-USBL Monte Carlo on the docking scenario: loose or tight USBL coupling, ukf/akf/aukf,
+    /// with multipath outliers and array orientation errors.
+    Usbl(auvnav_tools::usbl::UsblArgs),
     /// Turn a measured data set into a log.
     Import {
         #[command(subcommand)]
@@ -276,6 +279,22 @@ fn main() -> std::process::ExitCode {
                 println!("{}", serde_json::to_string_pretty(&r)?);
             } else {
                 auvnav_tools::align::print(&r);
+            }
+            Ok(())
+        }),
+        Command::Usbl(a) if a.table => auvnav_tools::usbl::run_table(&a).and_then(|r| {
+            if a.json {
+                println!("{}", serde_json::to_string_pretty(&r)?);
+            } else {
+                auvnav_tools::usbl::print_table(&r);
+            }
+            Ok(())
+        }),
+        Command::Usbl(a) => auvnav_tools::usbl::run(&a).and_then(|r| {
+            if a.json {
+                println!("{}", serde_json::to_string_pretty(&r)?);
+            } else {
+                auvnav_tools::usbl::print(&r);
             }
             Ok(())
         }),

@@ -1,0 +1,529 @@
+//! `auvnav usbl`: Monte Carlo of the S-USBL fusion on the docking scenario (600 s of straight
+//! runs, turns, climb and descent from 120° E, 31° N to a seabed USBL station).
+//!
+//! Every run simulates the voyage with the scenario's sensor suite (FOG-class INS, DVL, pressure
+//! depth, SeaTrac-class USBL) plus, per run, a random gyro and accelerometer bias and a random DVL
+//! scale-factor error (0.5 %), starts the navigator from the truth perturbed by a draw of its
+//! initial covariance, and feeds IMU, DVL, depth and USBL through `Navigator` — the code the
+//! daemon runs. USBL multipath outliers (`--outliers`, 10–50 m added to the slant range) and an
+//! error of the array's surveyed yaw (`--array-yaw-error`) are effects of the simulated device;
+//! the filter knows the array as surveyed. Each run depends only on its seed.
+
+use crate::log::LogMessage;
+use crate::sim::rng::Rng;
+use crate::sim::{self, SimConfig, StationGeometry, scenario::Scenario};
+use anyhow::{Context, bail};
+use auvnav_core::earth::{Geodetic, ned_offset, offset_position};
+use auvnav_core::navigator::{NavConfig, Navigator, initial_state};
+use auvnav_core::usbl::{Coupling, UsblConfig, UsblFilter};
+use auvnav_shm_schema::AidDiagnosticsV1;
+use nalgebra::{UnitQuaternion, Vector3};
+use serde::Serialize;
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct UsblArgs {
+    /// loose (the device's position fix) or tight (slant range and range differences).
+    #[arg(long, value_enum, default_value = "tight")]
+    pub coupling: Coupling,
+    /// ukf (fixed noise), akf (adaptive, linearised) or aukf (adaptive unscented).
+    #[arg(long, value_enum, default_value = "aukf")]
+    pub filter: UsblFilter,
+    /// Fraction of USBL fixes hit by a multipath outlier (10–50 m added to the range).
+    #[arg(long, default_value_t = 0.0)]
+    pub outliers: f64,
+    /// Error of the array's surveyed yaw (deg): the true array is turned by this much.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub array_yaw_error: f64,
+    /// Monte Carlo runs.
+    #[arg(long, default_value_t = 50)]
+    pub runs: usize,
+    /// Seed of the first run (run k uses seed + k).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Scenario (must have a station).
+    #[arg(long, default_value = "docking")]
+    pub scenario: String,
+    /// Seconds to simulate (default: the whole scenario).
+    #[arg(long)]
+    pub seconds: Option<f64>,
+    /// Statistics start this long after the start (s): what is measured is the navigation once
+    /// the filter has had the geometry to correct the initial position error (3 m per axis); the
+    /// first leg runs 80 s almost straight at the station, and its first turn is what makes the
+    /// cross-range error observable to a filter that allows for array orientation errors.
+    #[arg(long, default_value_t = 120.0)]
+    pub settle_s: f64,
+    /// A run whose horizontal error exceeds this after the settling time has diverged (m).
+    #[arg(long, default_value_t = 5.0)]
+    pub divergence_m: f64,
+    /// Override a `[navigation.usbl]` setting, e.g. `--set range_difference_error_std_m=0.005`
+    /// (repeatable; TOML values).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub settings: Vec<String>,
+    /// Worker threads (default: the available cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Run the whole comparison table ({loose, tight} × {akf, aukf} × {clean, 5 % outliers, 1°
+    /// array yaw error}) and print it as Markdown (JSON with --json).
+    #[arg(long)]
+    pub table: bool,
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// The outcome of one run.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunResult {
+    pub seed: u64,
+    pub horizontal_rms_m: f64,
+    pub horizontal_max_m: f64,
+    pub vertical_rms_m: f64,
+    pub vertical_max_m: f64,
+    pub velocity_rms_m_s: f64,
+    pub final_horizontal_m: f64,
+    pub fixes: u64,
+    pub fused: u64,
+    pub rejected: u64,
+    pub reopened: u64,
+    pub injected_outliers: u64,
+    pub accepted_outliers: u64,
+    /// Fixes without an outlier that the gate rejected.
+    pub rejected_clean: u64,
+}
+
+/// The Monte Carlo summary (RMS pooled over every epoch of every run).
+#[derive(Debug, Clone, Serialize)]
+pub struct UsblReport {
+    pub scenario: String,
+    pub coupling: Coupling,
+    pub filter: UsblFilter,
+    pub outlier_fraction: f64,
+    pub array_yaw_error_deg: f64,
+    pub runs: usize,
+    pub seed: u64,
+    pub seconds_per_run: f64,
+    /// Statistics start this long after the start (s).
+    pub settle_s: f64,
+    pub horizontal_rms_m: f64,
+    /// The largest horizontal error of any run at any time.
+    pub horizontal_max_m: f64,
+    /// The worst run's horizontal RMS.
+    pub worst_run_horizontal_rms_m: f64,
+    pub vertical_rms_m: f64,
+    pub vertical_max_m: f64,
+    pub velocity_rms_m_s: f64,
+    /// Runs whose horizontal error exceeded `divergence_m`.
+    pub divergent_runs: usize,
+    pub divergence_m: f64,
+    pub fixes: u64,
+    pub rejected: u64,
+    pub reopened: u64,
+    pub injected_outliers: u64,
+    pub accepted_outliers: u64,
+    pub rejected_clean: u64,
+    pub wall_s: f64,
+    pub per_run: Vec<RunResult>,
+}
+
+/// The navigation configuration matched to the docking scenario's sensors, with the station's
+/// array as surveyed.
+pub fn navigation_config(
+    station: &StationGeometry,
+    coupling: Coupling,
+    filter: UsblFilter,
+) -> NavConfig {
+    NavConfig {
+        gyro_angle_random_walk_deg_sqrt_h: 0.002,
+        accel_velocity_random_walk_m_s_sqrt_h: 0.0005,
+        gyro_bias_walk_deg_h_sqrt_h: 0.002,
+        accel_bias_walk_ug_sqrt_h: 5.0,
+        initial_position_std_m: 3.0,
+        initial_velocity_std_m_s: 0.05,
+        initial_tilt_std_deg: 0.02,
+        initial_heading_std_deg: 0.05,
+        initial_gyro_bias_std_deg_h: 0.01,
+        initial_accel_bias_std_ug: 30.0,
+        dvl_velocity_std_m_s: 0.01,
+        depth_std_m: 0.05,
+        estimate_dvl_scale: true,
+        initial_dvl_scale_std: 0.01,
+        usbl: Some(UsblConfig {
+            coupling,
+            filter,
+            array_latitude_deg: station.position.latitude_rad.to_degrees(),
+            array_longitude_deg: station.position.longitude_rad.to_degrees(),
+            array_height_m: station.position.height_m,
+            array_yaw_deg: station.yaw_rad.to_degrees(),
+            baseline_m: station.baseline_m,
+            responder_lever_arm_m: station.responder_lever_arm_m,
+            ..UsblConfig::default()
+        }),
+        ..NavConfig::default()
+    }
+}
+
+/// A fix waiting for the truth at its time to tell whether it was an outlier.
+struct PendingFix {
+    t_ns: u64,
+    slant_m: f64,
+    fused: bool,
+}
+
+/// The USBL configuration with `settings` (`key=value`, TOML values) applied.
+pub fn apply_settings(base: &UsblConfig, settings: &[String]) -> anyhow::Result<UsblConfig> {
+    let mut table = toml::Table::try_from(base)?;
+    for s in settings {
+        let (k, v) = s
+            .split_once('=')
+            .with_context(|| format!("--set {s:?}: expected KEY=VALUE"))?;
+        let value: toml::Table = toml::from_str(&format!("x = {}", v.trim()))
+            .with_context(|| format!("--set {s:?}: the value is not a TOML value"))?;
+        let k = k.trim();
+        if !table.contains_key(k) {
+            bail!("--set {s:?}: no USBL setting {k:?}");
+        }
+        table.insert(k.to_owned(), value["x"].clone());
+    }
+    let cfg: UsblConfig = table.try_into()?;
+    let problems = cfg.problems();
+    if !problems.is_empty() {
+        bail!("{}", problems.join("; "));
+    }
+    Ok(cfg)
+}
+
+fn run_one(
+    a: &UsblArgs,
+    scenario: &Scenario,
+    station: &StationGeometry,
+    seed: u64,
+) -> anyhow::Result<RunResult> {
+    let mut rng = Rng::new(seed, "montecarlo.usbl");
+    let mut cfg = navigation_config(station, a.coupling, a.filter);
+    if let Some(u) = cfg.usbl.as_mut() {
+        *u = apply_settings(u, &a.settings)?;
+    }
+    let mut effects = scenario.effects()?;
+    let draw3 = |rng: &mut Rng, s: f64| [rng.gauss(s), rng.gauss(s), rng.gauss(s)];
+    effects.set(
+        "imu.gyro_bias",
+        &draw3(&mut rng, cfg.initial_gyro_bias_std_deg_h),
+    )?;
+    effects.set(
+        "imu.accel_bias",
+        &draw3(&mut rng, cfg.initial_accel_bias_std_ug),
+    )?;
+    effects.set("dvl.scale_factor", &[1.0 + rng.gauss(0.005)])?;
+    effects.set("usbl.outlier_fraction", &[a.outliers])?;
+    effects.set("usbl.array_yaw", &[a.array_yaw_error])?;
+    let true_array = offset_position(&station.position, &Vector3::from(effects.usbl_array_offset));
+    let lever = Vector3::from(station.responder_lever_arm_m);
+    let sim_cfg = SimConfig {
+        scenario: scenario.clone(),
+        effects,
+        seed,
+        duration_s: a.seconds,
+    };
+    let mut nav: Option<Navigator> = None;
+    let mut pending: Option<PendingFix> = None;
+    let mut r = RunResult {
+        seed,
+        horizontal_rms_m: 0.0,
+        horizontal_max_m: 0.0,
+        vertical_rms_m: 0.0,
+        vertical_max_m: 0.0,
+        velocity_rms_m_s: 0.0,
+        final_horizontal_m: 0.0,
+        fixes: 0,
+        fused: 0,
+        rejected: 0,
+        reopened: 0,
+        injected_outliers: 0,
+        accepted_outliers: 0,
+        rejected_clean: 0,
+    };
+    let (mut sh, mut sv, mut svel, mut n) = (0.0, 0.0, 0.0, 0usize);
+    sim::simulate(&sim_cfg, |m| {
+        match m {
+            LogMessage::Truth(t) => {
+                let truth_pos = Geodetic {
+                    latitude_rad: t.latitude_rad,
+                    longitude_rad: t.longitude_rad,
+                    height_m: t.height_m,
+                };
+                let Some(nv) = nav.as_ref() else {
+                    nav = Some(perturbed_start(&cfg, t, &mut rng));
+                    return Ok(());
+                };
+                let q = t.quaternion_body_to_ned;
+                let c = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                    q[0], q[1], q[2], q[3],
+                ))
+                .to_rotation_matrix()
+                .into_inner();
+                if let Some(f) = pending.take_if(|f| f.t_ns <= t.host_time_ns) {
+                    let true_range = (ned_offset(&true_array, &truth_pos) + c * lever).norm();
+                    let outlier = (f.slant_m - true_range).abs() > 5.0;
+                    if outlier {
+                        r.injected_outliers += 1;
+                        r.accepted_outliers += u64::from(f.fused);
+                    } else if !f.fused {
+                        r.rejected_clean += 1;
+                    }
+                }
+                if (t.host_time_ns as f64) * 1e-9 < a.settle_s {
+                    return Ok(());
+                }
+                let s = nv.state();
+                let dp = ned_offset(&truth_pos, &s.position);
+                let dv = s.velocity_ned - Vector3::from(t.velocity_ned_m_s);
+                let h = dp.xy().norm();
+                sh += h * h;
+                sv += dp.z * dp.z;
+                svel += dv.norm_squared();
+                n += 1;
+                r.horizontal_max_m = r.horizontal_max_m.max(h);
+                r.vertical_max_m = r.vertical_max_m.max(dp.z.abs());
+                r.final_horizontal_m = h;
+            }
+            LogMessage::Imu(x) => {
+                if let Some(nv) = nav.as_mut() {
+                    nv.on_imu(x);
+                }
+            }
+            LogMessage::Dvl(x) => {
+                if let Some(nv) = nav.as_mut() {
+                    nv.on_dvl(x);
+                }
+            }
+            LogMessage::Depth(x) => {
+                if let Some(nv) = nav.as_mut() {
+                    nv.on_depth(x);
+                }
+            }
+            LogMessage::Usbl(x) => {
+                if let Some(nv) = nav.as_mut() {
+                    let d = nv.on_usbl(x);
+                    r.fixes += 1;
+                    pending = Some(PendingFix {
+                        t_ns: x.validity_time_ns,
+                        slant_m: x.slant_range_m,
+                        fused: d.flags & AidDiagnosticsV1::FLAG_FUSED != 0,
+                    });
+                }
+            }
+            _ => {}
+        }
+        Ok(())
+    })?;
+    let nv = nav.context("the simulation produced no truth")?;
+    let c = nv.counters;
+    r.fused = c.usbl_fused;
+    r.rejected = c.usbl_rejected + c.usbl_invalid + c.usbl_failed;
+    r.reopened = c.usbl_reopened;
+    let nf = n.max(1) as f64;
+    r.horizontal_rms_m = (sh / nf).sqrt();
+    r.vertical_rms_m = (sv / nf).sqrt();
+    r.velocity_rms_m_s = (svel / nf).sqrt();
+    Ok(r)
+}
+
+/// A navigator started from the truth perturbed by a draw from its initial covariance.
+fn perturbed_start(
+    cfg: &NavConfig,
+    t: &auvnav_shm_schema::TruthStateV1,
+    rng: &mut Rng,
+) -> Navigator {
+    let g = |rng: &mut Rng, s: f64| Vector3::new(rng.gauss(s), rng.gauss(s), rng.gauss(s));
+    let dp = g(rng, cfg.initial_position_std_m);
+    let dv = g(rng, cfg.initial_velocity_std_m_s);
+    let tilt = cfg.initial_tilt_std_deg.to_radians();
+    let phi = Vector3::new(
+        rng.gauss(tilt),
+        rng.gauss(tilt),
+        rng.gauss(cfg.initial_heading_std_deg.to_radians()),
+    );
+    let truth_pos = Geodetic {
+        latitude_rad: t.latitude_rad,
+        longitude_rad: t.longitude_rad,
+        height_m: t.height_m,
+    };
+    let mut s = initial_state(
+        t.host_time_ns as f64 * 1e-9,
+        offset_position(&truth_pos, &dp),
+        (Vector3::from(t.velocity_ned_m_s) + dv).into(),
+        t.euler_rad,
+    );
+    s.q_body_to_ned = UnitQuaternion::from_scaled_axis(-phi) * s.q_body_to_ned;
+    Navigator::new(cfg.clone(), s)
+}
+
+/// Runs the Monte Carlo for one configuration.
+pub fn run(a: &UsblArgs) -> anyhow::Result<UsblReport> {
+    let start = std::time::Instant::now();
+    if a.runs == 0 {
+        bail!("--runs must be at least 1");
+    }
+    if !(0.0..=0.5).contains(&a.outliers) {
+        bail!("--outliers {}: expected a fraction 0..=0.5", a.outliers);
+    }
+    if !(a.array_yaw_error.is_finite() && a.array_yaw_error.abs() <= 30.0) {
+        bail!(
+            "--array-yaw-error {}: expected -30..=30 deg",
+            a.array_yaw_error
+        );
+    }
+    if let Some(s) = a.seconds
+        && !(s.is_finite() && s >= 10.0 + a.settle_s)
+    {
+        bail!("--seconds {s}: expected at least --settle-s + 10");
+    }
+    if !(a.settle_s.is_finite() && a.settle_s >= 0.0) {
+        bail!("--settle-s {}: expected zero or more", a.settle_s);
+    }
+    let scenario = Scenario::load(&a.scenario)?;
+    let station = StationGeometry::from_scenario(&scenario).with_context(|| {
+        format!(
+            "scenario {} has no [station]: the USBL Monte Carlo needs one",
+            scenario.name
+        )
+    })?;
+    let threads = a.threads.unwrap_or_else(crate::parallel::default_threads);
+    let per_run = crate::parallel::map_runs(a.runs, threads, |k| {
+        run_one(a, &scenario, &station, a.seed.wrapping_add(k as u64))
+    })?;
+    let pooled = |f: fn(&RunResult) -> f64| {
+        (per_run.iter().map(|r| f(r).powi(2)).sum::<f64>() / per_run.len() as f64).sqrt()
+    };
+    let max = |f: fn(&RunResult) -> f64| per_run.iter().map(f).fold(0.0, f64::max);
+    let sum = |f: fn(&RunResult) -> u64| per_run.iter().map(f).sum::<u64>();
+    let seconds = a
+        .seconds
+        .unwrap_or(crate::sim::trajectory::Trajectory::from_scenario(&scenario)?.duration_s);
+    Ok(UsblReport {
+        scenario: scenario.name.clone(),
+        coupling: a.coupling,
+        filter: a.filter,
+        outlier_fraction: a.outliers,
+        array_yaw_error_deg: a.array_yaw_error,
+        runs: a.runs,
+        seed: a.seed,
+        seconds_per_run: seconds,
+        settle_s: a.settle_s,
+        horizontal_rms_m: pooled(|r| r.horizontal_rms_m),
+        horizontal_max_m: max(|r| r.horizontal_max_m),
+        worst_run_horizontal_rms_m: max(|r| r.horizontal_rms_m),
+        vertical_rms_m: pooled(|r| r.vertical_rms_m),
+        vertical_max_m: max(|r| r.vertical_max_m),
+        velocity_rms_m_s: pooled(|r| r.velocity_rms_m_s),
+        divergent_runs: per_run
+            .iter()
+            .filter(|r| r.horizontal_max_m > a.divergence_m)
+            .count(),
+        divergence_m: a.divergence_m,
+        fixes: sum(|r| r.fixes),
+        rejected: sum(|r| r.rejected),
+        reopened: sum(|r| r.reopened),
+        injected_outliers: sum(|r| r.injected_outliers),
+        accepted_outliers: sum(|r| r.accepted_outliers),
+        rejected_clean: sum(|r| r.rejected_clean),
+        wall_s: start.elapsed().as_secs_f64(),
+        per_run,
+    })
+}
+
+/// The comparison table: {loose, tight} × {akf, aukf} × {clean, 5 % outliers, 1° array yaw}.
+pub fn run_table(a: &UsblArgs) -> anyhow::Result<Vec<UsblReport>> {
+    let mut out = Vec::new();
+    for (outliers, yaw) in [(0.0, 0.0), (0.05, 0.0), (0.0, 1.0)] {
+        for coupling in [Coupling::Loose, Coupling::Tight] {
+            for filter in [UsblFilter::Akf, UsblFilter::Aukf] {
+                out.push(run(&UsblArgs {
+                    coupling,
+                    filter,
+                    outliers,
+                    array_yaw_error: yaw,
+                    table: false,
+                    ..a.clone()
+                })?);
+            }
+        }
+    }
+    Ok(out)
+}
+
+fn name<T: Serialize>(x: &T) -> String {
+    serde_json::to_value(x)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_owned))
+        .unwrap_or_default()
+}
+
+/// Prints reports as a Markdown table.
+pub fn print_table(reports: &[UsblReport]) {
+    println!(
+        "| case | coupling | filter | horiz. RMS (m) | horiz. max (m) | worst run RMS (m) | vert. RMS (m) | vel. RMS (m/s) | runs > {} m | outliers accepted / injected | clean fixes rejected | wall (s) |",
+        reports.first().map_or(5.0, |r| r.divergence_m)
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for r in reports {
+        let case = if r.outlier_fraction > 0.0 {
+            format!("{:.0} % outliers", r.outlier_fraction * 100.0)
+        } else if r.array_yaw_error_deg != 0.0 {
+            format!("{}° array yaw error", r.array_yaw_error_deg)
+        } else {
+            "clean".to_owned()
+        };
+        println!(
+            "| {case} | {} | {} | {:.3} | {:.2} | {:.3} | {:.3} | {:.4} | {}/{} | {}/{} | {} | {:.0} |",
+            name(&r.coupling),
+            name(&r.filter),
+            r.horizontal_rms_m,
+            r.horizontal_max_m,
+            r.worst_run_horizontal_rms_m,
+            r.vertical_rms_m,
+            r.velocity_rms_m_s,
+            r.divergent_runs,
+            r.runs,
+            r.accepted_outliers,
+            r.injected_outliers,
+            r.rejected_clean,
+            r.wall_s,
+        );
+    }
+}
+
+/// Prints one report as text.
+pub fn print(r: &UsblReport) {
+    println!(
+        "{} {} on {} ({} runs of {:.0} s, seed {}; outliers {:.0} %, array yaw error {}°):",
+        name(&r.coupling),
+        name(&r.filter),
+        r.scenario,
+        r.runs,
+        r.seconds_per_run,
+        r.seed,
+        r.outlier_fraction * 100.0,
+        r.array_yaw_error_deg
+    );
+    println!(
+        "  horizontal position error RMS {:.3} m (worst run {:.3} m), max {:.2} m; vertical RMS {:.3} m, max {:.2} m; velocity RMS {:.4} m/s",
+        r.horizontal_rms_m,
+        r.worst_run_horizontal_rms_m,
+        r.horizontal_max_m,
+        r.vertical_rms_m,
+        r.vertical_max_m,
+        r.velocity_rms_m_s
+    );
+    println!(
+        "  runs above {} m: {}; USBL fixes {}, rejected {} (clean {}), gate reopened {}; outliers injected {}, accepted {}; {:.1} s",
+        r.divergence_m,
+        r.divergent_runs,
+        r.fixes,
+        r.rejected,
+        r.rejected_clean,
+        r.reopened,
+        r.injected_outliers,
+        r.accepted_outliers,
+        r.wall_s
+    );
+}
