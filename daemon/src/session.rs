@@ -9,6 +9,7 @@ use crate::navigator::{NavConfig, Navigator, initial_state};
 use crate::strapdown::NavState;
 use auvnav_shm_schema::{
     AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, NavMode, NavSolutionV1,
+    UsblFixV1,
 };
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
@@ -143,6 +144,7 @@ enum Aid {
     Dvl(DvlVelocityV1),
     Depth(DepthV1),
     Gnss(GnssFixV1),
+    Usbl(UsblFixV1),
 }
 
 impl Aid {
@@ -152,6 +154,9 @@ impl Aid {
             Aid::Dvl(m) => (m.host_time_ns, 0, m.sequence),
             Aid::Depth(m) => (m.host_time_ns, 1, m.sequence),
             Aid::Gnss(m) => (m.host_time_ns, 2, m.sequence),
+            // A fix is applied at its time of validity (reception at the array), which precedes
+            // its delivery by the acoustic and processing latency.
+            Aid::Usbl(m) => (m.validity_time_ns, 3, m.sequence),
         }
     }
 }
@@ -594,6 +599,7 @@ impl Session {
             Aid::Dvl(m) => nav.on_dvl(&m),
             Aid::Depth(m) => nav.on_depth(&m),
             Aid::Gnss(m) => nav.on_gnss(&m),
+            Aid::Usbl(m) => nav.on_usbl(&m),
         };
         out(SessionOutput::Diagnostics(&d))
     }
@@ -629,5 +635,11 @@ impl Session {
     /// A GNSS fix (queued like DVL).
     pub fn on_gnss(&mut self, x: &GnssFixV1) {
         self.queue(Aid::Gnss(*x));
+    }
+
+    /// A USBL fix (queued by its time of validity; used when `[navigation.usbl]` is configured,
+    /// counted in the navigator's `usbl_unconfigured` otherwise).
+    pub fn on_usbl(&mut self, x: &UsblFixV1) {
+        self.queue(Aid::Usbl(*x));
     }
 }

@@ -231,3 +231,214 @@ fn adaptive_run(seed: u64) {
     );
     assert_eq!(noise.reopened, 0);
 }
+
+mod fusion {
+    use auvnav_core::earth::Geodetic;
+    use auvnav_core::filter::{self, CoreMatrix, ErrorFilter, ProcessNoise, StateVector};
+    use auvnav_core::navigator::{NavConfig, Navigator, initial_state};
+    use auvnav_core::usbl::{
+        Coupling, UsblConfig, UsblInputError, measurement, predict_tight,
+        range_differences_from_angles,
+    };
+    use auvnav_shm_schema::UsblFixV1;
+    use nalgebra::Vector3;
+
+    #[test]
+    fn gauss_markov_states_keep_their_stationary_variance_and_decorrelate() {
+        let mut p0 = StateVector::zeros();
+        p0[filter::POS] = 1.0;
+        let mut kf = ErrorFilter::new(&p0);
+        let (tau, std) = (200.0, 0.3);
+        kf.set_gauss_markov(filter::USBL, tau, std);
+        // Correlate the error state with a position state, then propagate with no dynamics.
+        let c = 0.5 * std;
+        kf.p[(filter::POS, filter::USBL)] = c;
+        kf.p[(filter::USBL, filter::POS)] = c;
+        let quiet = ProcessNoise {
+            gyro_noise: 0.0,
+            accel_noise: 0.0,
+            gyro_bias_walk: 0.0,
+            accel_bias_walk: 0.0,
+        };
+        let dt = 0.05;
+        let steps = 4000; // 200 s = one correlation time
+        for _ in 0..steps {
+            kf.predict(
+                &CoreMatrix::zeros(),
+                &nalgebra::Matrix3::identity(),
+                &quiet,
+                dt,
+            );
+        }
+        let t = dt * steps as f64;
+        let var = kf.p[(filter::USBL, filter::USBL)];
+        assert!((var - std * std).abs() < 1e-9 * std * std, "variance {var}");
+        let cross = kf.p[(filter::POS, filter::USBL)];
+        assert!(
+            (cross - c * (-t / tau).exp()).abs() < 1e-9,
+            "cross-covariance {cross}"
+        );
+        // A constant parameter state is untouched.
+        assert_eq!(
+            kf.param_transition(dt)[filter::DVL_SCALE - filter::CORE],
+            1.0
+        );
+    }
+
+    fn station() -> UsblConfig {
+        UsblConfig {
+            array_latitude_deg: 31.0,
+            array_longitude_deg: 120.0,
+            array_height_m: -55.0,
+            array_yaw_deg: 25.0,
+            baseline_m: 0.5,
+            ..UsblConfig::default()
+        }
+    }
+
+    fn fix(range: f64, d: [f64; 2], az: f64, el: f64, validity: u32) -> UsblFixV1 {
+        UsblFixV1 {
+            host_time_ns: 1_000_000_000,
+            validity_time_ns: 1_000_000_000,
+            slant_range_m: range,
+            range_difference_m: d,
+            azimuth_rad: az,
+            elevation_rad: el,
+            validity,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn a_device_that_reports_angles_gives_range_differences_through_the_baseline() {
+        let cfg = station();
+        let array = cfg.array();
+        // A responder 300 m out, 40 m above the array: exact range differences against the ones
+        // derived from its exact angles (error below b²/R) and the noise they are given.
+        let p_a: Vector3<f64> = Vector3::new(180.0, -230.0, -40.0);
+        let (az, el) = (p_a.y.atan2(p_a.x), (-p_a.z).atan2(p_a.x.hypot(p_a.y)));
+        let exact = predict_tight(&array, &p_a);
+        let m = measurement(
+            &cfg,
+            &array,
+            &fix(
+                p_a.norm(),
+                [0.0; 2],
+                az,
+                el,
+                UsblFixV1::VALID_RANGE | UsblFixV1::VALID_ANGLES,
+            ),
+        )
+        .expect("angles are enough for the tight model");
+        let bound = cfg.baseline_m.powi(2) / p_a.norm();
+        assert!((m.z[1] - exact[1]).abs() < bound && (m.z[2] - exact[2]).abs() < bound);
+        assert_eq!(
+            [m.z[1], m.z[2]],
+            range_differences_from_angles(cfg.baseline_m, az, el)
+        );
+        let sd = cfg.baseline_m * cfg.angle_std_deg.to_radians();
+        assert!((m.r[(1, 1)] - sd * sd).abs() < 1e-15);
+        // Loose: the fix is turned into the array's NED frame by the surveyed yaw.
+        let loose = UsblConfig {
+            coupling: Coupling::Loose,
+            ..cfg.clone()
+        };
+        let m = measurement(
+            &loose,
+            &array,
+            &fix(
+                p_a.norm(),
+                [0.0; 2],
+                az,
+                el,
+                UsblFixV1::VALID_RANGE | UsblFixV1::VALID_ANGLES,
+            ),
+        )
+        .expect("loose fix");
+        assert!((m.z - array.c_ned_to_array.transpose() * p_a).norm() < 1e-9);
+    }
+
+    #[test]
+    fn unusable_fixes_are_refused_and_counted_without_touching_the_state() {
+        let cfg = station();
+        let array = cfg.array();
+        let all = UsblFixV1::VALID_RANGE | UsblFixV1::VALID_RANGE_DIFFERENCES;
+        for (f, why) in [
+            (fix(100.0, [0.1, 0.1], 0.0, 0.0, 0), UsblInputError::NoRange),
+            (
+                fix(f64::NAN, [0.1, 0.1], 0.0, 0.0, all),
+                UsblInputError::BadRange,
+            ),
+            (
+                fix(-3.0, [0.1, 0.1], 0.0, 0.0, all),
+                UsblInputError::BadRange,
+            ),
+            (
+                fix(9000.0, [0.1, 0.1], 0.0, 0.0, all),
+                UsblInputError::BadRange,
+            ),
+            (
+                fix(100.0, [0.9, 0.1], 0.0, 0.0, all),
+                UsblInputError::BadDirection,
+            ),
+            (
+                fix(100.0, [0.1, f64::INFINITY], 0.0, 0.0, all),
+                UsblInputError::BadDirection,
+            ),
+            (
+                fix(100.0, [0.1, 0.1], 0.0, 0.0, UsblFixV1::VALID_RANGE),
+                UsblInputError::NoDirection,
+            ),
+        ] {
+            assert_eq!(measurement(&cfg, &array, &f), Err(why), "{f:?}");
+        }
+        let start = initial_state(
+            1.0,
+            Geodetic {
+                latitude_rad: 31.0f64.to_radians(),
+                longitude_rad: 120.0f64.to_radians(),
+                height_m: -20.0,
+            },
+            [0.0; 3],
+            [0.0; 3],
+        );
+        let mut nav = Navigator::new(
+            NavConfig {
+                usbl: Some(cfg),
+                ..NavConfig::default()
+            },
+            start,
+        );
+        let before = *nav.state();
+        nav.on_usbl(&fix(f64::NAN, [0.0; 2], 0.0, 0.0, all));
+        nav.on_usbl(&fix(100.0, [0.0; 2], 0.0, 0.0, UsblFixV1::VALID_RANGE));
+        assert_eq!(nav.counters.usbl_invalid, 2);
+        assert_eq!(nav.counters.usbl_fused, 0);
+        assert_eq!(nav.state().position, before.position);
+        // Without a [navigation.usbl] configuration fixes are counted as unused.
+        let mut plain = Navigator::new(NavConfig::default(), start);
+        plain.on_usbl(&fix(100.0, [0.0; 2], 0.0, 0.0, all));
+        assert_eq!(plain.counters.usbl_unconfigured, 1);
+    }
+
+    #[test]
+    fn the_usbl_section_parses_from_toml_and_reports_nonsense() {
+        let cfg: NavConfig = toml::from_str(
+            "[usbl]\ncoupling = \"loose\"\nfilter = \"akf\"\narray_latitude_deg = 31.0\nbaseline_m = 0.3\n",
+        )
+        .expect("parse");
+        let u = cfg.usbl.expect("usbl section");
+        assert_eq!(u.coupling, Coupling::Loose);
+        assert_eq!(u.baseline_m, 0.3);
+        assert!(u.problems().is_empty());
+        let bad = UsblConfig {
+            baseline_m: 0.0,
+            fading: 1.0,
+            ..u
+        };
+        let p = bad.problems();
+        assert!(p.iter().any(|x| x.starts_with("usbl.baseline_m")), "{p:?}");
+        assert!(p.iter().any(|x| x.starts_with("usbl.fading")), "{p:?}");
+        assert!(toml::from_str::<NavConfig>("[usbl]\nbaseline = 0.3\n").is_err());
+    }
+}

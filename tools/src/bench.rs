@@ -970,3 +970,120 @@ pub fn align(runs: usize, json: bool) -> anyhow::Result<()> {
     }
     Ok(())
 }
+
+/// Cost of one USBL update per coupling and filter.
+#[derive(Debug, Clone, Serialize)]
+pub struct UsblBench {
+    pub coupling: auvnav_core::usbl::Coupling,
+    pub filter: auvnav_core::usbl::UsblFilter,
+    /// States the update runs over (every state with non-zero variance).
+    pub states: usize,
+    pub updates: usize,
+    pub median_us: f64,
+    pub p90_us: f64,
+    pub max_us: f64,
+}
+
+/// `auvnav bench usbl`: the wall time of `Navigator::on_usbl` on the docking scenario, each
+/// update timed alone on a copy of the navigator taken just before it (the copy is not timed). An
+/// update includes the covariance propagation pending since the last one (at most one
+/// `covariance_interval_s`, 50 ms). One thread.
+pub fn usbl(seconds: f64, json: bool) -> anyhow::Result<()> {
+    use crate::log::LogMessage;
+    use crate::sim::StationGeometry;
+    use anyhow::bail;
+    use auvnav_core::navigator::{Navigator, initial_state};
+    use auvnav_core::usbl::{Coupling, UsblFilter};
+    use std::time::Instant;
+    let scenario = Scenario::load("docking")?;
+    let station =
+        StationGeometry::from_scenario(&scenario).context("the docking scenario has no station")?;
+    let (messages, _) = crate::sim::simulate_to_vec(&SimConfig {
+        scenario: scenario.clone(),
+        effects: scenario.effects()?,
+        seed: 1,
+        duration_s: Some(seconds),
+    })?;
+    let mut out = Vec::new();
+    let cases = [Coupling::Loose, Coupling::Tight]
+        .into_iter()
+        .flat_map(|c| [UsblFilter::Ukf, UsblFilter::Akf, UsblFilter::Aukf].map(|f| (c, f, false)))
+        .chain([(Coupling::Tight, UsblFilter::Aukf, true)]);
+    for (coupling, filter, all_states) in cases {
+        {
+            let mut cfg = crate::usbl::navigation_config(&station, coupling, filter);
+            if all_states {
+                // Every DVL parameter state switched on as well: all 26 error states.
+                cfg.estimate_dvl_mounting = true;
+                cfg.estimate_dvl_lever_arm = true;
+                cfg.estimate_dvl_time_offset = true;
+            }
+            let mut nav: Option<Navigator> = None;
+            let mut times = Vec::new();
+            for m in &messages {
+                match (m, nav.as_mut()) {
+                    (LogMessage::Truth(t), None) => {
+                        let pos = auvnav_core::earth::Geodetic {
+                            latitude_rad: t.latitude_rad,
+                            longitude_rad: t.longitude_rad,
+                            height_m: t.height_m,
+                        };
+                        let s = initial_state(
+                            t.host_time_ns as f64 * 1e-9,
+                            pos,
+                            t.velocity_ned_m_s,
+                            t.euler_rad,
+                        );
+                        nav = Some(Navigator::new(cfg.clone(), s));
+                    }
+                    (LogMessage::Imu(x), Some(n)) => {
+                        n.on_imu(x);
+                    }
+                    (LogMessage::Dvl(x), Some(n)) => {
+                        n.on_dvl(x);
+                    }
+                    (LogMessage::Depth(x), Some(n)) => {
+                        n.on_depth(x);
+                    }
+                    (LogMessage::Usbl(x), Some(n)) => {
+                        let mut copy = n.clone();
+                        let t0 = Instant::now();
+                        std::hint::black_box(copy.on_usbl(std::hint::black_box(x)));
+                        times.push(t0.elapsed().as_secs_f64() * 1e6);
+                        *n = copy;
+                    }
+                    _ => {}
+                }
+            }
+            let n = nav.context("the simulation produced no truth")?;
+            if times.is_empty() {
+                bail!("no USBL fix in {seconds} s of the docking scenario");
+            }
+            let states = (0..auvnav_core::filter::N)
+                .filter(|&i| n.covariance()[(i, i)] > 0.0)
+                .count();
+            let mut sorted = times.clone();
+            sorted.sort_by(f64::total_cmp);
+            out.push(UsblBench {
+                coupling,
+                filter,
+                states,
+                updates: times.len(),
+                median_us: median(&times),
+                p90_us: sorted[sorted.len() * 9 / 10],
+                max_us: sorted[sorted.len() - 1],
+            });
+        }
+    }
+    if json {
+        println!("{}", serde_json::to_string_pretty(&out)?);
+    } else {
+        for b in &out {
+            println!(
+                "usbl {:?} {:?}: {} updates over {} states: median {:.1} us, p90 {:.1} us, max {:.1} us",
+                b.coupling, b.filter, b.updates, b.states, b.median_us, b.p90_us, b.max_us
+            );
+        }
+    }
+    Ok(())
+}

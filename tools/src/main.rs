@@ -70,6 +70,14 @@ enum ImportWhat {
 
 #[derive(Subcommand)]
 enum BenchWhat {
+    /// Cost of one USBL update (loose/tight × ukf/akf/aukf) on the docking scenario.
+    Usbl {
+        /// Seconds of the docking scenario (one fix per second).
+        #[arg(long, default_value_t = 600.0)]
+        seconds: f64,
+        #[arg(long)]
+        json: bool,
+    },
     /// Wall time of the S-ALIGN Monte Carlo (220 runs, 1200 s, turning) per error model.
     Align {
         #[arg(long, default_value_t = 220)]
@@ -311,6 +319,7 @@ fn main() -> std::process::ExitCode {
                 json,
             } => auvnav_tools::bench::sim(hours, repeat, json),
             BenchWhat::Align { runs, json } => auvnav_tools::bench::align(runs, json),
+            BenchWhat::Usbl { seconds, json } => auvnav_tools::bench::usbl(seconds, json),
             BenchWhat::E2e { seconds, json } => auvnav_tools::bench::e2e_bench(seconds, json),
             BenchWhat::Decode {
                 repeat,

@@ -48,10 +48,13 @@ pub struct ReplayCounts {
     pub dvl: u64,
     pub depth: u64,
     pub gnss: u64,
+    /// USBL fixes (fused when the configuration has `[navigation.usbl]`; the navigator's
+    /// counters say what became of them).
+    pub usbl: u64,
     pub truth: u64,
     /// Sensor messages before the initial state was known (skipped).
     pub before_start: u64,
-    /// Messages this replay does not use (USBL, magnetometer, outputs of an earlier run).
+    /// Messages this replay does not use (magnetometer, outputs of an earlier run).
     pub unused: u64,
     /// Channels with a schema this program does not know (skipped).
     pub unknown: u64,
@@ -209,6 +212,12 @@ impl Replay {
                 self.counts.gnss += 1;
                 drop(fwd);
                 self.session.on_gnss(x);
+                self.note_time(x.host_time_ns);
+            }
+            LogMessage::Usbl(x) => {
+                self.counts.usbl += 1;
+                drop(fwd);
+                self.session.on_usbl(x);
                 self.note_time(x.host_time_ns);
             }
             LogMessage::Unknown => self.counts.unknown += 1,

@@ -144,6 +144,15 @@ impl DaemonConfig {
         ] {
             range(k, v, 0.0, 3600.0)?;
         }
+        if let Some(u) = &cfg.navigation.usbl {
+            let problems = u.problems();
+            if !problems.is_empty() {
+                return Err(format!(
+                    "{path}: navigation.{}",
+                    problems.join("; navigation.")
+                ));
+            }
+        }
         match (&cfg.initial, &cfg.alignment) {
             (None, None) => {
                 return Err(format!(
@@ -385,7 +394,6 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
         Watch::new("gnss", d.gnss_s, now),
     ];
     let mut missed_deadlines = 0u64;
-    let mut usbl_unused = 0u64;
     let health_ns = (cfg.health_period_s * 1e9) as u64;
     let mut next_health = 0u64;
     let mut next_flush = now + 1_000_000_000;
@@ -461,9 +469,9 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
         for m in gnsss.drain(..) {
             session.on_gnss(&m);
         }
-        // USBL fusion is not in the core yet: counted.
-        usbl_unused += usbls.len() as u64;
-        usbls.clear();
+        for m in usbls.drain(..) {
+            session.on_usbl(&m);
+        }
         let mut io_error = None;
         for m in imus.drain(..) {
             if let Err(x) = session.on_imu(&m, &mut |o| out.on(o)) {
@@ -511,11 +519,33 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
         ProcessState::Stopping,
     );
     eprintln!(
-        "auvnavd: stopping; {} solutions ({} published), {} late aid messages, {} lost on the bus, {} missed deadlines, {} USBL fixes not used",
-        out.solutions, out.published, session.late_aids, gaps, missed_deadlines, usbl_unused
+        "auvnavd: stopping; {} solutions ({} published), {} late aid messages, {} lost on the bus, {} missed deadlines; USBL fixes: {}",
+        out.solutions,
+        out.published,
+        session.late_aids,
+        gaps,
+        missed_deadlines,
+        usbl_summary(&session)
     );
     result?;
     flushed.map_err(|x| format!("flushing the CSV output: {x}"))
+}
+
+/// What became of the USBL fixes, for the stop message.
+fn usbl_summary(session: &Session) -> String {
+    let Some(c) = session.navigator().map(|n| n.counters) else {
+        return "no navigation yet".into();
+    };
+    if c.usbl_unconfigured > 0 {
+        return format!(
+            "{} received, not used (no [navigation.usbl] in the configuration)",
+            c.usbl_unconfigured
+        );
+    }
+    format!(
+        "{} fused, {} rejected by the gate ({} gate reopenings), {} invalid, {} failed",
+        c.usbl_fused, c.usbl_rejected, c.usbl_reopened, c.usbl_invalid, c.usbl_failed
+    )
 }
 
 fn main() -> ExitCode {
