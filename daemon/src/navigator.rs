@@ -20,6 +20,7 @@ use auvnav_shm_schema::{
 };
 use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, SMatrix, SVector, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
+use std::collections::VecDeque;
 
 /// Chi-square gate, 3 degrees of freedom, 99.9 %.
 pub const GATE_CHI2_3DOF: f64 = 16.27;
@@ -232,6 +233,33 @@ struct UsblFusion {
     /// Started at the first usable fix (the loose noise depends on its geometry).
     noise: Option<AdaptiveNoise>,
     last_fused_s: Option<f64>,
+    /// The vehicle's recent poses (time, position, attitude), for fixes whose time of validity
+    /// lies in the past; `max_latency_s` of them.
+    poses: VecDeque<(f64, Geodetic, UnitQuaternion<f64>)>,
+}
+
+impl UsblFusion {
+    /// The vehicle's pose at `t` (linear between the recorded poses; the oldest or newest one
+    /// outside them).
+    fn pose_at(&self, t: f64) -> Option<(Geodetic, UnitQuaternion<f64>)> {
+        let after = self.poses.partition_point(|p| p.0 < t);
+        match (
+            after.checked_sub(1).and_then(|i| self.poses.get(i)),
+            self.poses.get(after),
+        ) {
+            (Some(a), Some(b)) if b.0 > a.0 => {
+                let w = (t - a.0) / (b.0 - a.0);
+                let position = Geodetic {
+                    latitude_rad: a.1.latitude_rad + w * (b.1.latitude_rad - a.1.latitude_rad),
+                    longitude_rad: a.1.longitude_rad + w * (b.1.longitude_rad - a.1.longitude_rad),
+                    height_m: a.1.height_m + w * (b.1.height_m - a.1.height_m),
+                };
+                Some((position, a.2.slerp(&b.2, w)))
+            }
+            (_, Some(p)) | (Some(p), None) => Some((p.1, p.2)),
+            (None, None) => None,
+        }
+    }
 }
 
 impl Navigator {
@@ -296,6 +324,7 @@ impl Navigator {
                 errors: Vector3::zeros(),
                 noise: None,
                 last_fused_s: None,
+                poses: VecDeque::new(),
                 cfg: u.clone(),
             }
         });
@@ -423,6 +452,17 @@ impl Navigator {
         self.sd.state.time_s = t_ns as f64 * 1e-9;
         self.pending_f_ned += c_before * f * dt;
         self.pending_dt += dt;
+        if let Some(u) = self.usbl.as_mut() {
+            let s = &self.sd.state;
+            u.poses.push_back((s.time_s, s.position, s.q_body_to_ned));
+            while u
+                .poses
+                .front()
+                .is_some_and(|p| s.time_s - p.0 > u.cfg.max_latency_s + 0.1)
+            {
+                u.poses.pop_front();
+            }
+        }
         if self.pending_dt >= self.cfg.covariance_interval_s {
             self.propagate_covariance();
         }
@@ -744,16 +784,28 @@ impl Navigator {
                 return d;
             }
         };
-        if self.aid_is_late(t_ns) {
+        let t_valid = t_ns as f64 * 1e-9;
+        if self.sd.state.time_s - t_valid > u.cfg.max_latency_s {
+            self.counters.aid_late += 1;
             return d;
         }
         self.propagate_covariance();
         let Some(u) = self.usbl.as_mut() else {
             return d;
         };
+        // The geometry at the fix's time of validity; the errors are those of now.
         let s = &self.sd.state;
-        let geometry =
-            ResponderGeometry::new(&u.array, &s.position, &s.c_body_to_ned(), &u.lever_arm_b);
+        let (position, attitude) = if t_valid < s.time_s {
+            u.pose_at(t_valid).unwrap_or((s.position, s.q_body_to_ned))
+        } else {
+            (s.position, s.q_body_to_ned)
+        };
+        let geometry = ResponderGeometry::new(
+            &u.array,
+            &position,
+            &attitude.to_rotation_matrix().into_inner(),
+            &u.lever_arm_b,
+        );
         let noise = u.noise.get_or_insert_with(|| {
             let r0 = meas.r.diagonal();
             let scale = r0.max();
@@ -853,7 +905,7 @@ impl Navigator {
                 self.kf.p[(i, j)] = upd.p[(a, b)];
             }
         }
-        u.last_fused_s = Some(t_ns as f64 * 1e-9);
+        u.last_fused_s = Some(t_valid);
         self.correct(&dx);
         self.counters.usbl_fused += 1;
         d.flags = AidDiagnosticsV1::FLAG_FUSED | (d.flags & AidDiagnosticsV1::FLAG_RESET);

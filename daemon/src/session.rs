@@ -154,9 +154,9 @@ impl Aid {
             Aid::Dvl(m) => (m.host_time_ns, 0, m.sequence),
             Aid::Depth(m) => (m.host_time_ns, 1, m.sequence),
             Aid::Gnss(m) => (m.host_time_ns, 2, m.sequence),
-            // A fix is applied at its time of validity (reception at the array), which precedes
-            // its delivery by the acoustic and processing latency.
-            Aid::Usbl(m) => (m.validity_time_ns, 3, m.sequence),
+            // Queued by delivery like the others; the navigator evaluates a fix against the
+            // vehicle's pose at its (earlier) time of validity.
+            Aid::Usbl(m) => (m.host_time_ns, 3, m.sequence),
         }
     }
 }
@@ -637,8 +637,8 @@ impl Session {
         self.queue(Aid::Gnss(*x));
     }
 
-    /// A USBL fix (queued by its time of validity; used when `[navigation.usbl]` is configured,
-    /// counted in the navigator's `usbl_unconfigured` otherwise).
+    /// A USBL fix (queued like DVL; used when `[navigation.usbl]` is configured, counted in the
+    /// navigator's `usbl_unconfigured` otherwise).
     pub fn on_usbl(&mut self, x: &UsblFixV1) {
         self.queue(Aid::Usbl(*x));
     }

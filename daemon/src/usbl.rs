@@ -367,6 +367,11 @@ pub struct UsblConfig {
     pub reopen_after: u32,
     /// Longest slant range accepted (m). Default 5000.
     pub max_range_m: f64,
+    /// Oldest fix accepted, by its time of validity against the navigation state (s). A fix
+    /// is evaluated against the vehicle's position and attitude at its time of validity (kept
+    /// for this long) and corrects the current state: the navigation errors change little over
+    /// a few seconds. Default 3.
+    pub max_latency_s: f64,
     /// Sigma-point spread α. Default 0.5.
     pub unscented_alpha: f64,
     /// Sigma-point prior-knowledge β. Default 2.
@@ -398,6 +403,7 @@ impl Default for UsblConfig {
             fading: 0.98,
             reopen_after: 20,
             max_range_m: 5000.0,
+            max_latency_s: 3.0,
             unscented_alpha: u.alpha,
             unscented_beta: u.beta,
             unscented_kappa: u.kappa,
@@ -469,6 +475,11 @@ impl UsblConfig {
         ] {
             need(key, v > 0.0 && !v.is_nan(), "must be positive");
         }
+        need(
+            "max_latency_s",
+            (0.0..=30.0).contains(&self.max_latency_s),
+            "must be within 0..30",
+        );
         for (key, v) in [
             ("range_error_std_m", self.range_error_std_m),
             (

@@ -34,6 +34,10 @@ pub struct UsblArgs {
     /// Error of the array's surveyed yaw (deg): the true array is turned by this much.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub array_yaw_error: f64,
+    /// USBL latency (s): fixes are delivered this long after their time of validity, and
+    /// stamped with it as the driver's `settings.latency_s` does.
+    #[arg(long, default_value_t = 0.0)]
+    pub latency: f64,
     /// Monte Carlo runs.
     #[arg(long, default_value_t = 50)]
     pub runs: usize,
@@ -215,6 +219,8 @@ fn run_one(
     effects.set("dvl.scale_factor", &[1.0 + rng.gauss(0.005)])?;
     effects.set("usbl.outlier_fraction", &[a.outliers])?;
     effects.set("usbl.array_yaw", &[a.array_yaw_error])?;
+    effects.set("usbl.latency", &[a.latency])?;
+    let latency_ns = (a.latency * 1e9).round() as u64;
     let true_array = offset_position(&station.position, &Vector3::from(effects.usbl_array_offset));
     let lever = Vector3::from(station.responder_lever_arm_m);
     let sim_cfg = SimConfig {
@@ -224,7 +230,9 @@ fn run_one(
         duration_s: a.seconds,
     };
     let mut nav: Option<Navigator> = None;
-    let mut pending: Option<PendingFix> = None;
+    // Fixes waiting for the truth at their time of validity, and the recent true ranges.
+    let mut pending: std::collections::VecDeque<PendingFix> = Default::default();
+    let mut true_ranges: std::collections::VecDeque<(u64, f64)> = Default::default();
     let mut r = RunResult {
         seed,
         horizontal_rms_m: 0.0,
@@ -260,10 +268,21 @@ fn run_one(
                 ))
                 .to_rotation_matrix()
                 .into_inner();
-                if let Some(f) = pending.take_if(|f| f.t_ns <= t.host_time_ns) {
-                    let true_range = (ned_offset(&true_array, &truth_pos) + c * lever).norm();
-                    let outlier = (f.slant_m - true_range).abs() > 5.0;
-                    if outlier {
+                true_ranges.push_back((
+                    t.host_time_ns,
+                    (ned_offset(&true_array, &truth_pos) + c * lever).norm(),
+                ));
+                while true_ranges.len() > 400 {
+                    true_ranges.pop_front();
+                }
+                while pending.front().is_some_and(|f| f.t_ns <= t.host_time_ns) {
+                    let Some(f) = pending.pop_front() else { break };
+                    // The true range at the fix's time of validity (nearest truth record).
+                    let true_range = true_ranges
+                        .iter()
+                        .min_by_key(|(tt, _)| tt.abs_diff(f.t_ns))
+                        .map_or(f64::NAN, |x| x.1);
+                    if (f.slant_m - true_range).abs() > 5.0 {
                         r.injected_outliers += 1;
                         r.accepted_outliers += u64::from(f.fused);
                     } else if !f.fused {
@@ -302,9 +321,11 @@ fn run_one(
             }
             LogMessage::Usbl(x) => {
                 if let Some(nv) = nav.as_mut() {
-                    let d = nv.on_usbl(x);
+                    let mut x = *x;
+                    x.validity_time_ns = x.host_time_ns.saturating_sub(latency_ns);
+                    let d = nv.on_usbl(&x);
                     r.fixes += 1;
-                    pending = Some(PendingFix {
+                    pending.push_back(PendingFix {
                         t_ns: x.validity_time_ns,
                         slant_m: x.slant_range_m,
                         fused: d.flags & AidDiagnosticsV1::FLAG_FUSED != 0,
@@ -376,6 +397,9 @@ pub fn run(a: &UsblArgs) -> anyhow::Result<UsblReport> {
         && !(s.is_finite() && s >= 10.0 + a.settle_s)
     {
         bail!("--seconds {s}: expected at least --settle-s + 10");
+    }
+    if !(0.0..=5.0).contains(&a.latency) {
+        bail!("--latency {}: expected 0..=5 s", a.latency);
     }
     if !(a.settle_s.is_finite() && a.settle_s >= 0.0) {
         bail!("--settle-s {}: expected zero or more", a.settle_s);
