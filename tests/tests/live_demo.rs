@@ -52,3 +52,49 @@ fn live_demo_reproduces_bit_for_bit_from_its_recording() {
     assert_eq!(r["counts"]["imu"], 6000, "{r}");
     assert_eq!(r["navigator"]["imu_out_of_order"], 0, "{r}");
 }
+
+#[test]
+fn live_daemon_fuses_usbl_fixes_from_a_seatrac_on_a_pseudo_terminal() {
+    // The docking scenario has a station: the emulated SeaTrac reports range and angles, the
+    // USBL driver publishes them, the daemon fuses them (tight: range differences from the angles
+    // through the baseline) and the replay of the recording does the same.
+    let dir = TempDir::new("livedock");
+    let out = dir.path().join("run");
+    let o = Command::new(binary("auvnav"))
+        .args(["demo", "--scenario", "docking", "--seconds", "30"])
+        .args(["--speed", "4", "--json", "--out"])
+        .arg(&out)
+        .output()
+        .expect("auvnav demo");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    assert_eq!(v["replay_identical"], true, "{v}");
+    let daemon = v["process_reports"]
+        .as_array()
+        .and_then(|a| a.iter().find(|p| p[0] == "auvnavd"))
+        .and_then(|p| p[1].as_str())
+        .expect("daemon report")
+        .to_owned();
+    let fused: u64 = daemon
+        .split("USBL fixes: ")
+        .nth(1)
+        .and_then(|s| s.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no USBL count in {daemon:?}"));
+    // One fix per second for 30 s (the first may precede the daemon's first IMU sample).
+    assert!(fused >= 28, "{daemon}");
+    let o = Command::new(binary("auvnav"))
+        .arg("replay")
+        .arg(out.join("record.mcap"))
+        .arg("--json")
+        .output()
+        .expect("replay");
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(r["navigator"]["usbl_fused"], fused, "{r}");
+    assert_eq!(r["navigator"]["usbl_invalid"], 0, "{r}");
+}

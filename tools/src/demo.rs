@@ -102,9 +102,16 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
         let f = std::fs::File::create(dir.join("nav.csv")).context("creating nav.csv")?;
         csv_file = Some(std::io::BufWriter::new(f));
     }
+    // With a USBL station in the scenario, its fixes are fused (tight, AUKF).
+    let usbl = crate::sim::StationGeometry::from_scenario(&cfg.scenario)
+        .map(|st| crate::usbl::station_config(&st));
+    let has_usbl = usbl.is_some();
     let (simulated, accuracy, counters) = run_voyage(
         &cfg,
-        NavConfig::default(),
+        NavConfig {
+            usbl,
+            ..NavConfig::default()
+        },
         csv_file.as_mut().map(|w| w as &mut dyn std::io::Write),
     )?;
     if let Some(mut w) = csv_file {
@@ -126,7 +133,14 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
             "auvnav demo: scenario {} (seed {}), {:.0} s simulated, {:.0} m travelled",
             result.scenario, result.seed, result.simulated.duration_s, acc.distance_travelled_m
         );
-        println!("  INS + DVL + depth through the navigation core:");
+        println!(
+            "  INS + DVL + depth{} through the navigation core:",
+            if has_usbl {
+                " + USBL (tight, adaptive unscented)"
+            } else {
+                ""
+            }
+        );
         println!(
             "  horizontal error: final {:.2} m, max {:.2} m, CEP50 {:.2} m",
             acc.horizontal_error_final_m, acc.horizontal_error_max_m, acc.horizontal_error_cep50_m
@@ -143,6 +157,14 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
             result.counters.depth_rejected,
             result.wall_seconds
         );
+        if has_usbl {
+            println!(
+                "  USBL: {} fused, {} rejected by the gate ({} outliers simulated)",
+                result.counters.usbl_fused,
+                result.counters.usbl_rejected,
+                result.simulated.usbl_outliers
+            );
+        }
         if let Some(dir) = &a.out {
             println!(
                 "  log: {}  solution: {}",

@@ -272,8 +272,15 @@ pub fn run_live(
     let t0_ns = first_imu_ns.context("the simulation wrote no IMU sample")?;
     write_candump(&dir.join("depth.candump"), &depths)?;
 
-    // 2. Configurations.
+    // 2. Configurations. With a USBL station in the scenario, the daemon fuses its fixes.
     let [roll, pitch, yaw] = t0.euler_rad.map(f64::to_degrees);
+    let usbl = match crate::sim::StationGeometry::from_scenario(&cfg.scenario) {
+        Some(st) => format!(
+            "\n[navigation.usbl]\n{}",
+            toml::to_string(&crate::usbl::station_config(&st))?
+        ),
+        None => String::new(),
+    };
     let daemon_cfg = dir.join("auvnavd.toml");
     std::fs::write(
         &daemon_cfg,
@@ -282,7 +289,7 @@ pub fn run_live(
              [navigation]\nimu_dt_from_device_time = true\n\n\
              [initial]\nlatitude_deg = {:?}\nlongitude_deg = {:?}\nheight_m = {:?}\n\
              velocity_ned_m_s = {:?}\neuler_deg = [{roll:?}, {pitch:?}, {yaw:?}]\n\n\
-             [output]\nnav_csv = \"{}\"\n",
+             [output]\nnav_csv = \"{}\"\n{usbl}",
             t0.latitude_rad.to_degrees(),
             t0.longitude_rad.to_degrees(),
             t0.height_m,

@@ -66,7 +66,7 @@ pub struct UsblArgs {
     /// Worker threads (default: the available cores).
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Run the whole comparison table ({loose, tight} × {akf, aukf} × {clean, 5 % outliers, 1°
+    /// Run the whole comparison table ({loose, tight} × {ukf, akf, aukf} × {clean, 5 % outliers, 1°
     /// array yaw error}) and print it as Markdown (JSON with --json).
     #[arg(long)]
     pub table: bool,
@@ -128,6 +128,20 @@ pub struct UsblReport {
     pub per_run: Vec<RunResult>,
 }
 
+/// The USBL configuration for a simulated station as surveyed (tight coupling, AUKF, the
+/// defaults' noise, which match the scenarios' SeaTrac-class USBL).
+pub fn station_config(station: &StationGeometry) -> UsblConfig {
+    UsblConfig {
+        array_latitude_deg: station.position.latitude_rad.to_degrees(),
+        array_longitude_deg: station.position.longitude_rad.to_degrees(),
+        array_height_m: station.position.height_m,
+        array_yaw_deg: station.yaw_rad.to_degrees(),
+        baseline_m: station.baseline_m,
+        responder_lever_arm_m: station.responder_lever_arm_m,
+        ..UsblConfig::default()
+    }
+}
+
 /// The navigation configuration matched to the docking scenario's sensors, with the station's
 /// array as surveyed.
 pub fn navigation_config(
@@ -153,13 +167,7 @@ pub fn navigation_config(
         usbl: Some(UsblConfig {
             coupling,
             filter,
-            array_latitude_deg: station.position.latitude_rad.to_degrees(),
-            array_longitude_deg: station.position.longitude_rad.to_degrees(),
-            array_height_m: station.position.height_m,
-            array_yaw_deg: station.yaw_rad.to_degrees(),
-            baseline_m: station.baseline_m,
-            responder_lever_arm_m: station.responder_lever_arm_m,
-            ..UsblConfig::default()
+            ..station_config(station)
         }),
         ..NavConfig::default()
     }
@@ -455,12 +463,13 @@ pub fn run(a: &UsblArgs) -> anyhow::Result<UsblReport> {
     })
 }
 
-/// The comparison table: {loose, tight} × {akf, aukf} × {clean, 5 % outliers, 1° array yaw}.
+/// The comparison table: {loose, tight} × {ukf, akf, aukf} × {clean, 5 % outliers, 1° array
+/// yaw error}.
 pub fn run_table(a: &UsblArgs) -> anyhow::Result<Vec<UsblReport>> {
     let mut out = Vec::new();
     for (outliers, yaw) in [(0.0, 0.0), (0.05, 0.0), (0.0, 1.0)] {
         for coupling in [Coupling::Loose, Coupling::Tight] {
-            for filter in [UsblFilter::Akf, UsblFilter::Aukf] {
+            for filter in [UsblFilter::Ukf, UsblFilter::Akf, UsblFilter::Aukf] {
                 out.push(run(&UsblArgs {
                     coupling,
                     filter,
