@@ -442,3 +442,84 @@ mod fusion {
         assert!(toml::from_str::<NavConfig>("[usbl]\nbaseline = 0.3\n").is_err());
     }
 }
+
+/// Fixes with random bytes in every field: never a panic, every one counted once, the state
+/// stays finite.
+#[test]
+fn random_fixes_never_break_the_navigator() {
+    use auvnav_core::earth::Geodetic;
+    use auvnav_core::navigator::{NavConfig, Navigator, initial_state};
+    use auvnav_core::usbl::{Coupling, UsblConfig, UsblFilter};
+    use auvnav_shm_schema::UsblFixV1;
+    let mut g = Gen(0x5eed_1234_abcd_0001);
+    let bits = |g: &mut Gen| -> f64 {
+        // Half plausible values, half arbitrary bit patterns (NaN, infinities, huge, tiny).
+        if g.uniform() < 0.5 {
+            g.range(-2000.0, 2000.0)
+        } else {
+            f64::from_bits(((g.uniform() * u32::MAX as f64) as u64) << 32 | g.0 & 0xffff_ffff)
+        }
+    };
+    for coupling in [Coupling::Tight, Coupling::Loose] {
+        for filter in [UsblFilter::Ukf, UsblFilter::Akf, UsblFilter::Aukf] {
+            let start = initial_state(
+                1.0,
+                Geodetic {
+                    latitude_rad: 31.0f64.to_radians(),
+                    longitude_rad: 120.0f64.to_radians(),
+                    height_m: -20.0,
+                },
+                [1.0, 0.5, 0.0],
+                [0.0, 0.0, 0.3],
+            );
+            let cfg = UsblConfig {
+                coupling,
+                filter,
+                array_latitude_deg: 31.001,
+                array_longitude_deg: 120.001,
+                array_height_m: -50.0,
+                ..UsblConfig::default()
+            };
+            let mut nav = Navigator::new(
+                NavConfig {
+                    usbl: Some(cfg),
+                    ..NavConfig::default()
+                },
+                start,
+            );
+            let n = 3000u64;
+            for k in 0..n {
+                let f = UsblFixV1 {
+                    host_time_ns: 1_000_000_000,
+                    validity_time_ns: if k % 7 == 0 { 0 } else { 1_000_000_000 },
+                    slant_range_m: bits(&mut g),
+                    range_difference_m: [bits(&mut g) * 1e-3, bits(&mut g) * 1e-3],
+                    azimuth_rad: bits(&mut g) * 1e-3,
+                    elevation_rad: bits(&mut g) * 1e-3,
+                    position_array_m: [bits(&mut g), bits(&mut g), bits(&mut g)],
+                    validity: if k % 2 == 0 {
+                        0xff
+                    } else {
+                        (g.uniform() * 256.0) as u32
+                    },
+                    ..Default::default()
+                };
+                nav.on_usbl(&f);
+            }
+            let c = nav.counters;
+            assert_eq!(
+                c.usbl_fused + c.usbl_rejected + c.usbl_invalid + c.usbl_failed + c.aid_late,
+                n,
+                "{coupling:?} {filter:?}: {c:?}"
+            );
+            let s = nav.state();
+            assert!(
+                s.position.latitude_rad.is_finite()
+                    && s.position.height_m.is_finite()
+                    && s.velocity_ned.iter().all(|x| x.is_finite()),
+                "{coupling:?} {filter:?}"
+            );
+            assert!(nav.covariance().iter().all(|x| x.is_finite()));
+        }
+    }
+}

@@ -415,7 +415,17 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
             frames: out.published,
             timeouts: missed,
             drops: gaps + session.late_aids + out.errors,
-            invalid: session.before_start,
+            // Messages before the start, and sensor messages the navigator found malformed or
+            // out of range.
+            invalid: session.before_start
+                + session.navigator().map_or(0, |n| {
+                    let c = n.counters;
+                    c.imu_invalid
+                        + c.dvl_invalid
+                        + c.depth_invalid
+                        + c.gnss_invalid
+                        + c.usbl_invalid
+                }),
             pid: std::process::id(),
             state: state as u32,
             ..Default::default()
