@@ -44,6 +44,7 @@ fn replay(path: &Path) -> anyhow::Result<ReplayReport> {
         out: None,
         decimate: 1,
         min_distance: 100.0,
+        usbl: None,
         json: false,
     })
 }

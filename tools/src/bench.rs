@@ -132,6 +132,7 @@ pub fn replay(hours: f64, repeat: usize, json: bool) -> anyhow::Result<()> {
             out: None,
             decimate: 1,
             min_distance: 100.0,
+            usbl: None,
             json: false,
         };
         let mut runs = Vec::new();

@@ -329,6 +329,11 @@ pub struct ReplayArgs {
     /// Distance travelled beyond which points enter the error/distance figure (m).
     #[arg(long, default_value_t = 100.0)]
     pub min_distance: f64,
+    /// Fuse the USBL fixes with this coupling (loose or tight; adaptive unscented filter): the
+    /// configuration's `[navigation.usbl]`, or else the station survey in the log header of a
+    /// simulated voyage.
+    #[arg(long, value_enum)]
+    pub usbl: Option<auvnav_core::usbl::Coupling>,
     /// Print the result as JSON.
     #[arg(long)]
     pub json: bool,
@@ -418,6 +423,34 @@ pub fn session_config_from_toml(text: &str) -> anyhow::Result<ReplayConfig> {
 
 /// The configuration a replay runs with, and where it came from.
 pub fn replay_config(a: &ReplayArgs) -> anyhow::Result<(ReplayConfig, String)> {
+    let (mut cfg, mut source) = base_replay_config(a)?;
+    if let Some(coupling) = a.usbl {
+        match cfg.navigation.usbl.as_mut() {
+            Some(u) => u.coupling = coupling,
+            None => {
+                let header = LogReader::open(&a.log)
+                    .and_then(|mut r| r.read_header())
+                    .with_context(|| format!("reading {}", a.log.display()))?;
+                let station =
+                    crate::sim::StationGeometry::from_notes(&header.notes).with_context(|| {
+                        format!(
+                            "--usbl: {} has no station survey in its header; give the station \
+                             in [navigation.usbl] of --config",
+                            a.log.display()
+                        )
+                    })?;
+                cfg.navigation.usbl = Some(auvnav_core::usbl::UsblConfig {
+                    coupling,
+                    ..crate::usbl::station_config(&station)
+                });
+                source.push_str(", USBL station from the log header");
+            }
+        }
+    }
+    Ok((cfg, source))
+}
+
+fn base_replay_config(a: &ReplayArgs) -> anyhow::Result<(ReplayConfig, String)> {
     if let Some(p) = &a.config {
         return Ok((load_config(p)?, p.display().to_string()));
     }
@@ -586,6 +619,17 @@ pub fn print_report(r: &ReplayReport) {
         n.gnss_fused,
         n.gnss_rejected
     );
+    if n.usbl_unconfigured > 0 {
+        println!(
+            "  {} USBL fixes not used (no [navigation.usbl]; --usbl tight uses a simulated log's station)",
+            n.usbl_unconfigured
+        );
+    } else if r.counts.usbl > 0 {
+        println!(
+            "  USBL: {} fused, {} rejected by the gate ({} reopenings), {} invalid, {} late",
+            n.usbl_fused, n.usbl_rejected, n.usbl_reopened, n.usbl_invalid, n.aid_late
+        );
+    }
     let skipped = n.imu_out_of_order + n.imu_invalid + n.aid_late + r.counts.before_start;
     if skipped > 0 || n.imu_gaps > 0 {
         println!(

@@ -375,3 +375,57 @@ fn decode_prints_one_json_object_per_frame_and_counts_garbage() {
     ]);
     assert!(!o.status.success() && stderr(&o).contains("absent"));
 }
+
+#[test]
+fn replay_fuses_usbl_with_the_station_of_a_simulated_log_when_asked() {
+    let dir = temp_dir("replayusbl");
+    let log = dir.join("docking.mcap");
+    let log_s = log.to_string_lossy().to_string();
+    let o = auvnav(&[
+        "sim",
+        "--scenario",
+        "docking",
+        "--seed",
+        "9",
+        "--duration",
+        "120",
+        "--out",
+        &log_s,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = auvnav(&["replay", &log_s, "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(v["navigator"]["usbl_fused"], 0, "{v}");
+    assert_eq!(v["navigator"]["usbl_unconfigured"], 120, "{v}");
+    for coupling in ["tight", "loose"] {
+        let o = auvnav(&["replay", &log_s, "--usbl", coupling, "--json"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+        let fused = v["navigator"]["usbl_fused"].as_u64().expect("fused");
+        assert!(fused >= 115, "{coupling}: {v}");
+        assert!(
+            v["configuration"]
+                .as_str()
+                .is_some_and(|c| c.contains("station from the log header")),
+            "{v}"
+        );
+    }
+    // A log without a station survey: a clear error, not a silent replay without USBL.
+    let plain = dir.join("turns.mcap");
+    let plain_s = plain.to_string_lossy().to_string();
+    let o = auvnav(&[
+        "sim",
+        "--scenario",
+        "turns",
+        "--duration",
+        "10",
+        "--out",
+        &plain_s,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = auvnav(&["replay", &plain_s, "--usbl", "tight"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("no station survey"), "{}", stderr(&o));
+    let _ = std::fs::remove_dir_all(&dir);
+}
