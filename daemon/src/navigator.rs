@@ -760,10 +760,10 @@ impl Navigator {
     /// Fuses a USBL fix from the docking station by the configured coupling and filter (S-USBL).
     ///
     /// Tight: `z = [R, ΔR13, ΔR24]`, predicted from the state by the exact array geometry plus
-    /// the Gauss–Markov error states; loose: the fix as a position in the array's NED frame. The
-    /// update runs over every state with non-zero variance (unscented for ukf/aukf, linearised
-    /// for akf); the innovation passes the gate of the noise estimator before anything is changed,
-    /// so a rejected fix moves neither the state nor the noise estimate.
+    /// the Gauss–Markov error states; loose: the fix as a position, in line-of-sight coordinates.
+    /// The update runs over every state with non-zero variance (unscented for ukf/aukf,
+    /// linearised for akf); the innovation passes the gate of the noise estimator before anything
+    /// is changed, so a rejected fix moves neither the state nor the noise estimate.
     pub fn on_usbl(&mut self, m: &UsblFixV1) -> AidDiagnosticsV1 {
         let t_ns = m.validity_time_ns;
         let source = match self.usbl.as_ref().map(|u| u.cfg.coupling) {
@@ -834,12 +834,13 @@ impl Navigator {
         let coupling = u.cfg.coupling;
         let errors = u.errors;
         let array = u.array;
-        let c_array_to_ned = u.array.c_ned_to_array.transpose();
+        // Loose: array frame → line-of-sight coordinates of this fix.
+        let to_los = meas.frame * u.array.c_ned_to_array.transpose();
         let h = move |dx: &DVector<f64>| -> DVector<f64> {
             let p_a = geometry.responder_given_error(&pick(dx, &pos), &pick(dx, &att));
             let z = match coupling {
                 Coupling::Tight => usbl::predict_tight(&array, &p_a) + errors - pick(dx, &err),
-                Coupling::Loose => c_array_to_ned * p_a,
+                Coupling::Loose => to_los * p_a,
             };
             DVector::from_column_slice(z.as_slice())
         };

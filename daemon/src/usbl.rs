@@ -506,10 +506,15 @@ impl UsblConfig {
 /// A USBL measurement ready for the filter.
 #[derive(Debug, Clone, PartialEq)]
 pub struct UsblMeasurement {
-    /// Tight: [R, ΔR13, ΔR24]; loose: responder position in the array's NED frame (m).
+    /// Tight: [R, ΔR13, ΔR24] (m). Loose: the responder's position from the array in
+    /// line-of-sight coordinates [along the line of sight, across it horizontally (azimuth),
+    /// across it vertically (elevation)] (m), in which the fix's noise is uncorrelated.
     pub z: Vector3<f64>,
-    /// Nominal noise covariance.
+    /// Nominal noise covariance (diagonal).
     pub r: Matrix3<f64>,
+    /// Loose: rotation from the array's NED frame to the line-of-sight coordinates (so the
+    /// adaptive estimate and the gate work on independent components); tight: identity.
+    pub frame: Matrix3<f64>,
 }
 
 /// Why a fix cannot be used.
@@ -573,6 +578,7 @@ pub fn measurement(
             Ok(UsblMeasurement {
                 z: Vector3::new(range, d[0], d[1]),
                 r: Matrix3::from_diagonal(&Vector3::new(sr * sr, sd * sd, sd * sd)),
+                frame: Matrix3::identity(),
             })
         }
         Coupling::Loose => {
@@ -591,17 +597,24 @@ pub fn measurement(
             } else {
                 fix_position_ned(array, range, az, el)
             };
-            // Noise of the fix: range along the line of sight, angles across it.
+            // Line-of-sight coordinates (array frame): along it, and the directions in which
+            // the azimuth and the elevation move the fix; their noise: range, R cos(el) σ_az,
+            // R σ_el.
             let u = Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), -el.sin());
-            let d_az = Vector3::new(-el.cos() * az.sin(), el.cos() * az.cos(), 0.0) * range;
-            let d_el = Vector3::new(-el.sin() * az.cos(), -el.sin() * az.sin(), -el.cos()) * range;
-            let r_a = u * u.transpose() * (sr * sr)
-                + d_az * d_az.transpose() * (sa * sa)
-                + d_el * d_el.transpose() * (sa * sa);
-            let c = array.c_ned_to_array;
+            let e_az = Vector3::new(-az.sin(), az.cos(), 0.0);
+            let e_el = u.cross(&e_az);
+            let rows = Matrix3::from_rows(&[u.transpose(), e_az.transpose(), e_el.transpose()]);
+            let frame = rows * array.c_ned_to_array;
+            let across_az = (range * el.cos() * sa).max(1e-3);
+            let across_el = (range * sa).max(1e-3);
             Ok(UsblMeasurement {
-                z,
-                r: c.transpose() * r_a * c,
+                z: frame * z,
+                r: Matrix3::from_diagonal(&Vector3::new(
+                    sr * sr,
+                    across_az * across_az,
+                    across_el * across_el,
+                )),
+                frame,
             })
         }
     }

@@ -355,7 +355,14 @@ mod fusion {
             ),
         )
         .expect("loose fix");
-        assert!((m.z - array.c_ned_to_array.transpose() * p_a).norm() < 1e-9);
+        // In line-of-sight coordinates: the fix turned back into NED is the responder there; the
+        // first axis is the range, and the noise is range along it, angles across it.
+        assert!((m.frame.transpose() * m.z - array.c_ned_to_array.transpose() * p_a).norm() < 1e-9);
+        assert!((m.z[0] - p_a.norm()).abs() < 1e-9 && m.z[1].abs() < 1e-9 && m.z[2].abs() < 1e-9);
+        assert!((m.frame * m.frame.transpose() - nalgebra::Matrix3::identity()).norm() < 1e-12);
+        let across = p_a.norm() * cfg.angle_std_deg.to_radians();
+        assert!((m.r[(2, 2)] - across * across).abs() < 1e-12);
+        assert!((m.r[(1, 1)] - (across * el.cos()).powi(2)).abs() < 1e-12);
     }
 
     #[test]
