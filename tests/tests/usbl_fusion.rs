@@ -162,3 +162,94 @@ fn the_session_fuses_usbl_when_configured_as_the_daemon_and_replay_run_it() {
         "{acc_with:?}"
     );
 }
+
+#[test]
+fn the_adaptive_noise_estimate_converges_to_the_simulated_usbl_noise() {
+    // The docking run's USBL noise: 0.1 m on the range, 2 mm on the range differences. The
+    // estimator starts 3× too high on every channel; averaged over the second half of the run
+    // (its memory is about 50 fixes) it must find the simulated noise.
+    use auvnav_core::navigator::{Navigator, initial_state};
+    use auvnav_tools::log::LogMessage;
+    use auvnav_tools::sim::{self, SimConfig, StationGeometry, scenario::Scenario};
+    let scenario = Scenario::load("docking").expect("scenario");
+    let station = StationGeometry::from_scenario(&scenario).expect("station");
+    let effects = scenario.effects().expect("effects");
+    let truth_noise = [
+        effects.get("usbl.range_noise").expect("range noise")[0],
+        effects
+            .get("usbl.range_difference_noise")
+            .expect("difference noise")[0],
+    ];
+    for seed in [7501, 7502] {
+        let mut cfg =
+            auvnav_tools::usbl::navigation_config(&station, Coupling::Tight, UsblFilter::Aukf);
+        if let Some(u) = cfg.usbl.as_mut() {
+            u.range_std_m = 3.0 * truth_noise[0];
+            u.range_difference_std_m = 3.0 * truth_noise[1];
+        }
+        let mut nav: Option<Navigator> = None;
+        let mut sums = [0.0f64; 3];
+        let mut n = 0usize;
+        sim::simulate(
+            &SimConfig {
+                scenario: scenario.clone(),
+                effects: effects.clone(),
+                seed,
+                duration_s: None,
+            },
+            |m| {
+                match (m, nav.as_mut()) {
+                    (LogMessage::Truth(t), None) => {
+                        let p = auvnav_core::earth::Geodetic {
+                            latitude_rad: t.latitude_rad,
+                            longitude_rad: t.longitude_rad,
+                            height_m: t.height_m,
+                        };
+                        let s = initial_state(
+                            t.host_time_ns as f64 * 1e-9,
+                            p,
+                            t.velocity_ned_m_s,
+                            t.euler_rad,
+                        );
+                        nav = Some(Navigator::new(cfg.clone(), s));
+                    }
+                    (LogMessage::Imu(x), Some(nv)) => {
+                        nv.on_imu(x);
+                    }
+                    (LogMessage::Dvl(x), Some(nv)) => {
+                        nv.on_dvl(x);
+                    }
+                    (LogMessage::Depth(x), Some(nv)) => {
+                        nv.on_depth(x);
+                    }
+                    (LogMessage::Usbl(x), Some(nv)) => {
+                        nv.on_usbl(x);
+                        if x.host_time_ns >= 300_000_000_000
+                            && let Some((_, var)) = nv.usbl_estimates()
+                        {
+                            for i in 0..3 {
+                                sums[i] += var[i].sqrt();
+                            }
+                            n += 1;
+                        }
+                    }
+                    _ => {}
+                }
+                Ok(())
+            },
+        )
+        .expect("simulate");
+        assert!(n > 250, "{n} fixes in the second half");
+        let mean = sums.map(|s| s / n as f64);
+        let expected = [truth_noise[0], truth_noise[1], truth_noise[1]];
+        for i in 0..3 {
+            let ratio = mean[i] / expected[i];
+            assert!(
+                (0.85..1.15).contains(&ratio),
+                "seed {seed}, channel {i}: estimated σ {:.4} m, simulated {:.4} m",
+                mean[i],
+                expected[i]
+            );
+        }
+    }
+}
