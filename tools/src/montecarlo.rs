@@ -285,7 +285,7 @@ pub fn nees_monte_carlo_with(
 }
 
 /// A navigator started from the truth perturbed by a draw from its initial covariance.
-fn perturbed_start(
+pub(crate) fn perturbed_start(
     cfg: &NavConfig,
     filter_cfg: &NavConfig,
     t: &auvnav_shm_schema::TruthStateV1,

@@ -14,7 +14,7 @@ use crate::sim::rng::Rng;
 use crate::sim::{self, SimConfig, StationGeometry, scenario::Scenario};
 use anyhow::{Context, bail};
 use auvnav_core::earth::{Geodetic, ned_offset, offset_position};
-use auvnav_core::navigator::{NavConfig, Navigator, initial_state};
+use auvnav_core::navigator::{NavConfig, Navigator};
 use auvnav_core::usbl::{Coupling, UsblConfig, UsblFilter};
 use auvnav_shm_schema::AidDiagnosticsV1;
 use nalgebra::{UnitQuaternion, Vector3};
@@ -267,7 +267,7 @@ fn run_one(
                     height_m: t.height_m,
                 };
                 let Some(nv) = nav.as_ref() else {
-                    nav = Some(perturbed_start(&cfg, t, &mut rng));
+                    nav = Some(crate::montecarlo::perturbed_start(&cfg, &cfg, t, &mut rng));
                     return Ok(());
                 };
                 let q = t.quaternion_body_to_ned;
@@ -354,36 +354,6 @@ fn run_one(
     r.vertical_rms_m = (sv / nf).sqrt();
     r.velocity_rms_m_s = (svel / nf).sqrt();
     Ok(r)
-}
-
-/// A navigator started from the truth perturbed by a draw from its initial covariance.
-fn perturbed_start(
-    cfg: &NavConfig,
-    t: &auvnav_shm_schema::TruthStateV1,
-    rng: &mut Rng,
-) -> Navigator {
-    let g = |rng: &mut Rng, s: f64| Vector3::new(rng.gauss(s), rng.gauss(s), rng.gauss(s));
-    let dp = g(rng, cfg.initial_position_std_m);
-    let dv = g(rng, cfg.initial_velocity_std_m_s);
-    let tilt = cfg.initial_tilt_std_deg.to_radians();
-    let phi = Vector3::new(
-        rng.gauss(tilt),
-        rng.gauss(tilt),
-        rng.gauss(cfg.initial_heading_std_deg.to_radians()),
-    );
-    let truth_pos = Geodetic {
-        latitude_rad: t.latitude_rad,
-        longitude_rad: t.longitude_rad,
-        height_m: t.height_m,
-    };
-    let mut s = initial_state(
-        t.host_time_ns as f64 * 1e-9,
-        offset_position(&truth_pos, &dp),
-        (Vector3::from(t.velocity_ned_m_s) + dv).into(),
-        t.euler_rad,
-    );
-    s.q_body_to_ned = UnitQuaternion::from_scaled_axis(-phi) * s.q_body_to_ned;
-    Navigator::new(cfg.clone(), s)
 }
 
 /// Runs the Monte Carlo for one configuration.
