@@ -854,14 +854,12 @@ impl Navigator {
             UsblFilter::Akf => usbl::linearized_update(&p, &z, r, &h),
             UsblFilter::Ukf | UsblFilter::Aukf => usbl::unscented_update(&p, &z, r, &h, unscented),
         };
-        // Fixed noise (ukf): the configured covariance, full for the loose fix; adaptive: the
-        // estimator's diagonal.
-        let r_used = if kind == UsblFilter::Ukf {
+        // Fixed noise (ukf): this fix's configured noise (diagonal in the measurement's
+        // coordinates); adaptive: the estimator's.
+        if kind == UsblFilter::Ukf {
             noise.set_variances(&DVector::from_column_slice(meas.r.diagonal().as_slice()));
-            DMatrix::from_column_slice(3, 3, meas.r.as_slice())
-        } else {
-            noise.covariance()
-        };
+        }
+        let r_used = noise.covariance();
         let Some(mut upd) = update(&r_used) else {
             self.counters.usbl_failed += 1;
             return d;
