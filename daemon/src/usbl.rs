@@ -123,9 +123,9 @@ impl Default for UnscentedParams {
     }
 }
 
-/// The result of an unscented update.
+/// The result of a measurement update (unscented or linearised).
 #[derive(Debug, Clone)]
-pub struct UnscentedUpdate {
+pub struct MeasurementUpdate {
     /// The estimated error state (to feed back).
     pub dx: DVector<f64>,
     /// The updated covariance.
@@ -144,7 +144,7 @@ pub fn unscented_update(
     r: &DMatrix<f64>,
     h: &dyn Fn(&DVector<f64>) -> DVector<f64>,
     params: UnscentedParams,
-) -> Option<UnscentedUpdate> {
+) -> Option<MeasurementUpdate> {
     let n = p.nrows();
     let m = z.len();
     let nf = n as f64;
@@ -183,7 +183,7 @@ pub fn unscented_update(
     let dx = &k * &innovation;
     let mut p_new = p - &k * &s * k.transpose();
     p_new = (&p_new + p_new.transpose()) * 0.5;
-    Some(UnscentedUpdate {
+    Some(MeasurementUpdate {
         dx,
         p: p_new,
         innovation,
@@ -200,8 +200,8 @@ pub fn unscented_update(
 /// constant: the starting value counts as a full memory of measurements. (The bias-corrected
 /// weights d_k = (1 − b) / (1 − b^(k+1)) of the textbook form give the first innovation weight 1:
 /// one small innovation then set R far below the truth, the gate became too narrow and R could
-/// not grow back while H P⁻ Hᵀ exceeded it — seen in the docking Monte Carlo.) R_i is only learnt while (H P⁻ Hᵀ)_ii < R_i: while the state's own uncertainty
-/// dominates, ε_i² says little about the noise and an undetected outlier would inflate it (seen in
+/// not grow back while H P⁻ Hᵀ exceeded it — seen in the docking Monte Carlo.) R_i is only
+/// learnt while (H P⁻ Hᵀ)_ii < R_i: while the state's own uncertainty dominates, ε_i² says little about the noise and an undetected outlier would inflate it (seen in
 /// the test: one 20 m jump at the start raised σ to 6 m). A component whose ε_i² / (H P⁻ Hᵀ + R)_ii
 /// exceeds `gate_chi2` rejects the
 /// whole measurement. After `reopen_after` consecutive rejections the noise is assumed to have
@@ -684,7 +684,7 @@ pub fn linearized_update(
     z: &DVector<f64>,
     r: &DMatrix<f64>,
     h: &dyn Fn(&DVector<f64>) -> DVector<f64>,
-) -> Option<UnscentedUpdate> {
+) -> Option<MeasurementUpdate> {
     let n = p.nrows();
     let m = z.len();
     let hj = jacobian(n, m, h, 1e-3);
@@ -697,7 +697,7 @@ pub fn linearized_update(
     let ikh = DMatrix::identity(n, n) - &k * &hj;
     let mut p_new = &ikh * p * ikh.transpose() + &k * r * k.transpose();
     p_new = (&p_new + p_new.transpose()) * 0.5;
-    Some(UnscentedUpdate {
+    Some(MeasurementUpdate {
         dx,
         p: p_new,
         innovation,
