@@ -1,25 +1,22 @@
 //! Helpers shared by the end-to-end tests: the workspace's binaries, child processes that are
 //! killed when a test fails, and per-test names so concurrent tests never share topics or files.
 
-/// The measured data set `name` under ../shared/data, or `None` (with a message) when it is
-/// absent outside CI; under CI (`CI=true`) its absence is a failure.
+pub mod shared;
+
+/// The measured data set `name` under `<shared>/data` when its file `probe` exists, or `None`
+/// (with a SKIPPED message) outside CI; under CI (`CI=true`) its absence is a failure.
 pub fn measured_data(name: &str, probe: &str) -> Option<std::path::PathBuf> {
-    let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data")
-        .join(name);
+    let dir = shared::shared(&format!("data/{name}"))?;
     if dir.join(probe).exists() {
         return Some(dir);
     }
     if std::env::var("CI").is_ok_and(|v| v == "true") {
         panic!(
             "{} is missing: measured data is required under CI",
-            dir.display()
+            dir.join(probe).display()
         );
     }
-    eprintln!(
-        "SKIPPED: {} is absent (measured-data tests need ../shared/data)",
-        dir.display()
-    );
+    eprintln!("SKIPPED: {} is absent", dir.join(probe).display());
     None
 }
 
