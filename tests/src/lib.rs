@@ -48,6 +48,8 @@ pub mod processes {
                 "auvnav-drivers",
                 "-p",
                 "auvnav-tools",
+                "-p",
+                "auvnavd",
             ]);
             if dir.file_name().is_some_and(|n| n == "release") {
                 cmd.arg("--release");

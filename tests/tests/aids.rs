@@ -84,7 +84,7 @@ fn zero_velocity_updates_hold_a_moored_vehicle() {
     eprintln!(
         "pure inertial: {free:.2} m, {free_v:.3} m/s; with ZUPT: {held:.3} m, {held_v:.4} m/s"
     );
-    assert_eq!(n.counters.zero_velocity_fused, 600, "{:?}", n.counters);
+    assert_eq!(n.counters().zero_velocity_fused, 600, "{:?}", n.counters());
     assert!(held_v < 0.01, "{held_v}");
     assert!(held < 0.5 && held < free / 5.0, "{held} vs {free}");
 }
@@ -121,9 +121,9 @@ duration_s = 600.0
     let (with, _, n) = run(&msgs, offset, None, true);
     eprintln!(
         "start 18 m off: without GNSS {without:.1} m, with GNSS {with:.2} m; {:?}",
-        n.counters
+        n.counters()
     );
-    assert!(n.counters.gnss_fused > 500, "{:?}", n.counters);
+    assert!(n.counters().gnss_fused > 500, "{:?}", n.counters());
     assert!(without > 15.0, "{without}");
     assert!(with < 3.0, "{with}");
 }

@@ -1,7 +1,7 @@
 //! Coarse alignment on simulated voyages: static (moored) and DVL-aided in motion, without any
 //! prior heading. Tolerances follow from the simulated sensors (see each test).
 
-use auvnav_core::align::{InMotionAligner, static_alignment};
+use auvnav_core::align::coarse::{InMotionAligner, static_alignment};
 use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, TruthStateV1};
 use auvnav_tools::log::LogMessage;
 use auvnav_tools::sim::{self, SimConfig, scenario::Scenario};

@@ -2,7 +2,7 @@
 //! Carlo counts and seeds other than the documented table's (which starts at seed 1). The full
 //! table is `auvnav usbl --table --runs 50` (docs/usbl.md).
 
-use auvnav_core::usbl::{Coupling, UsblFilter};
+use auvnav_core::aid::usbl::{Coupling, UsblFilter};
 use auvnav_tools::usbl::{UsblArgs, UsblReport, run};
 
 fn monte_carlo(
@@ -168,7 +168,9 @@ fn the_adaptive_noise_estimate_converges_to_the_simulated_usbl_noise() {
     // The docking run's USBL noise: 0.1 m on the range, 2 mm on the range differences. The
     // estimator starts 3× too high on every channel; averaged over the second half of the run
     // (its memory is about 50 fixes) it must find the simulated noise.
-    use auvnav_core::navigator::{Navigator, initial_state};
+    use auvnav_core::navigator::initial_state;
+    use auvnav_core::session::{Session, SessionConfig, SessionOutput};
+    use auvnav_shm_schema::AidSource;
     use auvnav_tools::log::LogMessage;
     use auvnav_tools::sim::{self, SimConfig, StationGeometry, scenario::Scenario};
     let scenario = Scenario::load("docking").expect("scenario");
@@ -187,7 +189,12 @@ fn the_adaptive_noise_estimate_converges_to_the_simulated_usbl_noise() {
             u.range_std_m = 3.0 * truth_noise[0];
             u.range_difference_std_m = 3.0 * truth_noise[1];
         }
-        let mut nav: Option<Navigator> = None;
+        // Through the daemon's feed path: the session applies each fix before the next IMU
+        // sample; the estimate is read after each fix it applied.
+        let mut session = Session::new(&SessionConfig {
+            navigation: cfg.clone(),
+            ..Default::default()
+        });
         let mut sums = [0.0f64; 3];
         let mut n = 0usize;
         sim::simulate(
@@ -198,42 +205,43 @@ fn the_adaptive_noise_estimate_converges_to_the_simulated_usbl_noise() {
                 duration_s: None,
             },
             |m| {
-                match (m, nav.as_mut()) {
-                    (LogMessage::Truth(t), None) => {
-                        let p = auvnav_core::earth::Geodetic {
-                            latitude_rad: t.latitude_rad,
-                            longitude_rad: t.longitude_rad,
-                            height_m: t.height_m,
-                        };
-                        let s = initial_state(
-                            t.host_time_ns as f64 * 1e-9,
-                            p,
-                            t.velocity_ned_m_s,
-                            t.euler_rad,
-                        );
-                        nav = Some(Navigator::new(cfg.clone(), s));
-                    }
-                    (LogMessage::Imu(x), Some(nv)) => {
-                        nv.on_imu(x);
-                    }
-                    (LogMessage::Dvl(x), Some(nv)) => {
-                        nv.on_dvl(x);
-                    }
-                    (LogMessage::Depth(x), Some(nv)) => {
-                        nv.on_depth(x);
-                    }
-                    (LogMessage::Usbl(x), Some(nv)) => {
-                        nv.on_usbl(x);
-                        if x.host_time_ns >= 300_000_000_000
-                            && let Some((_, var)) = nv.usbl_estimates()
+                if let LogMessage::Truth(t) = m
+                    && !session.started()
+                {
+                    let p = auvnav_core::earth::Geodetic {
+                        latitude_rad: t.latitude_rad,
+                        longitude_rad: t.longitude_rad,
+                        height_m: t.height_m,
+                    };
+                    let s = initial_state(
+                        t.host_time_ns as f64 * 1e-9,
+                        p,
+                        t.velocity_ned_m_s,
+                        t.euler_rad,
+                    );
+                    session.start(s, "truth", &mut |_| Ok::<(), anyhow::Error>(()))?;
+                } else if let Some(x) = m.sensor()
+                    && session.started()
+                {
+                    let mut fix_time = None;
+                    session.feed(&x, &mut |o| {
+                        if let SessionOutput::Diagnostics(d) = o
+                            && d.source == AidSource::UsblSlantRange as u32
                         {
-                            for i in 0..3 {
-                                sums[i] += var[i].sqrt();
-                            }
-                            n += 1;
+                            fix_time = Some(d.host_time_ns);
                         }
+                        Ok::<(), anyhow::Error>(())
+                    })?;
+                    if let Some(t) = fix_time
+                        && t >= 300_000_000_000
+                        && let Some((_, var)) =
+                            session.navigator().and_then(|nv| nv.usbl_estimates())
+                    {
+                        for i in 0..3 {
+                            sums[i] += var[i].sqrt();
+                        }
+                        n += 1;
                     }
-                    _ => {}
                 }
                 Ok(())
             },

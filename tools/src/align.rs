@@ -1,5 +1,5 @@
 //! `auvnav align`: Monte Carlo comparison of the fine-alignment error models of S-ALIGN
-//! (`auvnav_core::fine_align`) on simulated voyages (`align_moored`, `align_straight`,
+//! (`auvnav_core::align::fine`) on simulated voyages (`align_moored`, `align_straight`,
 //! `align_turning`: 2 m/s, 1200 s). Every run simulates the voyage once with the seed's sensors
 //! and a random DVL installation, then runs each selected model on the same data from the same
 //! perturbed initial state. Runs are spread over the available cores; each run depends only on
@@ -9,10 +9,11 @@ use crate::log::LogMessage;
 use crate::sim::rng::Rng;
 use crate::sim::{self, SimConfig, effects::Effects, scenario::Scenario};
 use anyhow::{Context, bail};
+use auvnav_core::align::fine::{ErrorModel, FineAlignConfig};
 use auvnav_core::earth::{Geodetic, ned_offset, offset_position};
-use auvnav_core::fine_align::{ErrorModel, FineAlignConfig, FineAligner};
+use auvnav_core::session::{Session, SessionConfig};
 use auvnav_core::strapdown::NavState;
-use auvnav_shm_schema::{DvlVelocityV1, TruthStateV1};
+use auvnav_shm_schema::TruthStateV1;
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::Serialize;
 
@@ -119,37 +120,25 @@ pub fn align_measured(
         ErrorModel::NavigationWithMounting,
         ErrorModel::Navigation,
     ] {
-        let mut f = FineAligner::new(model, cfg, initial);
+        // The daemon's feed path: the session runs the alignment filter of `model`.
+        let mut session = Session::new(&SessionConfig::default());
+        session.start_fine_alignment(model, cfg, initial);
         let mut next = 0;
         let mut errs = Vec::new();
         for m in messages {
-            match m {
-                LogMessage::Imu(x) if x.host_time_ns > t0.host_time_ns && x.interval_s > 0.0 => {
-                    let (mut w, mut a) = (Vector3::from(x.angular), Vector3::from(x.specific));
-                    if x.status & auvnav_shm_schema::ImuSampleV1::STATUS_INCREMENTS != 0 {
-                        w /= x.interval_s;
-                        a /= x.interval_s;
-                    }
-                    f.on_imu(&w, &a, x.interval_s);
+            if let LogMessage::Truth(t) = m {
+                let el = (t.host_time_ns - t0.host_time_ns) as f64 * 1e-9;
+                // The reference is 1 Hz and a segment's last record is at 399 s: a checkpoint
+                // is taken at the first record within one second of it.
+                while next < MEASURED_CHECKPOINTS.len() && el >= MEASURED_CHECKPOINTS[next] - 1.0 {
+                    let f = session
+                        .fine_aligner()
+                        .context("the alignment filter stopped")?;
+                    errs.push((MEASURED_CHECKPOINTS[next], attitude_errors(f.state(), t)[2]));
+                    next += 1;
                 }
-                LogMessage::Dvl(d)
-                    if d.validity & DvlVelocityV1::VALID_VELOCITY != 0
-                        && d.host_time_ns > t0.host_time_ns =>
-                {
-                    f.on_dvl(&Vector3::from(d.velocity_dvl_m_s));
-                }
-                LogMessage::Truth(t) => {
-                    let el = (t.host_time_ns - t0.host_time_ns) as f64 * 1e-9;
-                    // The reference is 1 Hz and a segment's last record is at 399 s: a checkpoint
-                    // is taken at the first record within one second of it.
-                    while next < MEASURED_CHECKPOINTS.len()
-                        && el >= MEASURED_CHECKPOINTS[next] - 1.0
-                    {
-                        errs.push((MEASURED_CHECKPOINTS[next], attitude_errors(f.state(), t)[2]));
-                        next += 1;
-                    }
-                }
-                _ => {}
+            } else if let Some(x) = m.sensor() {
+                session.feed(&x, &mut |_| Ok::<(), anyhow::Error>(()))?;
             }
         }
         out.push((model.number(), errs));
@@ -367,39 +356,30 @@ fn run_one(
     let true_mount = Vector3::from(mount_deg.map(f64::to_radians));
     let mut out = Vec::new();
     for &model in models {
-        let mut f = FineAligner::new(model, cfg, initial);
+        // The daemon's feed path: the session runs the alignment filter of `model`.
+        let mut session = Session::new(&SessionConfig::default());
+        session.start_fine_alignment(model, cfg, initial);
         let mut result = RunResult::default();
         let mut next = 0;
         let mut last_truth = t0;
         for m in &messages {
-            match m {
-                LogMessage::Imu(x) => {
-                    if x.host_time_ns <= t0.host_time_ns {
-                        continue;
-                    }
-                    f.on_imu(
-                        &Vector3::from(x.angular),
-                        &Vector3::from(x.specific),
-                        x.interval_s,
-                    );
+            if let LogMessage::Truth(t) = m {
+                last_truth = *t;
+                let el = (t.host_time_ns - t0.host_time_ns) as f64 * 1e-9;
+                while next < CHECKPOINTS.len() && el >= CHECKPOINTS[next] - 1e-9 {
+                    let f = session
+                        .fine_aligner()
+                        .context("the alignment filter stopped")?;
+                    result.attitude.push(attitude_errors(f.state(), t));
+                    next += 1;
                 }
-                LogMessage::Dvl(d)
-                    if d.validity & DvlVelocityV1::VALID_VELOCITY != 0
-                        && d.host_time_ns > t0.host_time_ns =>
-                {
-                    f.on_dvl(&Vector3::from(d.velocity_dvl_m_s));
-                }
-                LogMessage::Truth(t) => {
-                    last_truth = *t;
-                    let el = (t.host_time_ns - t0.host_time_ns) as f64 * 1e-9;
-                    while next < CHECKPOINTS.len() && el >= CHECKPOINTS[next] - 1e-9 {
-                        result.attitude.push(attitude_errors(f.state(), t));
-                        next += 1;
-                    }
-                }
-                _ => {}
+            } else if let Some(x) = m.sensor() {
+                session.feed(&x, &mut |_| Ok::<(), anyhow::Error>(()))?;
             }
         }
+        let f = session
+            .fine_aligner()
+            .context("the alignment filter stopped")?;
         let end = Geodetic {
             latitude_rad: last_truth.latitude_rad,
             longitude_rad: last_truth.longitude_rad,

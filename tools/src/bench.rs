@@ -731,13 +731,22 @@ pub fn e2e(rate_hz: f64, seconds: f64) -> anyhow::Result<E2eLatency> {
     let dvl_cfg = driver_cfg("dvl", "wldvl", &ports[1].2)?;
     let usbl_cfg = driver_cfg("usbl", "seatrac", &ports[2].2)?;
     let daemon_cfg = dir.join("auvnavd.toml");
-    std::fs::write(
-        &daemon_cfg,
-        format!(
-            "prefix = \"{tag}\"\n[navigation]\nimu_dt_from_device_time = true\n\
-             [initial]\nlatitude_deg = 31.0\nlongitude_deg = 120.0\nheight_m = -20.0\neuler_deg = [0.0, 0.0, 0.0]\n"
-        ),
-    )?;
+    let daemon = auvnav_core::config::DaemonConfig {
+        prefix: tag.clone(),
+        navigation: auvnav_core::config::NavConfig {
+            imu_dt_from_device_time: true,
+            ..Default::default()
+        },
+        initial: Some(auvnav_core::config::InitialState {
+            latitude_deg: 31.0,
+            longitude_deg: 120.0,
+            height_m: -20.0,
+            velocity_ned_m_s: [0.0; 3],
+            euler_deg: [0.0; 3],
+        }),
+        ..Default::default()
+    };
+    std::fs::write(&daemon_cfg, daemon.to_toml()?)?;
     let done = std::sync::Arc::new(AtomicBool::new(false));
     let ready = std::sync::Arc::new(AtomicBool::new(false));
     type Seen = (Vec<(u64, u64)>, Vec<(u64, u64)>);
@@ -975,8 +984,8 @@ pub fn align(runs: usize, json: bool) -> anyhow::Result<()> {
 /// Cost of one USBL update per coupling and filter.
 #[derive(Debug, Clone, Serialize)]
 pub struct UsblBench {
-    pub coupling: auvnav_core::usbl::Coupling,
-    pub filter: auvnav_core::usbl::UsblFilter,
+    pub coupling: auvnav_core::aid::usbl::Coupling,
+    pub filter: auvnav_core::aid::usbl::UsblFilter,
     /// States the update runs over (every state with non-zero variance).
     pub states: usize,
     pub updates: usize,
@@ -993,8 +1002,10 @@ pub fn usbl(seconds: f64, json: bool) -> anyhow::Result<()> {
     use crate::log::LogMessage;
     use crate::sim::StationGeometry;
     use anyhow::bail;
-    use auvnav_core::navigator::{Navigator, initial_state};
-    use auvnav_core::usbl::{Coupling, UsblFilter};
+    use auvnav_core::aid::usbl::{Coupling, UsblFilter};
+    use auvnav_core::feed::SensorMessage;
+    use auvnav_core::navigator::initial_state;
+    use auvnav_core::session::{Session, SessionConfig};
     use std::time::Instant;
     let scenario = Scenario::load("docking")?;
     let station =
@@ -1019,11 +1030,16 @@ pub fn usbl(seconds: f64, json: bool) -> anyhow::Result<()> {
                 cfg.estimate_dvl_lever_arm = true;
                 cfg.estimate_dvl_time_offset = true;
             }
-            let mut nav: Option<Navigator> = None;
+            // The state is reached through the daemon's feed path; each fix's update is timed on
+            // a copy of the navigator as it stands when the fix arrives.
+            let mut session = Session::new(&SessionConfig {
+                navigation: cfg.clone(),
+                ..Default::default()
+            });
             let mut times = Vec::new();
             for m in &messages {
-                match (m, nav.as_mut()) {
-                    (LogMessage::Truth(t), None) => {
+                match m {
+                    LogMessage::Truth(t) if !session.started() => {
                         let pos = auvnav_core::earth::Geodetic {
                             latitude_rad: t.latitude_rad,
                             longitude_rad: t.longitude_rad,
@@ -1035,32 +1051,28 @@ pub fn usbl(seconds: f64, json: bool) -> anyhow::Result<()> {
                             t.velocity_ned_m_s,
                             t.euler_rad,
                         );
-                        nav = Some(Navigator::new(cfg.clone(), s));
+                        session.start(s, "truth", &mut |_| Ok::<(), anyhow::Error>(()))?;
                     }
-                    (LogMessage::Imu(x), Some(n)) => {
-                        n.on_imu(x);
-                    }
-                    (LogMessage::Dvl(x), Some(n)) => {
-                        n.on_dvl(x);
-                    }
-                    (LogMessage::Depth(x), Some(n)) => {
-                        n.on_depth(x);
-                    }
-                    (LogMessage::Usbl(x), Some(n)) => {
-                        let mut copy = n.clone();
-                        let t0 = Instant::now();
-                        std::hint::black_box(copy.on_usbl(std::hint::black_box(x)));
-                        times.push(t0.elapsed().as_secs_f64() * 1e6);
-                        *n = copy;
+                    other if session.started() => {
+                        let Some(x) = other.sensor() else { continue };
+                        if let (SensorMessage::Usbl(fix), Some(n)) = (&x, session.navigator()) {
+                            let mut copy = n.clone();
+                            let t0 = Instant::now();
+                            std::hint::black_box(copy.on_usbl(std::hint::black_box(fix)));
+                            times.push(t0.elapsed().as_secs_f64() * 1e6);
+                        }
+                        session.feed(&x, &mut |_| Ok::<(), anyhow::Error>(()))?;
                     }
                     _ => {}
                 }
             }
-            let n = nav.context("the simulation produced no truth")?;
+            let n = session
+                .navigator()
+                .context("the simulation produced no truth")?;
             if times.is_empty() {
                 bail!("no USBL fix in {seconds} s of the docking scenario");
             }
-            let states = (0..auvnav_core::filter::N)
+            let states = (0..auvnav_core::ekf::N)
                 .filter(|&i| n.covariance()[(i, i)] > 0.0)
                 .count();
             let mut sorted = times.clone();

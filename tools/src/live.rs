@@ -274,29 +274,32 @@ pub fn run_live(
 
     // 2. Configurations. With a USBL station in the scenario, the daemon fuses its fixes.
     let [roll, pitch, yaw] = t0.euler_rad.map(f64::to_degrees);
-    let usbl = match crate::sim::StationGeometry::from_scenario(&cfg.scenario) {
-        Some(st) => format!(
-            "\n[navigation.usbl]\n{}",
-            toml::to_string(&crate::usbl::station_config(&st))?
-        ),
-        None => String::new(),
+    let daemon_config = auvnav_core::config::DaemonConfig {
+        prefix: prefix.to_string(),
+        aid_delay_s: 0.02,
+        health_period_s: 0.5,
+        navigation: auvnav_core::config::NavConfig {
+            imu_dt_from_device_time: true,
+            usbl: crate::sim::StationGeometry::from_scenario(&cfg.scenario)
+                .map(|st| crate::usbl::station_config(&st)),
+            ..Default::default()
+        },
+        initial: Some(auvnav_core::config::InitialState {
+            latitude_deg: t0.latitude_rad.to_degrees(),
+            longitude_deg: t0.longitude_rad.to_degrees(),
+            height_m: t0.height_m,
+            velocity_ned_m_s: t0.velocity_ned_m_s,
+            euler_deg: [roll, pitch, yaw],
+        }),
+        output: auvnav_core::config::OutputConfig {
+            nav_csv: dir.join("live_nav.csv").display().to_string(),
+            ..Default::default()
+        },
+        ..Default::default()
     };
+    daemon_config.validate()?;
     let daemon_cfg = dir.join("auvnavd.toml");
-    std::fs::write(
-        &daemon_cfg,
-        format!(
-            "prefix = \"{prefix}\"\naid_delay_s = 0.02\nhealth_period_s = 0.5\n\n\
-             [navigation]\nimu_dt_from_device_time = true\n\n\
-             [initial]\nlatitude_deg = {:?}\nlongitude_deg = {:?}\nheight_m = {:?}\n\
-             velocity_ned_m_s = {:?}\neuler_deg = [{roll:?}, {pitch:?}, {yaw:?}]\n\n\
-             [output]\nnav_csv = \"{}\"\n{usbl}",
-            t0.latitude_rad.to_degrees(),
-            t0.longitude_rad.to_degrees(),
-            t0.height_m,
-            t0.velocity_ned_m_s,
-            dir.join("live_nav.csv").display()
-        ),
-    )?;
+    std::fs::write(&daemon_cfg, daemon_config.to_toml()?)?;
     let dev = dir.join("dev");
     let driver_cfg = |class: &str, protocol: &str, extra: &str| -> anyhow::Result<PathBuf> {
         let p = dir.join(format!("{class}.toml"));

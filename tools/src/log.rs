@@ -393,6 +393,21 @@ pub enum LogMessage {
     Unknown,
 }
 
+impl LogMessage {
+    /// The message as an input of the navigation session (the feed path), when it is one.
+    pub fn sensor(&self) -> Option<auvnav_core::feed::SensorMessage> {
+        use auvnav_core::feed::SensorMessage as S;
+        Some(match self {
+            LogMessage::Imu(x) => S::Imu(*x),
+            LogMessage::Dvl(x) => S::Dvl(*x),
+            LogMessage::Depth(x) => S::Depth(*x),
+            LogMessage::Gnss(x) => S::Gnss(*x),
+            LogMessage::Usbl(x) => S::Usbl(*x),
+            _ => return None,
+        })
+    }
+}
+
 /// A channel as declared in a log.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ChannelInfo {

@@ -13,8 +13,10 @@ use crate::log::LogMessage;
 use crate::sim::{self, SimConfig, effects::Effects, rng::Rng, scenario::Scenario};
 use anyhow::bail;
 use auvnav_core::earth::{self, Geodetic};
-use auvnav_core::filter;
-use auvnav_core::navigator::{NavConfig, Navigator, initial_state};
+use auvnav_core::ekf as filter;
+use auvnav_core::navigator::{NavConfig, initial_state};
+use auvnav_core::session::{Session, SessionConfig, SessionOutput};
+use auvnav_core::strapdown::NavState;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use serde::Serialize;
 
@@ -169,7 +171,11 @@ pub fn nees_monte_carlo_with(
             seed,
             duration_s: a.seconds,
         };
-        let mut nav: Option<Navigator> = None;
+        // The daemon's feed path: messages go through the session (aid delay 0, as replay).
+        let mut session = Session::new(&SessionConfig {
+            navigation: filter_cfg.clone(),
+            ..Default::default()
+        });
         let mut epoch = 0usize;
         let mut last_imu_ns = None;
         let mut start_ns = 0u64;
@@ -186,8 +192,11 @@ pub fn nees_monte_carlo_with(
                         longitude_rad: t.longitude_rad,
                         height_m: t.height_m,
                     };
-                    let Some(n) = nav.as_ref() else {
-                        nav = Some(perturbed_start(truth_cfg, filter_cfg, t, &mut rng));
+                    let Some(n) = session.navigator() else {
+                        let start = perturbed_start(truth_cfg, t, &mut rng);
+                        session.start(start, "truth perturbed by a draw of P0", &mut |_| {
+                            Ok::<(), anyhow::Error>(())
+                        })?;
                         start_ns = t.host_time_ns;
                         return Ok(());
                     };
@@ -220,21 +229,16 @@ pub fn nees_monte_carlo_with(
                     counts[epoch] += 1;
                     epoch += 1;
                 }
-                LogMessage::Imu(x) => {
-                    if let Some(n) = nav.as_mut()
-                        && n.on_imu(x).is_some()
-                    {
-                        last_imu_ns = Some(x.host_time_ns);
-                    }
-                }
-                LogMessage::Dvl(x) => {
-                    if let Some(n) = nav.as_mut() {
-                        n.on_dvl(x);
-                    }
-                }
-                LogMessage::Depth(x) => {
-                    if let Some(n) = nav.as_mut() {
-                        n.on_depth(x);
+                other if session.started() => {
+                    if let Some(x) = other.sensor() {
+                        let mut solved = false;
+                        session.feed(&x, &mut |o| {
+                            solved |= matches!(o, SessionOutput::Solution(_));
+                            Ok::<(), anyhow::Error>(())
+                        })?;
+                        if solved {
+                            last_imu_ns = Some(x.host_time_ns());
+                        }
                     }
                 }
                 _ => {}
@@ -284,13 +288,12 @@ pub fn nees_monte_carlo_with(
     })
 }
 
-/// A navigator started from the truth perturbed by a draw from its initial covariance.
+/// The truth perturbed by a draw from the initial covariance of `cfg`: where a run starts.
 pub(crate) fn perturbed_start(
     cfg: &NavConfig,
-    filter_cfg: &NavConfig,
     t: &auvnav_shm_schema::TruthStateV1,
     rng: &mut Rng,
-) -> Navigator {
+) -> NavState {
     let dp = Vector3::new(
         rng.gauss(cfg.initial_position_std_m),
         rng.gauss(cfg.initial_position_std_m),
@@ -319,7 +322,7 @@ pub(crate) fn perturbed_start(
         t.euler_rad,
     );
     s.q_body_to_ned = UnitQuaternion::from_scaled_axis(-phi) * s.q_body_to_ned;
-    Navigator::new(filter_cfg.clone(), s)
+    s
 }
 
 /// Runs `auvnav montecarlo nees` and prints the report.

@@ -24,11 +24,15 @@ pub use auvnav_core::session::{InitialReport, InitialState};
 /// `[initial]` state — the same file the daemon's `[navigation]`/`[initial]` tables hold.
 pub type ReplayConfig = auvnav_core::session::SessionConfig;
 
-/// Reads a replay configuration file.
+/// Reads a replay configuration file and validates it as the daemon does.
 pub fn load_config(path: &Path) -> anyhow::Result<ReplayConfig> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("reading configuration {}", path.display()))?;
-    toml::from_str(&text).with_context(|| format!("configuration {}", path.display()))
+    let cfg: ReplayConfig =
+        toml::from_str(&text).with_context(|| format!("configuration {}", path.display()))?;
+    cfg.validate()
+        .with_context(|| format!("configuration {}", path.display()))?;
+    Ok(cfg)
 }
 
 /// One output of the navigator.
@@ -190,35 +194,23 @@ impl Replay {
                 }
                 self.compare(t);
             }
-            LogMessage::Imu(x) => {
-                self.counts.imu += 1;
-                self.session.on_imu(x, &mut fwd)?;
-                drop(fwd);
-                self.note_time(x.host_time_ns);
-            }
-            LogMessage::Dvl(x) => {
-                self.counts.dvl += 1;
-                drop(fwd);
-                self.session.on_dvl(x);
-                self.note_time(x.host_time_ns);
-            }
-            LogMessage::Depth(x) => {
-                self.counts.depth += 1;
-                drop(fwd);
-                self.session.on_depth(x);
-                self.note_time(x.host_time_ns);
-            }
-            LogMessage::Gnss(x) => {
-                self.counts.gnss += 1;
-                drop(fwd);
-                self.session.on_gnss(x);
-                self.note_time(x.host_time_ns);
-            }
-            LogMessage::Usbl(x) => {
-                self.counts.usbl += 1;
-                drop(fwd);
-                self.session.on_usbl(x);
-                self.note_time(x.host_time_ns);
+            LogMessage::Imu(_)
+            | LogMessage::Dvl(_)
+            | LogMessage::Depth(_)
+            | LogMessage::Gnss(_)
+            | LogMessage::Usbl(_) => {
+                match m {
+                    LogMessage::Imu(_) => self.counts.imu += 1,
+                    LogMessage::Dvl(_) => self.counts.dvl += 1,
+                    LogMessage::Depth(_) => self.counts.depth += 1,
+                    LogMessage::Gnss(_) => self.counts.gnss += 1,
+                    _ => self.counts.usbl += 1,
+                }
+                if let Some(x) = m.sensor() {
+                    self.session.feed(&x, &mut fwd)?;
+                    drop(fwd);
+                    self.note_time(x.host_time_ns());
+                }
             }
             LogMessage::Unknown => self.counts.unknown += 1,
             _ => self.counts.unused += 1,
@@ -275,7 +267,7 @@ impl Replay {
     pub fn nav_counters(&self) -> NavCounters {
         self.session
             .navigator()
-            .map(|n| n.counters)
+            .map(|n| n.counters())
             .unwrap_or_default()
     }
 
@@ -333,7 +325,7 @@ pub struct ReplayArgs {
     /// configuration's `[navigation.usbl]`, or else the station survey in the log header of a
     /// simulated voyage.
     #[arg(long, value_enum)]
-    pub usbl: Option<auvnav_core::usbl::Coupling>,
+    pub usbl: Option<auvnav_core::aid::usbl::Coupling>,
     /// Print the result as JSON.
     #[arg(long)]
     pub json: bool,
@@ -417,8 +409,12 @@ pub fn session_config_from_toml(text: &str) -> anyhow::Result<ReplayConfig> {
             keep.insert(key.to_string(), v.clone());
         }
     }
-    keep.try_into()
-        .context("the embedded configuration's navigation tables")
+    let cfg: ReplayConfig = keep
+        .try_into()
+        .context("the embedded configuration's navigation tables")?;
+    cfg.validate()
+        .context("the embedded configuration's navigation tables")?;
+    Ok(cfg)
 }
 
 /// The configuration a replay runs with, and where it came from.
@@ -439,7 +435,7 @@ pub fn replay_config(a: &ReplayArgs) -> anyhow::Result<(ReplayConfig, String)> {
                             a.log.display()
                         )
                     })?;
-                cfg.navigation.usbl = Some(auvnav_core::usbl::UsblConfig {
+                cfg.navigation.usbl = Some(auvnav_core::aid::usbl::UsblConfig {
                     coupling,
                     ..crate::usbl::station_config(&station)
                 });

@@ -13,10 +13,12 @@ use crate::log::LogMessage;
 use crate::sim::rng::Rng;
 use crate::sim::{self, SimConfig, StationGeometry, scenario::Scenario};
 use anyhow::{Context, bail};
+use auvnav_core::aid::usbl::{Coupling, UsblConfig, UsblFilter};
 use auvnav_core::earth::{Geodetic, ned_offset, offset_position};
-use auvnav_core::navigator::{NavConfig, Navigator};
-use auvnav_core::usbl::{Coupling, UsblConfig, UsblFilter};
-use auvnav_shm_schema::AidDiagnosticsV1;
+use auvnav_core::feed::SensorMessage;
+use auvnav_core::navigator::NavConfig;
+use auvnav_core::session::{Session, SessionConfig, SessionOutput};
+use auvnav_shm_schema::{AidDiagnosticsV1, AidSource};
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::Serialize;
 
@@ -177,7 +179,8 @@ pub fn navigation_config(
 struct PendingFix {
     t_ns: u64,
     slant_m: f64,
-    fused: bool,
+    /// Fused or not, once the session has applied it.
+    fused: Option<bool>,
 }
 
 /// The USBL configuration with `settings` (`key=value`, TOML values) applied.
@@ -237,7 +240,11 @@ fn run_one(
         seed,
         duration_s: a.seconds,
     };
-    let mut nav: Option<Navigator> = None;
+    // The daemon's feed path: messages go through the session (aid delay 0, as replay).
+    let mut session = Session::new(&SessionConfig {
+        navigation: cfg.clone(),
+        ..Default::default()
+    });
     // Fixes waiting for the truth at their time of validity, and the recent true ranges.
     let mut pending: std::collections::VecDeque<PendingFix> = Default::default();
     let mut true_ranges: std::collections::VecDeque<(u64, f64)> = Default::default();
@@ -266,8 +273,11 @@ fn run_one(
                     longitude_rad: t.longitude_rad,
                     height_m: t.height_m,
                 };
-                let Some(nv) = nav.as_ref() else {
-                    nav = Some(crate::montecarlo::perturbed_start(&cfg, &cfg, t, &mut rng));
+                let Some(nv) = session.navigator() else {
+                    let start = crate::montecarlo::perturbed_start(&cfg, t, &mut rng);
+                    session.start(start, "truth perturbed by a draw of P0", &mut |_| {
+                        Ok::<(), anyhow::Error>(())
+                    })?;
                     return Ok(());
                 };
                 let q = t.quaternion_body_to_ned;
@@ -283,8 +293,13 @@ fn run_one(
                 while true_ranges.len() > 400 {
                     true_ranges.pop_front();
                 }
-                while pending.front().is_some_and(|f| f.t_ns <= t.host_time_ns) {
+                // Fixes the session has applied (in order), once the truth has passed them.
+                while pending
+                    .front()
+                    .is_some_and(|f| f.fused.is_some() && f.t_ns <= t.host_time_ns)
+                {
                     let Some(f) = pending.pop_front() else { break };
+                    let fused = f.fused.unwrap_or(false);
                     // The true range at the fix's time of validity (nearest truth record).
                     let true_range = true_ranges
                         .iter()
@@ -292,8 +307,8 @@ fn run_one(
                         .map_or(f64::NAN, |x| x.1);
                     if (f.slant_m - true_range).abs() > 5.0 {
                         r.injected_outliers += 1;
-                        r.accepted_outliers += u64::from(f.fused);
-                    } else if !f.fused {
+                        r.accepted_outliers += u64::from(fused);
+                    } else if !fused {
                         r.rejected_clean += 1;
                     }
                 }
@@ -312,40 +327,44 @@ fn run_one(
                 r.vertical_max_m = r.vertical_max_m.max(dp.z.abs());
                 r.final_horizontal_m = h;
             }
-            LogMessage::Imu(x) => {
-                if let Some(nv) = nav.as_mut() {
-                    nv.on_imu(x);
-                }
+            LogMessage::Usbl(x) if session.started() => {
+                let mut x = *x;
+                x.validity_time_ns = x.host_time_ns.saturating_sub(latency_ns);
+                r.fixes += 1;
+                pending.push_back(PendingFix {
+                    t_ns: x.validity_time_ns,
+                    slant_m: x.slant_range_m,
+                    fused: None,
+                });
+                session.feed(
+                    &SensorMessage::Usbl(x),
+                    &mut |_| Ok::<(), anyhow::Error>(()),
+                )?;
             }
-            LogMessage::Dvl(x) => {
-                if let Some(nv) = nav.as_mut() {
-                    nv.on_dvl(x);
-                }
-            }
-            LogMessage::Depth(x) => {
-                if let Some(nv) = nav.as_mut() {
-                    nv.on_depth(x);
-                }
-            }
-            LogMessage::Usbl(x) => {
-                if let Some(nv) = nav.as_mut() {
-                    let mut x = *x;
-                    x.validity_time_ns = x.host_time_ns.saturating_sub(latency_ns);
-                    let d = nv.on_usbl(&x);
-                    r.fixes += 1;
-                    pending.push_back(PendingFix {
-                        t_ns: x.validity_time_ns,
-                        slant_m: x.slant_range_m,
-                        fused: d.flags & AidDiagnosticsV1::FLAG_FUSED != 0,
-                    });
+            other if session.started() => {
+                if let Some(x) = other.sensor() {
+                    session.feed(&x, &mut |o| {
+                        // A USBL fix's outcome, when the session applies it (in order of
+                        // delivery: the oldest fix still undecided).
+                        if let SessionOutput::Diagnostics(d) = o
+                            && (d.source == AidSource::UsblSlantRange as u32
+                                || d.source == AidSource::UsblPosition as u32)
+                            && let Some(f) = pending.iter_mut().find(|f| f.fused.is_none())
+                        {
+                            f.fused = Some(d.flags & AidDiagnosticsV1::FLAG_FUSED != 0);
+                        }
+                        Ok::<(), anyhow::Error>(())
+                    })?;
                 }
             }
             _ => {}
         }
         Ok(())
     })?;
-    let nv = nav.context("the simulation produced no truth")?;
-    let c = nv.counters;
+    let nv = session
+        .navigator()
+        .context("the simulation produced no truth")?;
+    let c = nv.counters();
     r.fused = c.usbl_fused;
     r.rejected = c.usbl_rejected + c.usbl_invalid + c.usbl_failed;
     r.reopened = c.usbl_reopened;

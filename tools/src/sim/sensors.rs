@@ -5,7 +5,7 @@ use super::rng::Rng;
 use super::scenario::Station;
 use super::trajectory::TruthSample;
 use auvnav_core::earth::{self, Geodetic};
-use auvnav_core::filter::skew;
+use auvnav_core::ekf::skew;
 use auvnav_shm_schema::{
     DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, UsblFixV1,
 };

@@ -1,9 +1,10 @@
 //! The navigation core against physics: Jacobians against finite differences, the Schuler period
 //! of a pure-inertial run with an initial tilt error.
 
+use auvnav_core::aid::dvl::{DvlParameters, dvl_model};
+use auvnav_core::aid::gnss::gnss_model;
 use auvnav_core::earth::{self, Geodetic};
-use auvnav_core::filter;
-use auvnav_core::navigator::{DvlParameters, dvl_model, gnss_model};
+use auvnav_core::ekf as filter;
 use auvnav_core::strapdown::{ImuIncrement, NavState, Strapdown};
 use nalgebra::{Matrix3, Rotation3, SMatrix, UnitQuaternion, Vector3};
 

@@ -1,123 +1,20 @@
 //! A navigation session: the navigator together with how it starts, fed sensor messages one at a
-//! time. The daemon runs it on live messages and `auvnav replay` on a log's, in the same order, so
+//! time through [`crate::feed`]. The daemon runs it on live messages and `auvnav replay` on a log's, in the same order, so
 //! that the same messages give the same solutions bit for bit.
 
-use crate::align::InMotionAligner;
+use crate::align::coarse::InMotionAligner;
+use crate::align::fine::{ErrorModel, FineAlignConfig, FineAligner};
+use crate::config::NavConfig;
+pub use crate::config::{AlignmentConfig, InitialState, SessionConfig};
 use crate::earth::Geodetic;
-use crate::fine_align::{ErrorModel, FineAlignConfig, FineAligner};
-use crate::navigator::{NavConfig, Navigator, initial_state};
+use crate::navigator::Navigator;
 use crate::strapdown::NavState;
 use auvnav_shm_schema::{
     AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, NavMode, NavSolutionV1,
     UsblFixV1,
 };
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
-use serde::{Deserialize, Serialize};
-
-/// An initial state given in the configuration.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct InitialState {
-    /// Latitude (deg, WGS-84).
-    pub latitude_deg: f64,
-    /// Longitude (deg).
-    pub longitude_deg: f64,
-    /// Height above the ellipsoid (m; negative below it).
-    pub height_m: f64,
-    /// Velocity (m/s, NED; default 0).
-    #[serde(default)]
-    pub velocity_ned_m_s: [f64; 3],
-    /// Roll, pitch, yaw (deg).
-    pub euler_deg: [f64; 3],
-}
-
-impl InitialState {
-    /// The navigation state at `time_s`.
-    pub fn state(&self, time_s: f64) -> NavState {
-        initial_state(
-            time_s,
-            Geodetic {
-                latitude_rad: self.latitude_deg.to_radians(),
-                longitude_rad: self.longitude_deg.to_radians(),
-                height_m: self.height_m,
-            },
-            self.velocity_ned_m_s,
-            self.euler_deg.map(f64::to_radians),
-        )
-    }
-}
-
-/// Initial alignment when the attitude is unknown (`[alignment]`): the position is given, the
-/// attitude found by the coarse aligner (`crate::align`), then refined by the navigation filter
-/// with the DVL (fine alignment) until the heading's standard deviation meets the criterion.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct AlignmentConfig {
-    /// Latitude (deg, WGS-84).
-    pub latitude_deg: f64,
-    /// Longitude (deg).
-    pub longitude_deg: f64,
-    /// Height above the ellipsoid (m; negative below it).
-    pub height_m: f64,
-    /// Coarse alignment duration (s, 10..3600; default 120).
-    #[serde(default = "default_coarse_s")]
-    pub coarse_s: f64,
-    /// The vehicle is at rest during coarse alignment: velocity epochs are zero and need no DVL
-    /// (default false: DVL-aided in motion).
-    #[serde(default)]
-    pub moored: bool,
-    /// Heading standard deviation handed to the filter after the coarse stage (deg; default 2).
-    #[serde(default = "default_coarse_heading_std")]
-    pub coarse_heading_std_deg: f64,
-    /// Roll/pitch standard deviation handed to the filter (deg; default 0.05).
-    #[serde(default = "default_coarse_tilt_std")]
-    pub coarse_tilt_std_deg: f64,
-    /// Convergence criterion: the mode becomes navigating when the filter's heading standard
-    /// deviation falls below this (deg; default 0.1).
-    #[serde(default = "default_aligned_heading_std")]
-    pub aligned_heading_std_deg: f64,
-    /// Fine-alignment error model between the coarse stage and navigation: 1 (body-frame
-    /// velocity error, mounting states), 2 (navigation frame, mounting states), 3 (navigation
-    /// frame), or 0 to refine in the navigation filter itself (default 1). With 1–3 the
-    /// navigation filter starts, when the criterion is met, from the alignment filter's state,
-    /// IMU biases, DVL mounting estimate and standard deviations (cross-covariances dropped).
-    #[serde(default = "default_fine_model")]
-    pub fine_model: u8,
-}
-
-fn default_fine_model() -> u8 {
-    1
-}
-
-fn default_coarse_s() -> f64 {
-    120.0
-}
-fn default_coarse_heading_std() -> f64 {
-    2.0
-}
-fn default_coarse_tilt_std() -> f64 {
-    0.05
-}
-fn default_aligned_heading_std() -> f64 {
-    0.1
-}
-
-/// The navigation part of a configuration: `[navigation]` (the core's [`NavConfig`]), an
-/// optional `[initial]` state and the aid delay.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct SessionConfig {
-    /// An aid message stamped t is applied just before the first IMU sample stamped later than
-    /// t + aid_delay_s (s, 0..1; default 0). Live, the delay gives aid messages from other
-    /// processes time to arrive before the IMU passes them, so the order of processing depends
-    /// only on the time stamps, and a replay of the recording reproduces it exactly; the daemon
-    /// uses 0.02 s.
-    pub aid_delay_s: f64,
-    pub navigation: NavConfig,
-    pub initial: Option<InitialState>,
-    /// Used when `[initial]` is absent.
-    pub alignment: Option<AlignmentConfig>,
-}
+use serde::Serialize;
 
 /// One output of the session.
 #[derive(Debug, Clone, Copy)]
@@ -203,6 +100,11 @@ pub struct Session {
     aligned: bool,
     align_sequence: u64,
     fine: Option<FineAligner>,
+    /// The fine stage hands over to the navigator when its heading meets the criterion (false:
+    /// a study runs the alignment filter for its whole length).
+    fine_hands_over: bool,
+    /// The fine stage integrates IMU samples stamped after this (ns).
+    fine_start_ns: u64,
 }
 
 impl Session {
@@ -225,7 +127,29 @@ impl Session {
             aligned: cfg.alignment.is_none(),
             align_sequence: 0,
             fine: None,
+            fine_hands_over: true,
+            fine_start_ns: 0,
         }
+    }
+
+    /// Starts the fine-alignment filter of `model` from `state` (the attitude found elsewhere),
+    /// without a hand-over to the navigator: the alignment studies run the filter this way over
+    /// the same feed path as the daemon, and read it with [`Session::fine_aligner`].
+    pub fn start_fine_alignment(
+        &mut self,
+        model: ErrorModel,
+        cfg: FineAlignConfig,
+        state: NavState,
+    ) {
+        self.fine_start_ns = (state.time_s * 1e9).round() as u64;
+        self.fine = Some(FineAligner::new(model, cfg, state));
+        self.fine_hands_over = false;
+        self.aligned = false;
+    }
+
+    /// The fine-alignment filter while it runs.
+    pub fn fine_aligner(&self) -> Option<&FineAligner> {
+        self.fine.as_ref()
     }
 
     /// True while the attitude is being found (coarse or fine stage).
@@ -288,7 +212,7 @@ impl Session {
     /// An IMU sample. Aid messages due before it are applied first. With a configured initial
     /// state, the first sample starts the session at its time (and is not integrated: there is
     /// no interval before it).
-    pub fn on_imu<E>(
+    pub(crate) fn on_imu<E>(
         &mut self,
         x: &ImuSampleV1,
         out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
@@ -303,10 +227,10 @@ impl Session {
             self.apply(aid, out)?;
         }
         self.last_imu_ns = self.last_imu_ns.max(x.host_time_ns);
+        if self.nav.is_none() && self.fine.is_some() {
+            return self.fine_step(x, out);
+        }
         if self.nav.is_none() && self.configured_initial.is_none() && self.alignment.is_some() {
-            if self.fine.is_some() {
-                return self.fine_step(x, out);
-            }
             return self.coarse(x, out);
         }
         if self.nav.is_none()
@@ -486,9 +410,18 @@ impl Session {
         x: &ImuSampleV1,
         out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
     ) -> Result<(), E> {
-        let (Some(a), Some(fine)) = (self.alignment.clone(), self.fine.as_mut()) else {
+        let criterion = self
+            .alignment
+            .as_ref()
+            .filter(|_| self.fine_hands_over)
+            .map(|a| a.aligned_heading_std_deg.to_radians());
+        let Some(fine) = self.fine.as_mut() else {
             return Ok(());
         };
+        if x.host_time_ns <= self.fine_start_ns {
+            // At or before the start state: nothing to integrate.
+            return Ok(());
+        }
         let Some((w, f)) = Self::usable_rates(x) else {
             self.before_start += 1;
             return Ok(());
@@ -498,7 +431,7 @@ impl Session {
         let mut state = *fine.state();
         state.time_s = x.host_time_ns as f64 * 1e-9;
         let [att, vel, pos, gyro, accel] = fine.std_devs();
-        if fine.heading_std() < a.aligned_heading_std_deg.to_radians() {
+        if criterion.is_some_and(|c| fine.heading_std() < c) {
             // Hand over to the navigation filter with the alignment filter's estimates.
             let deg = 180.0 / std::f64::consts::PI;
             let mut cfg = self.cfg.clone();
@@ -575,7 +508,9 @@ impl Session {
             && let Some(fine) = self.fine.as_mut()
             && let Aid::Dvl(m) = aid
         {
-            if m.validity & DvlVelocityV1::VALID_VELOCITY != 0 {
+            if m.validity & DvlVelocityV1::VALID_VELOCITY != 0
+                && m.host_time_ns > self.fine_start_ns
+            {
                 let v = Vector3::from(m.velocity_dvl_m_s);
                 if v.iter().all(|x| x.is_finite()) {
                     fine.on_dvl(&v);
@@ -623,23 +558,23 @@ impl Session {
     }
 
     /// A DVL message (applied before the first IMU sample after its time + the aid delay).
-    pub fn on_dvl(&mut self, x: &DvlVelocityV1) {
+    pub(crate) fn on_dvl(&mut self, x: &DvlVelocityV1) {
         self.queue(Aid::Dvl(*x));
     }
 
     /// A depth message (queued like DVL).
-    pub fn on_depth(&mut self, x: &DepthV1) {
+    pub(crate) fn on_depth(&mut self, x: &DepthV1) {
         self.queue(Aid::Depth(*x));
     }
 
     /// A GNSS fix (queued like DVL).
-    pub fn on_gnss(&mut self, x: &GnssFixV1) {
+    pub(crate) fn on_gnss(&mut self, x: &GnssFixV1) {
         self.queue(Aid::Gnss(*x));
     }
 
     /// A USBL fix (queued like DVL; used when `[navigation.usbl]` is configured, counted in the
     /// navigator's `usbl_unconfigured` otherwise).
-    pub fn on_usbl(&mut self, x: &UsblFixV1) {
+    pub(crate) fn on_usbl(&mut self, x: &UsblFixV1) {
         self.queue(Aid::Usbl(*x));
     }
 }

@@ -6,9 +6,10 @@
 //! than t + `aid_delay_s` (see `auvnav_core::session`). An aid message that arrives after that IMU
 //! sample was processed is late: counted and applied at the next one.
 
+use auvnav_core::config::DaemonConfig;
 use auvnav_core::csv;
-use auvnav_core::navigator::NavConfig;
-use auvnav_core::session::{AlignmentConfig, InitialState, Session, SessionConfig, SessionOutput};
+use auvnav_core::feed::SensorMessage;
+use auvnav_core::session::{Session, SessionOutput};
 use auvnav_shm_schema::bus::{Bus, BusError, BusPublisher, BusSubscriber};
 use auvnav_shm_schema::clock::monotonic_ns;
 use auvnav_shm_schema::{
@@ -17,186 +18,9 @@ use auvnav_shm_schema::{
 };
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
-use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::process::ExitCode;
 use std::time::Duration;
-
-/// Outputs (`[output]`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-struct OutputConfig {
-    /// Publish every Nth navigation solution (count, 1..1000, default 1 = IMU rate).
-    solution_decimation: u32,
-    /// Also write every solution to this CSV file (the format of `auvnav replay --out F.csv`);
-    /// empty for none (default).
-    nav_csv: String,
-    /// Write every aid diagnostic to this CSV file; empty for none (default).
-    diagnostics_csv: String,
-}
-
-impl Default for OutputConfig {
-    fn default() -> Self {
-        OutputConfig {
-            solution_decimation: 1,
-            nav_csv: String::new(),
-            diagnostics_csv: String::new(),
-        }
-    }
-}
-
-/// Deadlines after which a silent sensor is reported lost (`[deadlines]`; s, 0 = none).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-struct Deadlines {
-    /// IMU (s, default 0.1).
-    imu_s: f64,
-    /// DVL (s, default 3).
-    dvl_s: f64,
-    /// Depth (s, default 3).
-    depth_s: f64,
-    /// USBL (s, default 0: fixes come when the station pings).
-    usbl_s: f64,
-    /// GNSS (s, default 0: only at the surface).
-    gnss_s: f64,
-}
-
-impl Default for Deadlines {
-    fn default() -> Self {
-        Deadlines {
-            imu_s: 0.1,
-            dvl_s: 3.0,
-            depth_s: 3.0,
-            usbl_s: 0.0,
-            gnss_s: 0.0,
-        }
-    }
-}
-
-/// `auvnavd`'s configuration file.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct DaemonConfig {
-    /// Node name and the name in the health message (default `auvnavd`).
-    #[serde(default = "default_name")]
-    name: String,
-    /// Service-name prefix of the deployment (default `auvnav`).
-    #[serde(default = "default_prefix")]
-    prefix: String,
-    /// Aid delay (s, 0..1, default 0.02): see the module documentation.
-    #[serde(default = "default_aid_delay")]
-    aid_delay_s: f64,
-    /// Health message period (s, 0.05..60, default 1).
-    #[serde(default = "default_health_period")]
-    health_period_s: f64,
-    /// The navigation core's configuration (`auvnav_core::navigator::NavConfig`).
-    #[serde(default)]
-    navigation: NavConfig,
-    /// Initial state; when absent, `[alignment]` finds the attitude (position given).
-    initial: Option<InitialState>,
-    /// Initial alignment (`auvnav_core::session::AlignmentConfig`): used without `[initial]`.
-    alignment: Option<AlignmentConfig>,
-    #[serde(default)]
-    output: OutputConfig,
-    #[serde(default)]
-    deadlines: Deadlines,
-}
-
-fn default_name() -> String {
-    "auvnavd".into()
-}
-fn default_prefix() -> String {
-    topic::DEFAULT_PREFIX.into()
-}
-fn default_aid_delay() -> f64 {
-    0.02
-}
-fn default_health_period() -> f64 {
-    1.0
-}
-
-impl DaemonConfig {
-    fn load(path: &str) -> Result<DaemonConfig, String> {
-        let text = std::fs::read_to_string(path).map_err(|e| format!("reading {path}: {e}"))?;
-        let cfg: DaemonConfig = toml::from_str(&text).map_err(|e| format!("{path}: {e}"))?;
-        let range = |key: &str, v: f64, lo: f64, hi: f64| {
-            if v.is_finite() && v >= lo && v <= hi {
-                Ok(())
-            } else {
-                Err(format!("{path}: {key} = {v}: expected {lo}..={hi}"))
-            }
-        };
-        range("aid_delay_s", cfg.aid_delay_s, 0.0, 1.0)?;
-        range("health_period_s", cfg.health_period_s, 0.05, 60.0)?;
-        range(
-            "output.solution_decimation",
-            f64::from(cfg.output.solution_decimation),
-            1.0,
-            1000.0,
-        )?;
-        let d = &cfg.deadlines;
-        for (k, v) in [
-            ("deadlines.imu_s", d.imu_s),
-            ("deadlines.dvl_s", d.dvl_s),
-            ("deadlines.depth_s", d.depth_s),
-            ("deadlines.usbl_s", d.usbl_s),
-            ("deadlines.gnss_s", d.gnss_s),
-        ] {
-            range(k, v, 0.0, 3600.0)?;
-        }
-        if let Some(u) = &cfg.navigation.usbl {
-            let problems = u.problems();
-            if !problems.is_empty() {
-                return Err(format!(
-                    "{path}: navigation.{}",
-                    problems.join("; navigation.")
-                ));
-            }
-        }
-        match (&cfg.initial, &cfg.alignment) {
-            (None, None) => {
-                return Err(format!(
-                    "{path}: give [initial] (a known state) or [alignment] (a known position; the \
-                     daemon finds the attitude)"
-                ));
-            }
-            (_, Some(a)) => {
-                range("alignment.coarse_s", a.coarse_s, 10.0, 3600.0)?;
-                range(
-                    "alignment.coarse_heading_std_deg",
-                    a.coarse_heading_std_deg,
-                    0.01,
-                    180.0,
-                )?;
-                range(
-                    "alignment.coarse_tilt_std_deg",
-                    a.coarse_tilt_std_deg,
-                    0.001,
-                    10.0,
-                )?;
-                range(
-                    "alignment.aligned_heading_std_deg",
-                    a.aligned_heading_std_deg,
-                    0.001,
-                    10.0,
-                )?;
-                range("alignment.latitude_deg", a.latitude_deg, -89.0, 89.0)?;
-                range("alignment.fine_model", f64::from(a.fine_model), 0.0, 3.0)?;
-            }
-            _ => {}
-        }
-        Ok(cfg)
-    }
-
-    fn session(&self) -> SessionConfig {
-        SessionConfig {
-            aid_delay_s: self.aid_delay_s,
-            navigation: self.navigation.clone(),
-            initial: self.initial.clone(),
-            alignment: self.alignment.clone(),
-        }
-    }
-}
 
 #[derive(clap::Parser)]
 #[command(name = "auvnavd", about = "auvnav fusion daemon", version)]
@@ -419,7 +243,7 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
             // out of range.
             invalid: session.before_start
                 + session.navigator().map_or(0, |n| {
-                    let c = n.counters;
+                    let c = n.counters();
                     c.imu_invalid
                         + c.dvl_invalid
                         + c.depth_invalid
@@ -470,21 +294,14 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
                 missed_deadlines += 1;
             }
         }
-        for m in dvls.drain(..) {
-            session.on_dvl(&m);
-        }
-        for m in depths.drain(..) {
-            session.on_depth(&m);
-        }
-        for m in gnsss.drain(..) {
-            session.on_gnss(&m);
-        }
-        for m in usbls.drain(..) {
-            session.on_usbl(&m);
-        }
+        // Aid messages first (they wait in the session for their turn), then the IMU samples.
+        let aids = (dvls.drain(..).map(SensorMessage::Dvl))
+            .chain(depths.drain(..).map(SensorMessage::Depth))
+            .chain(gnsss.drain(..).map(SensorMessage::Gnss))
+            .chain(usbls.drain(..).map(SensorMessage::Usbl));
         let mut io_error = None;
-        for m in imus.drain(..) {
-            if let Err(x) = session.on_imu(&m, &mut |o| out.on(o)) {
+        for m in aids.chain(imus.drain(..).map(SensorMessage::Imu)) {
+            if let Err(x) = session.feed(&m, &mut |o| out.on(o)) {
                 io_error = Some(x);
                 break;
             }
@@ -543,7 +360,7 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
 
 /// What became of the USBL fixes, for the stop message.
 fn usbl_summary(session: &Session) -> String {
-    let Some(c) = session.navigator().map(|n| n.counters) else {
+    let Some(c) = session.navigator().map(|n| n.counters()) else {
         return "no navigation yet".into();
     };
     if c.usbl_unconfigured > 0 {
@@ -558,11 +375,17 @@ fn usbl_summary(session: &Session) -> String {
     )
 }
 
+/// Reads and validates the configuration file; errors name the file.
+fn load(path: &str) -> Result<DaemonConfig, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("reading {path}: {e}"))?;
+    DaemonConfig::from_toml(&text).map_err(|e| format!("{path}: {e}"))
+}
+
 fn main() -> ExitCode {
     use clap::Parser;
     let args = Args::parse();
     if let Some(path) = &args.check_config {
-        return match DaemonConfig::load(path) {
+        return match load(path) {
             Ok(cfg) => {
                 match toml::to_string_pretty(&cfg) {
                     Ok(s) => print!("{s}"),
@@ -580,7 +403,7 @@ fn main() -> ExitCode {
         eprintln!("auvnavd: --config FILE is required (or --check-config FILE)");
         return ExitCode::from(2);
     };
-    let cfg = match DaemonConfig::load(path) {
+    let cfg = match load(path) {
         Ok(c) => c,
         Err(x) => {
             eprintln!("auvnavd: {x}");

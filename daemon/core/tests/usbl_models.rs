@@ -1,11 +1,11 @@
 //! USBL measurement models against geometry computed independently, and the unscented update
 //! against the Kalman update on a linear measurement.
 
-use auvnav_core::earth::{A, E2, Geodetic, to_ecef};
-use auvnav_core::usbl::{
+use auvnav_core::aid::usbl::{
     UnscentedParams, UsblArray, fix_position_ned, predict_tight, range_differences_from_angles,
     unscented_update,
 };
+use auvnav_core::earth::{A, E2, Geodetic, to_ecef};
 use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3};
 
 /// A small deterministic generator for test values (xorshift).
@@ -185,7 +185,7 @@ fn adaptive_noise_converges_to_the_true_variance_and_rejects_outliers() {
 }
 
 fn adaptive_run(seed: u64) {
-    use auvnav_core::usbl::AdaptiveNoise;
+    use auvnav_core::aid::usbl::AdaptiveNoise;
     // A slant range to a slowly moving target, a two-state (range, rate) Kalman filter, noise
     // σ = 0.3 m while the filter starts believing 1 m; 5 % of the fixes are multipath outliers
     // of 10–50 m.
@@ -233,13 +233,13 @@ fn adaptive_run(seed: u64) {
 }
 
 mod fusion {
-    use auvnav_core::earth::Geodetic;
-    use auvnav_core::filter::{self, CoreMatrix, ErrorFilter, ProcessNoise, StateVector};
-    use auvnav_core::navigator::{NavConfig, Navigator, initial_state};
-    use auvnav_core::usbl::{
+    use auvnav_core::aid::usbl::{
         Coupling, UsblConfig, UsblInputError, measurement, predict_tight,
         range_differences_from_angles,
     };
+    use auvnav_core::earth::Geodetic;
+    use auvnav_core::ekf::{self as filter, CoreMatrix, ErrorFilter, ProcessNoise, StateVector};
+    use auvnav_core::navigator::{NavConfig, Navigator, initial_state};
     use auvnav_shm_schema::UsblFixV1;
     use nalgebra::Vector3;
 
@@ -419,13 +419,13 @@ mod fusion {
         let before = *nav.state();
         nav.on_usbl(&fix(f64::NAN, [0.0; 2], 0.0, 0.0, all));
         nav.on_usbl(&fix(100.0, [0.0; 2], 0.0, 0.0, UsblFixV1::VALID_RANGE));
-        assert_eq!(nav.counters.usbl_invalid, 2);
-        assert_eq!(nav.counters.usbl_fused, 0);
+        assert_eq!(nav.counters().usbl_invalid, 2);
+        assert_eq!(nav.counters().usbl_fused, 0);
         assert_eq!(nav.state().position, before.position);
         // Without a [navigation.usbl] configuration fixes are counted as unused.
         let mut plain = Navigator::new(NavConfig::default(), start);
         plain.on_usbl(&fix(100.0, [0.0; 2], 0.0, 0.0, all));
-        assert_eq!(plain.counters.usbl_unconfigured, 1);
+        assert_eq!(plain.counters().usbl_unconfigured, 1);
     }
 
     #[test]
@@ -454,9 +454,9 @@ mod fusion {
 /// stays finite.
 #[test]
 fn random_fixes_never_break_the_navigator() {
+    use auvnav_core::aid::usbl::{Coupling, UsblConfig, UsblFilter};
     use auvnav_core::earth::Geodetic;
     use auvnav_core::navigator::{NavConfig, Navigator, initial_state};
-    use auvnav_core::usbl::{Coupling, UsblConfig, UsblFilter};
     use auvnav_shm_schema::UsblFixV1;
     let mut g = Gen(0x5eed_1234_abcd_0001);
     let bits = |g: &mut Gen| -> f64 {
@@ -513,7 +513,7 @@ fn random_fixes_never_break_the_navigator() {
                 };
                 nav.on_usbl(&f);
             }
-            let c = nav.counters;
+            let c = nav.counters();
             assert_eq!(
                 c.usbl_fused + c.usbl_rejected + c.usbl_invalid + c.usbl_failed + c.aid_late,
                 n,

@@ -69,7 +69,7 @@ pub enum FilterError {
 pub struct UpdateReport<const M: usize> {
     pub innovation: SVector<f64, M>,
     pub innovation_variance: SVector<f64, M>,
-    /// Normalised innovation squared divided by the gate.
+    /// Normalised innovation squared divided by the gate (above 1: rejected; see `ekf::gate`).
     pub test_ratio: f64,
     pub fused: bool,
 }
@@ -234,11 +234,12 @@ impl ErrorFilter {
         let s = h * self.p * h.transpose() + r;
         let s_inv = s.try_inverse().ok_or(FilterError::SingularInnovation)?;
         let nis = (y.transpose() * s_inv * y)[(0, 0)];
+        let outcome = super::gate::nis(nis, gate);
         let report = UpdateReport {
             innovation: *y,
             innovation_variance: s.diagonal(),
-            test_ratio: nis / gate,
-            fused: nis <= gate,
+            test_ratio: outcome.test_ratio,
+            fused: outcome.passed,
         };
         if !report.fused {
             return Ok((StateVector::zeros(), report));

@@ -1,0 +1,67 @@
+//! Depth aid: `h(x) = -height`, one dimension, χ² gate.
+
+use super::{AidCounters, AidUpdate, NavCore};
+use crate::config::NavConfig;
+use crate::ekf;
+use auvnav_shm_schema::{AidSource, DepthV1};
+use nalgebra::{SMatrix, SVector};
+
+/// The depth sensor's parameters and counters.
+#[derive(Debug, Clone)]
+pub struct DepthAid {
+    /// Noise (m).
+    pub std_m: f64,
+    /// χ² gate (1 dof).
+    pub gate_chi2: f64,
+    pub counters: AidCounters,
+}
+
+impl DepthAid {
+    pub fn new(cfg: &NavConfig) -> DepthAid {
+        DepthAid {
+            std_m: cfg.depth_std_m,
+            gate_chi2: cfg.depth_gate_chi2,
+            counters: AidCounters::default(),
+        }
+    }
+
+    /// Should we fuse: a valid, finite depth within −10..11 000 m, not older than the state.
+    fn usable(&mut self, core: &mut NavCore, m: &DepthV1) -> bool {
+        if m.validity & DepthV1::VALID_DEPTH == 0
+            || !m.depth_m.is_finite()
+            || !(-10.0..=11000.0).contains(&m.depth_m)
+        {
+            self.counters.invalid += 1;
+            return false;
+        }
+        !core.aid_is_late(m.host_time_ns)
+    }
+
+    /// Fuses a depth measurement.
+    pub fn fuse(&mut self, core: &mut NavCore, m: &DepthV1) -> AidUpdate {
+        let t_ns = m.host_time_ns;
+        let mut d = core.diagnostics(t_ns, AidSource::Depth);
+        d.dimension = 1;
+        if !self.usable(core, m) {
+            return AidUpdate::rejected(d);
+        }
+        core.propagate_covariance();
+        let y = SVector::<f64, 1>::new(-core.state().position.height_m - m.depth_m);
+        let mut h = SMatrix::<f64, 1, { ekf::N }>::zeros();
+        h[(0, ekf::POS + 2)] = 1.0;
+        let r = SMatrix::<f64, 1, 1>::new(self.std_m.powi(2));
+        d.observation[0] = m.depth_m;
+        d.observation_variance[0] = r[(0, 0)];
+        let result = core.kf.update(&y, &h, &r, self.gate_chi2);
+        let correction = NavCore::report(result, &mut d);
+        if correction.is_some() {
+            self.counters.fused += 1;
+        } else {
+            self.counters.rejected += 1;
+        }
+        AidUpdate {
+            diagnostics: d,
+            correction,
+        }
+    }
+}

@@ -1,0 +1,232 @@
+//! DVL velocity aid: `h(x) = s C_b^d (C_n^b v^n + omega_eb^b x l)` minus the time-offset term
+//! ([`dvl_model`]), χ² gate, with the DVL installation (mounting, scale factor, lever arm, time
+//! offset) as optional parameter states, and the re-opening of the velocity covariance after a
+//! run of rejections (`dvl_reset_after_s`).
+
+use super::{AidCounters, AidUpdate, NavCore};
+use crate::config::NavConfig;
+use crate::earth;
+use crate::ekf::{self, StateVector, skew};
+use crate::strapdown::NavState;
+use auvnav_shm_schema::{AidDiagnosticsV1, AidSource, DvlVelocityV1};
+use nalgebra::{Matrix3, Rotation3, SMatrix, Vector3};
+
+const DEG: f64 = std::f64::consts::PI / 180.0;
+
+/// The DVL's parameters, installation estimate, state and counters.
+#[derive(Debug, Clone)]
+pub struct DvlAid {
+    /// The installation (estimated when its parameter states are switched on).
+    pub params: DvlParameters,
+    /// Velocity noise per axis when the device gives none (m/s).
+    pub velocity_std_m_s: f64,
+    /// χ² gate (3 dof).
+    pub gate_chi2: f64,
+    /// Re-open the velocity covariance after rejections for this long (s; 0 = never).
+    pub reset_after_s: f64,
+    /// Time of the last fused velocity (s).
+    pub last_fused_s: f64,
+    rejected_since_s: Option<f64>,
+    pub counters: AidCounters,
+    /// Velocity covariance re-opened after a run of rejections.
+    pub resets: u64,
+}
+
+impl DvlAid {
+    pub fn new(cfg: &NavConfig, start_s: f64) -> DvlAid {
+        let [r, p, y] = cfg.dvl_mount_deg;
+        DvlAid {
+            params: DvlParameters {
+                c_dvl_to_body: Rotation3::from_euler_angles(r * DEG, p * DEG, y * DEG).into_inner(),
+                scale: cfg.dvl_scale_factor,
+                lever_arm_m: Vector3::from(cfg.dvl_lever_arm_m),
+                time_offset_s: cfg.dvl_time_offset_s,
+            },
+            velocity_std_m_s: cfg.dvl_velocity_std_m_s,
+            gate_chi2: cfg.dvl_gate_chi2,
+            reset_after_s: cfg.dvl_reset_after_s,
+            last_fused_s: start_s,
+            rejected_since_s: None,
+            counters: AidCounters::default(),
+            resets: 0,
+        }
+    }
+
+    /// The initial variances of the installation states that `cfg` switches on.
+    pub fn initial_variances(cfg: &NavConfig, p0: &mut StateVector) {
+        for i in 0..3 {
+            if cfg.estimate_dvl_mounting {
+                p0[ekf::DVL_MOUNT + i] = (cfg.initial_dvl_mounting_std_deg * DEG).powi(2);
+            }
+            if cfg.estimate_dvl_lever_arm {
+                p0[ekf::DVL_LEVER + i] = cfg.initial_dvl_lever_arm_std_m.powi(2);
+            }
+        }
+        if cfg.estimate_dvl_scale {
+            p0[ekf::DVL_SCALE] = cfg.initial_dvl_scale_std.powi(2);
+        }
+        if cfg.estimate_dvl_time_offset {
+            p0[ekf::DVL_TIME] = cfg.initial_dvl_time_offset_std_s.powi(2);
+        }
+    }
+
+    /// Applies a correction to the installation states.
+    pub fn correct(&mut self, dx: &StateVector) {
+        let dm = Vector3::new(
+            dx[ekf::DVL_MOUNT],
+            dx[ekf::DVL_MOUNT + 1],
+            dx[ekf::DVL_MOUNT + 2],
+        );
+        self.params.c_dvl_to_body *= Rotation3::from_scaled_axis(-dm).into_inner();
+        self.params.scale -= dx[ekf::DVL_SCALE];
+        self.params.lever_arm_m -= Vector3::new(
+            dx[ekf::DVL_LEVER],
+            dx[ekf::DVL_LEVER + 1],
+            dx[ekf::DVL_LEVER + 2],
+        );
+        self.params.time_offset_s -= dx[ekf::DVL_TIME];
+    }
+
+    /// Should we fuse: a valid, finite velocity below 20 m/s, not older than the state.
+    fn usable(&mut self, core: &mut NavCore, m: &DvlVelocityV1) -> bool {
+        let z = Vector3::from(m.velocity_dvl_m_s);
+        if m.validity & DvlVelocityV1::VALID_VELOCITY == 0
+            || !z.iter().all(|x| x.is_finite())
+            || z.norm() > 20.0
+        {
+            self.counters.invalid += 1;
+            return false;
+        }
+        !core.aid_is_late(m.validity_time_ns)
+    }
+
+    /// Fuses a DVL velocity (bottom track, in the DVL frame, at its time of validity).
+    pub fn fuse(&mut self, core: &mut NavCore, m: &DvlVelocityV1) -> AidUpdate {
+        let t_ns = m.validity_time_ns;
+        let mut d = core.diagnostics(t_ns, AidSource::DvlVelocity);
+        d.dimension = 3;
+        if !self.usable(core, m) {
+            return AidUpdate::rejected(d);
+        }
+        let z = Vector3::from(m.velocity_dvl_m_s);
+        core.propagate_covariance();
+        let (predicted, h) = dvl_model(
+            core.state(),
+            &core.last_omega_ib,
+            &core.last_f_body,
+            &self.params,
+        );
+        let y = predicted - z;
+        let sigma = if m.validity & DvlVelocityV1::VALID_STD != 0 {
+            Vector3::from(m.velocity_std_m_s).map(|x| x.max(1e-3))
+        } else {
+            Vector3::repeat(self.velocity_std_m_s)
+        };
+        let r = Matrix3::from_diagonal(&sigma.map(|x| x * x));
+        d.observation = z.into();
+        d.observation_variance = r.diagonal().into();
+        let t = t_ns as f64 * 1e-9;
+        let mut result = core.kf.update(&y, &h, &r, self.gate_chi2);
+        let rejected = matches!(result, Ok((_, ref rep)) if !rep.fused);
+        let since = *self.rejected_since_s.get_or_insert(t);
+        if rejected && self.reset_after_s > 0.0 && t - since >= self.reset_after_s {
+            let innovation_ned = core.state().c_body_to_ned() * y;
+            reopen_velocity(&mut core.kf.p, &innovation_ned);
+            self.resets += 1;
+            d.flags |= AidDiagnosticsV1::FLAG_RESET;
+            let (predicted, h) = dvl_model(
+                core.state(),
+                &core.last_omega_ib,
+                &core.last_f_body,
+                &self.params,
+            );
+            result = core.kf.update(&(predicted - z), &h, &r, f64::INFINITY);
+        }
+        let reset = d.flags & AidDiagnosticsV1::FLAG_RESET;
+        let correction = NavCore::report(result, &mut d);
+        if correction.is_some() {
+            self.counters.fused += 1;
+            self.last_fused_s = t;
+            self.rejected_since_s = None;
+        } else {
+            self.counters.rejected += 1;
+        }
+        d.flags |= reset;
+        AidUpdate {
+            diagnostics: d,
+            correction,
+        }
+    }
+}
+
+/// Drops the velocity states' cross-covariances and adds `innovation_ned` squared to their
+/// variances, so the next velocity measurement is believed again.
+fn reopen_velocity(p: &mut ekf::Covariance, innovation_ned: &Vector3<f64>) {
+    for i in 0..3 {
+        let v = ekf::VEL + i;
+        let keep = p[(v, v)] + innovation_ned[i].powi(2);
+        for j in 0..ekf::N {
+            p[(v, j)] = 0.0;
+            p[(j, v)] = 0.0;
+        }
+        p[(v, v)] = keep;
+    }
+}
+
+/// The DVL installation: mounting, scale factor, lever arm and time offset.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DvlParameters {
+    /// Rotation DVL frame -> body frame.
+    pub c_dvl_to_body: Matrix3<f64>,
+    /// Scale factor (1 = none).
+    pub scale: f64,
+    /// DVL position in the body frame (m).
+    pub lever_arm_m: Vector3<f64>,
+    /// The velocity stamped at t is the vehicle's at t - offset (s).
+    pub time_offset_s: f64,
+}
+
+/// The DVL measurement model: predicted velocity in the DVL frame,
+/// `h = s C_b^d (v_b + omega_eb^b x l) - tau s C_b^d a_b` with `v_b = C_n^b v^n` and
+/// `a_b = d v_b / dt = f_b + C_n^b g^n - omega_eb^b x v_b` (so the measurement stamped at t is the
+/// velocity at t - tau to first order), and its Jacobian w.r.t. the error state:
+/// `dh/d dv = s C_b^d (I + tau [omega_eb x]) C_n^b`,
+/// `dh/d phi = -(dh/d dv) [v x] + tau s C_b^d C_n^b [g x]`, `dh/d dm = [h x]` (mounting),
+/// `dh/d ds = h / s`, `dh/d dl = s C_b^d [omega_eb x]`, `dh/d dtau = -s C_b^d a_b`. Neglected: the
+/// Earth-rate part of `omega_eb` through the attitude (below 1e-4 of the lever-arm term) and the
+/// dependence on the bias errors (second order).
+/// `omega_ib_body` and `f_body` are the bias-corrected IMU outputs.
+pub fn dvl_model(
+    s: &NavState,
+    omega_ib_body: &Vector3<f64>,
+    f_body: &Vector3<f64>,
+    p: &DvlParameters,
+) -> (Vector3<f64>, SMatrix<f64, 3, { ekf::N }>) {
+    let c_nb = s.c_body_to_ned().transpose();
+    let c_bd = p.c_dvl_to_body.transpose();
+    let lat = s.position.latitude_rad;
+    let w_ie_b = c_nb * earth::earth_rate_ned(lat);
+    let w_eb = omega_ib_body - w_ie_b;
+    let v_b = c_nb * s.velocity_ned;
+    let a_b = f_body + c_nb * earth::gravity_ned(lat, s.position.height_m) - w_eb.cross(&v_b);
+    let unscaled = c_bd * (v_b + w_eb.cross(&p.lever_arm_m) - p.time_offset_s * a_b);
+    let predicted = p.scale * unscaled;
+    let mut h = SMatrix::<f64, 3, { ekf::N }>::zeros();
+    // v_b and a_b through the velocity and the attitude: C_n^b(est) = C_n^b (I + [phi x]).
+    let through_v = p.scale * c_bd * (Matrix3::identity() + p.time_offset_s * skew(&w_eb)) * c_nb;
+    h.fixed_view_mut::<3, 3>(0, ekf::VEL).copy_from(&through_v);
+    let g_n = earth::gravity_ned(lat, s.position.height_m);
+    h.fixed_view_mut::<3, 3>(0, ekf::ATT).copy_from(
+        &(-through_v * skew(&s.velocity_ned)
+            + p.scale * p.time_offset_s * c_bd * c_nb * skew(&g_n)),
+    );
+    h.fixed_view_mut::<3, 3>(0, ekf::DVL_MOUNT)
+        .copy_from(&skew(&predicted));
+    h.fixed_view_mut::<3, 1>(0, ekf::DVL_SCALE)
+        .copy_from(&unscaled);
+    h.fixed_view_mut::<3, 3>(0, ekf::DVL_LEVER)
+        .copy_from(&(p.scale * c_bd * skew(&w_eb)));
+    h.fixed_view_mut::<3, 1>(0, ekf::DVL_TIME)
+        .copy_from(&(-p.scale * c_bd * a_b));
+    (predicted, h)
+}

@@ -1,0 +1,489 @@
+//! The configuration of the navigation: the core's `[navigation]` table ([`NavConfig`]), the
+//! session's start (`[initial]` or `[alignment]`, [`SessionConfig`]) and the daemon's file
+//! ([`DaemonConfig`]: those plus outputs, deadlines and health). One type per table, each with
+//! `deny_unknown_fields` and documented units and defaults, and one validation
+//! ([`NavConfig::problems`], [`SessionConfig::problems`], [`DaemonConfig::validate`]) that the
+//! daemon, replay and every tool apply, so no program accepts a configuration another rejects.
+//! Files are written by serialising these types ([`DaemonConfig::to_toml`]).
+
+use crate::earth::Geodetic;
+use crate::ekf::gate;
+use crate::navigator::initial_state;
+use crate::strapdown::NavState;
+use serde::{Deserialize, Serialize};
+
+/// The navigation configuration shared by the daemon, replay and every offline tool.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NavConfig {
+    /// Gyro angle random walk (deg/sqrt(h)). Default 0.005.
+    pub gyro_angle_random_walk_deg_sqrt_h: f64,
+    /// Accelerometer velocity random walk (m/s/sqrt(h)). Default 0.002.
+    pub accel_velocity_random_walk_m_s_sqrt_h: f64,
+    /// Gyro bias random walk (deg/h/sqrt(h)). Default 0.002.
+    pub gyro_bias_walk_deg_h_sqrt_h: f64,
+    /// Accelerometer bias random walk (ug/sqrt(h)). Default 5.
+    pub accel_bias_walk_ug_sqrt_h: f64,
+    /// Initial one-sigma position uncertainty (m). Default 1.
+    pub initial_position_std_m: f64,
+    /// Initial one-sigma velocity uncertainty (m/s). Default 0.1.
+    pub initial_velocity_std_m_s: f64,
+    /// Initial one-sigma roll/pitch uncertainty (deg). Default 0.05.
+    pub initial_tilt_std_deg: f64,
+    /// Initial one-sigma heading uncertainty (deg). Default 0.1.
+    pub initial_heading_std_deg: f64,
+    /// Initial one-sigma gyro bias (deg/h). Default 0.05.
+    pub initial_gyro_bias_std_deg_h: f64,
+    /// Initial one-sigma accelerometer bias (ug). Default 100.
+    pub initial_accel_bias_std_ug: f64,
+    /// DVL velocity noise per axis when the device gives none (m/s). Default 0.02.
+    pub dvl_velocity_std_m_s: f64,
+    /// DVL mounting angles roll, pitch, yaw of the DVL frame w.r.t. the body (deg). Default 0.
+    pub dvl_mount_deg: [f64; 3],
+    /// DVL scale factor (1 = none). Default 1.
+    pub dvl_scale_factor: f64,
+    /// DVL position in the body frame (m). Default 0.
+    pub dvl_lever_arm_m: [f64; 3],
+    /// Depth noise (m). Default 0.1.
+    pub depth_std_m: f64,
+    /// Gate for DVL velocity (chi-square, 3 dof). Default 16.27 (99.9 %).
+    pub dvl_gate_chi2: f64,
+    /// Gate for depth (chi-square, 1 dof). Default 10.83 (99.9 %).
+    pub depth_gate_chi2: f64,
+    /// Covariance propagation interval (s). Default 0.05.
+    pub covariance_interval_s: f64,
+    /// Without a fused DVL velocity for this long the mode is degraded (s). Default 5.
+    pub dvl_timeout_s: f64,
+    /// IMU gaps longer than this many nominal intervals are bridged and counted (count). Default 10.
+    pub imu_max_gap_intervals: f64,
+    /// Integrate each IMU sample over the difference of the device's time stamps (when both
+    /// samples carry one and it is between 0 and 1 s) instead of the host's read times: removes
+    /// the read-time jitter of a live serial line, and keeps the integration right when a log is
+    /// played faster than real time. Default false (host time, as recorded logs are stamped).
+    pub imu_dt_from_device_time: bool,
+    /// DVL time offset: the velocity stamped at t is the vehicle's at t - offset (s). Default 0.
+    pub dvl_time_offset_s: f64,
+    /// Estimate the DVL mounting angles (parameter states). Default false.
+    pub estimate_dvl_mounting: bool,
+    /// Initial one-sigma of the DVL mounting angles when estimated (deg). Default 1.
+    pub initial_dvl_mounting_std_deg: f64,
+    /// Estimate the DVL scale factor (parameter state). Default false.
+    pub estimate_dvl_scale: bool,
+    /// Initial one-sigma of the DVL scale factor when estimated (1). Default 0.01.
+    pub initial_dvl_scale_std: f64,
+    /// Estimate the DVL lever arm (parameter states). Default false.
+    pub estimate_dvl_lever_arm: bool,
+    /// Initial one-sigma of the DVL lever arm when estimated (m). Default 0.5.
+    pub initial_dvl_lever_arm_std_m: f64,
+    /// Estimate the DVL time offset (parameter state). Default false.
+    pub estimate_dvl_time_offset: bool,
+    /// Initial one-sigma of the DVL time offset when estimated (s). Default 0.2.
+    pub initial_dvl_time_offset_std_s: f64,
+    /// GNSS antenna position in the body frame (m). Default 0.
+    pub gnss_lever_arm_m: [f64; 3],
+    /// Smallest GNSS position one-sigma used, whatever the receiver reports (m). Default 0.5.
+    pub gnss_min_std_m: f64,
+    /// Gate for GNSS position (chi-square, 3 dof). Default 16.27 (99.9 %).
+    pub gnss_gate_chi2: f64,
+    /// One-sigma of a zero-velocity update per axis (m/s). Default 0.01.
+    pub zero_velocity_std_m_s: f64,
+    /// Gate for zero-velocity updates (chi-square, 3 dof). Default 16.27 (99.9 %).
+    pub zero_velocity_gate_chi2: f64,
+    /// After valid DVL velocities have been rejected without a break for this long, the velocity
+    /// covariance is re-opened (cross-covariances dropped, the innovation added to the variances)
+    /// and the measurement fused: the filter had become too sure of a wrong velocity (s; 0 =
+    /// never). Default 5.
+    pub dvl_reset_after_s: f64,
+    /// USBL fusion (`[navigation.usbl]`): the station's array, the coupling and the filter.
+    /// Default none: USBL fixes are counted and not used.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub usbl: Option<crate::aid::usbl::UsblConfig>,
+}
+
+impl Default for NavConfig {
+    fn default() -> Self {
+        NavConfig {
+            gyro_angle_random_walk_deg_sqrt_h: 0.005,
+            accel_velocity_random_walk_m_s_sqrt_h: 0.002,
+            gyro_bias_walk_deg_h_sqrt_h: 0.002,
+            accel_bias_walk_ug_sqrt_h: 5.0,
+            initial_position_std_m: 1.0,
+            initial_velocity_std_m_s: 0.1,
+            initial_tilt_std_deg: 0.05,
+            initial_heading_std_deg: 0.1,
+            initial_gyro_bias_std_deg_h: 0.05,
+            initial_accel_bias_std_ug: 100.0,
+            dvl_velocity_std_m_s: 0.02,
+            dvl_mount_deg: [0.0; 3],
+            dvl_scale_factor: 1.0,
+            dvl_lever_arm_m: [0.0; 3],
+            depth_std_m: 0.1,
+            dvl_gate_chi2: gate::CHI2_3DOF_999,
+            depth_gate_chi2: gate::CHI2_1DOF_999,
+            covariance_interval_s: 0.05,
+            dvl_timeout_s: 5.0,
+            imu_max_gap_intervals: 10.0,
+            imu_dt_from_device_time: false,
+            dvl_time_offset_s: 0.0,
+            estimate_dvl_mounting: false,
+            initial_dvl_mounting_std_deg: 1.0,
+            estimate_dvl_scale: false,
+            initial_dvl_scale_std: 0.01,
+            estimate_dvl_lever_arm: false,
+            initial_dvl_lever_arm_std_m: 0.5,
+            estimate_dvl_time_offset: false,
+            initial_dvl_time_offset_std_s: 0.2,
+            gnss_lever_arm_m: [0.0; 3],
+            gnss_min_std_m: 0.5,
+            gnss_gate_chi2: gate::CHI2_3DOF_999,
+            zero_velocity_std_m_s: 0.01,
+            zero_velocity_gate_chi2: gate::CHI2_3DOF_999,
+            dvl_reset_after_s: 5.0,
+            usbl: None,
+        }
+    }
+}
+
+/// An initial state given in the configuration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InitialState {
+    /// Latitude (deg, WGS-84).
+    pub latitude_deg: f64,
+    /// Longitude (deg).
+    pub longitude_deg: f64,
+    /// Height above the ellipsoid (m; negative below it).
+    pub height_m: f64,
+    /// Velocity (m/s, NED; default 0).
+    #[serde(default)]
+    pub velocity_ned_m_s: [f64; 3],
+    /// Roll, pitch, yaw (deg).
+    pub euler_deg: [f64; 3],
+}
+
+impl InitialState {
+    /// The navigation state at `time_s`.
+    pub fn state(&self, time_s: f64) -> NavState {
+        initial_state(
+            time_s,
+            Geodetic {
+                latitude_rad: self.latitude_deg.to_radians(),
+                longitude_rad: self.longitude_deg.to_radians(),
+                height_m: self.height_m,
+            },
+            self.velocity_ned_m_s,
+            self.euler_deg.map(f64::to_radians),
+        )
+    }
+}
+
+/// Initial alignment when the attitude is unknown (`[alignment]`): the position is given, the
+/// attitude found by the coarse aligner (`crate::align`), then refined by the navigation filter
+/// with the DVL (fine alignment) until the heading's standard deviation meets the criterion.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AlignmentConfig {
+    /// Latitude (deg, WGS-84).
+    pub latitude_deg: f64,
+    /// Longitude (deg).
+    pub longitude_deg: f64,
+    /// Height above the ellipsoid (m; negative below it).
+    pub height_m: f64,
+    /// Coarse alignment duration (s, 10..3600; default 120).
+    #[serde(default = "default_coarse_s")]
+    pub coarse_s: f64,
+    /// The vehicle is at rest during coarse alignment: velocity epochs are zero and need no DVL
+    /// (default false: DVL-aided in motion).
+    #[serde(default)]
+    pub moored: bool,
+    /// Heading standard deviation handed to the filter after the coarse stage (deg; default 2).
+    #[serde(default = "default_coarse_heading_std")]
+    pub coarse_heading_std_deg: f64,
+    /// Roll/pitch standard deviation handed to the filter (deg; default 0.05).
+    #[serde(default = "default_coarse_tilt_std")]
+    pub coarse_tilt_std_deg: f64,
+    /// Convergence criterion: the mode becomes navigating when the filter's heading standard
+    /// deviation falls below this (deg; default 0.1).
+    #[serde(default = "default_aligned_heading_std")]
+    pub aligned_heading_std_deg: f64,
+    /// Fine-alignment error model between the coarse stage and navigation: 1 (body-frame
+    /// velocity error, mounting states), 2 (navigation frame, mounting states), 3 (navigation
+    /// frame), or 0 to refine in the navigation filter itself (default 1). With 1–3 the
+    /// navigation filter starts, when the criterion is met, from the alignment filter's state,
+    /// IMU biases, DVL mounting estimate and standard deviations (cross-covariances dropped).
+    #[serde(default = "default_fine_model")]
+    pub fine_model: u8,
+}
+
+fn default_fine_model() -> u8 {
+    1
+}
+
+fn default_coarse_s() -> f64 {
+    120.0
+}
+fn default_coarse_heading_std() -> f64 {
+    2.0
+}
+fn default_coarse_tilt_std() -> f64 {
+    0.05
+}
+fn default_aligned_heading_std() -> f64 {
+    0.1
+}
+
+/// The navigation part of a configuration: `[navigation]` (the core's [`NavConfig`]), an
+/// optional `[initial]` state and the aid delay.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SessionConfig {
+    /// An aid message stamped t is applied just before the first IMU sample stamped later than
+    /// t + aid_delay_s (s, 0..1; default 0). Live, the delay gives aid messages from other
+    /// processes time to arrive before the IMU passes them, so the order of processing depends
+    /// only on the time stamps, and a replay of the recording reproduces it exactly; the daemon
+    /// uses 0.02 s.
+    pub aid_delay_s: f64,
+    pub navigation: NavConfig,
+    pub initial: Option<InitialState>,
+    /// Used when `[initial]` is absent.
+    pub alignment: Option<AlignmentConfig>,
+}
+
+/// Outputs (`[output]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OutputConfig {
+    /// Publish every Nth navigation solution (count, 1..1000, default 1 = IMU rate).
+    pub solution_decimation: u32,
+    /// Also write every solution to this CSV file (the format of `auvnav replay --out F.csv`);
+    /// empty for none (default).
+    pub nav_csv: String,
+    /// Write every aid diagnostic to this CSV file; empty for none (default).
+    pub diagnostics_csv: String,
+}
+
+impl Default for OutputConfig {
+    fn default() -> Self {
+        OutputConfig {
+            solution_decimation: 1,
+            nav_csv: String::new(),
+            diagnostics_csv: String::new(),
+        }
+    }
+}
+
+/// Deadlines after which a silent sensor is reported lost (`[deadlines]`; s, 0 = none).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Deadlines {
+    /// IMU (s, default 0.1).
+    pub imu_s: f64,
+    /// DVL (s, default 3).
+    pub dvl_s: f64,
+    /// Depth (s, default 3).
+    pub depth_s: f64,
+    /// USBL (s, default 0: fixes come when the station pings).
+    pub usbl_s: f64,
+    /// GNSS (s, default 0: only at the surface).
+    pub gnss_s: f64,
+}
+
+impl Default for Deadlines {
+    fn default() -> Self {
+        Deadlines {
+            imu_s: 0.1,
+            dvl_s: 3.0,
+            depth_s: 3.0,
+            usbl_s: 0.0,
+            gnss_s: 0.0,
+        }
+    }
+}
+
+/// `auvnavd`'s configuration file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DaemonConfig {
+    /// Node name and the name in the health message (default `auvnavd`).
+    #[serde(default = "default_name")]
+    pub name: String,
+    /// Service-name prefix of the deployment (default `auvnav`).
+    #[serde(default = "default_prefix")]
+    pub prefix: String,
+    /// Aid delay (s, 0..1, default 0.02): see the module documentation.
+    #[serde(default = "default_aid_delay")]
+    pub aid_delay_s: f64,
+    /// Health message period (s, 0.05..60, default 1).
+    #[serde(default = "default_health_period")]
+    pub health_period_s: f64,
+    /// The navigation core's configuration ([`NavConfig`]).
+    #[serde(default)]
+    pub navigation: NavConfig,
+    /// Initial state; when absent, `[alignment]` finds the attitude (position given).
+    pub initial: Option<InitialState>,
+    /// Initial alignment ([`AlignmentConfig`]): used without `[initial]`.
+    pub alignment: Option<AlignmentConfig>,
+    #[serde(default)]
+    pub output: OutputConfig,
+    #[serde(default)]
+    pub deadlines: Deadlines,
+}
+
+fn default_name() -> String {
+    "auvnavd".into()
+}
+fn default_prefix() -> String {
+    auvnav_shm_schema::topic::DEFAULT_PREFIX.into()
+}
+fn default_aid_delay() -> f64 {
+    0.02
+}
+fn default_health_period() -> f64 {
+    1.0
+}
+
+/// Configuration problems, each as `key = value: what is expected`.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{}", .0.join("; "))]
+pub struct ConfigError(pub Vec<String>);
+
+/// Collects `key = value: expected lo..=hi` problems.
+struct Problems(Vec<String>);
+
+impl Problems {
+    fn range(&mut self, key: &str, v: f64, lo: f64, hi: f64) {
+        if !(v.is_finite() && v >= lo && v <= hi) {
+            self.0.push(format!("{key} = {v}: expected {lo}..={hi}"));
+        }
+    }
+}
+
+impl NavConfig {
+    /// Every value of `[navigation]` that makes no sense, as `navigation.key …`.
+    pub fn problems(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        if let Some(u) = &self.usbl {
+            out.extend(u.problems().into_iter().map(|p| format!("navigation.{p}")));
+        }
+        out
+    }
+}
+
+impl SessionConfig {
+    /// Every value of the session's tables that makes no sense (`[navigation]`, `aid_delay_s`,
+    /// `[alignment]`), as `key = value: expected …`.
+    pub fn problems(&self) -> Vec<String> {
+        let mut p = Problems(self.navigation.problems());
+        p.range("aid_delay_s", self.aid_delay_s, 0.0, 1.0);
+        if let Some(a) = &self.alignment {
+            p.range("alignment.coarse_s", a.coarse_s, 10.0, 3600.0);
+            p.range(
+                "alignment.coarse_heading_std_deg",
+                a.coarse_heading_std_deg,
+                0.01,
+                180.0,
+            );
+            p.range(
+                "alignment.coarse_tilt_std_deg",
+                a.coarse_tilt_std_deg,
+                0.001,
+                10.0,
+            );
+            p.range(
+                "alignment.aligned_heading_std_deg",
+                a.aligned_heading_std_deg,
+                0.001,
+                10.0,
+            );
+            p.range("alignment.latitude_deg", a.latitude_deg, -89.0, 89.0);
+            p.range("alignment.fine_model", f64::from(a.fine_model), 0.0, 3.0);
+        }
+        p.0
+    }
+
+    /// `Ok` when [`SessionConfig::problems`] finds none.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let p = self.problems();
+        if p.is_empty() {
+            Ok(())
+        } else {
+            Err(ConfigError(p))
+        }
+    }
+}
+
+impl Default for DaemonConfig {
+    /// The defaults of every key, without a start (`[initial]` or `[alignment]` must be added).
+    fn default() -> Self {
+        DaemonConfig {
+            name: default_name(),
+            prefix: default_prefix(),
+            aid_delay_s: default_aid_delay(),
+            health_period_s: default_health_period(),
+            navigation: NavConfig::default(),
+            initial: None,
+            alignment: None,
+            output: OutputConfig::default(),
+            deadlines: Deadlines::default(),
+        }
+    }
+}
+
+impl DaemonConfig {
+    /// Parses and validates the daemon's configuration file text.
+    pub fn from_toml(text: &str) -> Result<DaemonConfig, ConfigError> {
+        let cfg: DaemonConfig =
+            toml::from_str(text).map_err(|e| ConfigError(vec![e.to_string()]))?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// The configuration as TOML text (what `from_toml` reads back).
+    pub fn to_toml(&self) -> Result<String, ConfigError> {
+        toml::to_string(self).map_err(|e| ConfigError(vec![e.to_string()]))
+    }
+
+    /// Every problem of the file: the session's, the daemon's own ranges, and a missing start.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let mut p = Problems(self.session().problems());
+        p.range("health_period_s", self.health_period_s, 0.05, 60.0);
+        p.range(
+            "output.solution_decimation",
+            f64::from(self.output.solution_decimation),
+            1.0,
+            1000.0,
+        );
+        let d = &self.deadlines;
+        for (k, v) in [
+            ("deadlines.imu_s", d.imu_s),
+            ("deadlines.dvl_s", d.dvl_s),
+            ("deadlines.depth_s", d.depth_s),
+            ("deadlines.usbl_s", d.usbl_s),
+            ("deadlines.gnss_s", d.gnss_s),
+        ] {
+            p.range(k, v, 0.0, 3600.0);
+        }
+        if self.initial.is_none() && self.alignment.is_none() {
+            p.0.push(
+                "give [initial] (a known state) or [alignment] (a known position; the daemon \
+                 finds the attitude)"
+                    .into(),
+            );
+        }
+        if p.0.is_empty() {
+            Ok(())
+        } else {
+            Err(ConfigError(p.0))
+        }
+    }
+
+    /// The session's part of the file.
+    pub fn session(&self) -> SessionConfig {
+        SessionConfig {
+            aid_delay_s: self.aid_delay_s,
+            navigation: self.navigation.clone(),
+            initial: self.initial.clone(),
+            alignment: self.alignment.clone(),
+        }
+    }
+}
