@@ -157,7 +157,7 @@ fn replay_study_and_daemon_batches_give_identical_solutions() {
     let mut cfg = SessionConfig::default();
     let station = sim::StationGeometry::from_scenario(&Scenario::load("docking").expect("s"))
         .expect("the docking scenario has a station");
-    cfg.navigation.usbl = Some(auvnav_tools::usbl::station_config(&station));
+    cfg.navigation.usbl = Some(station.usbl_config());
     let via_replay = replay(&msgs, &cfg);
     let via_study = study(&msgs, &cfg);
     assert!(
@@ -178,4 +178,52 @@ fn replay_study_and_daemon_batches_give_identical_solutions() {
             &format!("daemon batches of {batch}"),
         );
     }
+}
+
+/// Every aid's `test_ratio` means the same: above 1 = rejected by the gate (a fused message with
+/// a ratio above 1 is one the gate let through on purpose, flagged `FLAG_RESET`).
+#[test]
+fn test_ratio_above_one_means_rejected_for_every_aid() {
+    let scenario = Scenario::load("docking").expect("scenario");
+    let station = sim::StationGeometry::from_scenario(&scenario).expect("station");
+    let mut effects = scenario.effects().expect("effects");
+    effects
+        .set("usbl.outlier_fraction", &[0.1])
+        .expect("outliers");
+    let (msgs, _) = sim::simulate_to_vec(&SimConfig {
+        scenario,
+        effects,
+        seed: 12,
+        duration_s: Some(240.0),
+    })
+    .expect("simulate");
+    let mut cfg = SessionConfig::default();
+    cfg.navigation.usbl = Some(station.usbl_config());
+    let (_, diagnostics) = replay(&msgs, &cfg);
+    let mut rejected_usbl = 0;
+    for d in &diagnostics {
+        let rejected = d.flags & AidDiagnosticsV1::FLAG_REJECTED != 0;
+        let fused = d.flags & AidDiagnosticsV1::FLAG_FUSED != 0;
+        let reset = d.flags & AidDiagnosticsV1::FLAG_RESET != 0;
+        let gated_out = d.test_ratio > 1.0;
+        // Never gated (invalid or late): no innovation variance.
+        let gated = d.innovation_variance.iter().any(|v| *v > 0.0);
+        assert!(fused != rejected, "source {}: flags {}", d.source, d.flags);
+        assert!(
+            !(fused && gated_out) || reset,
+            "source {}: fused with test ratio {} and no reset flag",
+            d.source,
+            d.test_ratio
+        );
+        assert!(
+            !(rejected && gated && !gated_out),
+            "source {}: rejected by the gate with test ratio {}",
+            d.source,
+            d.test_ratio
+        );
+        if rejected && d.source == auvnav_shm_schema::AidSource::UsblSlantRange as u32 {
+            rejected_usbl += 1;
+        }
+    }
+    assert!(rejected_usbl > 5, "{rejected_usbl} USBL outliers rejected");
 }

@@ -103,8 +103,7 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
         csv_file = Some(std::io::BufWriter::new(f));
     }
     // With a USBL station in the scenario, its fixes are fused (tight, AUKF).
-    let usbl = crate::sim::StationGeometry::from_scenario(&cfg.scenario)
-        .map(|st| crate::usbl::station_config(&st));
+    let usbl = crate::sim::StationGeometry::from_scenario(&cfg.scenario).map(|st| st.usbl_config());
     let has_usbl = usbl.is_some();
     let (simulated, accuracy, counters) = run_voyage(
         &cfg,

@@ -13,4 +13,5 @@ pub mod parallel;
 pub mod record;
 pub mod replay;
 pub mod sim;
+pub mod study;
 pub mod usbl;

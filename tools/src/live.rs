@@ -281,7 +281,7 @@ pub fn run_live(
         navigation: auvnav_core::config::NavConfig {
             imu_dt_from_device_time: true,
             usbl: crate::sim::StationGeometry::from_scenario(&cfg.scenario)
-                .map(|st| crate::usbl::station_config(&st)),
+                .map(|st| st.usbl_config()),
             ..Default::default()
         },
         initial: Some(auvnav_core::config::InitialState {

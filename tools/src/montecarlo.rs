@@ -14,13 +14,10 @@ use crate::sim::{self, SimConfig, effects::Effects, rng::Rng, scenario::Scenario
 use anyhow::bail;
 use auvnav_core::earth::{self, Geodetic};
 use auvnav_core::ekf as filter;
-use auvnav_core::navigator::{NavConfig, initial_state};
+use auvnav_core::navigator::NavConfig;
 use auvnav_core::session::{Session, SessionConfig, SessionOutput};
-use auvnav_core::strapdown::NavState;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use serde::Serialize;
-
-const DEG: f64 = std::f64::consts::PI / 180.0;
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct NeesArgs {
@@ -193,7 +190,7 @@ pub fn nees_monte_carlo_with(
                         height_m: t.height_m,
                     };
                     let Some(n) = session.navigator() else {
-                        let start = perturbed_start(truth_cfg, t, &mut rng);
+                        let start = crate::study::perturbed_start(truth_cfg, t, &mut rng);
                         session.start(start, "truth perturbed by a draw of P0", &mut |_| {
                             Ok::<(), anyhow::Error>(())
                         })?;
@@ -286,43 +283,6 @@ pub fn nees_monte_carlo_with(
         attitude: block(3),
         series,
     })
-}
-
-/// The truth perturbed by a draw from the initial covariance of `cfg`: where a run starts.
-pub(crate) fn perturbed_start(
-    cfg: &NavConfig,
-    t: &auvnav_shm_schema::TruthStateV1,
-    rng: &mut Rng,
-) -> NavState {
-    let dp = Vector3::new(
-        rng.gauss(cfg.initial_position_std_m),
-        rng.gauss(cfg.initial_position_std_m),
-        rng.gauss(cfg.initial_position_std_m),
-    );
-    let dv = Vector3::new(
-        rng.gauss(cfg.initial_velocity_std_m_s),
-        rng.gauss(cfg.initial_velocity_std_m_s),
-        rng.gauss(cfg.initial_velocity_std_m_s),
-    );
-    let tilt = cfg.initial_tilt_std_deg * DEG;
-    let phi = Vector3::new(
-        rng.gauss(tilt),
-        rng.gauss(tilt),
-        rng.gauss(cfg.initial_heading_std_deg * DEG),
-    );
-    let truth_pos = Geodetic {
-        latitude_rad: t.latitude_rad,
-        longitude_rad: t.longitude_rad,
-        height_m: t.height_m,
-    };
-    let mut s = initial_state(
-        t.host_time_ns as f64 * 1e-9,
-        earth::offset_position(&truth_pos, &dp),
-        (Vector3::from(t.velocity_ned_m_s) + dv).into(),
-        t.euler_rad,
-    );
-    s.q_body_to_ned = UnitQuaternion::from_scaled_axis(-phi) * s.q_body_to_ned;
-    s
 }
 
 /// Runs `auvnav montecarlo nees` and prints the report.

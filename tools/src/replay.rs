@@ -437,7 +437,7 @@ pub fn replay_config(a: &ReplayArgs) -> anyhow::Result<(ReplayConfig, String)> {
                     })?;
                 cfg.navigation.usbl = Some(auvnav_core::aid::usbl::UsblConfig {
                     coupling,
-                    ..crate::usbl::station_config(&station)
+                    ..station.usbl_config()
                 });
                 source.push_str(", USBL station from the log header");
             }

@@ -130,20 +130,6 @@ pub struct UsblReport {
     pub per_run: Vec<RunResult>,
 }
 
-/// The USBL configuration for a simulated station as surveyed (tight coupling, AUKF, the
-/// defaults' noise, which match the scenarios' SeaTrac-class USBL).
-pub fn station_config(station: &StationGeometry) -> UsblConfig {
-    UsblConfig {
-        array_latitude_deg: station.position.latitude_rad.to_degrees(),
-        array_longitude_deg: station.position.longitude_rad.to_degrees(),
-        array_height_m: station.position.height_m,
-        array_yaw_deg: station.yaw_rad.to_degrees(),
-        baseline_m: station.baseline_m,
-        responder_lever_arm_m: station.responder_lever_arm_m,
-        ..UsblConfig::default()
-    }
-}
-
 /// The navigation configuration matched to the docking scenario's sensors, with the station's
 /// array as surveyed.
 pub fn navigation_config(
@@ -169,7 +155,7 @@ pub fn navigation_config(
         usbl: Some(UsblConfig {
             coupling,
             filter,
-            ..station_config(station)
+            ..station.usbl_config()
         }),
         ..NavConfig::default()
     }
@@ -274,7 +260,7 @@ fn run_one(
                     height_m: t.height_m,
                 };
                 let Some(nv) = session.navigator() else {
-                    let start = crate::montecarlo::perturbed_start(&cfg, t, &mut rng);
+                    let start = crate::study::perturbed_start(&cfg, t, &mut rng);
                     session.start(start, "truth perturbed by a draw of P0", &mut |_| {
                         Ok::<(), anyhow::Error>(())
                     })?;

@@ -92,6 +92,20 @@ impl StationGeometry {
     }
 
     /// Header notes describing the station (read back by [`StationGeometry::from_notes`]).
+    /// The station as the navigator's `[navigation.usbl]` array (as surveyed; default noise,
+    /// coupling and filter).
+    pub fn usbl_config(&self) -> auvnav_core::aid::usbl::UsblConfig {
+        auvnav_core::aid::usbl::UsblConfig {
+            array_latitude_deg: self.position.latitude_rad.to_degrees(),
+            array_longitude_deg: self.position.longitude_rad.to_degrees(),
+            array_height_m: self.position.height_m,
+            array_yaw_deg: self.yaw_rad.to_degrees(),
+            baseline_m: self.baseline_m,
+            responder_lever_arm_m: self.responder_lever_arm_m,
+            ..Default::default()
+        }
+    }
+
     pub fn to_notes(&self) -> BTreeMap<String, String> {
         let mut m = BTreeMap::new();
         m.insert(

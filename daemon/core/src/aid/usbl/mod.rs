@@ -18,7 +18,7 @@ pub use crate::ekf::unscented::{
 
 use super::{AidUpdate, NavCore};
 use crate::earth::Geodetic;
-use crate::ekf::{self, ErrorFilter, StateVector, gate};
+use crate::ekf::{self, ErrorFilter, StateVector};
 use crate::strapdown::NavState;
 use auvnav_shm_schema::{AidDiagnosticsV1, AidSource, UsblFixV1};
 use nalgebra::{DMatrix, DVector, UnitQuaternion, Vector3};
@@ -250,6 +250,9 @@ impl UsblAid {
         };
         let hph = &upd.innovation_cov - &r_used;
         let reopened = noise.reopened;
+        // The gate that decides (per component, χ²₁), with the noise in use: its test ratio is
+        // what the diagnostics report (above 1 = rejected, unless the gate reopened: FLAG_RESET).
+        let gated = noise.gate(&upd.innovation, &hph);
         let accepted = noise.observe(&upd.innovation, &hph);
         if noise.reopened != reopened {
             self.counters.reopened += 1;
@@ -269,10 +272,7 @@ impl UsblAid {
             d.innovation_variance[i] = upd.innovation_cov[(i, i)];
             d.observation_variance[i] = noise.variances()[i];
         }
-        let s_inv = upd.innovation_cov.clone().try_inverse();
-        d.test_ratio = s_inv.map_or(f64::INFINITY, |si| {
-            (upd.innovation.transpose() * si * &upd.innovation)[(0, 0)] / gate::CHI2_3DOF_999
-        });
+        d.test_ratio = gated.test_ratio;
         if !accepted {
             self.counters.rejected += 1;
             return AidUpdate::rejected(d);

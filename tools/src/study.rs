@@ -1,0 +1,48 @@
+//! What the Monte Carlo studies (`auvnav montecarlo nees`, `auvnav usbl`) share besides the
+//! parallel runner (`crate::parallel`): how a run's navigation starts. The runs themselves feed
+//! the navigation session (`auvnav_core::feed`), as the daemon does.
+
+use crate::sim::rng::Rng;
+use auvnav_core::earth::{self, Geodetic};
+use auvnav_core::navigator::{NavConfig, initial_state};
+use auvnav_core::strapdown::NavState;
+use nalgebra::{UnitQuaternion, Vector3};
+
+const DEG: f64 = std::f64::consts::PI / 180.0;
+
+/// The truth perturbed by a draw from the initial covariance of `cfg`: where a run starts.
+pub fn perturbed_start(
+    cfg: &NavConfig,
+    t: &auvnav_shm_schema::TruthStateV1,
+    rng: &mut Rng,
+) -> NavState {
+    let dp = Vector3::new(
+        rng.gauss(cfg.initial_position_std_m),
+        rng.gauss(cfg.initial_position_std_m),
+        rng.gauss(cfg.initial_position_std_m),
+    );
+    let dv = Vector3::new(
+        rng.gauss(cfg.initial_velocity_std_m_s),
+        rng.gauss(cfg.initial_velocity_std_m_s),
+        rng.gauss(cfg.initial_velocity_std_m_s),
+    );
+    let tilt = cfg.initial_tilt_std_deg * DEG;
+    let phi = Vector3::new(
+        rng.gauss(tilt),
+        rng.gauss(tilt),
+        rng.gauss(cfg.initial_heading_std_deg * DEG),
+    );
+    let truth_pos = Geodetic {
+        latitude_rad: t.latitude_rad,
+        longitude_rad: t.longitude_rad,
+        height_m: t.height_m,
+    };
+    let mut s = initial_state(
+        t.host_time_ns as f64 * 1e-9,
+        earth::offset_position(&truth_pos, &dp),
+        (Vector3::from(t.velocity_ned_m_s) + dv).into(),
+        t.euler_rad,
+    );
+    s.q_body_to_ned = UnitQuaternion::from_scaled_axis(-phi) * s.q_body_to_ned;
+    s
+}
