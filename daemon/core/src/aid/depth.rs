@@ -54,14 +54,6 @@ impl DepthAid {
         d.observation_variance[0] = r[(0, 0)];
         let result = core.kf.update(&y, &h, &r, self.gate_chi2);
         let correction = NavCore::report(result, &mut d);
-        if correction.is_some() {
-            self.counters.fused += 1;
-        } else {
-            self.counters.rejected += 1;
-        }
-        AidUpdate {
-            diagnostics: d,
-            correction,
-        }
+        AidUpdate::counted(d, correction, &mut self.counters)
     }
 }

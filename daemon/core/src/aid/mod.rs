@@ -42,6 +42,25 @@ impl AidUpdate {
     }
 }
 
+impl AidUpdate {
+    /// The outcome of a gated update: the diagnostics and the correction when fused; counted.
+    pub fn counted(
+        diagnostics: AidDiagnosticsV1,
+        correction: Option<StateVector>,
+        counters: &mut AidCounters,
+    ) -> AidUpdate {
+        if correction.is_some() {
+            counters.fused += 1;
+        } else {
+            counters.rejected += 1;
+        }
+        AidUpdate {
+            diagnostics,
+            correction,
+        }
+    }
+}
+
 /// Counts of what became of an aid's messages.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct AidCounters {

@@ -1,0 +1,457 @@
+//! Latency: a frame on a pseudo-terminal to the bus (`pty_latency`), and to the navigation solution through real driver, daemon and recorder processes (`auvnav bench e2e`).
+
+#[allow(unused_imports)]
+use super::*;
+
+/// Latency through a real pseudo-terminal and a real driver process at one frame rate.
+#[derive(Debug, Clone, Serialize)]
+pub struct PtyLatency {
+    pub protocol: String,
+    pub rate_hz: f64,
+    pub frames_written: u64,
+    pub frames_received: u64,
+    /// Write call of the frame → the driver's read returned (its host time stamp): the
+    /// terminal and the driver's wake-up (µs).
+    pub pty_to_read_us: Percentiles,
+    /// Read return → message received by a subscriber in another process: decode, publish and
+    /// the shared-memory hop with event wake-up (µs).
+    pub read_to_subscriber_us: Percentiles,
+    /// Write call → message received by the subscriber: an upper bound of byte arrival →
+    /// publish (µs).
+    pub total_us: Percentiles,
+}
+
+/// p50, p99 and maximum.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Percentiles {
+    pub p50: f64,
+    pub p99: f64,
+    pub max: f64,
+}
+
+pub(crate) fn percentiles(mut v: Vec<f64>) -> Percentiles {
+    if v.is_empty() {
+        return Percentiles {
+            p50: f64::NAN,
+            p99: f64::NAN,
+            max: f64::NAN,
+        };
+    }
+    v.sort_by(f64::total_cmp);
+    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+    Percentiles {
+        p50: at(0.5),
+        p99: at(0.99),
+        max: v[v.len() - 1],
+    }
+}
+
+/// Plays KVH 1750 frames (format B, the frame index in the device time stamp) into a
+/// pseudo-terminal read by a real `auvnav-imu` process, and times each frame from its write call
+/// to its arrival at a subscriber in this process.
+pub fn pty_latency(rate_hz: f64, seconds: f64) -> anyhow::Result<PtyLatency> {
+    use auvnav_drivers::clock::monotonic_ns;
+    use auvnav_shm_schema::bus::Bus;
+    use auvnav_shm_schema::{ImuSampleV1, qos, topic};
+    use std::io::Write;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::time::{Duration, Instant};
+
+    let exe = std::env::current_exe()?;
+    let driver = exe
+        .parent()
+        .context("executable directory")?
+        .join("auvnav-imu");
+    if !driver.exists() {
+        anyhow::bail!(
+            "{} not found: build the drivers (cargo build --release -p auvnav-drivers)",
+            driver.display()
+        );
+    }
+    let tag = format!("benchpty{}r{}", std::process::id(), rate_hz as u64);
+    let dir = std::env::temp_dir().join(&tag);
+    std::fs::create_dir_all(&dir)?;
+    let (mut master, slave) = serialport::TTYPort::pair().context("pseudo-terminal")?;
+    use serialport::SerialPort;
+    let slave_path = slave.name().context("slave path")?;
+    let cfg = dir.join("imu.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "prefix = \"{tag}\"\nprotocol = \"kvh1750\"\n[serial]\nport = \"{slave_path}\"\n\
+             baud = 921600\n[settings.kvh]\nincrements = false\ndegrees = false\n\
+             rate_hz = {rate_hz}\ntemperature_centi = false\n"
+        ),
+    )?;
+    let done = std::sync::Arc::new(AtomicBool::new(false));
+    let ready = std::sync::Arc::new(AtomicBool::new(false));
+    // The subscriber lives in its own thread (iceoryx2 ports stay on the thread that made them).
+    let sub_thread = {
+        let done = done.clone();
+        let ready = ready.clone();
+        let tag = tag.clone();
+        std::thread::spawn(move || -> anyhow::Result<Vec<(u64, u64, u64)>> {
+            let bus = Bus::new(&format!("{tag}sub"), &tag)?;
+            let mut sub = bus.subscriber::<ImuSampleV1>(topic::IMU, qos::SENSOR)?;
+            ready.store(true, Ordering::SeqCst);
+            let mut got = Vec::new();
+            while !done.load(Ordering::SeqCst) {
+                sub.wait(Duration::from_millis(20))?;
+                while let Some(m) = sub.receive()? {
+                    got.push((m.device_time_ns / 1000, m.host_time_ns, monotonic_ns()));
+                }
+            }
+            Ok(got)
+        })
+    };
+    while !ready.load(Ordering::SeqCst) {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let mut child = std::process::Command::new(&driver)
+        .arg("--config")
+        .arg(&cfg)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .with_context(|| format!("starting {}", driver.display()))?;
+    // Let the driver open the terminal and its publisher connect.
+    std::thread::sleep(Duration::from_millis(1500));
+    let n = (rate_hz * seconds).round() as u64;
+    let mut written = vec![0u64; n as usize];
+    let start = Instant::now();
+    for i in 0..n {
+        let due = start + Duration::from_secs_f64(i as f64 / rate_hz);
+        let now = Instant::now();
+        if due > now {
+            std::thread::sleep(due - now);
+        }
+        let frame = auvnav_drivers::kvh::encode(&auvnav_drivers::kvh::KvhSample {
+            gyro: [1e-4, 0.0, 0.0],
+            accel: [0.0, 0.0, -1.0],
+            status: 0x77,
+            sequence: (i % 128) as u8,
+            temperature_raw: 20,
+            timestamp_us: Some(i as u32),
+        });
+        written[i as usize] = monotonic_ns();
+        master.write_all(&frame)?;
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    let _ = nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(child.id() as i32),
+        nix::sys::signal::Signal::SIGTERM,
+    );
+    let _ = child.wait();
+    done.store(true, Ordering::SeqCst);
+    let got = sub_thread
+        .join()
+        .map_err(|_| anyhow::anyhow!("subscriber thread panicked"))??;
+    drop(slave);
+    let _ = std::fs::remove_dir_all(&dir);
+    let (mut pty, mut hop, mut total) = (Vec::new(), Vec::new(), Vec::new());
+    for (idx, read_ns, recv_ns) in &got {
+        let Some(&w) = written.get(*idx as usize) else {
+            continue;
+        };
+        pty.push(read_ns.saturating_sub(w) as f64 * 1e-3);
+        hop.push(recv_ns.saturating_sub(*read_ns) as f64 * 1e-3);
+        total.push(recv_ns.saturating_sub(w) as f64 * 1e-3);
+    }
+    Ok(PtyLatency {
+        protocol: "kvh1750".into(),
+        rate_hz,
+        frames_written: n,
+        frames_received: got.len() as u64,
+        pty_to_read_us: percentiles(pty),
+        read_to_subscriber_us: percentiles(hop),
+        total_us: percentiles(total),
+    })
+}
+
+/// End-to-end latency of the on-board chain at one IMU rate.
+#[derive(Debug, Clone, Serialize)]
+pub struct E2eLatency {
+    pub imu_rate_hz: f64,
+    pub seconds: f64,
+    pub imu_frames_written: u64,
+    pub solutions_received: u64,
+    /// IMU frame written to its pseudo-terminal → navigation solution received by a subscriber
+    /// (µs): terminal, driver, shared memory, daemon (strapdown + filter), shared memory.
+    pub frame_to_solution_us: Percentiles,
+    /// IPC only: the IMU driver's read time stamp → the IMU message received by a subscriber in
+    /// another process (µs): decode, publish and the shared-memory hop with event wake-up.
+    pub driver_to_subscriber_us: Percentiles,
+    /// CPU use of the daemon and of the recorder over the run (% of one core).
+    pub daemon_cpu_percent: f64,
+    pub recorder_cpu_percent: f64,
+    pub dvl_frames_written: u64,
+    pub usbl_frames_written: u64,
+}
+
+/// CPU time (s) a process has used so far (`/proc/PID/stat` utime + stime).
+pub(crate) fn cpu_seconds(pid: u32) -> Option<f64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // Fields after the command name (which is in parentheses and may hold spaces).
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks: f64 = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    let hz = std::process::Command::new("getconf")
+        .arg("CLK_TCK")
+        .output()
+        .ok()
+        .and_then(|o| String::from_utf8(o.stdout).ok())
+        .and_then(|s| s.trim().parse::<f64>().ok())
+        .unwrap_or(100.0);
+    Some(ticks / hz)
+}
+
+/// Runs the chain with real processes — `auvnav-imu`, `auvnav-dvl` (Water Linked, 5 Hz),
+/// `auvnav-usbl` (SeaTrac, 1 Hz), `auvnavd` and `auvnav record` — on pseudo-terminals written by
+/// this process, and times each IMU frame to its navigation solution.
+pub fn e2e(rate_hz: f64, seconds: f64) -> anyhow::Result<E2eLatency> {
+    use auvnav_drivers::clock::monotonic_ns;
+    use auvnav_drivers::emulate as enc;
+    use auvnav_shm_schema::bus::Bus;
+    use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, NavSolutionV1, UsblFixV1, qos, topic};
+    use serialport::SerialPort;
+    use std::io::Write;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::time::{Duration, Instant};
+
+    let exe = std::env::current_exe()?;
+    let bin_dir = exe.parent().context("executable directory")?.to_path_buf();
+    let bin = |n: &str| -> anyhow::Result<std::path::PathBuf> {
+        let p = bin_dir.join(n);
+        anyhow::ensure!(
+            p.exists(),
+            "{} not found: build all binaries (cargo build --release)",
+            p.display()
+        );
+        Ok(p)
+    };
+    let tag = format!("benche2e{}r{}", std::process::id(), rate_hz as u64);
+    let dir = std::env::temp_dir().join(&tag);
+    std::fs::create_dir_all(&dir)?;
+    // Pseudo-terminals, one at a time.
+    let mut ports = Vec::new();
+    for _ in 0..3 {
+        let (master, slave) = serialport::TTYPort::pair().context("pseudo-terminal")?;
+        let path = slave.name().context("slave path")?;
+        ports.push((master, slave, path));
+    }
+    let driver_cfg = |class: &str,
+                      protocol: &str,
+                      port: &str|
+     -> anyhow::Result<std::path::PathBuf> {
+        let p = dir.join(format!("{class}.toml"));
+        std::fs::write(
+            &p,
+            format!(
+                "prefix = \"{tag}\"\nprotocol = \"{protocol}\"\n[serial]\nport = \"{port}\"\nbaud = 921600\n\
+                 [settings.kvh]\nincrements = false\ndegrees = false\nrate_hz = {rate_hz}\ntemperature_centi = false\n"
+            ),
+        )?;
+        Ok(p)
+    };
+    let imu_cfg = driver_cfg("imu", "kvh1750", &ports[0].2)?;
+    let dvl_cfg = driver_cfg("dvl", "wldvl", &ports[1].2)?;
+    let usbl_cfg = driver_cfg("usbl", "seatrac", &ports[2].2)?;
+    let daemon_cfg = dir.join("auvnavd.toml");
+    let daemon = auvnav_core::config::DaemonConfig {
+        prefix: tag.clone(),
+        navigation: auvnav_core::config::NavConfig {
+            imu_dt_from_device_time: true,
+            ..Default::default()
+        },
+        initial: Some(auvnav_core::config::InitialState {
+            latitude_deg: 31.0,
+            longitude_deg: 120.0,
+            height_m: -20.0,
+            velocity_ned_m_s: [0.0; 3],
+            euler_deg: [0.0; 3],
+        }),
+        ..Default::default()
+    };
+    std::fs::write(&daemon_cfg, daemon.to_toml()?)?;
+    let done = std::sync::Arc::new(AtomicBool::new(false));
+    let ready = std::sync::Arc::new(AtomicBool::new(false));
+    type Seen = (Vec<(u64, u64)>, Vec<(u64, u64)>);
+    let watcher = {
+        let (done, ready, tag) = (done.clone(), ready.clone(), tag.clone());
+        std::thread::spawn(move || -> anyhow::Result<Seen> {
+            let bus = Bus::new(&format!("{tag}sub"), &tag)?;
+            let mut sol = bus.subscriber::<NavSolutionV1>(topic::NAV_SOLUTION, qos::NAVIGATION)?;
+            let mut imu = bus.subscriber::<ImuSampleV1>(topic::IMU, qos::SENSOR)?;
+            ready.store(true, Ordering::SeqCst);
+            let (mut sols, mut imus) = (Vec::new(), Vec::new());
+            while !done.load(Ordering::SeqCst) {
+                sol.wait(Duration::from_millis(20))?;
+                while let Some(m) = sol.receive()? {
+                    sols.push((m.sequence, monotonic_ns()));
+                }
+                while let Some(m) = imu.receive()? {
+                    imus.push((m.host_time_ns, monotonic_ns()));
+                }
+            }
+            Ok((sols, imus))
+        })
+    };
+    while !ready.load(Ordering::SeqCst) {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let spawn = |name: &str, args: &[&std::ffi::OsStr]| -> anyhow::Result<std::process::Child> {
+        std::process::Command::new(bin(name)?)
+            .args(args)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .with_context(|| format!("starting {name}"))
+    };
+    let record_path = dir.join("record.mcap");
+    let mut children = [
+        spawn(
+            "auvnav",
+            &[
+                "record".as_ref(),
+                "--out".as_ref(),
+                record_path.as_os_str(),
+                "--prefix".as_ref(),
+                tag.as_ref(),
+            ],
+        )?,
+        spawn("auvnavd", &["--config".as_ref(), daemon_cfg.as_os_str()])?,
+        spawn("auvnav-imu", &["--config".as_ref(), imu_cfg.as_os_str()])?,
+        spawn("auvnav-dvl", &["--config".as_ref(), dvl_cfg.as_os_str()])?,
+        spawn("auvnav-usbl", &["--config".as_ref(), usbl_cfg.as_os_str()])?,
+    ];
+    std::thread::sleep(Duration::from_millis(1500));
+    let (recorder_pid, daemon_pid) = (children[0].id(), children[1].id());
+    let cpu0 = (cpu_seconds(daemon_pid), cpu_seconds(recorder_pid));
+    let n = (rate_hz * seconds).round() as u64;
+    let mut written = vec![0u64; n as usize];
+    let (mut dvl_n, mut usbl_n) = (0u64, 0u64);
+    let start = Instant::now();
+    for i in 0..n {
+        let due = start + Duration::from_secs_f64(i as f64 / rate_hz);
+        if let Some(d) = due.checked_duration_since(Instant::now()) {
+            std::thread::sleep(d);
+        }
+        let t_ns = (i as f64 / rate_hz * 1e9) as u64;
+        let imu = ImuSampleV1 {
+            angular: [1e-5, 0.0, 7.3e-5],
+            specific: [0.0, 0.0, -9.79],
+            device_time_ns: t_ns,
+            status: ImuSampleV1::STATUS_GYRO_VALID
+                | ImuSampleV1::STATUS_ACCEL_VALID
+                | ImuSampleV1::STATUS_DEVICE_TIME_VALID,
+            ..Default::default()
+        };
+        let cfg = auvnav_drivers::convert::KvhConfig {
+            increments: false,
+            degrees: false,
+            rate_hz,
+            temperature_centi: false,
+        };
+        let frame = enc::kvh_from_imu(&imu, &cfg, (i % 128) as u8);
+        written[i as usize] = monotonic_ns();
+        ports[0].0.write_all(&frame)?;
+        // DVL at 5 Hz and USBL at 1 Hz, written between IMU frames.
+        if (i as f64 * 5.0 / rate_hz).fract() == 0.0 {
+            let v = DvlVelocityV1 {
+                velocity_dvl_m_s: [0.0, 0.0, 0.0],
+                altitude_m: 10.0,
+                device_time_ns: t_ns,
+                validity_time_ns: t_ns,
+                validity: DvlVelocityV1::VALID_VELOCITY | DvlVelocityV1::VALID_ALTITUDE,
+                ..Default::default()
+            };
+            ports[1].0.write_all(&enc::wrz_from_dvl(&v, 0.0))?;
+            dvl_n += 1;
+        }
+        if (i as f64 / rate_hz).fract() == 0.0 {
+            let u = UsblFixV1 {
+                slant_range_m: 50.0,
+                sound_speed_m_s: 1500.0,
+                validity: UsblFixV1::VALID_RANGE | UsblFixV1::VALID_SOUND_SPEED,
+                ..Default::default()
+            };
+            ports[2].0.write_all(&enc::seatrac_from_usbl(&u, 1))?;
+            usbl_n += 1;
+        }
+    }
+    let wall = start.elapsed().as_secs_f64();
+    let cpu1 = (cpu_seconds(daemon_pid), cpu_seconds(recorder_pid));
+    std::thread::sleep(Duration::from_millis(300));
+    for c in children.iter_mut().rev() {
+        let _ = nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(c.id() as i32),
+            nix::sys::signal::Signal::SIGTERM,
+        );
+        let _ = c.wait();
+    }
+    done.store(true, Ordering::SeqCst);
+    let (sols, imus) = watcher
+        .join()
+        .map_err(|_| anyhow::anyhow!("subscriber thread panicked"))??;
+    for p in &mut ports {
+        let _ = p.0.set_timeout(Duration::from_millis(1));
+    }
+    drop(ports);
+    let _ = std::fs::remove_dir_all(&dir);
+    // Bus sequence k = the k-th solution = IMU frame k (the first frame starts the session).
+    let total: Vec<f64> = sols
+        .iter()
+        .filter_map(|(seq, recv)| {
+            written
+                .get(*seq as usize)
+                .map(|w| recv.saturating_sub(*w) as f64 * 1e-3)
+        })
+        .collect();
+    let hop: Vec<f64> = imus
+        .iter()
+        .map(|(read, recv)| recv.saturating_sub(*read) as f64 * 1e-3)
+        .collect();
+    let cpu = |a: Option<f64>, b: Option<f64>| match (a, b) {
+        (Some(a), Some(b)) if wall > 0.0 => 100.0 * (b - a) / wall,
+        _ => f64::NAN,
+    };
+    Ok(E2eLatency {
+        imu_rate_hz: rate_hz,
+        seconds,
+        imu_frames_written: n,
+        solutions_received: sols.len() as u64,
+        frame_to_solution_us: percentiles(total),
+        driver_to_subscriber_us: percentiles(hop),
+        daemon_cpu_percent: cpu(cpu0.0, cpu1.0),
+        recorder_cpu_percent: cpu(cpu0.1, cpu1.1),
+        dvl_frames_written: dvl_n,
+        usbl_frames_written: usbl_n,
+    })
+}
+
+/// `auvnav bench e2e`.
+pub fn e2e_bench(seconds: f64, json: bool) -> anyhow::Result<()> {
+    let mut results = Vec::new();
+    for rate in [200.0, 1000.0] {
+        results.push(e2e(rate, seconds)?);
+    }
+    if json {
+        println!("{}", serde_json::to_string_pretty(&results)?);
+    } else {
+        for r in &results {
+            println!(
+                "e2e at {} Hz IMU (+ DVL 5 Hz, USBL 1 Hz, recorder): {}/{} solutions; frame -> solution p50 {:.0} us, p99 {:.0} us, max {:.0} us; driver -> subscriber p50 {:.0} us, p99 {:.0} us; CPU daemon {:.1} %, recorder {:.1} %",
+                r.imu_rate_hz,
+                r.solutions_received,
+                r.imu_frames_written,
+                r.frame_to_solution_us.p50,
+                r.frame_to_solution_us.p99,
+                r.frame_to_solution_us.max,
+                r.driver_to_subscriber_us.p50,
+                r.driver_to_subscriber_us.p99,
+                r.daemon_cpu_percent,
+                r.recorder_cpu_percent
+            );
+        }
+    }
+    Ok(())
+}
