@@ -22,9 +22,8 @@ pub fn measured_data(name: &str, probe: &str) -> Option<std::path::PathBuf> {
 
 pub mod processes {
     use std::path::{Path, PathBuf};
-    use std::process::{Child, Command, ExitStatus};
+    use std::process::Command;
     use std::sync::atomic::{AtomicU32, Ordering};
-    use std::time::{Duration, Instant};
 
     /// The path of a workspace binary built for this test run (`target/<profile>/<name>`). The
     /// first call brings the binaries of the driver, daemon and tool packages up to date with one
@@ -96,55 +95,7 @@ pub mod processes {
         }
     }
 
-    /// A child process that is killed if the test ends before it was stopped.
-    pub struct Proc {
-        pub name: String,
-        pub child: Child,
-    }
-
-    impl Proc {
-        pub fn spawn(name: &str, cmd: &mut Command) -> Proc {
-            let child = cmd
-                .spawn()
-                .unwrap_or_else(|e| panic!("starting {name}: {e}"));
-            Proc {
-                name: name.to_string(),
-                child,
-            }
-        }
-
-        /// Sends SIGTERM and waits up to `timeout` for the exit.
-        pub fn terminate(&mut self, timeout: Duration) -> Option<ExitStatus> {
-            let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
-            let _ = nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM);
-            self.wait_for(timeout)
-        }
-
-        /// Waits up to `timeout` for the process to exit by itself.
-        pub fn wait_for(&mut self, timeout: Duration) -> Option<ExitStatus> {
-            let end = Instant::now() + timeout;
-            while Instant::now() < end {
-                if let Ok(Some(s)) = self.child.try_wait() {
-                    return Some(s);
-                }
-                std::thread::sleep(Duration::from_millis(20));
-            }
-            None
-        }
-
-        /// SIGKILL, as a crash would.
-        pub fn kill(&mut self) {
-            let _ = self.child.kill();
-            let _ = self.child.wait();
-        }
-    }
-
-    impl Drop for Proc {
-        fn drop(&mut self) {
-            if let Ok(None) = self.child.try_wait() {
-                let _ = self.child.kill();
-                let _ = self.child.wait();
-            }
-        }
-    }
+    /// A child process that is killed if the test ends before it was stopped: the harness the
+    /// `auvnav` program uses for its own processes.
+    pub use auvnav_tools::process::ChildProcess as Proc;
 }

@@ -2,9 +2,9 @@
 
 use auvnav_core::earth::{self, Geodetic};
 use auvnav_core::navigator::{NavConfig, Navigator, initial_state};
+use auvnav_log::LogMessage;
 use auvnav_shm_schema::TruthStateV1;
-use auvnav_tools::log::LogMessage;
-use auvnav_tools::sim::{self, SimConfig, scenario::Scenario};
+use auvnav_sim::{self as sim, SimConfig, scenario::Scenario};
 use nalgebra::Vector3;
 
 fn simulate(scenario: Scenario) -> Vec<LogMessage> {

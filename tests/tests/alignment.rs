@@ -2,9 +2,9 @@
 //! prior heading. Tolerances follow from the simulated sensors (see each test).
 
 use auvnav_core::align::coarse::{InMotionAligner, static_alignment};
+use auvnav_log::LogMessage;
 use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, TruthStateV1};
-use auvnav_tools::log::LogMessage;
-use auvnav_tools::sim::{self, SimConfig, scenario::Scenario};
+use auvnav_sim::{self as sim, SimConfig, scenario::Scenario};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
 fn simulate(name: &str, seconds: f64, seed: u64, ideal: bool) -> Vec<LogMessage> {

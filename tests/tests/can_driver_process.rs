@@ -73,7 +73,8 @@ fn candump_frames_become_depth_messages_on_the_bus() {
             .arg("--candump")
             .arg(&candump)
             .args(["--speed", "20"]),
-    );
+    )
+    .expect("spawn");
     // 10 s of frames at 20x: about half a second; the watchdog allows 30 s.
     let mut got = Vec::new();
     let mut last = None;

@@ -1,9 +1,9 @@
 //! The navigation core is deterministic: the same ordered inputs give bit-identical outputs.
 
 use auvnav_core::navigator::NavConfig;
+use auvnav_sim::SimConfig;
+use auvnav_sim::scenario::Scenario;
 use auvnav_tools::demo::run_voyage;
-use auvnav_tools::sim::SimConfig;
-use auvnav_tools::sim::scenario::Scenario;
 
 fn solution_csv(seed: u64) -> Vec<u8> {
     let scenario = Scenario::load("turns").expect("scenario");

@@ -3,10 +3,10 @@
 //! a killed daemon is replaced by a new one that starts cleanly while the drivers and the recorder
 //! keep running.
 
+use auvnav_log::{LogMessage, LogReader};
 use auvnav_shm_schema::bus::Bus;
 use auvnav_shm_schema::{NavMode, NavSolutionV1, ProcessHealthV1, ProcessState, qos, topic};
 use auvnav_tests::processes::{Proc, TempDir, binary, unique};
-use auvnav_tools::log::{LogMessage, LogReader};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -28,7 +28,7 @@ fn driver_config(dir: &Path, prefix: &str, class: &str, protocol: &str) -> PathB
 
 fn spawn(dir: &Path, name: &str, bin: &str, args: &[&str]) -> Proc {
     let err = std::fs::File::create(dir.join(format!("{name}.err"))).expect("stderr");
-    Proc::spawn(name, Command::new(binary(bin)).args(args).stderr(err))
+    Proc::spawn(name, Command::new(binary(bin)).args(args).stderr(err)).expect("spawn")
 }
 
 struct Watch {

@@ -6,10 +6,10 @@
 use auvnav_core::feed::SensorMessage;
 use auvnav_core::navigator::initial_state;
 use auvnav_core::session::{Session, SessionConfig, SessionOutput};
+use auvnav_log::LogMessage;
 use auvnav_shm_schema::{AidDiagnosticsV1, NavSolutionV1};
-use auvnav_tools::log::LogMessage;
+use auvnav_sim::{self as sim, SimConfig, scenario::Scenario};
 use auvnav_tools::replay::{Output, Replay};
-use auvnav_tools::sim::{self, SimConfig, scenario::Scenario};
 
 type Outputs = (Vec<NavSolutionV1>, Vec<AidDiagnosticsV1>);
 

@@ -39,7 +39,7 @@ fn auvnav(args: &[&str]) -> Vec<u8> {
     cmd.args(args)
         .stdout(std::fs::File::create(&stdout).expect("stdout file"))
         .stderr(std::fs::File::create(&stderr).expect("stderr file"));
-    let mut p = Proc::spawn("auvnav", &mut cmd);
+    let mut p = Proc::spawn("auvnav", &mut cmd).expect("spawn");
     let status = p.wait_for(Duration::from_secs(300));
     let err = std::fs::read_to_string(&stderr).unwrap_or_default();
     match status {
@@ -156,7 +156,7 @@ fn check(got: Vec<(String, String)>) {
 
 #[test]
 fn random_streams_give_their_known_values() {
-    use auvnav_tools::sim::rng::Rng;
+    use auvnav_sim::rng::Rng;
     let mut r = Rng::new(1, "imu");
     let ints: Vec<String> = (0..3).map(|_| format!("{:016x}", r.next_u64())).collect();
     let mut r = Rng::new(42, "dvl.beam_noise");

@@ -3,12 +3,12 @@
 //! Checks that values and counts match what was played, that garbage and corrupted frames are
 //! counted and never published, and that an unplugged device is reported and reconnected.
 
+use auvnav_log::{LogMessage, LogReader};
 use auvnav_shm_schema::bus::Bus;
 use auvnav_shm_schema::{
     DvlVelocityV1, ImuSampleV1, ProcessHealthV1, ProcessState, UsblFixV1, qos, topic,
 };
 use auvnav_tests::processes::{Proc, TempDir, binary, unique};
-use auvnav_tools::log::{LogMessage, LogReader};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -128,6 +128,7 @@ fn play(dir: &Path, log: &Path, devices: &[(&str, &str)], faults: &[&str]) -> Ou
                     .arg(cfg)
                     .stderr(err),
             )
+            .expect("spawn")
         })
         .collect();
     let mut emulate = Command::new(binary("auvnav"));
@@ -153,7 +154,7 @@ fn play(dir: &Path, log: &Path, devices: &[(&str, &str)], faults: &[&str]) -> Ou
     for (class, protocol) in devices {
         emulate.arg(format!("--{class}")).arg(protocol);
     }
-    let mut emulator = Proc::spawn("emulate", &mut emulate);
+    let mut emulator = Proc::spawn("emulate", &mut emulate).expect("spawn");
     let mut got = Collected::default();
     let mut drain = |got: &mut Collected| {
         while let Some(m) = imu.receive().expect("receive") {

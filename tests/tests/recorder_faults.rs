@@ -2,10 +2,10 @@
 //! its last flush and `--recover` makes it a complete log; on a write error (the file size limit
 //! standing in for a full disk) it reports, stops, and what it flushed stays readable.
 
+use auvnav_log::{LogError, LogMessage, LogReader};
 use auvnav_shm_schema::bus::Bus;
 use auvnav_shm_schema::{ImuSampleV1, qos, topic};
 use auvnav_tests::processes::{Proc, TempDir, binary, unique};
-use auvnav_tools::log::{LogError, LogMessage, LogReader};
 use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -71,6 +71,7 @@ fn start_recorder(out: &Path, prefix: &str, shell_prefix: &str) -> Proc {
             .arg(cmd)
             .stderr(std::fs::File::create(out.with_extension("err")).expect("stderr")),
     )
+    .expect("spawn")
 }
 
 #[test]

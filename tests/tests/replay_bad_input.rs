@@ -2,10 +2,10 @@
 //! malformed messages, missing channels and a truncated file are skipped and counted or end with
 //! a clear error; nothing panics.
 
+use auvnav_log::{CDR_HEADER, LogHeader, LogMessage, LogWriter, write_log_atomically};
 use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, Message, TruthStateV1, topic};
-use auvnav_tools::log::{CDR_HEADER, LogHeader, LogMessage, LogWriter, write_log_atomically};
+use auvnav_sim::{self as sim, SimConfig, scenario::Scenario};
 use auvnav_tools::replay::{ReplayArgs, ReplayReport, run};
-use auvnav_tools::sim::{self, SimConfig, scenario::Scenario};
 use std::path::{Path, PathBuf};
 
 fn messages(seconds: f64) -> Vec<LogMessage> {

@@ -1,11 +1,11 @@
 //! The simulator's effects checked against analytic expectations.
 
 use auvnav_core::earth::{self, Geodetic};
+use auvnav_log::LogMessage;
 use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, TruthStateV1, UsblFixV1};
-use auvnav_tools::log::LogMessage;
-use auvnav_tools::sim::effects::Effects;
-use auvnav_tools::sim::scenario::Scenario;
-use auvnav_tools::sim::{SimConfig, StationGeometry, simulate_to_vec};
+use auvnav_sim::effects::Effects;
+use auvnav_sim::scenario::Scenario;
+use auvnav_sim::{SimConfig, StationGeometry, simulate_to_vec};
 use nalgebra::{UnitQuaternion, Vector3};
 
 fn run(scenario: &str, settings: &[(&str, &[f64])], duration: Option<f64>) -> Vec<LogMessage> {

@@ -113,8 +113,8 @@ fn loose_coupling_with_a_surveyed_array_tracks_the_fix() {
 
 #[test]
 fn the_session_fuses_usbl_when_configured_as_the_daemon_and_replay_run_it() {
+    use auvnav_sim::{self as sim, SimConfig, StationGeometry, scenario::Scenario};
     use auvnav_tools::replay::{Replay, ReplayConfig};
-    use auvnav_tools::sim::{self, SimConfig, StationGeometry, scenario::Scenario};
     let scenario = Scenario::load("docking").expect("scenario");
     let station = StationGeometry::from_scenario(&scenario).expect("station");
     let (messages, summary) = sim::simulate_to_vec(&SimConfig {
@@ -170,9 +170,9 @@ fn the_adaptive_noise_estimate_converges_to_the_simulated_usbl_noise() {
     // (its memory is about 50 fixes) it must find the simulated noise.
     use auvnav_core::navigator::initial_state;
     use auvnav_core::session::{Session, SessionConfig, SessionOutput};
+    use auvnav_log::LogMessage;
     use auvnav_shm_schema::AidSource;
-    use auvnav_tools::log::LogMessage;
-    use auvnav_tools::sim::{self, SimConfig, StationGeometry, scenario::Scenario};
+    use auvnav_sim::{self as sim, SimConfig, StationGeometry, scenario::Scenario};
     let scenario = Scenario::load("docking").expect("scenario");
     let station = StationGeometry::from_scenario(&scenario).expect("station");
     let effects = scenario.effects().expect("effects");

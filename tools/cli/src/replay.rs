@@ -8,11 +8,11 @@
 //! between the two solutions around the epoch).
 
 use crate::accuracy::{Accuracy, AccuracyTracker};
-use crate::log::{LogError, LogHeader, LogMessage, LogReader, write_log_atomically};
 use anyhow::{Context, bail};
 use auvnav_core::earth::Geodetic;
 use auvnav_core::navigator::{NavCounters, Navigator, initial_state};
 use auvnav_core::session::{Session, SessionOutput};
+use auvnav_log::{LogError, LogHeader, LogMessage, LogReader, write_log_atomically};
 use auvnav_shm_schema::{AidDiagnosticsV1, NavSolutionV1, TruthStateV1, topic};
 use serde::Serialize;
 use std::io::Write;
@@ -428,7 +428,7 @@ pub fn replay_config(a: &ReplayArgs) -> anyhow::Result<(ReplayConfig, String)> {
                     .and_then(|mut r| r.read_header())
                     .with_context(|| format!("reading {}", a.log.display()))?;
                 let station =
-                    crate::sim::StationGeometry::from_notes(&header.notes).with_context(|| {
+                    auvnav_sim::StationGeometry::from_notes(&header.notes).with_context(|| {
                         format!(
                             "--usbl: {} has no station survey in its header; give the station \
                              in [navigation.usbl] of --config",

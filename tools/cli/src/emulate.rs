@@ -12,12 +12,12 @@
 //! pseudo-terminal (times in seconds of log time from the first message). Every fault is counted
 //! in the summary, so a test can check the driver against what was played.
 
-use crate::log::{LogMessage, LogReader};
-use crate::sim::rng::Rng;
 use anyhow::{Context, bail};
 use auvnav_drivers::convert::KvhConfig;
 use auvnav_drivers::device::{DeviceClass, Protocol};
 use auvnav_drivers::emulate as enc;
+use auvnav_log::{LogMessage, LogReader};
+use auvnav_sim::rng::Rng;
 use serde::Serialize;
 use std::io::Write;
 use std::path::{Path, PathBuf};

@@ -9,13 +9,13 @@
 //! runs, `N * ANEES` of a consistent filter is chi-square with `3 N` degrees of freedom; the report
 //! gives the two-sided 95 % bounds and the fraction of epochs inside them per block.
 
-use crate::log::LogMessage;
-use crate::sim::{self, SimConfig, effects::Effects, rng::Rng, scenario::Scenario};
 use anyhow::bail;
 use auvnav_core::earth::{self, Geodetic};
 use auvnav_core::ekf as filter;
 use auvnav_core::navigator::NavConfig;
 use auvnav_core::session::{Session, SessionConfig, SessionOutput};
+use auvnav_log::LogMessage;
+use auvnav_sim::{self as sim, SimConfig, effects::Effects, rng::Rng, scenario::Scenario};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use serde::Serialize;
 

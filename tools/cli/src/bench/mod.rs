@@ -1,8 +1,8 @@
 //! `auvnav bench`: throughput, latency and cost figures, one module per kind
 //! ([`throughput`], [`decode`], [`latency`], [`studies`]).
 
-use crate::sim::{self, SimConfig, scenario::Scenario};
 use anyhow::Context;
+use auvnav_sim::{self as sim, SimConfig, scenario::Scenario};
 use serde::Serialize;
 
 mod decode;

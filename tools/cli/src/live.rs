@@ -6,17 +6,18 @@
 //! byte-identical to the live one.
 
 use crate::accuracy::{Accuracy, AccuracyTracker};
-use crate::log::{LogMessage, LogReader};
+use crate::process::{ChildProcess, sibling};
 use crate::replay::interpolate;
-use crate::sim::{self, SimConfig, scenario::Scenario};
 use anyhow::{Context, bail};
 use auvnav_drivers::can::DbcDecoder;
 use auvnav_drivers::can_driver::SAMPLE_DBC;
+use auvnav_log::{LogMessage, LogReader};
 use auvnav_shm_schema::{NavSolutionV1, TruthStateV1};
+use auvnav_sim::{self as sim, SimConfig, scenario::Scenario};
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// What the live demo reports.
@@ -38,81 +39,6 @@ pub struct LiveResult {
     pub wall_seconds: f64,
     /// Per-process last lines of standard error (their summaries).
     pub process_reports: Vec<(String, String)>,
-}
-
-struct Process {
-    name: String,
-    child: Child,
-    stderr: PathBuf,
-}
-
-impl Process {
-    fn spawn(name: &str, dir: &Path, cmd: &mut Command) -> anyhow::Result<Process> {
-        let stderr = dir.join(format!("{name}.log"));
-        let file = std::fs::File::create(&stderr)?;
-        let child = cmd
-            .stdout(Stdio::null())
-            .stderr(file)
-            .spawn()
-            .with_context(|| format!("starting {name}"))?;
-        Ok(Process {
-            name: name.to_string(),
-            child,
-            stderr,
-        })
-    }
-
-    /// SIGTERM, then wait; SIGKILL after `timeout`. True for a clean exit.
-    fn stop(&mut self, timeout: Duration) -> bool {
-        let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
-        let _ = nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM);
-        self.wait(timeout)
-    }
-
-    fn wait(&mut self, timeout: Duration) -> bool {
-        let end = Instant::now() + timeout;
-        while Instant::now() < end {
-            if let Ok(Some(s)) = self.child.try_wait() {
-                return s.success();
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-        false
-    }
-
-    fn report(&self) -> String {
-        std::fs::read_to_string(&self.stderr)
-            .unwrap_or_default()
-            .lines()
-            .last()
-            .unwrap_or_default()
-            .to_string()
-    }
-}
-
-impl Drop for Process {
-    fn drop(&mut self) {
-        if let Ok(None) = self.child.try_wait() {
-            let _ = self.child.kill();
-            let _ = self.child.wait();
-        }
-    }
-}
-
-/// A workspace binary next to this program.
-fn sibling(name: &str) -> anyhow::Result<PathBuf> {
-    let exe = std::env::current_exe()?;
-    let path = exe.parent().context("executable directory")?.join(name);
-    if !path.exists() {
-        bail!(
-            "{} not found: the demo runs the drivers and the daemon as processes; build them \
-             with `cargo build --release` (all binaries), or run `auvnav demo --in-process`",
-            path.display()
-        );
-    }
-    Ok(path)
 }
 
 /// Parses the solution CSV written by the daemon or the replay.
@@ -228,7 +154,7 @@ pub fn run_live(
         "auvnav-can",
     ]
     .iter()
-    .map(|b| sibling(b))
+    .map(|b| sibling(b).context("or run `auvnav demo --in-process`"))
     .collect::<anyhow::Result<Vec<_>>>()?;
     let [daemon, dvl_bin, imu_bin, usbl_bin, can_bin] = &binaries[..] else {
         bail!("binaries");
@@ -280,7 +206,7 @@ pub fn run_live(
         health_period_s: 0.5,
         navigation: auvnav_core::config::NavConfig {
             imu_dt_from_device_time: true,
-            usbl: crate::sim::StationGeometry::from_scenario(&cfg.scenario)
+            usbl: auvnav_sim::StationGeometry::from_scenario(&cfg.scenario)
                 .map(|st| st.usbl_config()),
             ..Default::default()
         },
@@ -331,7 +257,7 @@ pub fn run_live(
 
     // 3. Processes: recorder and daemon first, so they see every message; then the drivers.
     let record = dir.join("record.mcap");
-    let mut recorder = Process::spawn(
+    let mut recorder = ChildProcess::spawn_logged(
         "record",
         &dir,
         Command::new(&me)
@@ -342,23 +268,23 @@ pub fn run_live(
             .arg("--embed-config")
             .arg(&daemon_cfg),
     )?;
-    let mut daemon_p = Process::spawn(
+    let mut daemon_p = ChildProcess::spawn_logged(
         "auvnavd",
         &dir,
         Command::new(daemon).arg("--config").arg(&daemon_cfg),
     )?;
     let mut drivers = vec![
-        Process::spawn(
+        ChildProcess::spawn_logged(
             "auvnav-dvl",
             &dir,
             Command::new(dvl_bin).arg("--config").arg(&dvl_cfg),
         )?,
-        Process::spawn(
+        ChildProcess::spawn_logged(
             "auvnav-imu",
             &dir,
             Command::new(imu_bin).arg("--config").arg(&imu_cfg),
         )?,
-        Process::spawn(
+        ChildProcess::spawn_logged(
             "auvnav-usbl",
             &dir,
             Command::new(usbl_bin).arg("--config").arg(&usbl_cfg),
@@ -366,7 +292,7 @@ pub fn run_live(
     ];
     std::thread::sleep(Duration::from_millis(500));
     let start_delay = 1.5;
-    let mut emulator = Process::spawn(
+    let mut emulator = ChildProcess::spawn_logged(
         "emulate",
         &dir,
         Command::new(&me)
@@ -380,7 +306,7 @@ pub fn run_live(
     )?;
     // The depth sensor's frames start with the other devices' (the emulator's start delay).
     std::thread::sleep(Duration::from_secs_f64(start_delay));
-    drivers.push(Process::spawn(
+    drivers.push(ChildProcess::spawn_logged(
         "auvnav-can",
         &dir,
         Command::new(can_bin)
@@ -391,12 +317,12 @@ pub fn run_live(
             .args(["--speed", &speed.to_string()]),
     )?);
     let play = Duration::from_secs_f64(seconds / speed + 30.0);
-    let mut clean = emulator.wait(play);
+    let mut clean = emulator.wait_clean(play);
     std::thread::sleep(Duration::from_millis(500));
     // 4. Stop: drivers (the CAN replay ends by itself), then the daemon, then the recorder.
     for d in &mut drivers {
         let ok = if d.name == "auvnav-can" {
-            d.wait(Duration::from_secs(10))
+            d.wait_clean(Duration::from_secs(10))
         } else {
             d.stop(Duration::from_secs(10))
         };
@@ -408,7 +334,7 @@ pub fn run_live(
     clean &= recorder.stop(Duration::from_secs(10));
     let mut process_reports: Vec<(String, String)> = Vec::new();
     for p in drivers.iter().chain([&daemon_p, &recorder, &emulator]) {
-        process_reports.push((p.name.clone(), p.report()));
+        process_reports.push((p.name.clone(), p.last_log_line()));
     }
 
     // 5. Accuracy of the live solution, and the replay of the recording.

@@ -9,16 +9,16 @@
 //! error of the array's surveyed yaw (`--array-yaw-error`) are effects of the simulated device;
 //! the filter knows the array as surveyed. Each run depends only on its seed.
 
-use crate::log::LogMessage;
-use crate::sim::rng::Rng;
-use crate::sim::{self, SimConfig, StationGeometry, scenario::Scenario};
 use anyhow::{Context, bail};
 use auvnav_core::aid::usbl::{Coupling, UsblConfig, UsblFilter};
 use auvnav_core::earth::{Geodetic, ned_offset, offset_position};
 use auvnav_core::feed::SensorMessage;
 use auvnav_core::navigator::NavConfig;
 use auvnav_core::session::{Session, SessionConfig, SessionOutput};
+use auvnav_log::LogMessage;
 use auvnav_shm_schema::{AidDiagnosticsV1, AidSource};
+use auvnav_sim::rng::Rng;
+use auvnav_sim::{self as sim, SimConfig, StationGeometry, scenario::Scenario};
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::Serialize;
 
@@ -405,7 +405,7 @@ pub fn run(a: &UsblArgs) -> anyhow::Result<UsblReport> {
     let sum = |f: fn(&RunResult) -> u64| per_run.iter().map(f).sum::<u64>();
     let seconds = a
         .seconds
-        .unwrap_or(crate::sim::trajectory::Trajectory::from_scenario(&scenario)?.duration_s);
+        .unwrap_or(auvnav_sim::trajectory::Trajectory::from_scenario(&scenario)?.duration_s);
     Ok(UsblReport {
         scenario: scenario.name.clone(),
         coupling: a.coupling,

@@ -5,15 +5,15 @@
 //! perturbed initial state. Runs are spread over the available cores; each run depends only on
 //! its seed, so the result does not depend on the number of threads.
 
-use crate::log::LogMessage;
-use crate::sim::rng::Rng;
-use crate::sim::{self, SimConfig, effects::Effects, scenario::Scenario};
 use anyhow::{Context, bail};
 use auvnav_core::align::fine::{ErrorModel, FineAlignConfig};
 use auvnav_core::earth::{Geodetic, ned_offset, offset_position};
 use auvnav_core::session::{Session, SessionConfig};
 use auvnav_core::strapdown::NavState;
+use auvnav_log::LogMessage;
 use auvnav_shm_schema::TruthStateV1;
+use auvnav_sim::rng::Rng;
+use auvnav_sim::{self as sim, SimConfig, effects::Effects, scenario::Scenario};
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::Serialize;
 

@@ -2,7 +2,7 @@
 //! library functions that tests drive directly.
 
 use anyhow::{Context, bail};
-use auvnav_tools::sim::{self, SimConfig, effects, scenario::Scenario};
+use auvnav_sim::{self as sim, SimConfig, effects, scenario::Scenario};
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 
@@ -30,7 +30,7 @@ enum Command {
     /// Play a log's sensor messages into pseudo-terminals in the devices' protocols.
     Emulate(auvnav_tools::emulate::EmulateArgs),
     /// Record every topic of a deployment to a log (MCAP); or recover a killed recorder's log.
-    Record(auvnav_tools::record::RecordArgs),
+    Record(auvnav_recorder::RecordArgs),
     /// S-ALIGN fine-alignment Monte Carlo: error models 1/2/3 on moored, straight, turning runs.
     Align(auvnav_tools::align::AlignArgs),
     /// S-ALIGN fine alignment on the Snapir segments from the reference heading plus an offset.
@@ -280,7 +280,7 @@ fn main() -> std::process::ExitCode {
         Command::Replay(a) => run_replay(&a),
         Command::Decode(a) => auvnav_tools::decode::run(&a).map(|_| ()),
         Command::Emulate(a) => auvnav_tools::emulate::run(&a).map(|_| ()),
-        Command::Record(a) => auvnav_tools::record::run(&a).map(|_| ()),
+        Command::Record(a) => auvnav_recorder::run(&a).map(|_| ()),
         Command::AlignMeasured(a) => auvnav_tools::align::run_measured(&a).map(|_| ()),
         Command::Align(a) => auvnav_tools::align::run(&a).and_then(|r| {
             if a.json {

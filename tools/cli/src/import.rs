@@ -7,8 +7,8 @@
 //! channel whose metadata says it is derived from the reference, not an independent sensor.
 //! Times are the files' own (0 at the segment start) in nanoseconds.
 
-use crate::log::{LogHeader, LogMessage, LogWriter, write_log_atomically};
 use anyhow::{Context, bail};
+use auvnav_log::{LogHeader, LogMessage, LogWriter, write_log_atomically};
 use auvnav_shm_schema::{DepthV1, DvlVelocityV1, ImuSampleV1, TruthStateV1, topic};
 use nalgebra::UnitQuaternion;
 use serde::Serialize;

@@ -2,10 +2,10 @@
 //! parallel runner (`crate::parallel`): how a run's navigation starts. The runs themselves feed
 //! the navigation session (`auvnav_core::feed`), as the daemon does.
 
-use crate::sim::rng::Rng;
 use auvnav_core::earth::{self, Geodetic};
 use auvnav_core::navigator::{NavConfig, initial_state};
 use auvnav_core::strapdown::NavState;
+use auvnav_sim::rng::Rng;
 use nalgebra::{UnitQuaternion, Vector3};
 
 const DEG: f64 = std::f64::consts::PI / 180.0;

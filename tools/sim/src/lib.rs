@@ -10,8 +10,8 @@ pub mod scenario;
 pub mod sensors;
 pub mod trajectory;
 
-use crate::log::{LogHeader, LogMessage, write_log_atomically};
 use auvnav_core::earth::{self, Geodetic};
+use auvnav_log::{LogHeader, LogMessage, write_log_atomically};
 use auvnav_shm_schema::{TruthStateV1, topic};
 use effects::Effects;
 use nalgebra::Vector3;

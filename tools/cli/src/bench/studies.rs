@@ -71,18 +71,18 @@ pub struct UsblBench {
 /// update includes the covariance propagation pending since the last one (at most one
 /// `covariance_interval_s`, 50 ms). One thread.
 pub fn usbl(seconds: f64, json: bool) -> anyhow::Result<()> {
-    use crate::log::LogMessage;
-    use crate::sim::StationGeometry;
     use anyhow::bail;
     use auvnav_core::aid::usbl::{Coupling, UsblFilter};
     use auvnav_core::feed::SensorMessage;
     use auvnav_core::navigator::initial_state;
     use auvnav_core::session::{Session, SessionConfig};
+    use auvnav_log::LogMessage;
+    use auvnav_sim::StationGeometry;
     use std::time::Instant;
     let scenario = Scenario::load("docking")?;
     let station =
         StationGeometry::from_scenario(&scenario).context("the docking scenario has no station")?;
-    let (messages, _) = crate::sim::simulate_to_vec(&SimConfig {
+    let (messages, _) = auvnav_sim::simulate_to_vec(&SimConfig {
         scenario: scenario.clone(),
         effects: scenario.effects()?,
         seed: 1,

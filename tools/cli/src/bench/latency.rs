@@ -57,17 +57,7 @@ pub fn pty_latency(rate_hz: f64, seconds: f64) -> anyhow::Result<PtyLatency> {
     use std::sync::atomic::{AtomicBool, Ordering};
     use std::time::{Duration, Instant};
 
-    let exe = std::env::current_exe()?;
-    let driver = exe
-        .parent()
-        .context("executable directory")?
-        .join("auvnav-imu");
-    if !driver.exists() {
-        anyhow::bail!(
-            "{} not found: build the drivers (cargo build --release -p auvnav-drivers)",
-            driver.display()
-        );
-    }
+    let driver = crate::process::sibling("auvnav-imu")?;
     let tag = format!("benchpty{}r{}", std::process::id(), rate_hz as u64);
     let dir = std::env::temp_dir().join(&tag);
     std::fs::create_dir_all(&dir)?;
@@ -107,12 +97,13 @@ pub fn pty_latency(rate_hz: f64, seconds: f64) -> anyhow::Result<PtyLatency> {
     while !ready.load(Ordering::SeqCst) {
         std::thread::sleep(Duration::from_millis(5));
     }
-    let mut child = std::process::Command::new(&driver)
-        .arg("--config")
-        .arg(&cfg)
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .with_context(|| format!("starting {}", driver.display()))?;
+    let mut child = crate::process::ChildProcess::spawn(
+        "auvnav-imu",
+        std::process::Command::new(&driver)
+            .arg("--config")
+            .arg(&cfg)
+            .stderr(std::process::Stdio::null()),
+    )?;
     // Let the driver open the terminal and its publisher connect.
     std::thread::sleep(Duration::from_millis(1500));
     let n = (rate_hz * seconds).round() as u64;
@@ -136,11 +127,7 @@ pub fn pty_latency(rate_hz: f64, seconds: f64) -> anyhow::Result<PtyLatency> {
         master.write_all(&frame)?;
     }
     std::thread::sleep(Duration::from_millis(300));
-    let _ = nix::sys::signal::kill(
-        nix::unistd::Pid::from_raw(child.id() as i32),
-        nix::sys::signal::Signal::SIGTERM,
-    );
-    let _ = child.wait();
+    child.stop(Duration::from_secs(10));
     done.store(true, Ordering::SeqCst);
     let got = sub_thread
         .join()
@@ -217,17 +204,6 @@ pub fn e2e(rate_hz: f64, seconds: f64) -> anyhow::Result<E2eLatency> {
     use std::sync::atomic::{AtomicBool, Ordering};
     use std::time::{Duration, Instant};
 
-    let exe = std::env::current_exe()?;
-    let bin_dir = exe.parent().context("executable directory")?.to_path_buf();
-    let bin = |n: &str| -> anyhow::Result<std::path::PathBuf> {
-        let p = bin_dir.join(n);
-        anyhow::ensure!(
-            p.exists(),
-            "{} not found: build all binaries (cargo build --release)",
-            p.display()
-        );
-        Ok(p)
-    };
     let tag = format!("benche2e{}r{}", std::process::id(), rate_hz as u64);
     let dir = std::env::temp_dir().join(&tag);
     std::fs::create_dir_all(&dir)?;
@@ -298,13 +274,14 @@ pub fn e2e(rate_hz: f64, seconds: f64) -> anyhow::Result<E2eLatency> {
     while !ready.load(Ordering::SeqCst) {
         std::thread::sleep(Duration::from_millis(5));
     }
-    let spawn = |name: &str, args: &[&std::ffi::OsStr]| -> anyhow::Result<std::process::Child> {
-        std::process::Command::new(bin(name)?)
-            .args(args)
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .with_context(|| format!("starting {name}"))
+    let spawn = |name: &str, args: &[&std::ffi::OsStr]| {
+        crate::process::ChildProcess::spawn(
+            name,
+            std::process::Command::new(crate::process::sibling(name)?)
+                .args(args)
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::null()),
+        )
     };
     let record_path = dir.join("record.mcap");
     let mut children = [
@@ -324,7 +301,7 @@ pub fn e2e(rate_hz: f64, seconds: f64) -> anyhow::Result<E2eLatency> {
         spawn("auvnav-usbl", &["--config".as_ref(), usbl_cfg.as_os_str()])?,
     ];
     std::thread::sleep(Duration::from_millis(1500));
-    let (recorder_pid, daemon_pid) = (children[0].id(), children[1].id());
+    let (recorder_pid, daemon_pid) = (children[0].pid(), children[1].pid());
     let cpu0 = (cpu_seconds(daemon_pid), cpu_seconds(recorder_pid));
     let n = (rate_hz * seconds).round() as u64;
     let mut written = vec![0u64; n as usize];
@@ -382,11 +359,7 @@ pub fn e2e(rate_hz: f64, seconds: f64) -> anyhow::Result<E2eLatency> {
     let cpu1 = (cpu_seconds(daemon_pid), cpu_seconds(recorder_pid));
     std::thread::sleep(Duration::from_millis(300));
     for c in children.iter_mut().rev() {
-        let _ = nix::sys::signal::kill(
-            nix::unistd::Pid::from_raw(c.id() as i32),
-            nix::sys::signal::Signal::SIGTERM,
-        );
-        let _ = c.wait();
+        c.stop(Duration::from_secs(10));
     }
     done.store(true, Ordering::SeqCst);
     let (sols, imus) = watcher

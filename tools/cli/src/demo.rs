@@ -6,9 +6,9 @@
 
 use crate::accuracy::Accuracy;
 use crate::replay::{Output, Replay, ReplayConfig};
-use crate::sim::{self, SimConfig, SimSummary, scenario::Scenario};
 use anyhow::Context;
 use auvnav_core::navigator::{NavConfig, NavCounters};
+use auvnav_sim::{self as sim, SimConfig, SimSummary, scenario::Scenario};
 use serde::Serialize;
 use std::path::PathBuf;
 
@@ -103,7 +103,7 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
         csv_file = Some(std::io::BufWriter::new(f));
     }
     // With a USBL station in the scenario, its fixes are fused (tight, AUKF).
-    let usbl = crate::sim::StationGeometry::from_scenario(&cfg.scenario).map(|st| st.usbl_config());
+    let usbl = auvnav_sim::StationGeometry::from_scenario(&cfg.scenario).map(|st| st.usbl_config());
     let has_usbl = usbl.is_some();
     let (simulated, accuracy, counters) = run_voyage(
         &cfg,

@@ -8,8 +8,8 @@
 //! counted per topic. A write error (a full disk) stops the recorder with a report; what was
 //! flushed before stays readable.
 
-use crate::log::{LogError, LogHeader, LogReader, LogWriter, write_log_atomically};
 use anyhow::{Context, bail};
+use auvnav_log::{LogError, LogHeader, LogReader, LogWriter, write_log_atomically};
 use auvnav_shm_schema::bus::{Bus, BusSubscriber, Sequenced};
 use auvnav_shm_schema::{
     AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, Message,

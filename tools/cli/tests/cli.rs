@@ -149,7 +149,7 @@ fn bad_input_gives_a_clear_error_and_no_file() {
 }
 
 fn scenario_path(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("src/sim/scenarios/{name}.toml"))
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../sim/src/scenarios/{name}.toml"))
 }
 
 #[test]
@@ -207,10 +207,10 @@ fn every_scenario_log_is_decoded_by_the_python_mcap_reader() {
         eprintln!("SKIPPED: {why} (pip install mcap mcap-ros2-support)");
         return;
     }
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/python/read_log.py");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/python/read_log.py");
     let dir = temp_dir("python");
     // Every built-in scenario, as `--list-scenarios` lists them.
-    for name in auvnav_tools::sim::scenario::BUILTIN.iter().map(|(n, _)| *n) {
+    for name in auvnav_sim::scenario::BUILTIN.iter().map(|(n, _)| *n) {
         let out = dir.join(format!("{name}.mcap"));
         let o = auvnav(&[
             "sim",
@@ -311,7 +311,7 @@ fn replaying_a_log_twice_gives_identical_files_and_reports_accuracy() {
     let out = dir.join("nav.mcap");
     let o = auvnav(&["replay", &log_s, "--out", &out.to_string_lossy()]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let mut reader = auvnav_tools::log::LogReader::open(&out).expect("open");
+    let mut reader = auvnav_log::LogReader::open(&out).expect("open");
     let mut topics = std::collections::BTreeMap::new();
     while let Some(m) = reader.next_message().expect("read") {
         *topics.entry(m.topic.to_string()).or_insert(0u64) += 1;
