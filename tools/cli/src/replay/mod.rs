@@ -1,0 +1,312 @@
+//! `auvnav replay`: runs a log through the navigation core as fast as it can.
+//!
+//! The log's sensor messages go through the navigation session's feed (`Session::feed`), the
+//! path the daemon runs, in log order; the session orders the aids against the IMU stream as the
+//! daemon does. The
+//! initial state comes from the configuration's `[initial]` table when it has one, otherwise from
+//! the first record of the log's truth channel (simulated truth, or the reference solution of an
+//! imported data set); sensor messages before that are counted and skipped. When the log has a
+//! truth channel, the solution is compared with it at every truth epoch (linear interpolation
+//! between the two solutions around the epoch).
+//!
+//! This module is the replay itself ([`Replay`]); [`command`] is the `auvnav replay` command
+//! around it (arguments, configuration, outputs, report).
+
+mod command;
+pub use command::*;
+
+use crate::accuracy::{Accuracy, AccuracyTracker};
+use anyhow::{Context, bail};
+use auvnav_core::earth::Geodetic;
+use auvnav_core::navigator::{NavCounters, Navigator, initial_state};
+use auvnav_core::session::{Session, SessionOutput};
+use auvnav_log::{LogError, LogHeader, LogMessage, LogReader, write_log_atomically};
+use auvnav_shm_schema::{AidDiagnosticsV1, NavSolutionV1, TruthStateV1, topic};
+use serde::Serialize;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+pub use auvnav_core::session::{InitialReport, InitialState};
+
+/// The replay configuration file: `[navigation]` (the core's `NavConfig`) and an optional
+/// `[initial]` state — the same file the daemon's `[navigation]`/`[initial]` tables hold.
+pub type ReplayConfig = auvnav_core::session::SessionConfig;
+
+/// Reads a replay configuration file and validates it as the daemon does.
+pub fn load_config(path: &Path) -> anyhow::Result<ReplayConfig> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading configuration {}", path.display()))?;
+    let cfg: ReplayConfig =
+        toml::from_str(&text).with_context(|| format!("configuration {}", path.display()))?;
+    cfg.validate()
+        .with_context(|| format!("configuration {}", path.display()))?;
+    Ok(cfg)
+}
+
+/// One output of the navigator.
+#[derive(Debug, Clone, Copy)]
+pub enum Output<'a> {
+    Solution(&'a NavSolutionV1),
+    Diagnostics(&'a AidDiagnosticsV1),
+    /// A truth record of the input, passed through so outputs can be compared with it.
+    Truth(&'a TruthStateV1),
+}
+
+/// What a replay skipped or could not use, per kind of input.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct ReplayCounts {
+    pub messages: u64,
+    pub imu: u64,
+    pub dvl: u64,
+    pub depth: u64,
+    pub gnss: u64,
+    /// USBL fixes (fused when the configuration has `[navigation.usbl]`; the navigator's
+    /// counters say what became of them).
+    pub usbl: u64,
+    pub truth: u64,
+    /// Sensor messages before the initial state was known (skipped).
+    pub before_start: u64,
+    /// Messages this replay does not use (magnetometer, outputs of an earlier run).
+    pub unused: u64,
+    /// Channels with a schema this program does not know (skipped).
+    pub unknown: u64,
+    /// Messages whose bytes do not match their schema (skipped).
+    pub malformed: u64,
+    /// Truth records older than the solution they would be compared with (skipped).
+    pub truth_late: u64,
+}
+
+/// Estimated parameters at the end of a replay.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FinalParameters {
+    pub gyro_bias_deg_h: [f64; 3],
+    pub accel_bias_ug: [f64; 3],
+    /// DVL mounting roll, pitch, yaw w.r.t. the body (deg).
+    pub dvl_mount_deg: [f64; 3],
+    pub dvl_scale_factor: f64,
+    pub dvl_lever_arm_m: [f64; 3],
+    pub dvl_time_offset_s: f64,
+}
+
+impl FinalParameters {
+    pub fn of(nav: &Navigator) -> FinalParameters {
+        let (bg, ba) = nav.imu_biases();
+        let d = nav.dvl_parameters();
+        let (r, p, y) = nalgebra::Rotation3::from_matrix_unchecked(d.c_dvl_to_body).euler_angles();
+        FinalParameters {
+            gyro_bias_deg_h: (bg * 3600.0).map(f64::to_degrees).into(),
+            accel_bias_ug: (ba / 9.806_65e-6).into(),
+            dvl_mount_deg: [r.to_degrees(), p.to_degrees(), y.to_degrees()],
+            dvl_scale_factor: d.scale,
+            dvl_lever_arm_m: d.lever_arm_m.into(),
+            dvl_time_offset_s: d.time_offset_s,
+        }
+    }
+}
+
+/// The replay state machine, fed one message at a time.
+pub struct Replay {
+    session: Session,
+    tracker: AccuracyTracker,
+    has_truth: bool,
+    prev_solution: Option<NavSolutionV1>,
+    pending_truth: Option<TruthStateV1>,
+    pub counts: ReplayCounts,
+    first_time_ns: Option<u64>,
+    last_time_ns: u64,
+}
+
+impl Replay {
+    pub fn new(cfg: &ReplayConfig, min_distance_m: f64) -> Replay {
+        Replay {
+            session: Session::new(cfg),
+            tracker: AccuracyTracker::new(min_distance_m),
+            has_truth: false,
+            prev_solution: None,
+            pending_truth: None,
+            counts: ReplayCounts::default(),
+            first_time_ns: None,
+            last_time_ns: 0,
+        }
+    }
+
+    pub fn navigator(&self) -> Option<&Navigator> {
+        self.session.navigator()
+    }
+
+    /// Passes the session's outputs on, following the solutions for the truth comparison.
+    fn forward<'o>(
+        prev: &'o mut Option<NavSolutionV1>,
+        pending: &'o mut Option<TruthStateV1>,
+        tracker: &'o mut AccuracyTracker,
+        out: &'o mut dyn FnMut(Output) -> anyhow::Result<()>,
+    ) -> impl FnMut(SessionOutput) -> anyhow::Result<()> + 'o {
+        move |o| match o {
+            SessionOutput::Solution(sol) => {
+                out(Output::Solution(sol))?;
+                if let (Some(t), Some(p)) = (*pending, *prev)
+                    && sol.host_time_ns >= t.host_time_ns
+                {
+                    tracker.add(&interpolate(&p, sol, t.host_time_ns), &t);
+                    *pending = None;
+                }
+                *prev = Some(*sol);
+                Ok(())
+            }
+            SessionOutput::Diagnostics(d) => out(Output::Diagnostics(d)),
+        }
+    }
+
+    /// Processes one message in log order; outputs go to `out`.
+    pub fn process(
+        &mut self,
+        m: &LogMessage,
+        out: &mut dyn FnMut(Output) -> anyhow::Result<()>,
+    ) -> anyhow::Result<()> {
+        self.counts.messages += 1;
+        let mut fwd = Self::forward(
+            &mut self.prev_solution,
+            &mut self.pending_truth,
+            &mut self.tracker,
+            out,
+        );
+        match m {
+            LogMessage::Truth(t) => {
+                drop(fwd);
+                self.counts.truth += 1;
+                self.has_truth = true;
+                out(Output::Truth(t))?;
+                self.note_time(t.host_time_ns);
+                if !self.session.started()
+                    && !self.session.has_configured_initial()
+                    && !self.session.has_alignment()
+                {
+                    let state = initial_state(
+                        t.host_time_ns as f64 * 1e-9,
+                        Geodetic {
+                            latitude_rad: t.latitude_rad,
+                            longitude_rad: t.longitude_rad,
+                            height_m: t.height_m,
+                        },
+                        t.velocity_ned_m_s,
+                        t.euler_rad,
+                    );
+                    let mut fwd = Self::forward(
+                        &mut self.prev_solution,
+                        &mut self.pending_truth,
+                        &mut self.tracker,
+                        out,
+                    );
+                    self.session
+                        .start(state, "first record of the truth channel", &mut fwd)?;
+                }
+                self.compare(t);
+            }
+            LogMessage::Imu(_)
+            | LogMessage::Dvl(_)
+            | LogMessage::Depth(_)
+            | LogMessage::Gnss(_)
+            | LogMessage::Usbl(_) => {
+                match m {
+                    LogMessage::Imu(_) => self.counts.imu += 1,
+                    LogMessage::Dvl(_) => self.counts.dvl += 1,
+                    LogMessage::Depth(_) => self.counts.depth += 1,
+                    LogMessage::Gnss(_) => self.counts.gnss += 1,
+                    _ => self.counts.usbl += 1,
+                }
+                if let Some(x) = m.sensor() {
+                    self.session.feed(&x, &mut fwd)?;
+                    drop(fwd);
+                    self.note_time(x.host_time_ns());
+                }
+            }
+            LogMessage::Unknown => self.counts.unknown += 1,
+            _ => self.counts.unused += 1,
+        }
+        self.counts.before_start = self.session.before_start;
+        Ok(())
+    }
+
+    /// Applies the aid messages still waiting for an IMU sample: call at the end of the input.
+    pub fn finish(
+        &mut self,
+        out: &mut dyn FnMut(Output) -> anyhow::Result<()>,
+    ) -> anyhow::Result<()> {
+        let mut fwd = Self::forward(
+            &mut self.prev_solution,
+            &mut self.pending_truth,
+            &mut self.tracker,
+            out,
+        );
+        self.session.finish(&mut fwd)
+    }
+
+    fn note_time(&mut self, t_ns: u64) {
+        self.first_time_ns.get_or_insert(t_ns);
+        self.last_time_ns = self.last_time_ns.max(t_ns);
+    }
+
+    fn compare(&mut self, t: &TruthStateV1) {
+        let Some(prev) = self.prev_solution else {
+            return;
+        };
+        if prev.host_time_ns == t.host_time_ns {
+            self.tracker.add(&prev, t);
+        } else if prev.host_time_ns > t.host_time_ns {
+            self.counts.truth_late += 1;
+        } else {
+            // Wait for the first solution at or after the truth epoch. A newer truth record
+            // replaces one still waiting (only possible when the IMU is slower than the truth).
+            if self.pending_truth.replace(*t).is_some() {
+                self.counts.truth_late += 1;
+            }
+        }
+    }
+
+    /// The accuracy against the truth channel, when the log has one.
+    pub fn accuracy(&self) -> Option<Accuracy> {
+        self.has_truth.then(|| self.tracker.result())
+    }
+
+    pub fn initial(&self) -> Option<&InitialReport> {
+        self.session.initial()
+    }
+
+    pub fn nav_counters(&self) -> NavCounters {
+        self.session
+            .navigator()
+            .map(|n| n.counters())
+            .unwrap_or_default()
+    }
+
+    /// Log time covered by the messages seen (s).
+    pub fn duration_s(&self) -> f64 {
+        self.first_time_ns
+            .map(|f| (self.last_time_ns - f) as f64 * 1e-9)
+            .unwrap_or(0.0)
+    }
+}
+
+/// The solution at `t_ns` between `a` and `b` (position, velocity and heading interpolated
+/// linearly; the rest taken from `b`).
+pub fn interpolate(a: &NavSolutionV1, b: &NavSolutionV1, t_ns: u64) -> NavSolutionV1 {
+    let span = b.host_time_ns.saturating_sub(a.host_time_ns);
+    if span == 0 {
+        return *b;
+    }
+    let w = t_ns.saturating_sub(a.host_time_ns) as f64 / span as f64;
+    let lerp = |x: f64, y: f64| x + (y - x) * w;
+    let mut s = *b;
+    s.host_time_ns = t_ns;
+    s.latitude_rad = lerp(a.latitude_rad, b.latitude_rad);
+    s.longitude_rad = lerp(a.longitude_rad, b.longitude_rad);
+    s.height_m = lerp(a.height_m, b.height_m);
+    for i in 0..3 {
+        s.velocity_ned_m_s[i] = lerp(a.velocity_ned_m_s[i], b.velocity_ned_m_s[i]);
+    }
+    let dyaw = (b.euler_rad[2] - a.euler_rad[2] + std::f64::consts::PI)
+        .rem_euclid(std::f64::consts::TAU)
+        - std::f64::consts::PI;
+    s.euler_rad[2] = a.euler_rad[2] + dyaw * w;
+    s
+}
