@@ -8,8 +8,8 @@
 
 use crate::earth::Geodetic;
 use crate::ekf::gate;
-use crate::navigator::initial_state;
 use crate::strapdown::NavState;
+use crate::strapdown::initial_state;
 use serde::{Deserialize, Serialize};
 
 /// The navigation configuration shared by the daemon, replay and every offline tool.

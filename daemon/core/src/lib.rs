@@ -3,7 +3,7 @@
 //!
 //! Map: [`earth`] and [`strapdown`] (the inertial mechanisation), [`ekf`] (error-state filter,
 //! gates, unscented update, adaptive noise), [`aid`] (one module per aiding sensor),
-//! [`navigator`] (the core plus its aids), [`align`] (coarse and fine alignment), [`session`]
+//! [`nav_core`] (strapdown, covariance, correction), [`navigator`] (the core plus its aids), [`align`] (coarse and fine alignment), [`session`]
 //! (how a run starts and the order in which messages meet the navigator), [`feed`] (the one
 //! message → session path), [`config`] (the configuration types and their validation), [`csv`]
 //! (solution and diagnostics files).
@@ -16,6 +16,7 @@ pub mod csv;
 pub mod earth;
 pub mod ekf;
 pub mod feed;
+pub mod nav_core;
 pub mod navigator;
 pub mod session;
 pub mod strapdown;

@@ -99,6 +99,21 @@ impl Strapdown {
     }
 }
 
+/// The initial state from a geodetic position, NED velocity and Euler angles.
+pub fn initial_state(
+    time_s: f64,
+    position: Geodetic,
+    velocity_ned: [f64; 3],
+    euler_rad: [f64; 3],
+) -> NavState {
+    NavState {
+        time_s,
+        position,
+        velocity_ned: Vector3::from(velocity_ned),
+        q_body_to_ned: UnitQuaternion::from_euler_angles(euler_rad[0], euler_rad[1], euler_rad[2]),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

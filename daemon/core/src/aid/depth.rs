@@ -1,7 +1,6 @@
 //! Depth aid: `h(x) = -height`, one dimension, χ² gate.
 
 use super::{AidCounters, AidUpdate, NavCore};
-use crate::config::NavConfig;
 use crate::ekf;
 use auvnav_shm_schema::{AidSource, DepthV1};
 use nalgebra::{SMatrix, SVector};
@@ -17,10 +16,11 @@ pub struct DepthAid {
 }
 
 impl DepthAid {
-    pub fn new(cfg: &NavConfig) -> DepthAid {
+    /// Noise `std_m` (m), χ² gate `gate_chi2` (1 dof).
+    pub fn new(std_m: f64, gate_chi2: f64) -> DepthAid {
         DepthAid {
-            std_m: cfg.depth_std_m,
-            gate_chi2: cfg.depth_gate_chi2,
+            std_m,
+            gate_chi2,
             counters: AidCounters::default(),
         }
     }

@@ -4,7 +4,6 @@
 //! run of rejections (`dvl_reset_after_s`).
 
 use super::{AidCounters, AidUpdate, NavCore};
-use crate::config::NavConfig;
 use crate::earth;
 use crate::ekf::{self, StateVector, skew};
 use crate::strapdown::NavState;
@@ -12,6 +11,16 @@ use auvnav_shm_schema::{AidDiagnosticsV1, AidSource, DvlVelocityV1};
 use nalgebra::{Matrix3, Rotation3, SMatrix, Vector3};
 
 const DEG: f64 = std::f64::consts::PI / 180.0;
+
+/// Which installation parameters are estimated (parameter states), with their initial
+/// one-sigma values; `None` = not estimated.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct DvlEstimation {
+    pub mounting_std_deg: Option<f64>,
+    pub scale_std: Option<f64>,
+    pub lever_arm_std_m: Option<f64>,
+    pub time_offset_std_s: Option<f64>,
+}
 
 /// The DVL's parameters, installation estimate, state and counters.
 #[derive(Debug, Clone)]
@@ -33,18 +42,21 @@ pub struct DvlAid {
 }
 
 impl DvlAid {
-    pub fn new(cfg: &NavConfig, start_s: f64) -> DvlAid {
-        let [r, p, y] = cfg.dvl_mount_deg;
+    /// The aid with the installation `params`, velocity noise `velocity_std_m_s` (m/s) when the
+    /// device gives none, χ² gate `gate_chi2` (3 dof), covariance re-opening after
+    /// `reset_after_s` (s, 0 = never), and `start_s` as the time of the last fused velocity.
+    pub fn new(
+        params: DvlParameters,
+        velocity_std_m_s: f64,
+        gate_chi2: f64,
+        reset_after_s: f64,
+        start_s: f64,
+    ) -> DvlAid {
         DvlAid {
-            params: DvlParameters {
-                c_dvl_to_body: Rotation3::from_euler_angles(r * DEG, p * DEG, y * DEG).into_inner(),
-                scale: cfg.dvl_scale_factor,
-                lever_arm_m: Vector3::from(cfg.dvl_lever_arm_m),
-                time_offset_s: cfg.dvl_time_offset_s,
-            },
-            velocity_std_m_s: cfg.dvl_velocity_std_m_s,
-            gate_chi2: cfg.dvl_gate_chi2,
-            reset_after_s: cfg.dvl_reset_after_s,
+            params,
+            velocity_std_m_s,
+            gate_chi2,
+            reset_after_s,
             last_fused_s: start_s,
             rejected_since_s: None,
             counters: AidCounters::default(),
@@ -52,21 +64,23 @@ impl DvlAid {
         }
     }
 
-    /// The initial variances of the installation states that `cfg` switches on.
-    pub fn initial_variances(cfg: &NavConfig, p0: &mut StateVector) {
+    /// Switches the installation states on in `p0` with their initial one-sigma values
+    /// (`None`: the state stays off): mounting (deg), scale factor (1), lever arm (m), time
+    /// offset (s).
+    pub fn initial_variances(p0: &mut StateVector, estimate: &DvlEstimation) {
         for i in 0..3 {
-            if cfg.estimate_dvl_mounting {
-                p0[ekf::DVL_MOUNT + i] = (cfg.initial_dvl_mounting_std_deg * DEG).powi(2);
+            if let Some(s) = estimate.mounting_std_deg {
+                p0[ekf::DVL_MOUNT + i] = (s * DEG).powi(2);
             }
-            if cfg.estimate_dvl_lever_arm {
-                p0[ekf::DVL_LEVER + i] = cfg.initial_dvl_lever_arm_std_m.powi(2);
+            if let Some(s) = estimate.lever_arm_std_m {
+                p0[ekf::DVL_LEVER + i] = s.powi(2);
             }
         }
-        if cfg.estimate_dvl_scale {
-            p0[ekf::DVL_SCALE] = cfg.initial_dvl_scale_std.powi(2);
+        if let Some(s) = estimate.scale_std {
+            p0[ekf::DVL_SCALE] = s.powi(2);
         }
-        if cfg.estimate_dvl_time_offset {
-            p0[ekf::DVL_TIME] = cfg.initial_dvl_time_offset_std_s.powi(2);
+        if let Some(s) = estimate.time_offset_std_s {
+            p0[ekf::DVL_TIME] = s.powi(2);
         }
     }
 
@@ -170,6 +184,20 @@ fn reopen_velocity(p: &mut ekf::Covariance, innovation_ned: &Vector3<f64>) {
             p[(j, v)] = 0.0;
         }
         p[(v, v)] = keep;
+    }
+}
+
+impl DvlParameters {
+    /// The installation from mounting roll, pitch, yaw of the DVL frame w.r.t. the body (deg),
+    /// scale factor, lever arm (body, m) and time offset (s).
+    pub fn new(mount_deg: [f64; 3], scale: f64, lever_arm_m: [f64; 3], time_offset_s: f64) -> Self {
+        let [r, p, y] = mount_deg;
+        DvlParameters {
+            c_dvl_to_body: Rotation3::from_euler_angles(r * DEG, p * DEG, y * DEG).into_inner(),
+            scale,
+            lever_arm_m: Vector3::from(lever_arm_m),
+            time_offset_s,
+        }
     }
 }
 

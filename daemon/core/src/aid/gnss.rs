@@ -2,7 +2,6 @@
 //! around the fix; χ² gate.
 
 use super::{AidCounters, AidUpdate, NavCore};
-use crate::config::NavConfig;
 use crate::earth::{self, Geodetic};
 use crate::ekf::{self, skew};
 use crate::strapdown::NavState;
@@ -22,11 +21,13 @@ pub struct GnssAid {
 }
 
 impl GnssAid {
-    pub fn new(cfg: &NavConfig) -> GnssAid {
+    /// Antenna at `lever_arm_m` (body, m), smallest one-sigma `min_std_m` (m), χ² gate
+    /// `gate_chi2` (3 dof).
+    pub fn new(lever_arm_m: [f64; 3], min_std_m: f64, gate_chi2: f64) -> GnssAid {
         GnssAid {
-            lever_arm_m: Vector3::from(cfg.gnss_lever_arm_m),
-            min_std_m: cfg.gnss_min_std_m,
-            gate_chi2: cfg.gnss_gate_chi2,
+            lever_arm_m: Vector3::from(lever_arm_m),
+            min_std_m,
+            gate_chi2,
             counters: AidCounters::default(),
         }
     }

@@ -21,7 +21,7 @@ pub mod usbl;
 pub mod zero_velocity;
 
 use crate::ekf::StateVector;
-pub use crate::navigator::NavCore;
+pub use crate::nav_core::NavCore;
 use auvnav_shm_schema::AidDiagnosticsV1;
 
 /// What one aid message did: its diagnostics and, when it was fused, the correction to apply.

@@ -3,7 +3,6 @@
 //! motion. Its own gate (`zero_velocity_gate_chi2`; it used to borrow the DVL's).
 
 use super::{AidCounters, AidUpdate, NavCore};
-use crate::config::NavConfig;
 use crate::ekf;
 use auvnav_shm_schema::AidSource;
 use nalgebra::{Matrix3, SMatrix};
@@ -19,10 +18,11 @@ pub struct ZeroVelocityAid {
 }
 
 impl ZeroVelocityAid {
-    pub fn new(cfg: &NavConfig) -> ZeroVelocityAid {
+    /// One-sigma per axis `std_m_s` (m/s), χ² gate `gate_chi2` (3 dof).
+    pub fn new(std_m_s: f64, gate_chi2: f64) -> ZeroVelocityAid {
         ZeroVelocityAid {
-            std_m_s: cfg.zero_velocity_std_m_s,
-            gate_chi2: cfg.zero_velocity_gate_chi2,
+            std_m_s,
+            gate_chi2,
             counters: AidCounters::default(),
         }
     }

@@ -1,7 +1,5 @@
 //! The `[navigation.usbl]` configuration.
 
-use super::model::UsblArray;
-use crate::earth::Geodetic;
 use crate::ekf::unscented::UnscentedParams;
 use serde::{Deserialize, Serialize};
 
@@ -120,19 +118,6 @@ impl Default for UsblConfig {
 }
 
 impl UsblConfig {
-    /// The surveyed array.
-    pub fn array(&self) -> UsblArray {
-        UsblArray::level(
-            Geodetic {
-                latitude_rad: self.array_latitude_deg.to_radians(),
-                longitude_rad: self.array_longitude_deg.to_radians(),
-                height_m: self.array_height_m,
-            },
-            self.array_yaw_deg.to_radians(),
-            self.baseline_m,
-        )
-    }
-
     pub fn unscented(&self) -> UnscentedParams {
         UnscentedParams {
             alpha: self.unscented_alpha,

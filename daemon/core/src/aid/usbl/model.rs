@@ -255,3 +255,18 @@ impl ResponderGeometry {
         self.nominal_a + self.c_ned_to_array * (phi.cross(&self.lever_ned) - dp)
     }
 }
+
+impl UsblConfig {
+    /// The surveyed array.
+    pub fn array(&self) -> UsblArray {
+        UsblArray::level(
+            Geodetic {
+                latitude_rad: self.array_latitude_deg.to_radians(),
+                longitude_rad: self.array_longitude_deg.to_radians(),
+                height_m: self.array_height_m,
+            },
+            self.array_yaw_deg.to_radians(),
+            self.baseline_m,
+        )
+    }
+}
