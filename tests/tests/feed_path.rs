@@ -4,8 +4,8 @@
 //! and diagnostics, bit for bit.
 
 use auvnav_core::feed::SensorMessage;
-use auvnav_core::navigator::initial_state;
 use auvnav_core::session::{Session, SessionConfig, SessionOutput};
+use auvnav_core::strapdown::NavState;
 use auvnav_log::LogMessage;
 use auvnav_shm_schema::{AidDiagnosticsV1, NavSolutionV1};
 use auvnav_sim::{self as sim, SimConfig, scenario::Scenario};
@@ -26,7 +26,7 @@ fn messages(scenario: &str, seconds: f64, seed: u64) -> Vec<LogMessage> {
     m
 }
 
-fn start_of(msgs: &[LogMessage]) -> auvnav_core::strapdown::NavState {
+fn start_of(msgs: &[LogMessage]) -> NavState {
     let t = msgs
         .iter()
         .find_map(|m| match m {
@@ -34,16 +34,7 @@ fn start_of(msgs: &[LogMessage]) -> auvnav_core::strapdown::NavState {
             _ => None,
         })
         .expect("truth");
-    initial_state(
-        t.host_time_ns as f64 * 1e-9,
-        auvnav_core::earth::Geodetic {
-            latitude_rad: t.latitude_rad,
-            longitude_rad: t.longitude_rad,
-            height_m: t.height_m,
-        },
-        t.velocity_ned_m_s,
-        t.euler_rad,
-    )
+    NavState::from_truth(&t)
 }
 
 fn collect(out: &mut Outputs) -> impl FnMut(SessionOutput) -> anyhow::Result<()> + '_ {

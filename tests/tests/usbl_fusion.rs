@@ -168,8 +168,8 @@ fn the_adaptive_noise_estimate_converges_to_the_simulated_usbl_noise() {
     // The docking run's USBL noise: 0.1 m on the range, 2 mm on the range differences. The
     // estimator starts 3× too high on every channel; averaged over the second half of the run
     // (its memory is about 50 fixes) it must find the simulated noise.
-    use auvnav_core::navigator::initial_state;
     use auvnav_core::session::{Session, SessionConfig, SessionOutput};
+    use auvnav_core::strapdown::NavState;
     use auvnav_log::LogMessage;
     use auvnav_shm_schema::AidSource;
     use auvnav_sim::{self as sim, SimConfig, StationGeometry, scenario::Scenario};
@@ -208,17 +208,7 @@ fn the_adaptive_noise_estimate_converges_to_the_simulated_usbl_noise() {
                 if let LogMessage::Truth(t) = m
                     && !session.started()
                 {
-                    let p = auvnav_core::earth::Geodetic {
-                        latitude_rad: t.latitude_rad,
-                        longitude_rad: t.longitude_rad,
-                        height_m: t.height_m,
-                    };
-                    let s = initial_state(
-                        t.host_time_ns as f64 * 1e-9,
-                        p,
-                        t.velocity_ned_m_s,
-                        t.euler_rad,
-                    );
+                    let s = NavState::from_truth(t);
                     session.start(s, "truth", &mut |_| Ok::<(), anyhow::Error>(()))?;
                 } else if let Some(x) = m.sensor()
                     && session.started()

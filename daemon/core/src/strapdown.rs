@@ -114,6 +114,23 @@ pub fn initial_state(
     }
 }
 
+impl NavState {
+    /// The state a truth or reference record describes (simulated truth, or an imported data
+    /// set's reference solution): where replay and the studies start from.
+    pub fn from_truth(t: &auvnav_shm_schema::TruthStateV1) -> NavState {
+        initial_state(
+            t.host_time_ns as f64 * 1e-9,
+            Geodetic {
+                latitude_rad: t.latitude_rad,
+                longitude_rad: t.longitude_rad,
+                height_m: t.height_m,
+            },
+            t.velocity_ned_m_s,
+            t.euler_rad,
+        )
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

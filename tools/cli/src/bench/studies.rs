@@ -74,8 +74,8 @@ pub fn usbl(seconds: f64, json: bool) -> anyhow::Result<()> {
     use anyhow::bail;
     use auvnav_core::aid::usbl::{Coupling, UsblFilter};
     use auvnav_core::feed::SensorMessage;
-    use auvnav_core::navigator::initial_state;
     use auvnav_core::session::{Session, SessionConfig};
+    use auvnav_core::strapdown::NavState;
     use auvnav_log::LogMessage;
     use auvnav_sim::StationGeometry;
     use std::time::Instant;
@@ -112,17 +112,7 @@ pub fn usbl(seconds: f64, json: bool) -> anyhow::Result<()> {
             for m in &messages {
                 match m {
                     LogMessage::Truth(t) if !session.started() => {
-                        let pos = auvnav_core::earth::Geodetic {
-                            latitude_rad: t.latitude_rad,
-                            longitude_rad: t.longitude_rad,
-                            height_m: t.height_m,
-                        };
-                        let s = initial_state(
-                            t.host_time_ns as f64 * 1e-9,
-                            pos,
-                            t.velocity_ned_m_s,
-                            t.euler_rad,
-                        );
+                        let s = NavState::from_truth(t);
                         session.start(s, "truth", &mut |_| Ok::<(), anyhow::Error>(()))?;
                     }
                     other if session.started() => {

@@ -17,9 +17,9 @@ pub use command::*;
 
 use crate::accuracy::{Accuracy, AccuracyTracker};
 use anyhow::{Context, bail};
-use auvnav_core::earth::Geodetic;
-use auvnav_core::navigator::{NavCounters, Navigator, initial_state};
+use auvnav_core::navigator::{NavCounters, Navigator};
 use auvnav_core::session::{Session, SessionOutput};
+use auvnav_core::strapdown::NavState;
 use auvnav_log::{LogError, LogHeader, LogMessage, LogReader, write_log_atomically};
 use auvnav_shm_schema::{AidDiagnosticsV1, NavSolutionV1, TruthStateV1, topic};
 use serde::Serialize;
@@ -181,16 +181,7 @@ impl Replay {
                     && !self.session.has_configured_initial()
                     && !self.session.has_alignment()
                 {
-                    let state = initial_state(
-                        t.host_time_ns as f64 * 1e-9,
-                        Geodetic {
-                            latitude_rad: t.latitude_rad,
-                            longitude_rad: t.longitude_rad,
-                            height_m: t.height_m,
-                        },
-                        t.velocity_ned_m_s,
-                        t.euler_rad,
-                    );
+                    let state = NavState::from_truth(t);
                     let mut fwd = Self::forward(
                         &mut self.prev_solution,
                         &mut self.pending_truth,
