@@ -1,18 +1,16 @@
 //! A navigation session: the navigator together with how it starts, fed sensor messages one at a
-//! time through [`crate::feed`]. The daemon runs it on live messages and `auvnav replay` on a log's, in the same order, so
-//! that the same messages give the same solutions bit for bit.
+//! time through [`crate::feed`]. The daemon runs it on live messages and `auvnav replay` on a
+//! log's, in the same order, so that the same messages give the same solutions bit for bit.
 
 use crate::align::coarse::InMotionAligner;
 use crate::align::fine::{ErrorModel, FineAlignConfig, FineAligner};
 use crate::config::NavConfig;
 pub use crate::config::{AlignmentConfig, InitialState, SessionConfig};
 use crate::earth::Geodetic;
+use crate::feed::SensorMessage;
 use crate::navigator::Navigator;
 use crate::strapdown::NavState;
-use auvnav_shm_schema::{
-    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, NavMode, NavSolutionV1,
-    UsblFixV1,
-};
+use auvnav_shm_schema::{AidDiagnosticsV1, DvlVelocityV1, ImuSampleV1, NavMode, NavSolutionV1};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use serde::Serialize;
 
@@ -35,34 +33,26 @@ pub struct InitialReport {
     pub euler_deg: [f64; 3],
 }
 
-/// An aid message waiting for its turn.
-#[derive(Debug, Clone, Copy)]
-enum Aid {
-    Dvl(DvlVelocityV1),
-    Depth(DepthV1),
-    Gnss(GnssFixV1),
-    Usbl(UsblFixV1),
-}
-
-impl Aid {
-    /// Order of processing: time stamp, then kind, then the publisher's sequence number.
-    fn key(&self) -> (u64, u8, u64) {
-        match self {
-            Aid::Dvl(m) => (m.host_time_ns, 0, m.sequence),
-            Aid::Depth(m) => (m.host_time_ns, 1, m.sequence),
-            Aid::Gnss(m) => (m.host_time_ns, 2, m.sequence),
-            // Queued by delivery like the others; the navigator evaluates a fix against the
-            // vehicle's pose at its (earlier) time of validity.
-            Aid::Usbl(m) => (m.host_time_ns, 3, m.sequence),
-        }
+/// Order in which queued aid messages are applied: time stamp, then kind, then the publisher's
+/// sequence number. A USBL fix is queued by delivery like the others; the navigator evaluates it
+/// against the vehicle's pose at its (earlier) time of validity.
+fn aid_key(m: &SensorMessage) -> (u64, u8, u64) {
+    match m {
+        SensorMessage::Dvl(m) => (m.host_time_ns, 0, m.sequence),
+        SensorMessage::Depth(m) => (m.host_time_ns, 1, m.sequence),
+        SensorMessage::Gnss(m) => (m.host_time_ns, 2, m.sequence),
+        SensorMessage::Usbl(m) => (m.host_time_ns, 3, m.sequence),
+        // Never queued: IMU samples are processed as they come.
+        SensorMessage::Imu(m) => (m.host_time_ns, u8::MAX, m.sequence),
     }
 }
 
-struct Pending(Aid);
+/// An aid message waiting for its turn.
+struct Pending(SensorMessage);
 
 impl PartialEq for Pending {
     fn eq(&self, o: &Self) -> bool {
-        self.0.key() == o.0.key()
+        aid_key(&self.0) == aid_key(&o.0)
     }
 }
 impl Eq for Pending {}
@@ -74,7 +64,7 @@ impl PartialOrd for Pending {
 impl Ord for Pending {
     fn cmp(&self, o: &Self) -> std::cmp::Ordering {
         // Reversed: the heap pops the earliest first.
-        o.0.key().cmp(&self.0.key())
+        aid_key(&o.0).cmp(&aid_key(&self.0))
     }
 }
 
@@ -212,13 +202,13 @@ impl Session {
     /// An IMU sample. Aid messages due before it are applied first. With a configured initial
     /// state, the first sample starts the session at its time (and is not integrated: there is
     /// no interval before it).
-    pub(crate) fn on_imu<E>(
+    fn on_imu<E>(
         &mut self,
         x: &ImuSampleV1,
         out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
     ) -> Result<(), E> {
         while let Some(p) = self.pending.peek() {
-            if p.0.key().0.saturating_add(self.aid_delay_ns) >= x.host_time_ns {
+            if aid_key(&p.0).0.saturating_add(self.aid_delay_ns) >= x.host_time_ns {
                 break;
             }
             let Some(Pending(aid)) = self.pending.pop() else {
@@ -501,12 +491,12 @@ impl Session {
 
     fn apply<E>(
         &mut self,
-        aid: Aid,
+        aid: SensorMessage,
         out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
     ) -> Result<(), E> {
         if self.nav.is_none()
             && let Some(fine) = self.fine.as_mut()
-            && let Aid::Dvl(m) = aid
+            && let SensorMessage::Dvl(m) = aid
         {
             if m.validity & DvlVelocityV1::VALID_VELOCITY != 0
                 && m.host_time_ns > self.fine_start_ns
@@ -520,7 +510,7 @@ impl Session {
         }
         if self.nav.is_none()
             && self.aligner.is_some()
-            && let Aid::Dvl(m) = aid
+            && let SensorMessage::Dvl(m) = aid
         {
             // Coarse alignment takes the DVL's velocity at the next IMU sample.
             self.last_velocity_body = self.dvl_body_velocity(&m);
@@ -531,10 +521,12 @@ impl Session {
             return Ok(());
         };
         let d = match aid {
-            Aid::Dvl(m) => nav.on_dvl(&m),
-            Aid::Depth(m) => nav.on_depth(&m),
-            Aid::Gnss(m) => nav.on_gnss(&m),
-            Aid::Usbl(m) => nav.on_usbl(&m),
+            SensorMessage::Dvl(m) => nav.on_dvl(&m),
+            SensorMessage::Depth(m) => nav.on_depth(&m),
+            SensorMessage::Gnss(m) => nav.on_gnss(&m),
+            SensorMessage::Usbl(m) => nav.on_usbl(&m),
+            // Not an aid (the feed never queues IMU samples).
+            SensorMessage::Imu(_) => return Ok(()),
         };
         out(SessionOutput::Diagnostics(&d))
     }
@@ -550,31 +542,28 @@ impl Session {
         Ok(())
     }
 
-    fn queue(&mut self, aid: Aid) {
-        if aid.key().0.saturating_add(self.aid_delay_ns) < self.last_imu_ns {
+    /// Feeds one sensor message. IMU samples are processed at once (after the aid messages due
+    /// before them); aid messages wait for their turn. Outputs go to `out`.
+    pub fn feed<E>(
+        &mut self,
+        m: &SensorMessage,
+        out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
+    ) -> Result<(), E> {
+        match m {
+            SensorMessage::Imu(x) => self.on_imu(x, out),
+            aid => {
+                self.queue(*aid);
+                Ok(())
+            }
+        }
+    }
+
+    /// Queues an aid message (applied before the first IMU sample stamped after its time + the
+    /// aid delay); counted as late when the IMU has already passed that point.
+    fn queue(&mut self, aid: SensorMessage) {
+        if aid_key(&aid).0.saturating_add(self.aid_delay_ns) < self.last_imu_ns {
             self.late_aids += 1;
         }
         self.pending.push(Pending(aid));
-    }
-
-    /// A DVL message (applied before the first IMU sample after its time + the aid delay).
-    pub(crate) fn on_dvl(&mut self, x: &DvlVelocityV1) {
-        self.queue(Aid::Dvl(*x));
-    }
-
-    /// A depth message (queued like DVL).
-    pub(crate) fn on_depth(&mut self, x: &DepthV1) {
-        self.queue(Aid::Depth(*x));
-    }
-
-    /// A GNSS fix (queued like DVL).
-    pub(crate) fn on_gnss(&mut self, x: &GnssFixV1) {
-        self.queue(Aid::Gnss(*x));
-    }
-
-    /// A USBL fix (queued like DVL; used when `[navigation.usbl]` is configured, counted in the
-    /// navigator's `usbl_unconfigured` otherwise).
-    pub(crate) fn on_usbl(&mut self, x: &UsblFixV1) {
-        self.queue(Aid::Usbl(*x));
     }
 }

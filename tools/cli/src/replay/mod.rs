@@ -17,6 +17,7 @@ pub use command::*;
 
 use crate::accuracy::{Accuracy, AccuracyTracker};
 use anyhow::{Context, bail};
+use auvnav_core::feed::SensorMessage;
 use auvnav_core::navigator::{NavCounters, Navigator};
 use auvnav_core::session::{Session, SessionOutput};
 use auvnav_core::strapdown::NavState;
@@ -193,26 +194,22 @@ impl Replay {
                 }
                 self.compare(t);
             }
-            LogMessage::Imu(_)
-            | LogMessage::Dvl(_)
-            | LogMessage::Depth(_)
-            | LogMessage::Gnss(_)
-            | LogMessage::Usbl(_) => {
-                match m {
-                    LogMessage::Imu(_) => self.counts.imu += 1,
-                    LogMessage::Dvl(_) => self.counts.dvl += 1,
-                    LogMessage::Depth(_) => self.counts.depth += 1,
-                    LogMessage::Gnss(_) => self.counts.gnss += 1,
-                    _ => self.counts.usbl += 1,
-                }
-                if let Some(x) = m.sensor() {
+            LogMessage::Unknown => self.counts.unknown += 1,
+            other => match other.sensor() {
+                Some(x) => {
+                    *match x {
+                        SensorMessage::Imu(_) => &mut self.counts.imu,
+                        SensorMessage::Dvl(_) => &mut self.counts.dvl,
+                        SensorMessage::Depth(_) => &mut self.counts.depth,
+                        SensorMessage::Gnss(_) => &mut self.counts.gnss,
+                        SensorMessage::Usbl(_) => &mut self.counts.usbl,
+                    } += 1;
                     self.session.feed(&x, &mut fwd)?;
                     drop(fwd);
                     self.note_time(x.host_time_ns());
                 }
-            }
-            LogMessage::Unknown => self.counts.unknown += 1,
-            _ => self.counts.unused += 1,
+                None => self.counts.unused += 1,
+            },
         }
         self.counts.before_start = self.session.before_start;
         Ok(())
