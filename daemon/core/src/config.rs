@@ -94,6 +94,11 @@ pub struct NavConfig {
     /// and the measurement fused: the filter had become too sure of a wrong velocity (s; 0 =
     /// never). Default 5.
     pub dvl_reset_after_s: f64,
+    /// The DVL installation as a table (`[navigation.dvl]`, what `auvnav calibrate dvl` writes).
+    /// When present it replaces `dvl_mount_deg`, `dvl_scale_factor`, `dvl_lever_arm_m` and
+    /// `dvl_time_offset_s`, which must then stay at their defaults. Default none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dvl: Option<DvlInstallation>,
     /// USBL fusion (`[navigation.usbl]`): the station's array, the coupling and the filter.
     /// Default none: USBL fixes are counted and not used.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -139,8 +144,65 @@ impl Default for NavConfig {
             zero_velocity_std_m_s: 0.01,
             zero_velocity_gate_chi2: gate::CHI2_3DOF_999,
             dvl_reset_after_s: 5.0,
+            dvl: None,
             usbl: None,
         }
+    }
+}
+
+/// The DVL installation (`[navigation.dvl]`): the same quantities, units and sign conventions as
+/// the simulator's effects `dvl.mount_roll`, `dvl.mount_pitch`, `dvl.mount_yaw`,
+/// `dvl.scale_factor`, `dvl.lever_arm` and `dvl.time_offset`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DvlInstallation {
+    /// Mounting roll, pitch, yaw of the DVL frame w.r.t. the body (deg). Default 0.
+    pub mount_deg: [f64; 3],
+    /// Scale factor: the DVL reads this times the true velocity (1 = none). Default 1.
+    pub scale_factor: f64,
+    /// DVL position in the body frame (m). Default 0.
+    pub lever_arm_m: [f64; 3],
+    /// The velocity stamped at t is the vehicle's at t - offset (s). Default 0.
+    pub time_offset_s: f64,
+    /// Where these values come from (free text, e.g. the calibration run). Default empty.
+    #[serde(skip_serializing_if = "String::is_empty")]
+    pub source: String,
+}
+
+impl Default for DvlInstallation {
+    fn default() -> Self {
+        DvlInstallation {
+            mount_deg: [0.0; 3],
+            scale_factor: 1.0,
+            lever_arm_m: [0.0; 3],
+            time_offset_s: 0.0,
+            source: String::new(),
+        }
+    }
+}
+
+impl NavConfig {
+    /// The DVL installation in force: the `[navigation.dvl]` table when there is one, otherwise
+    /// the flat `dvl_*` keys.
+    pub fn dvl_installation(&self) -> DvlInstallation {
+        self.dvl.clone().unwrap_or_else(|| DvlInstallation {
+            mount_deg: self.dvl_mount_deg,
+            scale_factor: self.dvl_scale_factor,
+            lever_arm_m: self.dvl_lever_arm_m,
+            time_offset_s: self.dvl_time_offset_s,
+            source: String::new(),
+        })
+    }
+
+    /// Sets the DVL installation: into the `[navigation.dvl]` table (the flat keys go back to
+    /// their defaults, so the configuration stays valid).
+    pub fn set_dvl_installation(&mut self, d: DvlInstallation) {
+        let defaults = NavConfig::default();
+        self.dvl_mount_deg = defaults.dvl_mount_deg;
+        self.dvl_scale_factor = defaults.dvl_scale_factor;
+        self.dvl_lever_arm_m = defaults.dvl_lever_arm_m;
+        self.dvl_time_offset_s = defaults.dvl_time_offset_s;
+        self.dvl = Some(d);
     }
 }
 
@@ -362,6 +424,31 @@ impl NavConfig {
     /// Every value of `[navigation]` that makes no sense, as `navigation.key …`.
     pub fn problems(&self) -> Vec<String> {
         let mut out = Vec::new();
+        if let Some(d) = &self.dvl {
+            let defaults = NavConfig::default();
+            if self.dvl_mount_deg != defaults.dvl_mount_deg
+                || self.dvl_scale_factor != defaults.dvl_scale_factor
+                || self.dvl_lever_arm_m != defaults.dvl_lever_arm_m
+                || self.dvl_time_offset_s != defaults.dvl_time_offset_s
+            {
+                out.push(
+                    "navigation.dvl: the DVL installation is given twice; with a [navigation.dvl] \
+                     table, leave dvl_mount_deg, dvl_scale_factor, dvl_lever_arm_m and \
+                     dvl_time_offset_s out of [navigation]"
+                        .to_string(),
+                );
+            }
+            let mut p = Problems(Vec::new());
+            p.range("navigation.dvl.scale_factor", d.scale_factor, 0.5, 2.0);
+            p.range("navigation.dvl.time_offset_s", d.time_offset_s, -5.0, 5.0);
+            for (i, a) in d.mount_deg.iter().enumerate() {
+                p.range(&format!("navigation.dvl.mount_deg[{i}]"), *a, -180.0, 180.0);
+            }
+            for (i, l) in d.lever_arm_m.iter().enumerate() {
+                p.range(&format!("navigation.dvl.lever_arm_m[{i}]"), *l, -50.0, 50.0);
+            }
+            out.extend(p.0);
+        }
         if let Some(u) = &self.usbl {
             out.extend(u.problems().into_iter().map(|p| format!("navigation.{p}")));
         }

@@ -132,12 +132,8 @@ impl Navigator {
         };
         let mut core = NavCore::new(initial, &p0, Self::process_noise(&cfg), timing);
         let usbl = UsblAid::new(cfg.usbl.as_ref(), &mut core.kf);
-        let dvl = DvlParameters::new(
-            cfg.dvl_mount_deg,
-            cfg.dvl_scale_factor,
-            cfg.dvl_lever_arm_m,
-            cfg.dvl_time_offset_s,
-        );
+        let d = cfg.dvl_installation();
+        let dvl = DvlParameters::new(d.mount_deg, d.scale_factor, d.lever_arm_m, d.time_offset_s);
         Navigator {
             dvl: DvlAid::new(
                 dvl,

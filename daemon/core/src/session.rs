@@ -433,7 +433,9 @@ impl Session {
             cfg.initial_accel_bias_std_ug = accel.max() / 9.806_65e-6;
             if fine.model != ErrorModel::Navigation {
                 let m = fine.mounting();
-                cfg.dvl_mount_deg = [m.x * deg, m.y * deg, m.z * deg];
+                let mut d = cfg.dvl_installation();
+                d.mount_deg = [m.x * deg, m.y * deg, m.z * deg];
+                cfg.set_dvl_installation(d);
             }
             let (bg, ba) = fine.imu_biases();
             self.fine = None;
@@ -478,14 +480,15 @@ impl Session {
         if !v.iter().all(|x| x.is_finite()) {
             return None;
         }
-        let [r, p, y] = self.cfg.dvl_mount_deg.map(f64::to_radians);
+        let d = self.cfg.dvl_installation();
+        let [r, p, y] = d.mount_deg.map(f64::to_radians);
         let c: Matrix3<f64> = Rotation3::from_euler_angles(r, p, y).into_inner();
-        let scale = if self.cfg.dvl_scale_factor > 0.0 {
-            self.cfg.dvl_scale_factor
+        let scale = if d.scale_factor > 0.0 {
+            d.scale_factor
         } else {
             1.0
         };
-        let lever = Vector3::from(self.cfg.dvl_lever_arm_m);
+        let lever = Vector3::from(d.lever_arm_m);
         Some(c * v / scale - self.last_omega.cross(&lever))
     }
 

@@ -1,6 +1,7 @@
 pub mod accuracy;
 pub mod align;
 pub mod bench;
+pub mod calibrate;
 pub mod csv;
 pub mod decode;
 pub mod demo;

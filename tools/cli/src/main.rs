@@ -38,6 +38,14 @@ enum Command {
     /// S-USBL Monte Carlo on the docking scenario: loose or tight USBL coupling, ukf/akf/aukf,
     /// with multipath outliers and array orientation errors.
     Usbl(auvnav_tools::usbl::UsblArgs),
+    /// Calibrate an installation from recorded voyages by replaying them through the core.
+    Calibrate {
+        #[command(subcommand)]
+        what: CalibrateWhat,
+    },
+    /// Apply named simulator effects (see `auvnav sim --list-effects`) to the sensor messages
+    /// of a recorded log, simulated or measured; the output's header says what was applied.
+    Perturb(PerturbArgs),
     /// Turn a measured data set into a log.
     Import {
         #[command(subcommand)]
@@ -59,6 +67,72 @@ enum Command {
 enum MonteCarloWhat {
     /// Filter consistency: normalised estimation error squared of position, velocity and attitude.
     Nees(auvnav_tools::montecarlo::NeesArgs),
+}
+
+#[derive(Subcommand)]
+enum CalibrateWhat {
+    /// S-CAL: DVL mounting, scale factor, lever arm and time offset that minimise the dead
+    /// reckoning's error at the fixes (CEP50 of error/distance), with standard deviations,
+    /// observability, hold-out evaluation, a [navigation.dvl] table and a report.
+    Dvl(auvnav_tools::calibrate::CalibrateDvlArgs),
+}
+
+#[derive(clap::Args)]
+struct PerturbArgs {
+    /// The log to perturb.
+    log: PathBuf,
+    /// An effect: NAME=VALUE or NAME=V1,V2,V3 (repeatable).
+    #[arg(long = "effect", value_name = "NAME=VALUE", required = true)]
+    effects: Vec<String>,
+    /// Seed of the noise effects.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Output log (written atomically).
+    #[arg(long)]
+    out: PathBuf,
+    /// Print what was done as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+fn run_perturb(a: &PerturbArgs) -> anyhow::Result<()> {
+    let p = sim::perturb::Perturbation::parse(&a.effects, a.seed)?;
+    let counts = sim::perturb::perturb_log(&a.log, &a.out, &p)?;
+    if a.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({
+                "version": 1,
+                "input": a.log,
+                "output": a.out,
+                "effects": p.describe(),
+                "seed": a.seed,
+                "counts": counts,
+            }))?
+        );
+    } else {
+        eprintln!(
+            "{}: {} applied to {} messages ({} IMU, {} DVL, {} depth changed; {} DVL without a neighbour at t - offset marked invalid)",
+            a.out.display(),
+            p.describe(),
+            counts.messages,
+            counts.imu_changed,
+            counts.dvl_changed,
+            counts.depth_changed,
+            counts.dvl_invalidated
+        );
+    }
+    Ok(())
+}
+
+fn run_calibrate_dvl(a: &auvnav_tools::calibrate::CalibrateDvlArgs) -> anyhow::Result<()> {
+    let r = auvnav_tools::calibrate::calibrate_dvl(a)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+    } else {
+        print!("{}", auvnav_tools::calibrate::report::text(&r));
+    }
+    Ok(())
 }
 
 #[derive(Subcommand)]
@@ -169,6 +243,44 @@ struct SimArgs {
     /// Print the run summary as JSON.
     #[arg(long)]
     json: bool,
+    /// Simulate a calibration campaign instead of one scenario (scal: the S-CAL trial's four
+    /// straight voyages; scal-turns: with turns and speed changes); --out is then a directory
+    /// that receives voyage_1.mcap … voyage_4.mcap, and --effect adds installation errors.
+    #[arg(long, value_name = "NAME")]
+    campaign: Option<String>,
+}
+
+fn run_campaign(a: &SimArgs, name: &str) -> anyhow::Result<()> {
+    let kind = sim::campaign::CampaignKind::parse(name)?;
+    let Some(dir) = a.out.as_ref() else {
+        bail!("--out DIR is required with --campaign (the directory for the voyages)");
+    };
+    let mut installation = Vec::new();
+    for setting in &a.effects {
+        installation.push(effects::parse_setting(setting)?);
+    }
+    let voyages = sim::campaign::campaign(kind, a.seed, &installation)?;
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut summaries = Vec::new();
+    for (i, cfg) in voyages.iter().enumerate() {
+        let out = dir.join(format!("voyage_{}.mcap", i + 1));
+        let s = sim::simulate_to_log(cfg, &out)
+            .with_context(|| format!("simulating into {}", out.display()))?;
+        if !a.json {
+            eprintln!(
+                "{}: {} s, {:.0} m, {} GNSS fixes",
+                out.display(),
+                s.duration_s,
+                s.distance_m,
+                s.gnss
+            );
+        }
+        summaries.push(s);
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&summaries)?);
+    }
+    Ok(())
 }
 
 fn sim_config(a: &SimArgs) -> anyhow::Result<SimConfig> {
@@ -203,6 +315,9 @@ fn run_sim(a: SimArgs) -> anyhow::Result<()> {
     if a.list_scenarios {
         print!("{}", sim::scenario::listing());
         return Ok(());
+    }
+    if let Some(name) = &a.campaign {
+        return run_campaign(&a, name);
     }
     let cfg = sim_config(&a)?;
     let Some(out) = a.out.as_ref() else {
@@ -309,6 +424,10 @@ fn main() -> std::process::ExitCode {
         Command::Montecarlo { what } => match what {
             MonteCarloWhat::Nees(a) => auvnav_tools::montecarlo::run_nees(&a),
         },
+        Command::Calibrate { what } => match what {
+            CalibrateWhat::Dvl(a) => run_calibrate_dvl(&a),
+        },
+        Command::Perturb(a) => run_perturb(&a),
         Command::Import { what } => match what {
             ImportWhat::Snapir(a) => run_import_snapir(&a),
         },

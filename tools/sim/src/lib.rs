@@ -4,7 +4,9 @@
 //! seeded per-sensor random streams, and writes messages in time order, so the same inputs give
 //! the same log bytes.
 
+pub mod campaign;
 pub mod effects;
+pub mod perturb;
 pub mod rng;
 pub mod scenario;
 pub mod sensors;
