@@ -201,6 +201,18 @@ enum BenchWhat {
         #[arg(long)]
         json: bool,
     },
+    /// Wall time and full replays of the DVL calibration methods (fast, seed, two-point) on the
+    /// simulated S-CAL campaign (four voyages of 5.8–6.9 km) on all cores.
+    Calibrate {
+        /// Campaign seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Methods to time (default: all three).
+        #[arg(long, value_enum, value_delimiter = ',')]
+        methods: Vec<auvnav_tools::calibrate::Method>,
+        #[arg(long)]
+        json: bool,
+    },
     /// Time to simulate and write one hour of 200 Hz IMU, 5 Hz DVL, 1 Hz USBL and 1 Hz depth.
     Sim {
         /// Simulated hours.
@@ -437,6 +449,19 @@ fn main() -> std::process::ExitCode {
                 repeat,
                 json,
             } => auvnav_tools::bench::sim(hours, repeat, json),
+            BenchWhat::Calibrate {
+                seed,
+                methods,
+                json,
+            } => {
+                use auvnav_tools::calibrate::Method;
+                let methods = if methods.is_empty() {
+                    vec![Method::Fast, Method::Seed, Method::TwoPoint]
+                } else {
+                    methods
+                };
+                auvnav_tools::bench::calibrate(seed, &methods, json)
+            }
             BenchWhat::Align { runs, json } => auvnav_tools::bench::align(runs, json),
             BenchWhat::Usbl { seconds, json } => auvnav_tools::bench::usbl(seconds, json),
             BenchWhat::E2e { seconds, json } => auvnav_tools::bench::e2e_bench(seconds, json),

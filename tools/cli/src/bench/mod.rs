@@ -1,15 +1,17 @@
 //! `auvnav bench`: throughput, latency and cost figures, one module per kind
-//! ([`throughput`], [`decode`], [`latency`], [`studies`]).
+//! ([`throughput`], [`decode`], [`latency`], [`studies`], [`calibrate`]).
 
 use anyhow::Context;
 use auvnav_sim::{self as sim, SimConfig, scenario::Scenario};
 use serde::Serialize;
 
+mod calibrate;
 mod decode;
 mod latency;
 mod studies;
 mod throughput;
 
+pub use calibrate::*;
 pub use decode::*;
 pub use latency::*;
 pub use studies::*;

@@ -254,7 +254,7 @@ pub fn build(i: Inputs) -> CalibrationReport {
         .collect();
     let fitted: Vec<String> = parameters
         .iter()
-        .filter(|p| p.status == "estimated")
+        .filter(|p| p.status == "estimated" && p.determined != Some(false))
         .map(|p| match p.std {
             Some(s) => format!("{} = {:.4} ± {:.4} {}", p.name, p.value, s, p.unit),
             None => format!("{} = {:.4} {}", p.name, p.value, p.unit),
@@ -270,6 +270,27 @@ pub fn build(i: Inputs) -> CalibrationReport {
         verdict.push_str("These voyages determine none of the estimated parameters; the installation stays at its prior. ");
     } else {
         let _ = write!(verdict, "Determined: {}. ", fitted.join("; "));
+    }
+    let insignificant: Vec<&str> = parameters
+        .iter()
+        .filter(|p| {
+            p.status == "estimated"
+                && p.determined == Some(true)
+                && p.std.is_some_and(|s| (p.value - p.prior).abs() < 2.0 * s)
+        })
+        .map(|p| p.name.as_str())
+        .collect();
+    if !insignificant.is_empty() {
+        let _ = write!(
+            verdict,
+            "{} {} within two standard deviations of the prior: the voyages find no significant correction. ",
+            insignificant.join(", "),
+            if insignificant.len() == 1 {
+                "is"
+            } else {
+                "are"
+            }
+        );
     }
     if !held.is_empty() {
         let _ = write!(

@@ -229,10 +229,10 @@ pub fn calibrate(
             settings.lhs_samples + 1 + (it + 1) * n,
             total,
         );
-        // Stop when five iterations in a row improve the best by less than 0.1 %.
+        // Stop when, past half the iterations, five in a row improve the best by less than 0.1 %.
         if gbest_f > before * (1.0 - 1e-3) {
             stalled += 1;
-            if stalled >= 5 {
+            if stalled >= 5 && 2 * iterations_run >= settings.iterations {
                 notes.push(format!(
                     "swarm stopped after {iterations_run} iterations: no 0.1 % improvement in five"
                 ));
