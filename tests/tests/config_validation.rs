@@ -69,3 +69,30 @@ fn check_config_prints_a_file_that_reads_back_the_same() {
     assert_eq!(a, b);
     assert_eq!(a.navigation.dvl_scale_factor, 1.002);
 }
+
+#[test]
+fn the_dvl_installation_is_given_once_as_a_table_or_as_flat_keys() {
+    let start = "[initial]\nlatitude_deg = 31.0\nlongitude_deg = 120.0\nheight_m = -20.0\neuler_deg = [0.0, 0.0, 45.0]\n";
+    let table = format!(
+        "{start}[navigation.dvl]\nmount_deg = [0.0, 0.2, 1.5]\nscale_factor = 0.998\nlever_arm_m = [-1.8, 0.0, 0.2]\ntime_offset_s = 0.1\n"
+    );
+    let cfg = DaemonConfig::from_toml(&table).expect("table");
+    let d = cfg.navigation.dvl_installation();
+    assert_eq!(d.mount_deg, [0.0, 0.2, 1.5]);
+    assert_eq!((d.scale_factor, d.time_offset_s), (0.998, 0.1));
+    let both = format!(
+        "{start}[navigation]\ndvl_scale_factor = 1.002\n[navigation.dvl]\nscale_factor = 0.998\n"
+    );
+    let err = DaemonConfig::from_toml(&both)
+        .expect_err("given twice")
+        .to_string();
+    assert!(
+        err.contains("navigation.dvl") && err.contains("twice"),
+        "{err}"
+    );
+    let bad = format!("{start}[navigation.dvl]\nscale_factor = 7.0\n");
+    let err = DaemonConfig::from_toml(&bad)
+        .expect_err("range")
+        .to_string();
+    assert!(err.contains("navigation.dvl.scale_factor"), "{err}");
+}

@@ -113,7 +113,7 @@ struct DvlEpoch {
 }
 
 /// The IMU angular rate of a sample (rad/s), whichever mode it is in.
-fn imu_rate(m: &ImuSampleV1) -> Vector3<f64> {
+pub fn imu_rate(m: &ImuSampleV1) -> Vector3<f64> {
     let a = Vector3::from(m.angular);
     if m.status & ImuSampleV1::STATUS_INCREMENTS != 0 && m.interval_s > 0.0 {
         a / m.interval_s

@@ -9,7 +9,8 @@ use auvnav_core::config::NavConfig;
 use auvnav_core::earth::{self, Geodetic};
 use auvnav_core::feed::SensorMessage;
 use auvnav_core::session::{Session, SessionConfig, SessionOutput};
-use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, NavSolutionV1};
+use auvnav_shm_schema::{DvlVelocityV1, NavSolutionV1};
+use auvnav_sim::perturb::imu_rate;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 /// The S-CAL CEP50 factor.
@@ -69,15 +70,6 @@ impl VoyageRun {
 
     pub fn cep50(&self, fixes: &[Fix], threshold_m: f64) -> f64 {
         cep50(&self.scored(fixes, threshold_m))
-    }
-}
-
-fn imu_rate(m: &ImuSampleV1) -> Vector3<f64> {
-    let a = Vector3::from(m.angular);
-    if m.status & ImuSampleV1::STATUS_INCREMENTS != 0 && m.interval_s > 0.0 {
-        a / m.interval_s
-    } else {
-        a
     }
 }
 

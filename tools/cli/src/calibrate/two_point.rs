@@ -96,19 +96,13 @@ pub fn combine(per: &[TwoPointVoyage]) -> Option<(f64, f64)> {
     if total <= 0.0 {
         return None;
     }
-    let yaw = per
-        .iter()
-        .zip(&w)
-        .map(|(p, w)| p.mount_yaw_deg_a * w)
-        .sum::<f64>()
-        / total;
-    let scale = per
-        .iter()
-        .zip(&w)
-        .map(|(p, w)| p.scale_factor_a * w)
-        .sum::<f64>()
-        / total;
-    Some((yaw, scale))
+    let weighted = |f: fn(&TwoPointVoyage) -> f64| {
+        per.iter().zip(&w).map(|(p, w)| f(p) * w).sum::<f64>() / total
+    };
+    Some((
+        weighted(|p| p.mount_yaw_deg_a),
+        weighted(|p| p.scale_factor_a),
+    ))
 }
 
 /// The two-point method on the voyages of `baseline` (the runs with the starting installation):
