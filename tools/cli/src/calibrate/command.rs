@@ -243,12 +243,13 @@ pub fn calibrate_dvl(args: &CalibrateDvlArgs) -> anyhow::Result<CalibrationRepor
         epochs: true,
     };
 
-    // Baseline with the starting installation; distances for voyages without truth.
-    let baseline = {
+    // Baseline with the starting installation; distances for voyages without truth come from
+    // its track (the errors at the fixes do not depend on them, so the runs are only re-scored).
+    let runs = {
         let problem = Problem::new(&voyages, cfg.navigation.clone(), args.threshold, threads);
-        problem.evaluate(&prior, record_all)?
+        problem.evaluate(&prior, record_all)?.runs
     };
-    for (v, r) in voyages.iter_mut().zip(&baseline.runs) {
+    for (v, r) in voyages.iter_mut().zip(&runs) {
         if v.distance_source == DistanceSource::StartingDeadReckoning {
             v.set_distances_from_track(&r.track);
         }
@@ -264,7 +265,7 @@ pub fn calibrate_dvl(args: &CalibrateDvlArgs) -> anyhow::Result<CalibrationRepor
         }
     }
     let problem = Problem::new(&voyages, cfg.navigation.clone(), args.threshold, threads);
-    let baseline = problem.evaluate(&prior, record_all)?;
+    let baseline = problem.score(runs);
     let settings = SeedSettings {
         lhs_samples: args.lhs_samples,
         particles: args.particles,

@@ -62,7 +62,8 @@ impl<'a> Problem<'a> {
         self.replays.load(Ordering::Relaxed)
     }
 
-    fn score(&self, runs: Vec<VoyageRun>) -> Evaluation {
+    /// Scores runs of every voyage (in voyage order) made with one candidate.
+    pub fn score(&self, runs: Vec<VoyageRun>) -> Evaluation {
         let cep50: Vec<f64> = self
             .voyages
             .iter()
