@@ -1,9 +1,9 @@
 //! GNSS position and zero-velocity updates through the navigator, on simulated voyages.
 
-use auvnav_core::earth::{self, Geodetic};
+use auvnav_core::earth;
 use auvnav_core::navigator::{NavConfig, Navigator, initial_state};
+use auvnav_core::strapdown::truth_position;
 use auvnav_log::LogMessage;
-use auvnav_shm_schema::TruthStateV1;
 use auvnav_sim::{self as sim, SimConfig, scenario::Scenario};
 use nalgebra::Vector3;
 
@@ -16,14 +16,6 @@ fn simulate(scenario: Scenario) -> Vec<LogMessage> {
         duration_s: None,
     };
     sim::simulate_to_vec(&cfg).expect("simulate").0
-}
-
-fn position(t: &TruthStateV1) -> Geodetic {
-    Geodetic {
-        latitude_rad: t.latitude_rad,
-        longitude_rad: t.longitude_rad,
-        height_m: t.height_m,
-    }
 }
 
 /// Runs IMU plus the aids `use_aid` accepts, starting `offset` metres (NED) off the truth;
@@ -41,7 +33,7 @@ fn run(
         match m {
             LogMessage::Truth(t) => {
                 if nav.is_none() {
-                    let p = earth::offset_position(&position(t), &offset);
+                    let p = earth::offset_position(&truth_position(t), &offset);
                     let s = initial_state(
                         t.host_time_ns as f64 * 1e-9,
                         p,
@@ -71,7 +63,7 @@ fn run(
     }
     let n = nav.expect("started");
     let t = last_truth.expect("truth");
-    let e = earth::ned_offset(&position(&t), &n.state().position);
+    let e = earth::ned_offset(&truth_position(&t), &n.state().position);
     let dv = n.state().velocity_ned - Vector3::from(t.velocity_ned_m_s);
     (e.xy().norm(), dv.norm(), n)
 }

@@ -1,6 +1,7 @@
 //! The simulator's effects checked against analytic expectations.
 
-use auvnav_core::earth::{self, Geodetic};
+use auvnav_core::earth;
+use auvnav_core::strapdown::truth_position;
 use auvnav_log::LogMessage;
 use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, TruthStateV1, UsblFixV1};
 use auvnav_sim::effects::Effects;
@@ -128,12 +129,11 @@ fn dead_reckon(msgs: &[LogMessage]) -> (Vector3<f64>, f64, Vector3<f64>) {
         }
     }
     let (a, b) = (first_truth.expect("truth"), last_truth.expect("truth"));
-    let geo = |t: &TruthStateV1| Geodetic {
-        latitude_rad: t.latitude_rad,
-        longitude_rad: t.longitude_rad,
-        height_m: t.height_m,
-    };
-    (p, path, earth::ned_offset(&geo(&a), &geo(&b)))
+    (
+        p,
+        path,
+        earth::ned_offset(&truth_position(&a), &truth_position(&b)),
+    )
 }
 
 #[test]
@@ -171,11 +171,7 @@ fn usbl_range_differences_match_the_array_geometry() {
                 LogMessage::Truth(t) => {
                     let Some(f) = pending.take() else { continue };
                     assert_eq!(f.host_time_ns, t.host_time_ns);
-                    let pos = Geodetic {
-                        latitude_rad: t.latitude_rad,
-                        longitude_rad: t.longitude_rad,
-                        height_m: t.height_m,
-                    };
+                    let pos = truth_position(t);
                     let r_ned = earth::ned_offset(&station.position, &pos)
                         + c_body_to_ned(t) * Vector3::from(station.responder_lever_arm_m);
                     // The true array is yawed by the error; express the direction in its frame.

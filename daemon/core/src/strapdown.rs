@@ -120,14 +120,19 @@ impl NavState {
     pub fn from_truth(t: &auvnav_shm_schema::TruthStateV1) -> NavState {
         initial_state(
             t.host_time_ns as f64 * 1e-9,
-            Geodetic {
-                latitude_rad: t.latitude_rad,
-                longitude_rad: t.longitude_rad,
-                height_m: t.height_m,
-            },
+            truth_position(t),
             t.velocity_ned_m_s,
             t.euler_rad,
         )
+    }
+}
+
+/// The position of a truth / reference record.
+pub fn truth_position(t: &auvnav_shm_schema::TruthStateV1) -> Geodetic {
+    Geodetic {
+        latitude_rad: t.latitude_rad,
+        longitude_rad: t.longitude_rad,
+        height_m: t.height_m,
     }
 }
 

@@ -31,7 +31,8 @@ pub struct Accuracy {
     pub epochs: usize,
 }
 
-fn wrap(a: f64) -> f64 {
+/// An angle wrapped to -pi..pi (rad).
+pub fn wrap(a: f64) -> f64 {
     (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
 }
 

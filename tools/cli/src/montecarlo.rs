@@ -10,10 +10,11 @@
 //! gives the two-sided 95 % bounds and the fraction of epochs inside them per block.
 
 use anyhow::bail;
-use auvnav_core::earth::{self, Geodetic};
+use auvnav_core::earth;
 use auvnav_core::ekf as filter;
 use auvnav_core::navigator::NavConfig;
 use auvnav_core::session::{Session, SessionConfig, SessionOutput};
+use auvnav_core::strapdown::truth_position;
 use auvnav_log::LogMessage;
 use auvnav_sim::{self as sim, SimConfig, effects::Effects, rng::Rng, scenario::Scenario};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
@@ -184,11 +185,7 @@ pub fn nees_monte_carlo_with(
                         t.euler_rad[1],
                         t.euler_rad[2],
                     );
-                    let truth_pos = Geodetic {
-                        latitude_rad: t.latitude_rad,
-                        longitude_rad: t.longitude_rad,
-                        height_m: t.height_m,
-                    };
+                    let truth_pos = truth_position(t);
                     let Some(n) = session.navigator() else {
                         let start = crate::study::perturbed_start(truth_cfg, t, &mut rng);
                         session.start(start, "truth perturbed by a draw of P0", &mut |_| {

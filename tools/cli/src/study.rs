@@ -2,9 +2,10 @@
 //! parallel runner (`crate::parallel`): how a run's navigation starts. The runs themselves feed
 //! the navigation session (`auvnav_core::feed`), as the daemon does.
 
-use auvnav_core::earth::{self, Geodetic};
+use auvnav_core::earth;
 use auvnav_core::navigator::{NavConfig, initial_state};
 use auvnav_core::strapdown::NavState;
+use auvnav_core::strapdown::truth_position;
 use auvnav_sim::rng::Rng;
 use nalgebra::{UnitQuaternion, Vector3};
 
@@ -32,11 +33,7 @@ pub fn perturbed_start(
         rng.gauss(tilt),
         rng.gauss(cfg.initial_heading_std_deg * DEG),
     );
-    let truth_pos = Geodetic {
-        latitude_rad: t.latitude_rad,
-        longitude_rad: t.longitude_rad,
-        height_m: t.height_m,
-    };
+    let truth_pos = truth_position(t);
     let mut s = initial_state(
         t.host_time_ns as f64 * 1e-9,
         earth::offset_position(&truth_pos, &dp),

@@ -11,10 +11,11 @@
 
 use anyhow::{Context, bail};
 use auvnav_core::aid::usbl::{Coupling, UsblConfig, UsblFilter};
-use auvnav_core::earth::{Geodetic, ned_offset, offset_position};
+use auvnav_core::earth::{ned_offset, offset_position};
 use auvnav_core::feed::SensorMessage;
 use auvnav_core::navigator::NavConfig;
 use auvnav_core::session::{Session, SessionConfig, SessionOutput};
+use auvnav_core::strapdown::truth_position;
 use auvnav_log::LogMessage;
 use auvnav_shm_schema::{AidDiagnosticsV1, AidSource};
 use auvnav_sim::rng::Rng;
@@ -254,11 +255,7 @@ fn run_one(
     sim::simulate(&sim_cfg, |m| {
         match m {
             LogMessage::Truth(t) => {
-                let truth_pos = Geodetic {
-                    latitude_rad: t.latitude_rad,
-                    longitude_rad: t.longitude_rad,
-                    height_m: t.height_m,
-                };
+                let truth_pos = truth_position(t);
                 let Some(nv) = session.navigator() else {
                     let start = crate::study::perturbed_start(&cfg, t, &mut rng);
                     session.start(start, "truth perturbed by a draw of P0", &mut |_| {

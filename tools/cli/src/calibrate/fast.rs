@@ -225,7 +225,7 @@ fn sum_of_squares(problem: &Problem, runs: &[VoyageRun]) -> f64 {
         .sum()
 }
 
-/// The posterior of a Gauss–Newton step: (information matrix with prior, gradient term).
+/// A MAP Gauss–Newton step and the posterior covariance of the parameters it moves.
 struct Step {
     delta: DVector<f64>,
     covariance: DMatrix<f64>,

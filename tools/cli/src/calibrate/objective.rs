@@ -73,8 +73,7 @@ impl VoyageRun {
     }
 }
 
-fn lerp_position(a: &NavSolutionV1, b: &NavSolutionV1, t_ns: u64) -> Geodetic {
-    let s = crate::replay::interpolate(a, b, t_ns);
+fn position(s: &NavSolutionV1) -> Geodetic {
     Geodetic {
         latitude_rad: s.latitude_rad,
         longitude_rad: s.longitude_rad,
@@ -99,9 +98,9 @@ impl Tracker<'_> {
             {
                 let f = &self.fixes[self.next_fix];
                 let pos = if f.time_ns <= p.host_time_ns {
-                    lerp_position(&p, &p, f.time_ns)
+                    position(&p)
                 } else {
-                    lerp_position(&p, sol, f.time_ns)
+                    position(&crate::replay::interpolate(&p, sol, f.time_ns))
                 };
                 let o = earth::ned_offset(&f.position, &pos);
                 run.errors_ne.push([o.x, o.y]);
@@ -110,14 +109,7 @@ impl Tracker<'_> {
             }
         }
         if self.record.track && sol.host_time_ns >= self.next_track_ns {
-            run.track.push((
-                sol.host_time_ns,
-                Geodetic {
-                    latitude_rad: sol.latitude_rad,
-                    longitude_rad: sol.longitude_rad,
-                    height_m: sol.height_m,
-                },
-            ));
+            run.track.push((sol.host_time_ns, position(sol)));
             self.next_track_ns = sol.host_time_ns + 1_000_000_000;
         }
         self.prev = Some(*sol);
@@ -197,7 +189,7 @@ pub fn run_voyage(
     if let Some(p) = t.prev {
         while t.next_fix < t.fixes.len() {
             let f = &t.fixes[t.next_fix];
-            let pos = lerp_position(&p, &p, f.time_ns);
+            let pos = position(&p);
             let o = earth::ned_offset(&f.position, &pos);
             run.errors_ne.push([o.x, o.y]);
             run.positions.push(pos);

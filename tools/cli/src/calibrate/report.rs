@@ -468,9 +468,7 @@ pub fn config_toml(r: &CalibrationReport) -> anyhow::Result<String> {
 
 /// Writes `text` to `path` atomically (a temporary file beside it, then a rename).
 pub fn write_atomically(path: &Path, text: &str) -> anyhow::Result<()> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".partial");
-    let tmp = std::path::PathBuf::from(tmp);
+    let tmp = crate::replay::partial_path(path);
     let result = (|| -> anyhow::Result<()> {
         use std::io::Write;
         let mut f = std::fs::File::create(&tmp)?;

@@ -20,6 +20,7 @@
 
 use super::objective::VoyageRun;
 use super::voyage::Voyage;
+use crate::accuracy::wrap;
 use auvnav_core::earth;
 use serde::Serialize;
 
@@ -40,10 +41,6 @@ pub struct TwoPointVoyage {
     pub scale_factor_a: f64,
     pub mount_yaw_deg_b: f64,
     pub scale_factor_b: f64,
-}
-
-fn wrap(a: f64) -> f64 {
-    (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
 }
 
 /// The two-point estimate of each voyage from its start-installation run (`yaw0` deg, `s0`).

@@ -6,7 +6,7 @@ use anyhow::{Context, bail};
 use auvnav_core::earth::{self, Geodetic};
 use auvnav_core::feed::SensorMessage;
 use auvnav_core::session::SessionConfig;
-use auvnav_core::strapdown::NavState;
+use auvnav_core::strapdown::{NavState, truth_position};
 use auvnav_log::{LogMessage, LogReader};
 use auvnav_shm_schema::{DvlVelocityV1, GnssFixV1};
 use serde::Serialize;
@@ -209,11 +209,7 @@ impl Voyage {
                     .iter()
                     .map(|t| Fix {
                         time_ns: t.host_time_ns,
-                        position: Geodetic {
-                            latitude_rad: t.latitude_rad,
-                            longitude_rad: t.longitude_rad,
-                            height_m: t.height_m,
-                        },
+                        position: truth_position(t),
                         std_m: 0.0,
                         distance_m: 0.0,
                     })
@@ -262,16 +258,7 @@ impl Voyage {
             let track: Vec<(u64, Geodetic)> = truth
                 .iter()
                 .filter(|t| t.host_time_ns >= start_ns)
-                .map(|t| {
-                    (
-                        t.host_time_ns,
-                        Geodetic {
-                            latitude_rad: t.latitude_rad,
-                            longitude_rad: t.longitude_rad,
-                            height_m: t.height_m,
-                        },
-                    )
-                })
+                .map(|t| (t.host_time_ns, truth_position(t)))
                 .collect();
             set_distances(&mut fix_list, &track);
         }

@@ -86,7 +86,8 @@ pub fn run_log(
     }
 }
 
-fn partial_path(path: &Path) -> PathBuf {
+/// `path` + `.partial`: where a file is written before it is renamed into place.
+pub fn partial_path(path: &Path) -> PathBuf {
     let mut p = path.as_os_str().to_owned();
     p.push(".partial");
     PathBuf::from(p)

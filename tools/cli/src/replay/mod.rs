@@ -292,9 +292,7 @@ pub fn interpolate(a: &NavSolutionV1, b: &NavSolutionV1, t_ns: u64) -> NavSoluti
     for i in 0..3 {
         s.velocity_ned_m_s[i] = lerp(a.velocity_ned_m_s[i], b.velocity_ned_m_s[i]);
     }
-    let dyaw = (b.euler_rad[2] - a.euler_rad[2] + std::f64::consts::PI)
-        .rem_euclid(std::f64::consts::TAU)
-        - std::f64::consts::PI;
+    let dyaw = crate::accuracy::wrap(b.euler_rad[2] - a.euler_rad[2]);
     s.euler_rad[2] = a.euler_rad[2] + dyaw * w;
     s
 }
