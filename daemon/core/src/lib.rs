@@ -20,3 +20,4 @@ pub mod nav_core;
 pub mod navigator;
 pub mod session;
 pub mod strapdown;
+pub mod wmm;
