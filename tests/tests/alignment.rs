@@ -172,6 +172,7 @@ fn session_aligns_in_motion_and_hands_over_to_navigation() {
                 coarse_tilt_std_deg: 0.05,
                 aligned_heading_std_deg: 0.1,
                 fine_model,
+                heading_source: Default::default(),
             }),
             ..Default::default()
         };

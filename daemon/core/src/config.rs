@@ -103,6 +103,11 @@ pub struct NavConfig {
     /// Default none: USBL fixes are counted and not used.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub usbl: Option<crate::aid::usbl::UsblConfig>,
+    /// Magnetic heading aid (`[navigation.magnetometer]`): the calibration (what `auvnav
+    /// calibrate mag` writes), the field model, noise and gate. Default none: readings are
+    /// counted and not used.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub magnetometer: Option<crate::aid::magnetometer::MagnetometerConfig>,
 }
 
 impl Default for NavConfig {
@@ -146,6 +151,7 @@ impl Default for NavConfig {
             dvl_reset_after_s: 5.0,
             dvl: None,
             usbl: None,
+            magnetometer: None,
         }
     }
 }
@@ -275,6 +281,21 @@ pub struct AlignmentConfig {
     /// IMU biases, DVL mounting estimate and standard deviations (cross-covariances dropped).
     #[serde(default = "default_fine_model")]
     pub fine_model: u8,
+    /// Where the coarse heading comes from: "gyrocompass" (the Earth's rotation seen by the
+    /// gyros; needs navigation-grade gyros) or "magnetometer" (the calibrated field of
+    /// `[navigation.magnetometer]` and the declination of the field model, for vehicles whose
+    /// gyros cannot find north). Default "gyrocompass".
+    #[serde(default)]
+    pub heading_source: HeadingSource,
+}
+
+/// The coarse alignment's heading source.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum HeadingSource {
+    #[default]
+    Gyrocompass,
+    Magnetometer,
 }
 
 fn default_fine_model() -> u8 {
@@ -452,6 +473,9 @@ impl NavConfig {
         if let Some(u) = &self.usbl {
             out.extend(u.problems().into_iter().map(|p| format!("navigation.{p}")));
         }
+        if let Some(m) = &self.magnetometer {
+            out.extend(m.problems().into_iter().map(|p| format!("navigation.{p}")));
+        }
         out
     }
 }
@@ -484,6 +508,15 @@ impl SessionConfig {
             );
             p.range("alignment.latitude_deg", a.latitude_deg, -89.0, 89.0);
             p.range("alignment.fine_model", f64::from(a.fine_model), 0.0, 3.0);
+            if a.heading_source == HeadingSource::Magnetometer
+                && self.navigation.magnetometer.is_none()
+            {
+                p.0.push(
+                    "alignment.heading_source = \"magnetometer\": needs a [navigation.magnetometer] \
+                     table (its calibration and field model)"
+                        .into(),
+                );
+            }
         }
         p.0
     }

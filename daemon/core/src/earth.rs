@@ -27,6 +27,11 @@ pub struct Geodetic {
     pub height_m: f64,
 }
 
+/// An angle wrapped to −π..π (rad).
+pub fn wrap_pi(a: f64) -> f64 {
+    (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
+}
+
 /// Meridian radius of curvature R_M (m).
 pub fn meridian_radius(lat: f64) -> f64 {
     let s = lat.sin();

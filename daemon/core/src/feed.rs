@@ -3,7 +3,9 @@
 //! tests — hands each message to `Session::feed` (`crate::session`) as a [`SensorMessage`]. The
 //! session decides the order in which aids meet the IMU stream (time stamp + aid delay, then
 //! kind, then sequence), so a figure measured by any of them measures the code the daemon runs.
-use auvnav_shm_schema::{DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, UsblFixV1};
+use auvnav_shm_schema::{
+    DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, UsblFixV1,
+};
 
 /// A sensor message for the navigation session.
 #[derive(Debug, Clone, Copy)]
@@ -13,6 +15,7 @@ pub enum SensorMessage {
     Depth(DepthV1),
     Gnss(GnssFixV1),
     Usbl(UsblFixV1),
+    Magnetometer(MagnetometerV1),
 }
 
 impl SensorMessage {
@@ -24,6 +27,7 @@ impl SensorMessage {
             SensorMessage::Depth(m) => m.host_time_ns,
             SensorMessage::Gnss(m) => m.host_time_ns,
             SensorMessage::Usbl(m) => m.host_time_ns,
+            SensorMessage::Magnetometer(m) => m.host_time_ns,
         }
     }
 }

@@ -13,6 +13,7 @@ use crate::aid::AidUpdate;
 use crate::aid::depth::DepthAid;
 use crate::aid::dvl::{DvlAid, DvlEstimation, DvlParameters};
 use crate::aid::gnss::GnssAid;
+use crate::aid::magnetometer::MagnetometerAid;
 use crate::aid::usbl::UsblAid;
 use crate::aid::zero_velocity::ZeroVelocityAid;
 pub use crate::config::NavConfig;
@@ -20,8 +21,8 @@ use crate::ekf::{self, ProcessNoise, StateVector};
 use crate::nav_core::{ImuTiming, NavCore};
 use crate::strapdown::NavState;
 use auvnav_shm_schema::{
-    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, NavMode, NavSolutionV1,
-    UsblFixV1,
+    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, NavMode,
+    NavSolutionV1, UsblFixV1,
 };
 use nalgebra::Vector3;
 use serde::Serialize;
@@ -63,6 +64,16 @@ pub struct NavCounters {
     pub usbl_reopened: u64,
     /// USBL updates that failed numerically (covariance not positive definite).
     pub usbl_failed: u64,
+    pub magnetometer_fused: u64,
+    /// Magnetic headings rejected by the innovation gate.
+    pub magnetometer_rejected: u64,
+    /// Magnetometer readings flagged invalid, not finite, or without a local field.
+    pub magnetometer_invalid: u64,
+    /// Readings whose calibrated magnitude is far from the field model (a disturbed
+    /// environment or a calibration that does not hold): not fused.
+    pub magnetometer_disturbed: u64,
+    /// Readings received without a `[navigation.magnetometer]` configuration.
+    pub magnetometer_unconfigured: u64,
     /// Aiding messages older than the navigation state (skipped).
     pub aid_late: u64,
 }
@@ -78,6 +89,8 @@ pub struct Navigator {
     gnss: GnssAid,
     zero_velocity: ZeroVelocityAid,
     usbl: UsblAid,
+    magnetometer: Option<MagnetometerAid>,
+    magnetometer_unconfigured: u64,
     dvl_timeout_s: f64,
     solution_sequence: u64,
 }
@@ -149,6 +162,8 @@ impl Navigator {
                 cfg.zero_velocity_gate_chi2,
             ),
             usbl,
+            magnetometer: cfg.magnetometer.as_ref().map(MagnetometerAid::new),
+            magnetometer_unconfigured: 0,
             core,
             dvl_timeout_s: cfg.dvl_timeout_s,
             solution_sequence: 0,
@@ -239,6 +254,17 @@ impl Navigator {
         self.apply(u)
     }
 
+    /// Fuses a magnetometer reading as a magnetic heading (`crate::aid::magnetometer`); `None`
+    /// (counted) without a `[navigation.magnetometer]` configuration.
+    pub fn on_magnetometer(&mut self, m: &MagnetometerV1) -> Option<AidDiagnosticsV1> {
+        let Some(aid) = self.magnetometer.as_mut() else {
+            self.magnetometer_unconfigured += 1;
+            return None;
+        };
+        let u = aid.fuse(&mut self.core, m);
+        Some(self.apply(u))
+    }
+
     /// The estimated USBL measurement errors [δR, δΔR13, δΔR24] (m) and the noise variances in
     /// use, when USBL fusion is configured and has seen a fix.
     pub fn usbl_estimates(&self) -> Option<(Vector3<f64>, Vector3<f64>)> {
@@ -255,6 +281,11 @@ impl Navigator {
             &self.zero_velocity.counters,
             &self.usbl.counters,
         );
+        let mag = self
+            .magnetometer
+            .as_ref()
+            .map(|m| m.counters)
+            .unwrap_or_default();
         NavCounters {
             imu_samples: c.imu_samples,
             imu_out_of_order: c.imu_out_of_order,
@@ -278,6 +309,11 @@ impl Navigator {
             usbl_unconfigured: usbl.unconfigured,
             usbl_reopened: usbl.reopened,
             usbl_failed: usbl.failed,
+            magnetometer_fused: mag.common.fused,
+            magnetometer_rejected: mag.common.rejected,
+            magnetometer_invalid: mag.common.invalid,
+            magnetometer_disturbed: mag.disturbed,
+            magnetometer_unconfigured: self.magnetometer_unconfigured,
             aid_late: c.aid_late,
         }
     }
@@ -303,6 +339,10 @@ impl Navigator {
         let usbl_fused_s = self.usbl.last_fused_s();
         if usbl_fused_s.is_some_and(|t| s.time_s - t <= self.dvl_timeout_s) {
             health |= NavSolutionV1::HEALTH_USBL;
+        }
+        let mag_fused_ns = self.magnetometer.as_ref().and_then(|m| m.last_fused_ns());
+        if mag_fused_ns.is_some_and(|t| s.time_s - t as f64 * 1e-9 <= self.dvl_timeout_s) {
+            health |= NavSolutionV1::HEALTH_MAGNETOMETER;
         }
         NavSolutionV1 {
             host_time_ns: t_ns,

@@ -2,10 +2,11 @@
 //! time through [`crate::feed`]. The daemon runs it on live messages and `auvnav replay` on a
 //! log's, in the same order, so that the same messages give the same solutions bit for bit.
 
+use crate::aid::magnetometer::MagnetometerAid;
 use crate::align::coarse::InMotionAligner;
 use crate::align::fine::{ErrorModel, FineAlignConfig, FineAligner};
-use crate::config::NavConfig;
 pub use crate::config::{AlignmentConfig, InitialState, SessionConfig};
+use crate::config::{HeadingSource, NavConfig};
 use crate::earth::Geodetic;
 use crate::feed::SensorMessage;
 use crate::navigator::Navigator;
@@ -42,6 +43,7 @@ fn aid_key(m: &SensorMessage) -> (u64, u8, u64) {
         SensorMessage::Depth(m) => (m.host_time_ns, 1, m.sequence),
         SensorMessage::Gnss(m) => (m.host_time_ns, 2, m.sequence),
         SensorMessage::Usbl(m) => (m.host_time_ns, 3, m.sequence),
+        SensorMessage::Magnetometer(m) => (m.host_time_ns, 4, m.sequence),
         // Never queued: IMU samples are processed as they come.
         SensorMessage::Imu(m) => (m.host_time_ns, u8::MAX, m.sequence),
     }
@@ -95,6 +97,11 @@ pub struct Session {
     fine_hands_over: bool,
     /// The fine stage integrates IMU samples stamped after this (ns).
     fine_start_ns: u64,
+    /// Coarse heading from the magnetometer (`heading_source = "magnetometer"`): its
+    /// calibration and field model, and the sum of the calibrated readings in start-body axes.
+    align_magnetometer: Option<MagnetometerAid>,
+    mag_sum_b0: Vector3<f64>,
+    mag_count: usize,
 }
 
 impl Session {
@@ -119,7 +126,40 @@ impl Session {
             fine: None,
             fine_hands_over: true,
             fine_start_ns: 0,
+            align_magnetometer: match (&cfg.alignment, &cfg.navigation.magnetometer) {
+                (Some(a), Some(m)) if a.heading_source == HeadingSource::Magnetometer => {
+                    Some(MagnetometerAid::new(m))
+                }
+                _ => None,
+            },
+            mag_sum_b0: Vector3::zeros(),
+            mag_count: 0,
         }
+    }
+
+    /// The coarse attitude with its heading replaced by the magnetic one: the mean calibrated
+    /// field, rotated to NED with the aligner's attitude, must point at the declination; the
+    /// attitude (and the distance moved) turn about the vertical by the difference. `None`
+    /// without readings or a local field.
+    fn magnetic_heading_correction(
+        &mut self,
+        c_b_n: &Matrix3<f64>,
+        c_b_b0: &Matrix3<f64>,
+        lat: f64,
+        lon: f64,
+    ) -> Option<Matrix3<f64>> {
+        let aid = self.align_magnetometer.as_mut()?;
+        if self.mag_count == 0 {
+            return None;
+        }
+        let (declination, _) = aid.local_field(lat, lon)?;
+        let mean_body = c_b_b0.transpose() * (self.mag_sum_b0 / self.mag_count as f64);
+        let m = c_b_n * mean_body;
+        if m.x.hypot(m.y) < 1e-6 * m.norm() {
+            return None;
+        }
+        let delta = crate::earth::wrap_pi(m.y.atan2(m.x) - declination);
+        Some(*Rotation3::from_axis_angle(&Vector3::z_axis(), -delta).matrix())
     }
 
     /// Starts the fine-alignment filter of `model` from `state` (the attitude found elsewhere),
@@ -307,6 +347,23 @@ impl Session {
         }
         let Some((c_b_n, moved)) = aligner.solve_with_displacement() else {
             return Ok(());
+        };
+        let c_b_b0 = *aligner.body_to_start();
+        let (c_b_n, moved) = match self.magnetic_heading_correction(
+            &c_b_n,
+            &c_b_b0,
+            a.latitude_deg.to_radians(),
+            a.longitude_deg.to_radians(),
+        ) {
+            Some(turn) => (turn * c_b_n, turn * moved),
+            None if self.align_magnetometer.is_some() => {
+                // No magnetic heading yet: keep aligning (the hand-over waits for one).
+                if due {
+                    self.before_start += 1;
+                }
+                return Ok(());
+            }
+            None => (c_b_n, moved),
         };
         let start = Geodetic {
             latitude_rad: a.latitude_deg.to_radians(),
@@ -512,6 +569,18 @@ impl Session {
             return Ok(());
         }
         if self.nav.is_none()
+            && let Some(aligner) = self.aligner.as_ref()
+            && let Some(mag) = self.align_magnetometer.as_ref()
+            && let SensorMessage::Magnetometer(m) = aid
+        {
+            // Coarse alignment sums the calibrated field in start-body axes.
+            if let Some(b) = mag.calibrated(&m) {
+                self.mag_sum_b0 += aligner.body_to_start() * b;
+                self.mag_count += 1;
+            }
+            return Ok(());
+        }
+        if self.nav.is_none()
             && self.aligner.is_some()
             && let SensorMessage::Dvl(m) = aid
         {
@@ -528,6 +597,11 @@ impl Session {
             SensorMessage::Depth(m) => nav.on_depth(&m),
             SensorMessage::Gnss(m) => nav.on_gnss(&m),
             SensorMessage::Usbl(m) => nav.on_usbl(&m),
+            SensorMessage::Magnetometer(m) => match nav.on_magnetometer(&m) {
+                Some(d) => d,
+                // Without [navigation.magnetometer] the readings are counted, not reported.
+                None => return Ok(()),
+            },
             // Not an aid (the feed never queues IMU samples).
             SensorMessage::Imu(_) => return Ok(()),
         };

@@ -13,8 +13,8 @@ use auvnav_core::session::{Session, SessionOutput};
 use auvnav_shm_schema::bus::{Bus, BusError, BusPublisher, BusSubscriber};
 use auvnav_shm_schema::clock::monotonic_ns;
 use auvnav_shm_schema::{
-    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, NavSolutionV1,
-    ProcessHealthV1, ProcessState, UsblFixV1, qos, topic,
+    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1,
+    NavSolutionV1, ProcessHealthV1, ProcessState, UsblFixV1, qos, topic,
 };
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
@@ -168,12 +168,16 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
     let mut usbl = bus
         .subscriber::<UsblFixV1>(topic::USBL, qos::SENSOR)
         .map_err(e)?;
+    let mut magnetometer = bus
+        .subscriber::<MagnetometerV1>(topic::MAGNETOMETER, qos::SENSOR)
+        .map_err(e)?;
     let listeners = [
         topic::IMU,
         topic::DVL,
         topic::DEPTH,
         topic::GNSS,
         topic::USBL,
+        topic::MAGNETOMETER,
     ]
     .iter()
     .map(|t| bus.listener(t))
@@ -221,8 +225,14 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
     let health_ns = (cfg.health_period_s * 1e9) as u64;
     let mut next_health = 0u64;
     let mut next_flush = now + 1_000_000_000;
-    let (mut imus, mut dvls, mut depths, mut gnsss, mut usbls) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut imus, mut dvls, mut depths, mut gnsss, mut usbls, mut mags) = (
+        Vec::new(),
+        Vec::new(),
+        Vec::new(),
+        Vec::new(),
+        Vec::new(),
+        Vec::new(),
+    );
     let mut state = ProcessState::Starting;
     eprintln!(
         "auvnavd: running under {}/ (aid delay {} s, solution every {} IMU samples)",
@@ -249,6 +259,7 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
                         + c.depth_invalid
                         + c.gnss_invalid
                         + c.usbl_invalid
+                        + c.magnetometer_invalid
                 }),
             pid: std::process::id(),
             state: state as u32,
@@ -274,6 +285,7 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
             drain(&mut depth, &mut depths)?;
             drain(&mut gnss, &mut gnsss)?;
             drain(&mut usbl, &mut usbls)?;
+            drain(&mut magnetometer, &mut mags)?;
             drain(&mut imu, &mut imus)?;
             Ok(())
         })();
@@ -298,7 +310,8 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
         let aids = (dvls.drain(..).map(SensorMessage::Dvl))
             .chain(depths.drain(..).map(SensorMessage::Depth))
             .chain(gnsss.drain(..).map(SensorMessage::Gnss))
-            .chain(usbls.drain(..).map(SensorMessage::Usbl));
+            .chain(usbls.drain(..).map(SensorMessage::Usbl))
+            .chain(mags.drain(..).map(SensorMessage::Magnetometer));
         let mut io_error = None;
         for m in aids.chain(imus.drain(..).map(SensorMessage::Imu)) {
             if let Err(x) = session.feed(&m, &mut |o| out.on(o)) {
@@ -346,13 +359,14 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
         ProcessState::Stopping,
     );
     eprintln!(
-        "auvnavd: stopping; {} solutions ({} published), {} late aid messages, {} lost on the bus, {} missed deadlines; USBL fixes: {}",
+        "auvnavd: stopping; {} solutions ({} published), {} late aid messages, {} lost on the bus, {} missed deadlines; USBL fixes: {}; magnetometer: {}",
         out.solutions,
         out.published,
         session.late_aids,
         gaps,
         missed_deadlines,
-        usbl_summary(&session)
+        usbl_summary(&session),
+        magnetometer_summary(&session)
     );
     result?;
     flushed.map_err(|x| format!("flushing the CSV output: {x}"))
@@ -372,6 +386,26 @@ fn usbl_summary(session: &Session) -> String {
     format!(
         "{} fused, {} rejected by the gate ({} gate reopenings), {} invalid, {} failed",
         c.usbl_fused, c.usbl_rejected, c.usbl_reopened, c.usbl_invalid, c.usbl_failed
+    )
+}
+
+/// What became of the magnetometer readings, for the stop message.
+fn magnetometer_summary(session: &Session) -> String {
+    let Some(c) = session.navigator().map(|n| n.counters()) else {
+        return "no navigation yet".into();
+    };
+    if c.magnetometer_unconfigured > 0 {
+        return format!(
+            "{} received, not used (no [navigation.magnetometer] in the configuration)",
+            c.magnetometer_unconfigured
+        );
+    }
+    format!(
+        "{} fused, {} rejected by the gate, {} disturbed (magnitude far from the field model), {} invalid",
+        c.magnetometer_fused,
+        c.magnetometer_rejected,
+        c.magnetometer_disturbed,
+        c.magnetometer_invalid
     )
 }
 

@@ -32,9 +32,7 @@ pub struct Accuracy {
 }
 
 /// An angle wrapped to -pi..pi (rad).
-pub fn wrap(a: f64) -> f64 {
-    (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
-}
+pub use auvnav_core::earth::wrap_pi as wrap;
 
 impl AccuracyTracker {
     pub fn new(min_distance_m: f64) -> Self {

@@ -406,6 +406,7 @@ impl LogMessage {
             LogMessage::Depth(x) => S::Depth(*x),
             LogMessage::Gnss(x) => S::Gnss(*x),
             LogMessage::Usbl(x) => S::Usbl(*x),
+            LogMessage::Magnetometer(x) => S::Magnetometer(*x),
             _ => return None,
         })
     }

@@ -17,6 +17,7 @@
 pub mod depth;
 pub mod dvl;
 pub mod gnss;
+pub mod magnetometer;
 pub mod usbl;
 pub mod zero_velocity;
 

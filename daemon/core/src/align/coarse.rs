@@ -119,6 +119,11 @@ impl InMotionAligner {
         }
     }
 
+    /// C_b^b0: the body attitude at the latest IMU time relative to the start.
+    pub fn body_to_start(&self) -> &Matrix3<f64> {
+        &self.c_b_b0
+    }
+
     /// Velocity epochs kept so far.
     pub fn epochs(&self) -> usize {
         self.epochs.len()

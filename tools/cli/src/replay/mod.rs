@@ -64,10 +64,12 @@ pub struct ReplayCounts {
     /// USBL fixes (fused when the configuration has `[navigation.usbl]`; the navigator's
     /// counters say what became of them).
     pub usbl: u64,
+    /// Magnetometer readings (fused as headings with `[navigation.magnetometer]`).
+    pub magnetometer: u64,
     pub truth: u64,
     /// Sensor messages before the initial state was known (skipped).
     pub before_start: u64,
-    /// Messages this replay does not use (magnetometer, outputs of an earlier run).
+    /// Messages this replay does not use (outputs of an earlier run).
     pub unused: u64,
     /// Channels with a schema this program does not know (skipped).
     pub unknown: u64,
@@ -203,6 +205,7 @@ impl Replay {
                         SensorMessage::Depth(_) => &mut self.counts.depth,
                         SensorMessage::Gnss(_) => &mut self.counts.gnss,
                         SensorMessage::Usbl(_) => &mut self.counts.usbl,
+                        SensorMessage::Magnetometer(_) => &mut self.counts.magnetometer,
                     } += 1;
                     self.session.feed(&x, &mut fwd)?;
                     drop(fwd);
