@@ -75,6 +75,11 @@ enum CalibrateWhat {
     /// reckoning's error at the fixes (CEP50 of error/distance), with standard deviations,
     /// observability, hold-out evaluation, a [navigation.dvl] table and a report.
     Dvl(auvnav_tools::calibrate::CalibrateDvlArgs),
+    /// S-MAG: magnetometer hard and soft iron from recordings with the attitude the vehicle
+    /// reached (ellipsoid, the seed's particle swarm, or Levenberg–Marquardt with constrained
+    /// fallbacks), checked on held-out readings, with a [navigation.magnetometer] table, plots
+    /// and a verdict.
+    Mag(auvnav_tools::calibrate::mag::CalibrateMagArgs),
 }
 
 #[derive(clap::Args)]
@@ -121,6 +126,23 @@ fn run_perturb(a: &PerturbArgs) -> anyhow::Result<()> {
             counts.depth_changed,
             counts.dvl_invalidated
         );
+    }
+    Ok(())
+}
+
+fn run_calibrate_mag(a: &auvnav_tools::calibrate::mag::CalibrateMagArgs) -> anyhow::Result<()> {
+    use auvnav_tools::calibrate::mag::{calibrate_mag, report};
+    let r = calibrate_mag(a)?;
+    if let Some(p) = &a.write_config {
+        report::write_config(p, &r)?;
+    }
+    if let Some(d) = &a.report {
+        report::write_report_dir(d, &r, &r.samples)?;
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+    } else {
+        print!("{}", report::text(&r));
     }
     Ok(())
 }
@@ -438,6 +460,7 @@ fn main() -> std::process::ExitCode {
         },
         Command::Calibrate { what } => match what {
             CalibrateWhat::Dvl(a) => run_calibrate_dvl(&a),
+            CalibrateWhat::Mag(a) => run_calibrate_mag(&a),
         },
         Command::Perturb(a) => run_perturb(&a),
         Command::Import { what } => match what {

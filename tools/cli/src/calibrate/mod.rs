@@ -11,6 +11,7 @@
 
 pub mod command;
 pub mod fast;
+pub mod mag;
 pub mod objective;
 pub mod params;
 pub mod report;
