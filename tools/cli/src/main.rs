@@ -235,6 +235,17 @@ enum BenchWhat {
         #[arg(long)]
         json: bool,
     },
+    /// Wall time of the magnetometer calibration methods (ellipsoid, seed, lm) on 10 000
+    /// simulated samples, full and AUV-like attitude coverage, with their errors.
+    Mag {
+        #[arg(long, default_value_t = 10_000)]
+        samples: usize,
+        /// Repetitions (the median is reported).
+        #[arg(long, default_value_t = 3)]
+        repeat: usize,
+        #[arg(long)]
+        json: bool,
+    },
     /// Time to simulate and write one hour of 200 Hz IMU, 5 Hz DVL, 1 Hz USBL and 1 Hz depth.
     Sim {
         /// Simulated hours.
@@ -485,6 +496,11 @@ fn main() -> std::process::ExitCode {
                 };
                 auvnav_tools::bench::calibrate(seed, &methods, json)
             }
+            BenchWhat::Mag {
+                samples,
+                repeat,
+                json,
+            } => auvnav_tools::bench::mag(samples, repeat, json),
             BenchWhat::Align { runs, json } => auvnav_tools::bench::align(runs, json),
             BenchWhat::Usbl { seconds, json } => auvnav_tools::bench::usbl(seconds, json),
             BenchWhat::E2e { seconds, json } => auvnav_tools::bench::e2e_bench(seconds, json),

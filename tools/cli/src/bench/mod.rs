@@ -8,11 +8,13 @@ use serde::Serialize;
 mod calibrate;
 mod decode;
 mod latency;
+mod mag;
 mod studies;
 mod throughput;
 
 pub use calibrate::*;
 pub use decode::*;
 pub use latency::*;
+pub use mag::*;
 pub use studies::*;
 pub use throughput::*;

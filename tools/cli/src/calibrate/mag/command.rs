@@ -195,7 +195,7 @@ fn reference_field(
     })
 }
 
-fn heading_check(samples: &[MagSample], c: &Calibration) -> Option<HeadingCheck> {
+pub fn heading_check(samples: &[MagSample], c: &Calibration) -> Option<HeadingCheck> {
     let mut before = 0.0;
     let mut after = 0.0;
     let mut n = 0usize;

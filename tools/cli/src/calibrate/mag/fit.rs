@@ -90,10 +90,42 @@ impl Model {
 pub enum FitError {
     #[error("{0}")]
     Degenerate(String),
+    /// The readings lie in a plane: only the heading-plane model can be fitted.
+    #[error("{0}")]
+    Planar(String),
 }
 
 /// Hard iron only: the sphere `|h − b| = r` by linear least squares. Returns (b, r).
 pub fn sphere(samples: &[MagSample]) -> Result<(Vector3<f64>, f64), FitError> {
+    if samples.len() < 4 {
+        return Err(FitError::Degenerate(format!(
+            "{} readings cannot determine a sphere",
+            samples.len()
+        )));
+    }
+    // The readings must move: their scatter's largest spread against their magnitude.
+    let n = samples.len() as f64;
+    let mean = samples.iter().map(|s| s.field_ut).sum::<Vector3<f64>>() / n;
+    let scatter = samples
+        .iter()
+        .map(|s| (s.field_ut - mean) * (s.field_ut - mean).transpose())
+        .sum::<Matrix3<f64>>()
+        / n;
+    let eig = scatter.symmetric_eigenvalues();
+    let spread = eig.max().max(0.0).sqrt();
+    let level = samples.iter().map(|s| s.field_ut.norm()).sum::<f64>() / n;
+    if spread < 0.02 * level.max(1e-9) {
+        return Err(FitError::Degenerate(format!(
+            "the readings barely change (spread {spread:.3} µT on {level:.1} µT): the recording \
+             holds one attitude, no sphere can be fitted; turn the vehicle"
+        )));
+    }
+    if eig.min().max(0.0).sqrt() < 0.02 * spread {
+        return Err(FitError::Planar(
+            "the readings lie in one plane (one axis of rotation only): no sphere can be fitted"
+                .into(),
+        ));
+    }
     let mut ata = SMatrix::<f64, 4, 4>::zeros();
     let mut atb = SVector::<f64, 4>::zeros();
     for s in samples {

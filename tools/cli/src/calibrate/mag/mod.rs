@@ -10,6 +10,7 @@ pub mod command;
 pub mod fit;
 pub mod input;
 pub mod report;
+pub mod simulated;
 
 use fit::{Calibration, FitError, LmFit, MagSample, Model, SwarmSettings};
 use nalgebra::Vector3;
@@ -261,7 +262,40 @@ pub fn run_method(
             let horizontal = reference
                 .inclination_deg
                 .map_or(r, |i| r * i.to_radians().cos());
-            let (centre, radius) = fit::sphere(samples)?;
+            let (centre, radius) = match fit::sphere(samples) {
+                Ok(v) => v,
+                Err(FitError::Planar(why))
+                    if forced_model.is_none() || forced_model == Some(Model::Plane) =>
+                {
+                    // Level turns only: the heading plane is all the readings can give.
+                    let n = samples.len() as f64;
+                    let mean = samples.iter().map(|s| s.field_ut).sum::<Vector3<f64>>() / n;
+                    let rad = samples
+                        .iter()
+                        .map(|s| (s.field_ut - mean).xy().norm())
+                        .sum::<f64>()
+                        / n;
+                    let s0 = horizontal / rad.max(1e-9);
+                    let start = Calibration {
+                        k: nalgebra::Matrix3::from_diagonal(&Vector3::new(s0, s0, 1.0)),
+                        hard_iron_ut: Vector3::new(mean.x, mean.y, 0.0),
+                        lambda: None,
+                    };
+                    let f = fit::levenberg_marquardt(samples, r, horizontal, Model::Plane, &start)?;
+                    return Ok(MethodOutcome {
+                        method,
+                        calibration: f.calibration,
+                        model: Model::Plane,
+                        lm: Some(f),
+                        reasons: vec![format!(
+                            "{why}; {}: the z hard iron and scale are not determined",
+                            Model::Plane.name()
+                        )],
+                        evaluations: None,
+                    });
+                }
+                Err(e) => return Err(e),
+            };
             let sphere_start = Calibration {
                 k: nalgebra::Matrix3::identity() * (r / radius),
                 hard_iron_ut: centre,
