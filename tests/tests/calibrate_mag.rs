@@ -13,14 +13,15 @@ use auvnav_tools::calibrate::mag::{
 use nalgebra::Vector3;
 
 fn effects(hard: [f64; 3], soft: [f64; 9], intensity: f64, dip: f64) -> Effects {
-    let mut e = Effects::default();
-    e.mag_hard_iron = hard;
-    e.mag_soft_iron = soft;
-    e.mag_intensity = intensity;
-    e.mag_inclination = dip;
-    e.mag_declination = 0.0;
-    e.mag_noise = 0.1;
-    e
+    Effects {
+        mag_hard_iron: hard,
+        mag_soft_iron: soft,
+        mag_intensity: intensity,
+        mag_inclination: dip,
+        mag_declination: 0.0,
+        mag_noise: 0.1,
+        ..Default::default()
+    }
 }
 
 fn reference(intensity: f64, dip: f64) -> ReferenceField {

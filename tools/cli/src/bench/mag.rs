@@ -20,12 +20,14 @@ struct Row {
 
 /// Runs the benchmark; prints a table or JSON.
 pub fn mag(samples_n: usize, repeat: usize, json: bool) -> anyhow::Result<()> {
-    let mut e = auvnav_sim::effects::Effects::default();
-    e.mag_hard_iron = [9.0, -11.0, 6.5];
-    e.mag_soft_iron = [1.06, 0.03, -0.04, 0.03, 0.95, 0.02, -0.04, 0.02, 1.02];
-    e.mag_intensity = 49.0;
-    e.mag_inclination = 52.0;
-    e.mag_noise = 0.1;
+    let e = auvnav_sim::effects::Effects {
+        mag_hard_iron: [9.0, -11.0, 6.5],
+        mag_soft_iron: [1.06, 0.03, -0.04, 0.03, 0.95, 0.02, -0.04, 0.02, 1.02],
+        mag_intensity: 49.0,
+        mag_inclination: 52.0,
+        mag_noise: 0.1,
+        ..Default::default()
+    };
     let reference = ReferenceField {
         intensity_ut: 49.0,
         inclination_deg: Some(52.0),
