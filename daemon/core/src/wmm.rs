@@ -371,26 +371,6 @@ pub fn decimal_year(year: i32, month: u32, day: u32, seconds_of_day: f64) -> Opt
     Some(year as f64 + (f64::from(before + day - 1) + seconds_of_day / 86_400.0) / total)
 }
 
-/// The decimal year of a time in seconds since the Unix epoch (UTC, leap seconds ignored).
-pub fn decimal_year_from_unix(seconds: f64) -> Option<f64> {
-    if !seconds.is_finite() {
-        return None;
-    }
-    let days = (seconds / 86_400.0).floor();
-    let sod = seconds - days * 86_400.0;
-    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
-    let z = days as i64 + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
-    let y = (yoe + era * 400 + i64::from(m <= 2)) as i32;
-    decimal_year(y, m, d, sod)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -427,9 +407,5 @@ mod tests {
         assert_eq!(decimal_year(2024, 7, 2, 0.0), Some(2024.0 + 183.0 / 366.0));
         assert_eq!(decimal_year(2025, 2, 29, 0.0), None);
         assert_eq!(decimal_year(2025, 13, 1, 0.0), None);
-        // 2012-06-12T12:00:00Z
-        let y = decimal_year_from_unix(1_339_502_400.0).expect("date");
-        assert!((y - decimal_year(2012, 6, 12, 43_200.0).expect("date")).abs() < 1e-12);
-        assert_eq!(decimal_year_from_unix(0.0), Some(1970.0));
     }
 }

@@ -4,6 +4,7 @@
 
 use super::fit::MagSample;
 use anyhow::{Context, bail};
+use auvnav_drivers::convert;
 use auvnav_log::{LogMessage, LogReader};
 use auvnav_shm_schema::{ImuSampleV1, MagnetometerV1};
 use nalgebra::Vector3;
@@ -155,23 +156,28 @@ pub struct CsvColumns {
 fn iso_seconds(s: &str) -> Option<f64> {
     let s = s.trim().trim_end_matches('Z');
     let (date, time) = s.split_once(['T', ' '])?;
-    let mut d = date.split('-').map(|x| x.parse::<i64>().ok());
-    let (y, mo, da) = (d.next()??, d.next()??, d.next()??);
+    let mut d = date.split('-');
+    let y: i64 = d.next()?.parse().ok()?;
+    let mo: u32 = d.next()?.parse().ok()?;
+    let da: u32 = d.next()?.parse().ok()?;
     let mut t = time.split(':');
     let (h, mi): (f64, f64) = (t.next()?.parse().ok()?, t.next()?.parse().ok()?);
     let sec: f64 = t.next().unwrap_or("0").parse().ok()?;
     if !(1..=12).contains(&mo) || !(1..=31).contains(&da) {
         return None;
     }
-    // Days from civil (Howard Hinnant's algorithm).
-    let y2 = if mo <= 2 { y - 1 } else { y };
-    let era = y2.div_euclid(400);
-    let yoe = y2 - era * 400;
-    let mp = (mo + 9) % 12;
-    let doy = (153 * mp + 2) / 5 + da - 1;
-    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-    let days = era * 146_097 + doe - 719_468;
+    let days = convert::days_from_civil(y, mo, da);
     Some(days as f64 * 86_400.0 + h * 3600.0 + mi * 60.0 + sec)
+}
+
+/// The decimal year of a time in seconds since the Unix epoch (UTC, leap seconds ignored).
+fn decimal_year_from_unix(seconds: f64) -> Option<f64> {
+    if !seconds.is_finite() {
+        return None;
+    }
+    let days = (seconds / 86_400.0).floor();
+    let (y, m, d) = convert::civil_from_days(days as i64);
+    auvnav_core::wmm::decimal_year(i32::try_from(y).ok()?, m, d, seconds - days * 86_400.0)
 }
 
 /// Reads magnetometer (and accelerometer) columns of a CSV file. Lines starting with `#` are
@@ -252,7 +258,7 @@ pub fn read_csv(path: &Path, cols: &CsvColumns) -> anyhow::Result<Recording> {
                 Err(_) => match iso_seconds(s) {
                     Some(v) => {
                         if out.whereabouts.date.is_none() {
-                            out.whereabouts.date = auvnav_core::wmm::decimal_year_from_unix(v);
+                            out.whereabouts.date = decimal_year_from_unix(v);
                         }
                         v
                     }
@@ -322,5 +328,9 @@ mod tests {
         assert_eq!(iso_seconds("2012-06-12T12:00:02.5"), Some(1_339_502_402.5));
         assert_eq!(iso_seconds("2012-13-12T12:00:00"), None);
         assert_eq!(iso_seconds("yesterday"), None);
+        let y = decimal_year_from_unix(1_339_502_400.0).expect("date");
+        let want = auvnav_core::wmm::decimal_year(2012, 6, 12, 43_200.0).expect("date");
+        assert!((y - want).abs() < 1e-12);
+        assert_eq!(decimal_year_from_unix(0.0), Some(1970.0));
     }
 }
