@@ -355,12 +355,10 @@ pub fn calibrate_mag(a: &CalibrateMagArgs) -> anyhow::Result<MagReport> {
     let c = outcome.calibration;
     let id = Calibration::identity();
     let r = reference.intensity_ut;
-    let raw_radius_note = radius;
     let spreads = SpreadTable {
-        fit_before: super::spreads(&fit_set, &id, raw_radius_note),
+        fit_before: super::spreads(&fit_set, &id, radius),
         fit_after: super::spreads(&fit_set, &c, r),
-        evaluation_before: (!eval_set.is_empty())
-            .then(|| super::spreads(&eval_set, &id, raw_radius_note)),
+        evaluation_before: (!eval_set.is_empty()).then(|| super::spreads(&eval_set, &id, radius)),
         evaluation_after: (!eval_set.is_empty()).then(|| super::spreads(&eval_set, &c, r)),
     };
     let with_force = fit_set.iter().any(|s| s.specific_force.is_some());
@@ -442,7 +440,6 @@ pub fn calibrate_mag(a: &CalibrateMagArgs) -> anyhow::Result<MagReport> {
         );
     }
     let cov_raw = super::coverage(&all, &id);
-    let _ = &cov_raw;
     let cov_cal = super::coverage(&all, &c);
     if cov_cal.sphere_fraction < limits.coverage && outcome.model == Model::Full {
         verdict.push(format!(
