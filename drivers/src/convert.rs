@@ -6,7 +6,7 @@ use crate::pd0::{CoordinateSystem, Ensemble};
 use crate::seatrac::AcoFix;
 use crate::wldvl::Velocity;
 use crate::xsens::MtData2;
-use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, UsblFixV1};
+use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, MagnetometerV1, UsblFixV1};
 use serde::{Deserialize, Serialize};
 
 /// Standard gravity, for accelerometers that report in g (m/s^2).
@@ -307,6 +307,41 @@ pub fn xsens_sample(
     if let Some(t) = d.sample_time_fine {
         m.device_time_ns = u64::from(t) * 100_000;
         m.status |= ImuSampleV1::STATUS_DEVICE_TIME_VALID;
+    }
+    Some(m)
+}
+
+/// The magnetic field of an Xsens MTData2 message as a magnetometer message: the normalised field
+/// times `unit_ut` (µT per normalised unit), in tesla, in the sensor frame as sent (calibration
+/// is the navigator's). None when the message carries no magnetic field. A non-finite or
+/// implausible (|B| ≥ 1 mT) field is published without VALID_FIELD, so the navigator counts it.
+pub fn xsens_magnetometer(
+    d: &MtData2,
+    unit_ut: f64,
+    host_time_ns: u64,
+    sequence: u64,
+) -> Option<MagnetometerV1> {
+    let b = d.magnetic_field?;
+    let field_t = b.map(|x| x * unit_ut * 1e-6);
+    let mut m = MagnetometerV1 {
+        host_time_ns,
+        sequence,
+        field_t,
+        ..Default::default()
+    };
+    let norm = field_t.iter().map(|x| x * x).sum::<f64>().sqrt();
+    if norm.is_finite() && norm < 1e-3 {
+        m.validity |= MagnetometerV1::VALID_FIELD;
+    }
+    if let Some(t) = d.temperature_c
+        && (-60.0..=120.0).contains(&t)
+    {
+        m.temperature_c = t as f32;
+        m.validity |= MagnetometerV1::VALID_TEMPERATURE;
+    }
+    if let Some(t) = d.sample_time_fine {
+        m.device_time_ns = u64::from(t) * 100_000;
+        m.validity |= MagnetometerV1::VALID_DEVICE_TIME;
     }
     Some(m)
 }

@@ -9,7 +9,7 @@ use crate::pd0::Pd0Decoder;
 use crate::seatrac::{SeatracDecoder, SeatracMessage};
 use crate::wldvl::{WlDecoder, WlFrame};
 use crate::xsens::{XbusDecoder, XbusMessage};
-use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, UsblFixV1};
+use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, MagnetometerV1, UsblFixV1};
 use serde::{Deserialize, Serialize};
 
 /// A serial protocol the drivers speak.
@@ -53,6 +53,11 @@ impl Protocol {
     }
 
     /// The class of device that speaks it.
+    /// Whether the device also sends the magnetic field (published on the magnetometer topic).
+    pub fn carries_magnetic_field(self) -> bool {
+        self == Protocol::Xsens
+    }
+
     pub fn class(self) -> DeviceClass {
         match self {
             Protocol::Pd0 | Protocol::Wldvl => DeviceClass::Dvl,
@@ -91,15 +96,23 @@ pub struct ProtocolSettings {
     /// Xsens output data rate: the integration interval of delta-q/delta-v is its inverse (Hz,
     /// default 400).
     pub xsens_rate_hz: f64,
+    /// What one unit of the Xsens normalised magnetic field stands for (µT): the field strength
+    /// at the site of the device's last magnetic calibration (default 50). A magnetometer
+    /// calibration (`auvnav calibrate mag`) absorbs an error in it into the soft-iron scale.
+    pub xsens_field_unit_ut: f64,
     /// KVH output configuration (=ROTFMT, =ROTUNITS, =TEMPUNITS, rate).
     pub kvh: KvhConfig,
 }
+
+/// Default of [`ProtocolSettings::xsens_field_unit_ut`] (µT).
+pub const XSENS_FIELD_UNIT_UT: f64 = 50.0;
 
 impl Default for ProtocolSettings {
     fn default() -> Self {
         ProtocolSettings {
             latency_s: 0.0,
             xsens_rate_hz: 400.0,
+            xsens_field_unit_ut: XSENS_FIELD_UNIT_UT,
             kvh: KvhConfig {
                 increments: false,
                 degrees: false,
@@ -116,6 +129,7 @@ pub enum Output {
     Imu(ImuSampleV1),
     Dvl(DvlVelocityV1),
     Usbl(UsblFixV1),
+    Magnetometer(MagnetometerV1),
 }
 
 enum Inner {
@@ -142,6 +156,9 @@ pub struct DeviceDecoder {
     inner: Inner,
     last_counter: Option<u16>,
     counters: DeviceCounters,
+    /// A second message from the last frame (an Xsens packet with both inertial data and the
+    /// magnetic field), returned by the next call.
+    pending: Option<Output>,
 }
 
 impl DeviceDecoder {
@@ -159,6 +176,7 @@ impl DeviceDecoder {
             inner,
             last_counter: None,
             counters: DeviceCounters::default(),
+            pending: None,
         }
     }
 
@@ -208,6 +226,9 @@ impl DeviceDecoder {
     /// assigns it.
     pub fn next_output(&mut self, host_time_ns: u64) -> Option<Output> {
         let s = self.settings;
+        if let Some(out) = self.pending.take() {
+            return Some(out);
+        }
         loop {
             match &mut self.inner {
                 Inner::Pd0(d) => match d.next_ensemble()? {
@@ -245,12 +266,19 @@ impl DeviceDecoder {
                         if let Some(c) = m.packet_counter {
                             self.device_counter(c, 1 << 16);
                         }
-                        if let Some(out) =
-                            convert::xsens_sample(&m, s.xsens_rate_hz, host_time_ns, 0)
-                        {
-                            return Some(Output::Imu(out));
+                        let imu = convert::xsens_sample(&m, s.xsens_rate_hz, host_time_ns, 0)
+                            .map(Output::Imu);
+                        let mag =
+                            convert::xsens_magnetometer(&m, s.xsens_field_unit_ut, host_time_ns, 0)
+                                .map(Output::Magnetometer);
+                        match (imu, mag) {
+                            (Some(i), m) => {
+                                self.pending = m;
+                                return Some(i);
+                            }
+                            (None, Some(m)) => return Some(m),
+                            (None, None) => self.counters.other_frames += 1,
                         }
-                        self.counters.other_frames += 1;
                     }
                     XbusMessage::Other(_) => self.counters.other_frames += 1,
                 },

@@ -9,7 +9,7 @@ use crate::pd0::{self, BottomTrack, CoordinateSystem, Ensemble, FixedLeader, Var
 use crate::seatrac::{self, AcoFix, FixRange, FixUsbl};
 use crate::wldvl::{self, Velocity, WlFrame};
 use crate::xsens::{self, MtData2};
-use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, UsblFixV1};
+use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, MagnetometerV1, UsblFixV1};
 
 /// System configuration word of the emulated PD0 DVL: 600 kHz, convex, 30° beams, down-looking,
 /// 4-beam Janus.
@@ -219,6 +219,26 @@ pub fn xsens_from_imu(m: &ImuSampleV1, packet_counter: u16) -> Vec<u8> {
     xsens::encode_mtdata2(&d)
 }
 
+/// A magnetometer message as an Xsens MTData2 message carrying the magnetic field in normalised
+/// units of `unit_ut` µT (the inverse of [`crate::convert::xsens_magnetometer`]), with packet
+/// counter, sample time fine and temperature. An invalid field is sent as NaN.
+pub fn xsens_from_magnetometer(m: &MagnetometerV1, unit_ut: f64, packet_counter: u16) -> Vec<u8> {
+    let field = if m.validity & MagnetometerV1::VALID_FIELD != 0 {
+        m.field_t.map(|b| b * 1e6 / unit_ut)
+    } else {
+        [f64::NAN; 3]
+    };
+    xsens::encode_mtdata2(&MtData2 {
+        packet_counter: Some(packet_counter),
+        sample_time_fine: (m.validity & MagnetometerV1::VALID_DEVICE_TIME != 0)
+            .then_some((m.device_time_ns / 100_000) as u32),
+        temperature_c: (m.validity & MagnetometerV1::VALID_TEMPERATURE != 0)
+            .then_some(f64::from(m.temperature_c)),
+        magnetic_field: Some(field),
+        ..Default::default()
+    })
+}
+
 /// A USBL message as a SeaTrac `CID_XCVR_FIX` line (the inverse of
 /// [`crate::convert::seatrac_fix`]; `position_array_m` is `[northing, easting, depth]`).
 pub fn seatrac_from_usbl(m: &UsblFixV1, local_id: u8) -> Vec<u8> {
@@ -402,6 +422,64 @@ mod tests {
                 assert!((back.specific[i] - m.specific[i]).abs() <= 1e-6 * m.specific[i].abs());
             }
         }
+    }
+
+    #[test]
+    fn xsens_magnetic_field_round_trips_and_shares_a_packet_with_inertial_data() {
+        let m = MagnetometerV1 {
+            host_time_ns: 5_000_000_000,
+            device_time_ns: 123_456_700_000,
+            field_t: [21.5e-6, -3.25e-6, 41.0e-6],
+            temperature_c: 12.5,
+            validity: MagnetometerV1::VALID_FIELD
+                | MagnetometerV1::VALID_TEMPERATURE
+                | MagnetometerV1::VALID_DEVICE_TIME,
+            ..Default::default()
+        };
+        let settings = ProtocolSettings {
+            xsens_field_unit_ut: 48.0,
+            ..Default::default()
+        };
+        let Output::Magnetometer(back) = decode_one(
+            Protocol::Xsens,
+            settings,
+            &xsens_from_magnetometer(&m, 48.0, 3),
+        ) else {
+            panic!("not a magnetometer message")
+        };
+        assert_eq!(back.validity, m.validity);
+        assert_eq!(back.device_time_ns, m.device_time_ns);
+        assert_eq!(back.temperature_c, m.temperature_c);
+        for i in 0..3 {
+            assert!((back.field_t[i] - m.field_t[i]).abs() <= 1e-7 * m.field_t[i].abs());
+        }
+        // An invalid field travels as NaN and comes back without VALID_FIELD.
+        let bad = MagnetometerV1 { validity: 0, ..m };
+        let Output::Magnetometer(back) = decode_one(
+            Protocol::Xsens,
+            settings,
+            &xsens_from_magnetometer(&bad, 48.0, 4),
+        ) else {
+            panic!("not a magnetometer message")
+        };
+        assert_eq!(back.validity & MagnetometerV1::VALID_FIELD, 0);
+        // One packet with rate of turn, acceleration and the field: two messages, IMU first.
+        let both = xsens::encode_mtdata2(&MtData2 {
+            packet_counter: Some(7),
+            rate_of_turn: Some([0.01, 0.02, 0.03]),
+            acceleration: Some([0.0, 0.0, -9.8]),
+            magnetic_field: Some([0.4, 0.1, 0.8]),
+            ..Default::default()
+        });
+        let mut d = DeviceDecoder::new(Protocol::Xsens, settings);
+        d.push(&both);
+        assert!(matches!(d.next_output(1), Some(Output::Imu(_))));
+        let Some(Output::Magnetometer(b)) = d.next_output(1) else {
+            panic!("the field of the packet was not published")
+        };
+        assert!((b.field_t[2] - 0.8 * 48e-6).abs() < 1e-12);
+        assert!(d.next_output(1).is_none());
+        assert_eq!(d.counters().other_frames, 0);
     }
 
     #[test]

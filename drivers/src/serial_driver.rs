@@ -8,8 +8,8 @@ use crate::clock::monotonic_ns;
 use crate::device::{DeviceClass, DeviceDecoder, Output, Protocol, ProtocolSettings};
 use auvnav_shm_schema::bus::{Bus, BusError, BusPublisher};
 use auvnav_shm_schema::{
-    DvlVelocityV1, ImuSampleV1, ProcessHealthV1, ProcessState, RAW_CHUNK, RawBytesV1, UsblFixV1,
-    qos, topic,
+    DvlVelocityV1, ImuSampleV1, MagnetometerV1, ProcessHealthV1, ProcessState, RAW_CHUNK,
+    RawBytesV1, UsblFixV1, qos, topic,
 };
 use serde::{Deserialize, Serialize};
 use std::io::Read;
@@ -243,6 +243,16 @@ impl SerialDriverConfig {
                 "0 < x <= 4000 Hz".into(),
             ));
         }
+        if !(st.xsens_field_unit_ut.is_finite()
+            && st.xsens_field_unit_ut > 0.0
+            && st.xsens_field_unit_ut <= 1000.0)
+        {
+            return Err(range(
+                "settings.xsens_field_unit_ut",
+                st.xsens_field_unit_ut.to_string(),
+                "0 < x <= 1000 uT".into(),
+            ));
+        }
         if !(st.kvh.rate_hz.is_finite() && st.kvh.rate_hz > 0.0 && st.kvh.rate_hz <= 10_000.0) {
             return Err(range(
                 "settings.kvh.rate_hz",
@@ -304,28 +314,44 @@ pub fn open_port(
         .open_native()
 }
 
-/// The publisher of the driver's device class.
-enum DataPublisher {
+/// The publishers of the driver: its device class's topic, and the magnetometer topic for an
+/// IMU whose protocol carries the magnetic field (Xsens).
+struct DataPublisher {
+    class: ClassPublisher,
+    magnetometer: Option<BusPublisher<MagnetometerV1>>,
+}
+
+enum ClassPublisher {
     Imu(BusPublisher<ImuSampleV1>),
     Dvl(BusPublisher<DvlVelocityV1>),
     Usbl(BusPublisher<UsblFixV1>),
 }
 
 impl DataPublisher {
-    fn new(bus: &Bus, class: DeviceClass) -> Result<Self, BusError> {
-        Ok(match class {
-            DeviceClass::Imu => DataPublisher::Imu(bus.publisher(topic::IMU, qos::SENSOR)?),
-            DeviceClass::Dvl => DataPublisher::Dvl(bus.publisher(topic::DVL, qos::SENSOR)?),
-            DeviceClass::Usbl => DataPublisher::Usbl(bus.publisher(topic::USBL, qos::SENSOR)?),
+    fn new(bus: &Bus, protocol: Protocol) -> Result<Self, BusError> {
+        let class = match protocol.class() {
+            DeviceClass::Imu => ClassPublisher::Imu(bus.publisher(topic::IMU, qos::SENSOR)?),
+            DeviceClass::Dvl => ClassPublisher::Dvl(bus.publisher(topic::DVL, qos::SENSOR)?),
+            DeviceClass::Usbl => ClassPublisher::Usbl(bus.publisher(topic::USBL, qos::SENSOR)?),
+        };
+        let magnetometer = if protocol.carries_magnetic_field() {
+            Some(bus.publisher(topic::MAGNETOMETER, qos::SENSOR)?)
+        } else {
+            None
+        };
+        Ok(DataPublisher {
+            class,
+            magnetometer,
         })
     }
 
-    /// Publishes `out`; false when it is not of this publisher's class (never, by construction).
+    /// Publishes `out`; false when the driver has no publisher for it (never, by construction).
     fn publish(&mut self, out: Output) -> Result<bool, BusError> {
-        match (self, out) {
-            (DataPublisher::Imu(p), Output::Imu(m)) => p.publish(m).map(|_| true),
-            (DataPublisher::Dvl(p), Output::Dvl(m)) => p.publish(m).map(|_| true),
-            (DataPublisher::Usbl(p), Output::Usbl(m)) => p.publish(m).map(|_| true),
+        match (&mut self.class, &mut self.magnetometer, out) {
+            (ClassPublisher::Imu(p), _, Output::Imu(m)) => p.publish(m).map(|_| true),
+            (ClassPublisher::Dvl(p), _, Output::Dvl(m)) => p.publish(m).map(|_| true),
+            (ClassPublisher::Usbl(p), _, Output::Usbl(m)) => p.publish(m).map(|_| true),
+            (_, Some(p), Output::Magnetometer(m)) => p.publish(m).map(|_| true),
             _ => Ok(false),
         }
     }
@@ -353,7 +379,7 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
     let name = cfg.process_name();
     let class = cfg.protocol.class();
     let bus = Bus::new(&name, &cfg.prefix)?;
-    let mut data = DataPublisher::new(&bus, class)?;
+    let mut data = DataPublisher::new(&bus, cfg.protocol)?;
     let mut health_pub = bus.publisher::<ProcessHealthV1>(topic::HEALTH, qos::HEALTH)?;
     let mut raw_pub = if cfg.raw_capture {
         Some(bus.publisher::<RawBytesV1>(&topic::raw(&name), qos::RAW)?)
@@ -377,12 +403,17 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
     let mut last_open_error = String::new();
     let mut buf = vec![0u8; 64 * 1024];
     eprintln!(
-        "{name}: {} on {} at {} baud, publishing on {}/{} (mounting rpy {:?} deg, lever arm {:?} m)",
+        "{name}: {} on {} at {} baud, publishing on {}/{}{} (mounting rpy {:?} deg, lever arm {:?} m)",
         cfg.protocol.name(),
         cfg.serial.port,
         cfg.serial.baud,
         cfg.prefix,
         class.name(),
+        if cfg.protocol.carries_magnetic_field() {
+            format!(" and {}/{}", cfg.prefix, topic::MAGNETOMETER)
+        } else {
+            String::new()
+        },
         cfg.mounting.rotation_rpy_deg,
         cfg.mounting.lever_arm_m,
     );

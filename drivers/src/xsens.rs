@@ -287,6 +287,9 @@ pub fn encode_mtdata2(m: &MtData2) -> Vec<u8> {
     if let Some(q) = m.delta_q {
         put(xdi::DELTA_Q, &f32s(&q));
     }
+    if let Some(b) = m.magnetic_field {
+        put(xdi::MAGNETIC_FIELD, &f32s(&b));
+    }
     frame(MID_MTDATA2, &p)
 }
 

@@ -6,7 +6,8 @@
 use auvnav_log::{LogMessage, LogReader};
 use auvnav_shm_schema::bus::Bus;
 use auvnav_shm_schema::{
-    DvlVelocityV1, ImuSampleV1, ProcessHealthV1, ProcessState, UsblFixV1, qos, topic,
+    DvlVelocityV1, ImuSampleV1, MagnetometerV1, ProcessHealthV1, ProcessState, UsblFixV1, qos,
+    topic,
 };
 use auvnav_tests::processes::{Proc, TempDir, binary, unique};
 use serde_json::Value;
@@ -24,6 +25,7 @@ struct Collected {
     imu: Vec<ImuSampleV1>,
     dvl: Vec<DvlVelocityV1>,
     usbl: Vec<UsblFixV1>,
+    magnetometer: Vec<MagnetometerV1>,
     health: Vec<ProcessHealthV1>,
 }
 
@@ -31,6 +33,7 @@ struct Played {
     imu: Vec<ImuSampleV1>,
     dvl: Vec<DvlVelocityV1>,
     usbl: Vec<UsblFixV1>,
+    magnetometer: Vec<MagnetometerV1>,
 }
 
 fn simulate(dir: &Path) -> (PathBuf, Played) {
@@ -52,12 +55,14 @@ fn simulate(dir: &Path) -> (PathBuf, Played) {
         imu: vec![],
         dvl: vec![],
         usbl: vec![],
+        magnetometer: vec![],
     };
     while let Some(raw) = reader.next_message().expect("reading the log") {
         match raw.decode_any().expect("decoding") {
             LogMessage::Imu(m) => played.imu.push(m),
             LogMessage::Dvl(m) => played.dvl.push(m),
             LogMessage::Usbl(m) => played.usbl.push(m),
+            LogMessage::Magnetometer(m) => played.magnetometer.push(m),
             _ => {}
         }
     }
@@ -113,6 +118,9 @@ fn play(dir: &Path, log: &Path, devices: &[(&str, &str)], faults: &[&str]) -> Ou
     let mut usbl = bus
         .subscriber::<UsblFixV1>(topic::USBL, qos::SENSOR)
         .expect("usbl");
+    let mut magnetometer = bus
+        .subscriber::<MagnetometerV1>(topic::MAGNETOMETER, qos::SENSOR)
+        .expect("magnetometer");
     let mut health = bus
         .subscriber::<ProcessHealthV1>(topic::HEALTH, qos::HEALTH)
         .expect("health");
@@ -165,6 +173,9 @@ fn play(dir: &Path, log: &Path, devices: &[(&str, &str)], faults: &[&str]) -> Ou
         }
         while let Some(m) = usbl.receive().expect("receive") {
             got.usbl.push(m);
+        }
+        while let Some(m) = magnetometer.receive().expect("receive") {
+            got.magnetometer.push(m);
         }
         while let Some(m) = health.receive().expect("receive") {
             got.health.push(m);
@@ -354,8 +365,15 @@ fn garbage_is_counted_never_published_and_an_unplugged_device_comes_back() {
     let imu = device(&o.summary, "imu");
     assert!(count(imu, "corrupted") > 0 && count(imu, "garbage_bytes") > 0);
     assert!(count(dvl, "unplugged") > 0 && count(imu, "paused") > 0);
-    // Exactly the intact frames are published: corrupted ones and garbage never are.
-    assert_eq!(o.got.imu.len(), count(imu, "written"), "{}", o.stderr);
+    // Exactly the intact frames are published: corrupted ones and garbage never are. The Xsens
+    // sends the magnetic field in packets of its own, published on the magnetometer topic.
+    assert!(!played.magnetometer.is_empty() && !o.got.magnetometer.is_empty());
+    assert_eq!(
+        o.got.imu.len() + o.got.magnetometer.len(),
+        count(imu, "written"),
+        "{}",
+        o.stderr
+    );
     assert_eq!(o.got.dvl.len(), count(dvl, "written"), "{}", o.stderr);
     // And each published message is one that was played (matched by the device clock).
     for g in &o.got.imu {
@@ -386,6 +404,20 @@ fn garbage_is_counted_never_published_and_an_unplugged_device_comes_back() {
             ));
         }
     }
+    for g in &o.got.magnetometer {
+        let p = played
+            .magnetometer
+            .iter()
+            .find(|p| p.device_time_ns / 100_000 == g.device_time_ns / 100_000)
+            .expect("a magnetometer message that was played");
+        assert_eq!(g.validity, p.validity);
+        for i in 0..3 {
+            assert!(
+                close(g.field_t[i], p.field_t[i], 1e-6 * 60e-6),
+                "{g:?} {p:?}"
+            );
+        }
+    }
     // The corrupted frames are counted as checksum errors; garbage as skipped bytes.
     let hi = last_health(&o.got, "imu");
     assert!(
@@ -393,7 +425,10 @@ fn garbage_is_counted_never_published_and_an_unplugged_device_comes_back() {
         "{hi:?}"
     );
     assert!(hi.bytes_skipped > 0);
-    assert_eq!(hi.frames as usize, o.got.imu.len());
+    assert_eq!(
+        hi.frames as usize,
+        o.got.imu.len() + o.got.magnetometer.len()
+    );
     // The pause (3 s of log = 0.75 s at 4x, beyond the 0.5 s silence timeout) is reported as a
     // timeout and the reconnecting state while data had been flowing, then running again. (The
     // drivers also see a silence before the emulator starts playing.)

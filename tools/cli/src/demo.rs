@@ -30,6 +30,10 @@ pub struct DemoArgs {
     /// Random seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// The emulated IMU's protocol (processes only): `xsens` (an MTi sending its magnetic field
+    /// too, which the daemon fuses as a heading aid) or `kvh1750`.
+    #[arg(long, default_value = "xsens")]
+    pub imu: String,
     /// Write the logs and solutions here (processes: voyage.mcap, record.mcap, live_nav.csv,
     /// replay_nav.csv and each process's log; in process: sim.mcap and nav.csv).
     #[arg(long)]
@@ -105,10 +109,14 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
     // With a USBL station in the scenario, its fixes are fused (tight, AUKF).
     let usbl = auvnav_sim::StationGeometry::from_scenario(&cfg.scenario).map(|st| st.usbl_config());
     let has_usbl = usbl.is_some();
+    // With a magnetometer in the scenario, its heading is fused (calibrated as simulated).
+    let magnetometer = (cfg.scenario.rates.magnetometer_hz > 0)
+        .then(|| sim::sensors::MagnetometerModel::navigator_config(&cfg.effects));
     let (simulated, accuracy, counters) = run_voyage(
         &cfg,
         NavConfig {
             usbl,
+            magnetometer,
             ..NavConfig::default()
         },
         csv_file.as_mut().map(|w| w as &mut dyn std::io::Write),
@@ -164,6 +172,13 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
                 result.simulated.usbl_outliers
             );
         }
+        if result.simulated.magnetometer > 0 {
+            let c = &result.counters;
+            println!(
+                "  magnetometer heading: {} fused, {} rejected by the gate, {} disturbed",
+                c.magnetometer_fused, c.magnetometer_rejected, c.magnetometer_disturbed
+            );
+        }
         if let Some(dir) = &a.out {
             println!(
                 "  log: {}  solution: {}",
@@ -176,8 +191,16 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
 }
 
 fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
+    let imu = match auvnav_drivers::device::Protocol::from_name(&a.imu) {
+        Some(
+            p @ (auvnav_drivers::device::Protocol::Xsens
+            | auvnav_drivers::device::Protocol::Kvh1750),
+        ) => p,
+        _ => anyhow::bail!("--imu {:?}: expected xsens or kvh1750", a.imu),
+    };
     let r = crate::live::run_live(
         &a.scenario,
+        imu,
         a.seed,
         a.seconds.unwrap_or(120.0),
         a.speed,
@@ -192,8 +215,9 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
             r.scenario, r.seed, r.simulated_seconds, r.speed, acc.distance_travelled_m
         );
         println!(
-            "  processes: emulated PD0 DVL, KVH 1750 IMU, SeaTrac USBL on pseudo-terminals; \
-             auvnav-dvl, -imu, -usbl, -can (depth); auvnavd; auvnav record"
+            "  processes: emulated PD0 DVL, {} IMU, SeaTrac USBL on pseudo-terminals; \
+             auvnav-dvl, -imu, -usbl, -can (depth); auvnavd; auvnav record",
+            r.imu
         );
         println!(
             "  live solution: {} rows; horizontal error final {:.2} m, max {:.2} m, CEP50 {:.2} m; heading RMS {:.3} deg",

@@ -14,7 +14,7 @@
 
 use anyhow::{Context, bail};
 use auvnav_drivers::convert::KvhConfig;
-use auvnav_drivers::device::{DeviceClass, Protocol};
+use auvnav_drivers::device::{DeviceClass, Protocol, XSENS_FIELD_UNIT_UT};
 use auvnav_drivers::emulate as enc;
 use auvnav_log::{LogMessage, LogReader};
 use auvnav_sim::rng::Rng;
@@ -77,7 +77,9 @@ pub struct EmulateArgs {
 pub struct DeviceSummary {
     pub device: String,
     pub protocol: String,
-    /// Messages of the device's class in the log (within the played duration).
+    /// Messages of the log the device sends (within the played duration): its class's, and the
+    /// magnetometer's for an IMU that carries the field (Xsens, in units of the drivers' default
+    /// `settings.xsens_field_unit_ut`).
     pub messages: u64,
     /// Frames written intact.
     pub written: u64,
@@ -195,6 +197,9 @@ impl Device {
             }
             (Protocol::Xsens, LogMessage::Imu(s)) => {
                 enc::xsens_from_imu(s, (self.counter % 65_536) as u16)
+            }
+            (Protocol::Xsens, LogMessage::Magnetometer(m)) => {
+                enc::xsens_from_magnetometer(m, XSENS_FIELD_UNIT_UT, (self.counter % 65_536) as u16)
             }
             (Protocol::Seatrac, LogMessage::Usbl(u)) => enc::seatrac_from_usbl(u, 1),
             _ => return None,
@@ -349,6 +354,8 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
             LogMessage::Imu(s) => (DeviceClass::Imu, s.host_time_ns),
             LogMessage::Dvl(s) => (DeviceClass::Dvl, s.host_time_ns),
             LogMessage::Usbl(s) => (DeviceClass::Usbl, s.host_time_ns),
+            // An IMU that carries the magnetic field (Xsens) sends it in its own packets.
+            LogMessage::Magnetometer(s) => (DeviceClass::Imu, s.host_time_ns),
             _ => continue,
         };
         let Some(d) = devices.iter_mut().find(|d| d.class == class) else {

@@ -11,6 +11,7 @@ use crate::replay::interpolate;
 use anyhow::{Context, bail};
 use auvnav_drivers::can::DbcDecoder;
 use auvnav_drivers::can_driver::SAMPLE_DBC;
+use auvnav_drivers::device::Protocol;
 use auvnav_log::{LogMessage, LogReader};
 use auvnav_shm_schema::{NavSolutionV1, TruthStateV1};
 use auvnav_sim::{self as sim, SimConfig, scenario::Scenario};
@@ -27,6 +28,8 @@ pub struct LiveResult {
     pub seed: u64,
     pub simulated_seconds: f64,
     pub speed: f64,
+    /// The emulated IMU's protocol (`xsens` also sends the magnetic field).
+    pub imu: String,
     pub directory: String,
     pub record: String,
     pub live_nav_csv: String,
@@ -135,6 +138,7 @@ fn write_candump(path: &Path, depths: &[auvnav_shm_schema::DepthV1]) -> anyhow::
 /// Runs the live demo.
 pub fn run_live(
     scenario_name: &str,
+    imu: Protocol,
     seed: u64,
     seconds: f64,
     speed: f64,
@@ -208,6 +212,9 @@ pub fn run_live(
             imu_dt_from_device_time: true,
             usbl: auvnav_sim::StationGeometry::from_scenario(&cfg.scenario)
                 .map(|st| st.usbl_config()),
+            // The field reaches the daemon when the IMU carries it (Xsens).
+            magnetometer: (imu.carries_magnetic_field() && rates.magnetometer_hz > 0)
+                .then(|| auvnav_sim::sensors::MagnetometerModel::navigator_config(&cfg.effects)),
             ..Default::default()
         },
         initial: Some(auvnav_core::config::InitialState {
@@ -240,14 +247,14 @@ pub fn run_live(
         Ok(p)
     };
     let dvl_cfg = driver_cfg("dvl", "pd0", "")?;
-    let imu_cfg = driver_cfg(
-        "imu",
-        "kvh1750",
-        &format!(
+    let imu_settings = match imu {
+        Protocol::Xsens => format!("[settings]\nxsens_rate_hz = {}\n", rates.imu_hz),
+        _ => format!(
             "[settings.kvh]\nincrements = false\ndegrees = false\nrate_hz = {}\ntemperature_centi = false\n",
             rates.imu_hz
         ),
-    )?;
+    };
+    let imu_cfg = driver_cfg("imu", imu.name(), &imu_settings)?;
     let usbl_cfg = driver_cfg("usbl", "seatrac", "")?;
     let can_cfg = dir.join("can.toml");
     std::fs::write(
@@ -298,7 +305,7 @@ pub fn run_live(
         Command::new(&me)
             .arg("emulate")
             .arg(&voyage)
-            .args(["--dvl", "pd0", "--imu", "kvh1750", "--usbl", "seatrac"])
+            .args(["--dvl", "pd0", "--imu", imu.name(), "--usbl", "seatrac"])
             .args(["--speed", &speed.to_string()])
             .arg("--link-dir")
             .arg(&dev)
@@ -357,6 +364,7 @@ pub fn run_live(
         seed,
         simulated_seconds: seconds,
         speed,
+        imu: imu.name().to_string(),
         directory: dir.display().to_string(),
         record: record.display().to_string(),
         live_nav_csv: live_csv.display().to_string(),

@@ -4,6 +4,7 @@ use super::effects::Effects;
 use super::rng::Rng;
 use super::scenario::Station;
 use super::trajectory::TruthSample;
+use auvnav_core::aid::magnetometer::MagnetometerConfig;
 use auvnav_core::earth::{self, Geodetic};
 use auvnav_core::ekf::skew;
 use auvnav_shm_schema::{
@@ -434,6 +435,20 @@ impl MagnetometerModel {
             hard_iron_ut: Vector3::from(e.mag_hard_iron),
             noise_ut: e.mag_noise,
             sequence: 0,
+        }
+    }
+
+    /// The navigator's magnetometer configuration that matches these effects: the simulated
+    /// hard and soft iron as a perfect calibration, and the simulated declination and intensity
+    /// in place of the field model.
+    pub fn navigator_config(e: &Effects) -> MagnetometerConfig {
+        MagnetometerConfig {
+            hard_iron_ut: e.mag_hard_iron,
+            soft_iron: e.mag_soft_iron,
+            declination_deg: Some(e.mag_declination),
+            intensity_ut: Some(e.mag_intensity),
+            source: "the simulator's magnetometer effects".into(),
+            ..Default::default()
         }
     }
 

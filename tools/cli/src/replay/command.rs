@@ -328,6 +328,20 @@ pub fn print_report(r: &ReplayReport) {
             n.usbl_fused, n.usbl_rejected, n.usbl_reopened, n.usbl_invalid, n.aid_late
         );
     }
+    if n.magnetometer_unconfigured > 0 {
+        println!(
+            "  {} magnetometer readings not used (no [navigation.magnetometer])",
+            n.magnetometer_unconfigured
+        );
+    } else if r.counts.magnetometer > 0 {
+        println!(
+            "  magnetometer heading: {} fused, {} rejected by the gate, {} disturbed, {} invalid",
+            n.magnetometer_fused,
+            n.magnetometer_rejected,
+            n.magnetometer_disturbed,
+            n.magnetometer_invalid
+        );
+    }
     let skipped = n.imu_out_of_order + n.imu_invalid + n.aid_late + r.counts.before_start;
     if skipped > 0 || n.imu_gaps > 0 {
         println!(
