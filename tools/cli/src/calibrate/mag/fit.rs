@@ -228,14 +228,25 @@ fn unit(f: &Option<Vector3<f64>>) -> Option<Vector3<f64>> {
 
 /// The seed's fitness of (K, b, λ): ½Σ(|B|²/R² − 1)² + ½Σ(f̂·B/R − λ)², per sample.
 pub fn seed_fitness(samples: &[MagSample], field_ut: f64, c: &Calibration) -> f64 {
+    fitness_with_units(samples, &unit_forces(samples), field_ut, c)
+}
+
+/// [`seed_fitness`] with the unit specific forces computed once ([`unit_forces`]).
+fn fitness_with_units(
+    samples: &[MagSample],
+    units: &[Option<Vector3<f64>>],
+    field_ut: f64,
+    c: &Calibration,
+) -> f64 {
     let lambda = c.lambda.unwrap_or(0.0);
+    let inv_r = 1.0 / field_ut;
     let mut sum = 0.0;
-    for s in samples {
+    for (s, f) in samples.iter().zip(units) {
         let b = c.apply(&s.field_ut);
-        let e1 = b.norm_squared() / (field_ut * field_ut) - 1.0;
+        let e1 = b.norm_squared() * inv_r * inv_r - 1.0;
         sum += 0.5 * e1 * e1;
-        if let Some(f) = unit(&s.specific_force) {
-            let e2 = f.dot(&b) / field_ut - lambda;
+        if let Some(f) = f {
+            let e2 = f.dot(&b) * inv_r - lambda;
             sum += 0.5 * e2 * e2;
         }
     }
@@ -260,8 +271,8 @@ impl Default for SwarmSettings {
     }
 }
 
-/// The seed method: 13 unknowns x = [K11..K33, b1..b3, λ] by particle swarm (inertia 0.729,
-/// c1 = c2 = 1.494). The search box: K within ±50 % of the scale that maps the sphere fit's
+/// The seed method: 13 unknowns x = [K11..K33, b1..b3, λ] by a synchronous particle swarm
+/// (inertia 0.729, c1 = c2 = 1.494; the particles of an iteration evaluated in parallel). The search box: K within ±50 % of the scale that maps the sphere fit's
 /// radius to R (off-diagonals ±30 %), b within half a radius of the sphere centre, λ ∈ [−1, 1].
 /// Deterministic per `settings.seed`. Returns the calibration and the swarm's evaluation count.
 pub fn swarm(
@@ -290,7 +301,23 @@ pub fn swarm(
         hard_iron_ut: Vector3::new(x[9], x[10], x[11]),
         lambda: Some(x[12]),
     };
-    let fitness = |x: &[f64; 13]| seed_fitness(samples, field_ut, &decode(x));
+    let units = unit_forces(samples);
+    let fitness = |x: &[f64; 13]| fitness_with_units(samples, &units, field_ut, &decode(x));
+    // The particles of one iteration are evaluated in parallel (each fitness depends only on its
+    // particle), so the result does not depend on the number of threads.
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let evaluate = |pos: &[[f64; 13]], f: &mut [f64]| {
+        let chunk = pos.len().div_ceil(threads).max(1);
+        std::thread::scope(|scope| {
+            for (p, out) in pos.chunks(chunk).zip(f.chunks_mut(chunk)) {
+                scope.spawn(|| {
+                    for (x, y) in p.iter().zip(out.iter_mut()) {
+                        *y = fitness(x);
+                    }
+                });
+            }
+        });
+    };
     let mut rng = Rng::new(settings.seed, "calibrate.mag.swarm");
     let n = settings.particles.max(2);
     let mut pos: Vec<[f64; 13]> = (0..n)
@@ -299,7 +326,8 @@ pub fn swarm(
     let mut vel: Vec<[f64; 13]> = (0..n)
         .map(|_| std::array::from_fn(|k| 0.1 * (2.0 * rng.uniform() - 1.0) * (hi[k] - lo[k])))
         .collect();
-    let mut f: Vec<f64> = pos.iter().map(fitness).collect();
+    let mut f = vec![0.0; n];
+    evaluate(&pos, &mut f);
     let mut evaluations = n;
     let mut pbest = pos.clone();
     let mut pbest_f = f.clone();
@@ -311,6 +339,7 @@ pub fn swarm(
     }
     let (mut gbest, mut gbest_f) = (pbest[g], pbest_f[g]);
     let (w, c1, c2) = (0.729, 1.494, 1.494);
+    // Synchronous swarm: every particle moves with the best of the previous iteration.
     for _ in 0..settings.iterations {
         for i in 0..n {
             for k in 0..13 {
@@ -322,8 +351,10 @@ pub fn swarm(
                 vel[i][k] = vel[i][k].clamp(-vmax, vmax);
                 pos[i][k] = (pos[i][k] + vel[i][k]).clamp(lo[k], hi[k]);
             }
-            f[i] = fitness(&pos[i]);
-            evaluations += 1;
+        }
+        evaluate(&pos, &mut f);
+        evaluations += n;
+        for i in 0..n {
             if f[i] < pbest_f[i] {
                 pbest_f[i] = f[i];
                 pbest[i] = pos[i];
@@ -404,22 +435,75 @@ fn k_of(full: &SVector<f64, 10>) -> Matrix3<f64> {
     )
 }
 
-/// Normal equations of the model at `p`: (JᵀJ, Jᵀr, Σr², residual count).
+/// The unit specific force of each sample (None without one), computed once per fit.
+fn unit_forces(samples: &[MagSample]) -> Vec<Option<Vector3<f64>>> {
+    samples.iter().map(|s| unit(&s.specific_force)).collect()
+}
+
+/// JᵀJ (upper triangle) and Jᵀr accumulated over rows of at most 10 parameters, in fixed-size
+/// arrays: the hot loop of the fit allocates nothing and checks no bounds per element.
+struct Normal {
+    n: usize,
+    jtj: [[f64; 10]; 10],
+    jtr: [f64; 10],
+    ssr: f64,
+    count: usize,
+}
+
+impl Normal {
+    fn new(n: usize) -> Normal {
+        Normal {
+            n,
+            jtj: [[0.0; 10]; 10],
+            jtr: [0.0; 10],
+            ssr: 0.0,
+            count: 0,
+        }
+    }
+
+    fn add(&mut self, row: &[f64; 10], r: f64) {
+        let n = self.n;
+        for a in 0..n {
+            self.jtr[a] += row[a] * r;
+            let ra = row[a];
+            for (acc, rb) in self.jtj[a][a..n].iter_mut().zip(&row[a..n]) {
+                *acc += ra * rb;
+            }
+        }
+        self.ssr += r * r;
+        self.count += 1;
+    }
+
+    fn finish(self) -> (DMatrix<f64>, DVector<f64>, f64, usize) {
+        let n = self.n;
+        let jtj = DMatrix::from_fn(n, n, |a, b| {
+            if a <= b {
+                self.jtj[a][b]
+            } else {
+                self.jtj[b][a]
+            }
+        });
+        let jtr = DVector::from_fn(n, |a, _| self.jtr[a]);
+        (jtj, jtr, self.ssr, self.count)
+    }
+}
+
+/// Normal equations of the model at `p`: (JᵀJ, Jᵀr, Σr², residual count). `units` holds each
+/// sample's unit specific force ([`unit_forces`]).
 fn normal_equations(
     model: Model,
     samples: &[MagSample],
+    units: &[Option<Vector3<f64>>],
     field_ut: f64,
     horizontal_ut: f64,
     p: &[f64],
 ) -> (DMatrix<f64>, DVector<f64>, f64, usize) {
     let np = p.len();
-    let mut jtj = DMatrix::zeros(np, np);
-    let mut jtr = DVector::zeros(np);
-    let mut ssr = 0.0;
-    let mut count = 0;
+    let mut ne = Normal::new(np);
     if model == Model::Plane {
         let k = nalgebra::Matrix2::new(p[0], p[2], p[2], p[1]);
         let b = nalgebra::Vector2::new(p[3], p[4]);
+        let mut row = [0.0; 10];
         for s in samples {
             let d = nalgebra::Vector2::new(s.field_ut.x, s.field_ut.y) - b;
             let bb = k * d;
@@ -427,92 +511,80 @@ fn normal_equations(
             let r = nb / horizontal_ut - 1.0;
             // d|B|/dk11 = B1 d1/|B|, dk22 = B2 d2/|B|, dk12 = (B1 d2 + B2 d1)/|B|, db = −KᵀB/|B|.
             let kb = k.transpose() * bb;
-            let row = [
-                bb.x * d.x / nb,
-                bb.y * d.y / nb,
-                (bb.x * d.y + bb.y * d.x) / nb,
-                -kb.x / nb,
-                -kb.y / nb,
-            ]
-            .map(|v| v / horizontal_ut);
-            accumulate(&mut jtj, &mut jtr, &row, r);
-            ssr += r * r;
-            count += 1;
+            let g = 1.0 / (nb * horizontal_ut);
+            row[..5].copy_from_slice(&[
+                bb.x * d.x * g,
+                bb.y * d.y * g,
+                (bb.x * d.y + bb.y * d.x) * g,
+                -kb.x * g,
+                -kb.y * g,
+            ]);
+            ne.add(&row, r);
         }
-        return (jtj, jtr, ssr, count);
+        return ne.finish();
     }
     let (full, t) = expand(model, p);
+    // The model's parameters from the full ones: row · T (identity for the full model).
+    let identity = model == Model::Full;
+    let t: [[f64; 10]; 10] =
+        std::array::from_fn(|i| std::array::from_fn(|j| if j < np { t[(i, j)] } else { 0.0 }));
+    let map = |row: &[f64; 10]| -> [f64; 10] {
+        if identity {
+            return *row;
+        }
+        let mut m = [0.0; 10];
+        for (i, &x) in row.iter().enumerate() {
+            if x != 0.0 {
+                for j in 0..np {
+                    m[j] += x * t[i][j];
+                }
+            }
+        }
+        m
+    };
     let k = k_of(&full);
     let b = Vector3::new(full[6], full[7], full[8]);
     let lambda = full[9];
-    let mut rows = [[0.0; 10]; 2];
-    for s in samples {
+    for (s, f) in samples.iter().zip(units) {
         let d = s.field_ut - b;
         let bb = k * d;
         let nb = bb.norm().max(1e-12);
         let r1 = nb / field_ut - 1.0;
         let kb = k.transpose() * bb;
-        rows[0] = [
-            bb.x * d.x,
-            bb.y * d.y,
-            bb.z * d.z,
-            bb.x * d.y + bb.y * d.x,
-            bb.x * d.z + bb.z * d.x,
-            bb.y * d.z + bb.z * d.y,
-            -kb.x,
-            -kb.y,
-            -kb.z,
+        let g = 1.0 / (nb * field_ut);
+        let row = [
+            bb.x * d.x * g,
+            bb.y * d.y * g,
+            bb.z * d.z * g,
+            (bb.x * d.y + bb.y * d.x) * g,
+            (bb.x * d.z + bb.z * d.x) * g,
+            (bb.y * d.z + bb.z * d.y) * g,
+            -kb.x * g,
+            -kb.y * g,
+            -kb.z * g,
             0.0,
-        ]
-        .map(|v| v / (nb * field_ut));
-        let mut used = 1;
-        let mut r2 = 0.0;
-        if let Some(f) = unit(&s.specific_force) {
-            r2 = f.dot(&bb) / field_ut - lambda;
+        ];
+        ne.add(&map(&row), r1);
+        if let Some(f) = f {
+            let r2 = f.dot(&bb) / field_ut - lambda;
             let kf = k.transpose() * f;
-            rows[1] = [
-                f.x * d.x,
-                f.y * d.y,
-                f.z * d.z,
-                f.x * d.y + f.y * d.x,
-                f.x * d.z + f.z * d.x,
-                f.y * d.z + f.z * d.y,
-                -kf.x,
-                -kf.y,
-                -kf.z,
-                0.0,
-            ]
-            .map(|v| v / field_ut);
-            rows[1][9] = -1.0;
-            used = 2;
-        }
-        for (row, r) in rows.iter().zip([r1, r2]).take(used) {
-            // Model parameters: row · T.
-            let mut mrow = [0.0; 10];
-            for j in 0..np {
-                mrow[j] = (0..10).map(|i| row[i] * t[(i, j)]).sum();
-            }
-            accumulate(&mut jtj, &mut jtr, &mrow[..np], r);
-            ssr += r * r;
-            count += 1;
+            let g = 1.0 / field_ut;
+            let row = [
+                f.x * d.x * g,
+                f.y * d.y * g,
+                f.z * d.z * g,
+                (f.x * d.y + f.y * d.x) * g,
+                (f.x * d.z + f.z * d.x) * g,
+                (f.y * d.z + f.z * d.y) * g,
+                -kf.x * g,
+                -kf.y * g,
+                -kf.z * g,
+                -1.0,
+            ];
+            ne.add(&map(&row), r2);
         }
     }
-    (jtj, jtr, ssr, count)
-}
-
-fn accumulate(jtj: &mut DMatrix<f64>, jtr: &mut DVector<f64>, row: &[f64], r: f64) {
-    let n = row.len();
-    for a in 0..n {
-        jtr[a] += row[a] * r;
-        for b in a..n {
-            jtj[(a, b)] += row[a] * row[b];
-        }
-    }
-    for a in 0..n {
-        for b in 0..a {
-            jtj[(a, b)] = jtj[(b, a)];
-        }
-    }
+    ne.finish()
 }
 
 /// The calibration of a model's parameter vector.
@@ -582,10 +654,11 @@ pub fn levenberg_marquardt(
     }
     let lambda0 = mean_lambda(samples, field_ut, start);
     let mut p = start_of(model, start, lambda0);
-    let has_force = samples.iter().any(|s| unit(&s.specific_force).is_some());
+    let units = unit_forces(samples);
+    let has_force = units.iter().any(Option::is_some);
     let np = p.len();
     let (mut jtj, mut jtr, mut ssr, mut m) =
-        normal_equations(model, samples, field_ut, horizontal_ut, &p);
+        normal_equations(model, samples, &units, field_ut, horizontal_ut, &p);
     let mut mu = 1e-3;
     let mut iterations = 0;
     for _ in 0..100 {
@@ -613,7 +686,8 @@ pub fn levenberg_marquardt(
             continue;
         };
         let trial: Vec<f64> = p.iter().zip(step.iter()).map(|(x, d)| x + d).collect();
-        let (j2, r2, s2, m2) = normal_equations(model, samples, field_ut, horizontal_ut, &trial);
+        let (j2, r2, s2, m2) =
+            normal_equations(model, samples, &units, field_ut, horizontal_ut, &trial);
         if s2.is_finite() && s2 < ssr {
             let gain = (ssr - s2) / ssr.max(1e-300);
             p = trial;
