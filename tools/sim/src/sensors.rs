@@ -154,13 +154,50 @@ pub fn dvl_beam_directions() -> [Vector3<f64>; 4] {
 
 /// The DVL: beam velocities with noise, least-squares instrument velocity, mounting rotation,
 /// lever arm, scale factor, sound speed, time offset and loss of bottom lock.
+/// The DVL's installation as the simulator models it (`dvl.mount_*`, `dvl.lever_arm`,
+/// `dvl.scale_factor`, `dvl.sound_speed`): what a locked, noise-free DVL reads for a body motion.
+/// Model discovery predicts DVL readings with the same code.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DvlInstallation {
+    pub c_body_to_dvl: Matrix3<f64>,
+    pub lever_arm: Vector3<f64>,
+    /// Velocity scale: `dvl.scale_factor` × assumed / true sound speed.
+    pub scale: f64,
+}
+
+impl DvlInstallation {
+    pub fn from_effects(e: &Effects) -> DvlInstallation {
+        let c_dvl_to_body = Rotation3::from_euler_angles(
+            e.dvl_mount_roll.to_radians(),
+            e.dvl_mount_pitch.to_radians(),
+            e.dvl_mount_yaw.to_radians(),
+        );
+        DvlInstallation {
+            c_body_to_dvl: c_dvl_to_body.inverse().into_inner(),
+            lever_arm: Vector3::from(e.dvl_lever_arm),
+            scale: e.dvl_scale_factor * ASSUMED_SOUND_SPEED / e.dvl_sound_speed,
+        }
+    }
+
+    /// The velocity in the DVL frame for the body's attitude, velocity w.r.t. the Earth (NED) and
+    /// angular rate w.r.t. the Earth (body axes), at the time of validity.
+    pub fn velocity(
+        &self,
+        c_body_to_ned: &Matrix3<f64>,
+        velocity_ned: &Vector3<f64>,
+        omega_eb_body: &Vector3<f64>,
+    ) -> Vector3<f64> {
+        let v_body =
+            c_body_to_ned.transpose() * velocity_ned + omega_eb_body.cross(&self.lever_arm);
+        self.c_body_to_dvl * v_body * self.scale
+    }
+}
+
 pub struct DvlModel {
     rng: Rng,
     beams: [Vector3<f64>; 4],
     pinv: Matrix3x4<f64>,
-    c_body_to_dvl: Matrix3<f64>,
-    lever_arm: Vector3<f64>,
-    scale: f64,
+    install: DvlInstallation,
     noise: f64,
     velocity_std: Vector3<f64>,
     loss_rate: f64,
@@ -180,18 +217,11 @@ impl DvlModel {
             .try_inverse()
             .unwrap_or_else(Matrix3::identity);
         let pinv = btb_inv * b.transpose();
-        let c_dvl_to_body = Rotation3::from_euler_angles(
-            e.dvl_mount_roll.to_radians(),
-            e.dvl_mount_pitch.to_radians(),
-            e.dvl_mount_yaw.to_radians(),
-        );
         DvlModel {
             rng: Rng::new(seed, "dvl"),
             beams,
             pinv,
-            c_body_to_dvl: c_dvl_to_body.inverse().into_inner(),
-            lever_arm: Vector3::from(e.dvl_lever_arm),
-            scale: e.dvl_scale_factor * ASSUMED_SOUND_SPEED / e.dvl_sound_speed,
+            install: DvlInstallation::from_effects(e),
             noise: e.dvl_noise,
             velocity_std: btb_inv.diagonal().map(f64::sqrt) * e.dvl_noise,
             loss_rate: e.dvl_bottom_lock_loss_rate,
@@ -227,10 +257,12 @@ impl DvlModel {
         if !locked {
             return m;
         }
-        let v_body = truth.c_body_to_ned.transpose() * truth.velocity_ned
-            + truth.omega_eb_body.cross(&self.lever_arm);
-        let v_dvl = self.c_body_to_dvl * v_body * self.scale;
-        let c_dvl_to_ned = truth.c_body_to_ned * self.c_body_to_dvl.transpose();
+        let v_dvl = self.install.velocity(
+            &truth.c_body_to_ned,
+            &truth.velocity_ned,
+            &truth.omega_eb_body,
+        );
+        let c_dvl_to_ned = truth.c_body_to_ned * self.install.c_body_to_dvl.transpose();
         let mut y = nalgebra::Vector4::zeros();
         for (i, b) in self.beams.iter().enumerate() {
             y[i] = b.dot(&v_dvl) + self.rng.gauss(self.noise);
@@ -388,11 +420,15 @@ impl DepthModel {
         }
     }
 
+    /// What a noise-free depth sensor reads at a true depth (m): the pressure converted with the
+    /// assumed density (`depth.density`), plus `depth.bias`. Model discovery uses the same code.
+    pub fn reading(e: &Effects, depth_m: f64) -> f64 {
+        let pressure = e.depth_density * STANDARD_GRAVITY * depth_m;
+        pressure / (ASSUMED_DENSITY * STANDARD_GRAVITY) + e.depth_bias
+    }
+
     pub fn sample(&mut self, t: f64, truth: &TruthSample) -> DepthV1 {
-        let depth = -truth.position.height_m;
-        let pressure = self.e.depth_density * STANDARD_GRAVITY * depth;
-        let measured = pressure / (ASSUMED_DENSITY * STANDARD_GRAVITY)
-            + self.e.depth_bias
+        let measured = DepthModel::reading(&self.e, -truth.position.height_m)
             + self.rng.gauss(self.e.depth_noise);
         self.sequence += 1;
         DepthV1 {
@@ -414,26 +450,32 @@ impl DepthModel {
 /// Magnetometer: Earth field (declination, inclination, intensity), soft and hard iron, noise.
 pub struct MagnetometerModel {
     rng: Rng,
-    field_ned_ut: Vector3<f64>,
-    soft_iron: Matrix3<f64>,
-    hard_iron_ut: Vector3<f64>,
-    noise_ut: f64,
+    e: Effects,
     sequence: u64,
 }
 
 impl MagnetometerModel {
-    pub fn new(e: &Effects, seed: u64) -> MagnetometerModel {
+    /// The Earth field (µT, NED) of `mag.declination`, `mag.inclination`, `mag.intensity`.
+    pub fn field_ned_ut(e: &Effects) -> Vector3<f64> {
         let (dec, inc) = (
             e.mag_declination.to_radians(),
             e.mag_inclination.to_radians(),
         );
+        e.mag_intensity * Vector3::new(inc.cos() * dec.cos(), inc.cos() * dec.sin(), inc.sin())
+    }
+
+    /// What a noise-free magnetometer reads (µT, sensor axes) in an attitude: soft iron, then
+    /// hard iron, on the body field. Model discovery uses the same code.
+    pub fn reading(e: &Effects, c_body_to_ned: &Matrix3<f64>) -> Vector3<f64> {
+        Matrix3::from_row_slice(&e.mag_soft_iron)
+            * (c_body_to_ned.transpose() * MagnetometerModel::field_ned_ut(e))
+            + Vector3::from(e.mag_hard_iron)
+    }
+
+    pub fn new(e: &Effects, seed: u64) -> MagnetometerModel {
         MagnetometerModel {
             rng: Rng::new(seed, "magnetometer"),
-            field_ned_ut: e.mag_intensity
-                * Vector3::new(inc.cos() * dec.cos(), inc.cos() * dec.sin(), inc.sin()),
-            soft_iron: Matrix3::from_row_slice(&e.mag_soft_iron),
-            hard_iron_ut: Vector3::from(e.mag_hard_iron),
-            noise_ut: e.mag_noise,
+            e: e.clone(),
             sequence: 0,
         }
     }
@@ -453,14 +495,10 @@ impl MagnetometerModel {
     }
 
     pub fn sample(&mut self, t: f64, truth: &TruthSample) -> MagnetometerV1 {
-        let b = truth.c_body_to_ned.transpose() * self.field_ned_ut;
         let r = &mut self.rng;
-        let noise = Vector3::new(
-            r.gauss(self.noise_ut),
-            r.gauss(self.noise_ut),
-            r.gauss(self.noise_ut),
-        );
-        let m = self.soft_iron * b + self.hard_iron_ut + noise;
+        let sigma = self.e.mag_noise;
+        let noise = Vector3::new(r.gauss(sigma), r.gauss(sigma), r.gauss(sigma));
+        let m = MagnetometerModel::reading(&self.e, &truth.c_body_to_ned) + noise;
         self.sequence += 1;
         MagnetometerV1 {
             host_time_ns: ns(t),
