@@ -5,6 +5,7 @@ pub mod calibrate;
 pub mod csv;
 pub mod decode;
 pub mod demo;
+pub mod discover;
 pub mod emulate;
 pub mod import;
 pub mod live;

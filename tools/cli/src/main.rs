@@ -46,6 +46,9 @@ enum Command {
     /// Apply named simulator effects (see `auvnav sim --list-effects`) to the sensor messages
     /// of a recorded log, simulated or measured; the output's header says what was applied.
     Perturb(PerturbArgs),
+    /// Find where the simulator's sensor models disagree with a log, name the cause from the
+    /// effect vocabulary, and measure the gain on held-out data.
+    Discover(auvnav_tools::discover::command::DiscoverArgs),
     /// Turn a measured data set into a log.
     Import {
         #[command(subcommand)]
@@ -439,6 +442,7 @@ fn main() -> std::process::ExitCode {
         Command::Demo(a) => auvnav_tools::demo::run(&a),
         Command::Replay(a) => run_replay(&a),
         Command::Decode(a) => auvnav_tools::decode::run(&a).map(|_| ()),
+        Command::Discover(a) => auvnav_tools::discover::command::run(&a).map(|_| ()),
         Command::Emulate(a) => auvnav_tools::emulate::run(&a).map(|_| ()),
         Command::Record(a) => auvnav_recorder::run(&a).map(|_| ()),
         Command::AlignMeasured(a) => auvnav_tools::align::run_measured(&a).map(|_| ()),

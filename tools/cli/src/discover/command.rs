@@ -1,0 +1,469 @@
+//! `auvnav discover LOG… [--reference truth] [--effect NAME=VALUE…] [--json]`.
+
+use super::describe::{Description, describe};
+use super::fit::{self, Problem, Selection};
+use super::{Channel, ChannelKind, Reference, spec};
+use anyhow::{Context, bail};
+use auvnav_log::{LogMessage, LogReader};
+use auvnav_shm_schema::{DepthV1, DvlVelocityV1, MagnetometerV1};
+use auvnav_sim::effects::{Effects, parse_setting};
+use serde::Serialize;
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct DiscoverArgs {
+    /// Logs (MCAP, as written by `auvnav sim` or the recorder) with the sensor channels and the
+    /// reference motion.
+    #[arg(required = true)]
+    pub logs: Vec<PathBuf>,
+    /// The reference motion: `truth` (the simulated truth topic).
+    #[arg(long, default_value = "truth")]
+    pub reference: String,
+    /// The nominal model's effects, NAME=VALUE (repeatable; default: every effect off, the
+    /// simulator's defaults).
+    #[arg(long = "effect", value_name = "NAME=VALUE")]
+    pub effects: Vec<String>,
+    /// Fraction of each channel (in time order) the held-out gain is fitted on; the rest scores it.
+    #[arg(long, default_value_t = 0.7)]
+    pub fit_fraction: f64,
+    /// Print the report as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// An effect discovery keeps.
+#[derive(Debug, Clone, Serialize)]
+pub struct FoundEffect {
+    /// The effect's name in `auvnav sim --list-effects`.
+    pub name: String,
+    /// The estimate in the effect's unit (a number, or an array for a vector effect).
+    pub value: serde_json::Value,
+    /// One-sigma of the estimate (same shape; null where the motion does not determine it).
+    pub std: serde_json::Value,
+    pub unit: String,
+    pub channel: ChannelKind,
+    /// Why it was kept.
+    pub evidence: String,
+    /// Relative drop of the held-out mean squared residual when it was added.
+    pub gain: f64,
+}
+
+/// Two effects the motion cannot tell apart.
+#[derive(Debug, Clone, Serialize)]
+pub struct Unseparable {
+    pub effects: [String; 2],
+    /// Largest canonical correlation of their sensitivities on this motion.
+    pub correlation: f64,
+    pub note: String,
+}
+
+/// Components of an effect the motion does not excite.
+#[derive(Debug, Clone, Serialize)]
+pub struct Unobservable {
+    pub name: String,
+    pub components: Vec<usize>,
+}
+
+/// Structure left in a residual after the selected effects.
+#[derive(Debug, Clone, Serialize)]
+pub struct Unexplained {
+    pub channel: ChannelKind,
+    pub component: usize,
+    pub note: String,
+}
+
+/// One channel before and after discovery.
+#[derive(Debug, Clone, Serialize)]
+pub struct ChannelReport {
+    pub channel: ChannelKind,
+    pub unit: String,
+    pub epochs: usize,
+    pub skipped: usize,
+    /// Epochs the reference covers.
+    pub compared: usize,
+    pub held_out_mse_nominal: f64,
+    pub held_out_mse_selected: f64,
+    /// Per component: the residual of the nominal model.
+    pub nominal: Vec<Description>,
+    /// Per component: the residual with the selected effects.
+    pub selected: Vec<Description>,
+}
+
+/// The held-out gain of one channel: fit on the first part, residual RMS on the rest.
+#[derive(Debug, Clone, Serialize)]
+pub struct ChannelGain {
+    pub channel: ChannelKind,
+    pub fit_fraction: f64,
+    pub rms_before: Vec<f64>,
+    pub rms_after: Vec<f64>,
+}
+
+/// The report (`--json`, version 1).
+#[derive(Debug, Clone, Serialize)]
+pub struct DiscoverReport {
+    pub version: u32,
+    pub inputs: Vec<String>,
+    pub reference: String,
+    pub channels: Vec<ChannelReport>,
+    pub effects: Vec<FoundEffect>,
+    pub unseparable: Vec<Unseparable>,
+    pub unobservable: Vec<Unobservable>,
+    pub unexplained: Vec<Unexplained>,
+    pub gain: Vec<ChannelGain>,
+    /// What could not be analysed, and why.
+    pub notes: Vec<String>,
+    pub wall_seconds: f64,
+}
+
+/// The channels and the reference of the logs.
+pub fn read_logs(paths: &[PathBuf]) -> anyhow::Result<(Vec<Channel>, Reference)> {
+    let mut truth = Vec::new();
+    let mut channels: Vec<Channel> = ChannelKind::ALL.iter().map(|&k| Channel::new(k)).collect();
+    for p in paths {
+        let mut reader = LogReader::open(p).with_context(|| format!("opening {}", p.display()))?;
+        while let Some(raw) = reader
+            .next_message()
+            .with_context(|| format!("reading {}", p.display()))?
+        {
+            let Ok(m) = raw.decode_any() else { continue };
+            match m {
+                LogMessage::Truth(t) => truth.push(t),
+                LogMessage::Dvl(d) => {
+                    let c = &mut channels[0];
+                    if d.validity & DvlVelocityV1::VALID_VELOCITY != 0 {
+                        c.push(d.host_time_ns as f64 * 1e-9, d.velocity_dvl_m_s);
+                    } else {
+                        c.skipped += 1;
+                    }
+                }
+                LogMessage::Depth(d) => {
+                    let c = &mut channels[1];
+                    if d.validity & DepthV1::VALID_DEPTH != 0 {
+                        c.push(d.host_time_ns as f64 * 1e-9, [d.depth_m, 0.0, 0.0]);
+                    } else {
+                        c.skipped += 1;
+                    }
+                }
+                LogMessage::Magnetometer(m) => {
+                    let c = &mut channels[2];
+                    if m.validity & MagnetometerV1::VALID_FIELD != 0 {
+                        c.push(m.host_time_ns as f64 * 1e-9, m.field_t.map(|b| b * 1e6));
+                    } else {
+                        c.skipped += 1;
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+    Ok((channels, Reference::from_truth(&truth)))
+}
+
+fn json_of(v: &[f64]) -> serde_json::Value {
+    let num = |x: f64| {
+        serde_json::Number::from_f64(x).map_or(serde_json::Value::Null, serde_json::Value::Number)
+    };
+    if v.len() == 1 {
+        num(v[0])
+    } else {
+        serde_json::Value::Array(v.iter().map(|&x| num(x)).collect())
+    }
+}
+
+/// Runs discovery on channels against a reference with a nominal model.
+pub fn discover(
+    channels: &[Channel],
+    reference: &Reference,
+    nominal: &Effects,
+    fit_fraction: f64,
+    sel: &Selection,
+) -> DiscoverReport {
+    let start = std::time::Instant::now();
+    let mut r = DiscoverReport {
+        version: 1,
+        inputs: Vec::new(),
+        reference: String::new(),
+        channels: Vec::new(),
+        effects: Vec::new(),
+        unseparable: Vec::new(),
+        unobservable: Vec::new(),
+        unexplained: Vec::new(),
+        gain: Vec::new(),
+        notes: Vec::new(),
+        wall_seconds: 0.0,
+    };
+    if reference.len() < 2 {
+        r.notes.push(
+            "no reference motion in the logs: nothing can be compared (simulated logs carry the \
+             truth topic)"
+                .into(),
+        );
+        return r;
+    }
+    for ch in channels {
+        let kind = ch.kind;
+        if ch.is_empty() {
+            r.notes
+                .push(format!("{}: no valid readings in the logs", kind.name()));
+            continue;
+        }
+        let p = Problem::new(ch, reference, nominal.clone());
+        if p.epochs.len() < 10 * fit::FOLDS {
+            r.notes.push(format!(
+                "{}: {} of {} readings inside the reference: too few to analyse (at least {})",
+                kind.name(),
+                p.epochs.len(),
+                ch.len(),
+                10 * fit::FOLDS
+            ));
+            continue;
+        }
+        let sep = fit::separability(&p);
+        for (c, comps) in &sep.unexcited {
+            r.unobservable.push(Unobservable {
+                name: fit::name(*c).into(),
+                components: comps.clone(),
+            });
+        }
+        let (steps, base_mse) = fit::select(&p, sel, &sep);
+        let set: Vec<usize> = steps.iter().map(|s| s.candidate).collect();
+        let f = p.fit(&set, &p.epochs);
+        for s in &steps {
+            let (off, len) = fit::offset_of(&set, s.candidate);
+            let name = fit::name(s.candidate);
+            let std: Vec<f64> = f.std[off..off + len].to_vec();
+            let gain = 1.0 - s.mse_after / s.mse_before;
+            let mut evidence = format!(
+                "held-out mean squared residual {:.4e} -> {:.4e} ({:.1} % lower)",
+                s.mse_before,
+                s.mse_after,
+                100.0 * gain
+            );
+            for (rival, corr) in &s.rivals {
+                evidence.push_str(&format!(
+                    "; {} explains the data about as well (correlation {corr:.3})",
+                    fit::name(*rival)
+                ));
+                r.unseparable.push(Unseparable {
+                    effects: [name.into(), fit::name(*rival).into()],
+                    correlation: *corr,
+                    note: format!(
+                        "the motion cannot separate them; reported as {name}, which scored best"
+                    ),
+                });
+            }
+            r.effects.push(FoundEffect {
+                name: name.into(),
+                value: json_of(&f.theta[off..off + len]),
+                std: json_of(&std),
+                unit: spec(name).map_or("", |s| s.unit).into(),
+                channel: kind,
+                evidence,
+                gain,
+            });
+        }
+        // Pairs the motion cannot separate among the channel's candidates (for the reader, even
+        // when neither was selected).
+        for &(a, b, c) in &sep.pairs {
+            if c > sel.max_correlation
+                && !r.unseparable.iter().any(|u| {
+                    (u.effects[0] == fit::name(a) && u.effects[1] == fit::name(b))
+                        || (u.effects[0] == fit::name(b) && u.effects[1] == fit::name(a))
+                })
+            {
+                r.unseparable.push(Unseparable {
+                    effects: [fit::name(a).into(), fit::name(b).into()],
+                    correlation: c,
+                    note: "not separable on this motion".into(),
+                });
+            }
+        }
+        // Describe the residuals before and after.
+        let d = kind.dims();
+        let times: Vec<f64> = p.epochs.iter().map(|&i| ch.times[i]).collect();
+        let states: Vec<_> = times.iter().map(|&t| reference.at(t)).collect();
+        let reg = |g: &dyn Fn(&super::RefState) -> f64| -> Vec<f64> {
+            states.iter().map(|s| s.as_ref().map_or(0.0, g)).collect()
+        };
+        let regressors: Vec<(&str, Vec<f64>)> = vec![
+            ("speed", reg(&|s| s.velocity_ned.norm())),
+            ("yaw_rate", reg(&|s| s.omega_eb_body.z)),
+            ("pitch_rate", reg(&|s| s.omega_eb_body.y)),
+            ("forward_specific_force", reg(&|s| s.specific_force_body.x)),
+            ("depth", reg(&|s| -s.height_m)),
+            ("time", times.iter().map(|t| t - times[0]).collect()),
+        ];
+        let split = |res: &[f64]| -> Vec<Description> {
+            (0..d)
+                .map(|k| {
+                    let comp: Vec<f64> = res.iter().skip(k).step_by(d).copied().collect();
+                    describe(&times, &comp, &regressors)
+                })
+                .collect()
+        };
+        let nominal_desc = split(&p.residuals(nominal, &p.epochs));
+        let selected_desc = split(&p.residuals(&p.effects(&set, &f.theta), &p.epochs));
+        for (k, desc) in selected_desc.iter().enumerate() {
+            if desc.white {
+                continue;
+            }
+            let mut note = format!(
+                "not white (Ljung-Box Q {:.0} > {:.1}; lag-1 autocorrelation {:.2}); rms {:.4} {}",
+                desc.ljung_box_q,
+                super::describe::CHI2_20_99,
+                desc.lag1,
+                desc.rms,
+                kind.unit()
+            );
+            if let Some(f) = desc.peak_hz {
+                note.push_str(&format!("; periodic at {f:.4} Hz"));
+            }
+            for (name, c) in &desc.correlated_with {
+                note.push_str(&format!("; correlated with {name} ({c:+.2})"));
+            }
+            r.unexplained.push(Unexplained {
+                channel: kind,
+                component: k,
+                note,
+            });
+        }
+        // Held-out gain: the selected set fitted on the first part, scored on the rest.
+        let cut = ((p.epochs.len() as f64) * fit_fraction).round() as usize;
+        let (train, test) = p.epochs.split_at(cut.clamp(1, p.epochs.len() - 1));
+        let ft = p.fit(&set, train);
+        let rms = |res: Vec<f64>| -> Vec<f64> {
+            (0..d)
+                .map(|k| {
+                    let v: Vec<f64> = res.iter().skip(k).step_by(d).copied().collect();
+                    (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
+                })
+                .collect()
+        };
+        r.gain.push(ChannelGain {
+            channel: kind,
+            fit_fraction,
+            rms_before: rms(p.residuals(nominal, test)),
+            rms_after: rms(p.residuals(&p.effects(&set, &ft.theta), test)),
+        });
+        r.channels.push(ChannelReport {
+            channel: kind,
+            unit: kind.unit().into(),
+            epochs: ch.len(),
+            skipped: ch.skipped,
+            compared: p.epochs.len(),
+            held_out_mse_nominal: base_mse,
+            held_out_mse_selected: steps.last().map_or(base_mse, |s| s.mse_after),
+            nominal: nominal_desc,
+            selected: selected_desc,
+        });
+    }
+    r.wall_seconds = start.elapsed().as_secs_f64();
+    r
+}
+
+/// `auvnav discover`.
+pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
+    if a.reference != "truth" {
+        bail!(
+            "--reference {:?}: only `truth` (the simulated truth topic) is supported so far",
+            a.reference
+        );
+    }
+    if !(a.fit_fraction > 0.0 && a.fit_fraction < 1.0) {
+        bail!("--fit-fraction {}: expected 0 < f < 1", a.fit_fraction);
+    }
+    let mut nominal = Effects::default();
+    for s in &a.effects {
+        let (name, values) = parse_setting(s)?;
+        nominal.set(&name, &values)?;
+    }
+    let (channels, reference) = read_logs(&a.logs)?;
+    let mut r = discover(
+        &channels,
+        &reference,
+        &nominal,
+        a.fit_fraction,
+        &Selection::default(),
+    );
+    r.inputs = a.logs.iter().map(|p| p.display().to_string()).collect();
+    r.reference = a.reference.clone();
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+    } else {
+        print_text(&r);
+    }
+    Ok(r)
+}
+
+fn print_text(r: &DiscoverReport) {
+    println!(
+        "auvnav discover: {} (reference: {})",
+        r.inputs.join(", "),
+        r.reference
+    );
+    for c in &r.channels {
+        println!(
+            "  {}: {} readings ({} compared, {} skipped); held-out mean squared residual {:.4e} nominal, {:.4e} with the effects found",
+            c.channel.name(),
+            c.epochs,
+            c.compared,
+            c.skipped,
+            c.held_out_mse_nominal,
+            c.held_out_mse_selected
+        );
+    }
+    if r.effects.is_empty() {
+        println!("  effects found: none (the nominal model explains the data)");
+    } else {
+        println!("  effects found:");
+        for e in &r.effects {
+            println!(
+                "    {} = {} ± {} {}  ({})",
+                e.name, e.value, e.std, e.unit, e.evidence
+            );
+        }
+    }
+    for u in &r.unseparable {
+        println!(
+            "  unseparable: {} and {} (correlation {:.3}): {}",
+            u.effects[0], u.effects[1], u.correlation, u.note
+        );
+    }
+    for u in &r.unobservable {
+        println!(
+            "  not excited by this motion: {} components {:?}",
+            u.name, u.components
+        );
+    }
+    for u in &r.unexplained {
+        println!(
+            "  unexplained: {} component {}: {}",
+            u.channel.name(),
+            u.component,
+            u.note
+        );
+    }
+    for g in &r.gain {
+        println!(
+            "  held-out gain {} (fit on the first {:.0} %): rms {:?} -> {:?} {}",
+            g.channel.name(),
+            100.0 * g.fit_fraction,
+            g.rms_before
+                .iter()
+                .map(|x| format!("{x:.4}"))
+                .collect::<Vec<_>>(),
+            g.rms_after
+                .iter()
+                .map(|x| format!("{x:.4}"))
+                .collect::<Vec<_>>(),
+            r.channels
+                .iter()
+                .find(|c| c.channel == g.channel)
+                .map_or("", |c| c.unit.as_str())
+        );
+    }
+    for n in &r.notes {
+        println!("  note: {n}");
+    }
+    println!("  {:.2} s", r.wall_seconds);
+}

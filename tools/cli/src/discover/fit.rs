@@ -1,0 +1,408 @@
+//! Estimating candidate effects on one channel, choosing them by held-out score, and checking
+//! which ones the motion can tell apart.
+//!
+//! The residual is measured − predicted (the simulator's sensor model under the effects) over
+//! the channel's epochs. A set of effects is fitted by Gauss–Newton with numerical derivatives
+//! (each effect's step in its own unit), started from the nominal values. The held-out score is
+//! the mean squared residual over five contiguous time blocks, each predicted by a fit on the
+//! other four. Forward selection adds, one at a time, the candidate that lowers the held-out score
+//! most, and keeps it only when the score drops by at least [`Selection::min_gain`] and the
+//! estimate lies at least [`Selection::min_sigma`] standard deviations from its nominal value.
+
+use super::{CANDIDATES, Candidate, Channel, Reference, spec};
+use auvnav_sim::effects::Effects;
+use nalgebra::{DMatrix, DVector};
+
+/// The data one channel's fits run on.
+pub struct Problem<'a> {
+    pub channel: &'a Channel,
+    pub reference: &'a Reference,
+    /// The nominal model (what the simulation assumes before discovery).
+    pub nominal: Effects,
+    /// Epochs the nominal model can predict (indices into the channel).
+    pub epochs: Vec<usize>,
+}
+
+impl<'a> Problem<'a> {
+    pub fn new(channel: &'a Channel, reference: &'a Reference, nominal: Effects) -> Problem<'a> {
+        let epochs = (0..channel.len())
+            .filter(|&i| {
+                channel
+                    .kind
+                    .predict(&nominal, reference, channel.times[i])
+                    .is_some()
+            })
+            .collect();
+        Problem {
+            channel,
+            reference,
+            nominal,
+            epochs,
+        }
+    }
+
+    /// This channel's candidates (indices into [`CANDIDATES`]).
+    pub fn candidates(&self) -> Vec<usize> {
+        (0..CANDIDATES.len())
+            .filter(|&i| CANDIDATES[i].channel == self.channel.kind)
+            .collect()
+    }
+
+    /// The nominal parameter vector of a set of candidates.
+    pub fn nominal_theta(&self, set: &[usize]) -> Vec<f64> {
+        set.iter()
+            .flat_map(|&c| self.nominal.get(CANDIDATES[c].name).unwrap_or_default())
+            .collect()
+    }
+
+    /// The effects with the set's parameters, each component clamped to the effect's range.
+    pub fn effects(&self, set: &[usize], theta: &[f64]) -> Effects {
+        let mut e = self.nominal.clone();
+        let mut k = 0;
+        for &c in set {
+            let name = CANDIDATES[c].name;
+            let Some(s) = spec(name) else { continue };
+            let v: Vec<f64> = theta[k..k + s.components]
+                .iter()
+                .map(|x| x.clamp(s.min, s.max))
+                .collect();
+            k += s.components;
+            // In range by construction.
+            let _ = e.set(name, &v);
+        }
+        e
+    }
+
+    /// Residuals (measured − predicted) over `epochs`, flattened per component; an epoch the
+    /// effects move outside the reference contributes zeros.
+    pub fn residuals(&self, e: &Effects, epochs: &[usize]) -> Vec<f64> {
+        let d = self.channel.kind.dims();
+        let mut r = Vec::with_capacity(epochs.len() * d);
+        for &i in epochs {
+            let z = self.channel.values[i];
+            match self
+                .channel
+                .kind
+                .predict(e, self.reference, self.channel.times[i])
+            {
+                Some(p) => r.extend((0..d).map(|k| z[k] - p[k])),
+                None => r.extend(std::iter::repeat_n(0.0, d)),
+            }
+        }
+        r
+    }
+
+    /// Numerical Jacobian of the residuals with respect to the set's parameters at `theta`.
+    fn jacobian(&self, set: &[usize], theta: &[f64], epochs: &[usize], r0: &[f64]) -> DMatrix<f64> {
+        let steps = steps(set);
+        let mut j = DMatrix::zeros(r0.len(), theta.len());
+        for (k, h) in steps.iter().enumerate() {
+            let mut t = theta.to_vec();
+            t[k] += h;
+            let r = self.residuals(&self.effects(set, &t), epochs);
+            for (row, (a, b)) in r.iter().zip(r0).enumerate() {
+                j[(row, k)] = (a - b) / h;
+            }
+        }
+        j
+    }
+
+    /// Fits the set on `epochs` by Gauss–Newton (with a little Levenberg damping so that a
+    /// direction the motion does not excite stays at its nominal value).
+    pub fn fit(&self, set: &[usize], epochs: &[usize]) -> Fit {
+        let mut theta = self.nominal_theta(set);
+        let mut r = self.residuals(&self.effects(set, &theta), epochs);
+        let mut sse: f64 = r.iter().map(|x| x * x).sum();
+        let n = r.len();
+        let mut jac = DMatrix::zeros(n, theta.len());
+        for _ in 0..8 {
+            if theta.is_empty() {
+                break;
+            }
+            jac = self.jacobian(set, &theta, epochs, &r);
+            let jtj = jac.transpose() * &jac;
+            let jtr = jac.transpose() * DVector::from_column_slice(&r);
+            let mut a = jtj.clone();
+            for i in 0..theta.len() {
+                a[(i, i)] += 1e-9 * jtj[(i, i)].max(1e-12) + 1e-12;
+            }
+            let Some(step) = a.cholesky().map(|c| c.solve(&jtr)) else {
+                break;
+            };
+            // r = z − h: the Gauss–Newton step is +(JᵀJ)⁻¹Jᵀr with J = ∂r/∂θ = −∂h/∂θ, so −.
+            let trial: Vec<f64> = theta.iter().zip(step.iter()).map(|(t, s)| t - s).collect();
+            let rt = self.residuals(&self.effects(set, &trial), epochs);
+            let st: f64 = rt.iter().map(|x| x * x).sum();
+            if !(st.is_finite() && st <= sse) {
+                break;
+            }
+            let done = sse - st <= 1e-10 * sse.max(1e-300);
+            theta = trial;
+            r = rt;
+            sse = st;
+            if done {
+                break;
+            }
+        }
+        // Parameter covariance σ²(JᵀJ)⁻¹ at the solution.
+        let dof = n.saturating_sub(theta.len()).max(1) as f64;
+        let sigma2 = sse / dof;
+        let std = if theta.is_empty() {
+            Vec::new()
+        } else {
+            let jtj = jac.transpose() * &jac;
+            match jtj.clone().try_inverse() {
+                Some(inv) => (0..theta.len())
+                    .map(|i| (sigma2 * inv[(i, i)]).max(0.0).sqrt())
+                    .collect(),
+                None => vec![f64::INFINITY; theta.len()],
+            }
+        };
+        Fit { theta, std, sse, n }
+    }
+
+    /// The held-out score of a set: mean squared residual over the five time blocks, each
+    /// predicted with a fit on the other four.
+    pub fn held_out_mse(&self, set: &[usize]) -> f64 {
+        let blocks = blocks(&self.epochs, FOLDS);
+        let (mut sum, mut count) = (0.0, 0usize);
+        for (k, test) in blocks.iter().enumerate() {
+            let train: Vec<usize> = blocks
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != k)
+                .flat_map(|(_, b)| b.iter().copied())
+                .collect();
+            let f = self.fit(set, &train);
+            let r = self.residuals(&self.effects(set, &f.theta), test);
+            sum += r.iter().map(|x| x * x).sum::<f64>();
+            count += r.len();
+        }
+        sum / count.max(1) as f64
+    }
+}
+
+/// Number of time blocks of the held-out score.
+pub const FOLDS: usize = 5;
+
+/// Splits `epochs` into `k` contiguous blocks.
+pub fn blocks(epochs: &[usize], k: usize) -> Vec<Vec<usize>> {
+    let n = epochs.len();
+    (0..k)
+        .map(|b| epochs[b * n / k..(b + 1) * n / k].to_vec())
+        .collect()
+}
+
+fn steps(set: &[usize]) -> Vec<f64> {
+    set.iter()
+        .flat_map(|&c| {
+            let n = spec(CANDIDATES[c].name).map_or(1, |s| s.components);
+            std::iter::repeat_n(CANDIDATES[c].step, n)
+        })
+        .collect()
+}
+
+/// A fitted set: parameters, their standard deviations, Σr² and the residual count.
+#[derive(Debug, Clone)]
+pub struct Fit {
+    pub theta: Vec<f64>,
+    pub std: Vec<f64>,
+    pub sse: f64,
+    pub n: usize,
+}
+
+/// Thresholds of the forward selection.
+#[derive(Debug, Clone, Copy)]
+pub struct Selection {
+    /// Smallest relative drop of the held-out score for an effect to be kept.
+    pub min_gain: f64,
+    /// Smallest distance of the estimate from its nominal value, in standard deviations.
+    pub min_sigma: f64,
+    /// Canonical correlation above which two candidates count as not separable on the motion.
+    pub max_correlation: f64,
+}
+
+impl Default for Selection {
+    fn default() -> Self {
+        Selection {
+            min_gain: 0.01,
+            min_sigma: 5.0,
+            max_correlation: 0.98,
+        }
+    }
+}
+
+/// One step of the selection: the candidate, the held-out score before and after.
+#[derive(Debug, Clone)]
+pub struct Step {
+    pub candidate: usize,
+    pub mse_before: f64,
+    pub mse_after: f64,
+    /// Other candidates whose addition scored within 2 % of this one and that the motion cannot
+    /// separate from it.
+    pub rivals: Vec<(usize, f64)>,
+}
+
+/// Greedy forward selection on one channel. Returns the kept steps and the held-out score of
+/// the empty set.
+pub fn select(p: &Problem, sel: &Selection, separability: &Separability) -> (Vec<Step>, f64) {
+    let mut chosen: Vec<usize> = Vec::new();
+    let base = p.held_out_mse(&chosen);
+    let mut current = base;
+    let mut steps = Vec::new();
+    let mut remaining = p.candidates();
+    while !remaining.is_empty() {
+        let scores: Vec<(usize, f64)> = remaining
+            .iter()
+            .map(|&c| {
+                let mut s = chosen.clone();
+                s.push(c);
+                (c, p.held_out_mse(&s))
+            })
+            .collect();
+        let Some(&(best, score)) = scores.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+            break;
+        };
+        if score.is_nan() || score >= current * (1.0 - sel.min_gain) {
+            break;
+        }
+        let mut set = chosen.clone();
+        set.push(best);
+        let f = p.fit(&set, &p.epochs);
+        let nominal = p.nominal_theta(&set);
+        let (off, len) = offset_of(&set, best);
+        let significant = (off..off + len).any(|k| {
+            let s = f.std[k];
+            s.is_finite() && s > 0.0 && (f.theta[k] - nominal[k]).abs() >= sel.min_sigma * s
+        });
+        if !significant {
+            break;
+        }
+        let rivals = scores
+            .iter()
+            .filter(|(c, s)| {
+                *c != best
+                    && *s <= score * 1.02
+                    && separability.correlation(best, *c) > sel.max_correlation
+            })
+            .map(|&(c, _)| (c, separability.correlation(best, c)))
+            .collect();
+        steps.push(Step {
+            candidate: best,
+            mse_before: current,
+            mse_after: score,
+            rivals,
+        });
+        chosen = set;
+        current = score;
+        remaining.retain(|&c| c != best);
+    }
+    (steps, base)
+}
+
+/// Where a candidate's parameters sit in a set's vector: (offset, length).
+pub fn offset_of(set: &[usize], candidate: usize) -> (usize, usize) {
+    let mut off = 0;
+    for &c in set {
+        let n = spec(CANDIDATES[c].name).map_or(1, |s| s.components);
+        if c == candidate {
+            return (off, n);
+        }
+        off += n;
+    }
+    (off, 0)
+}
+
+/// Which candidates the motion excites and which it cannot tell apart, from the Jacobian of the
+/// residuals at the nominal model.
+#[derive(Debug, Clone, Default)]
+pub struct Separability {
+    /// Candidates of the channel.
+    pub candidates: Vec<usize>,
+    /// Largest canonical correlation between two candidates' columns (symmetric).
+    pub pairs: Vec<(usize, usize, f64)>,
+    /// Per candidate: components the motion does not excite (sensitivity below 1e-9 of the
+    /// channel's largest).
+    pub unexcited: Vec<(usize, Vec<usize>)>,
+}
+
+impl Separability {
+    pub fn correlation(&self, a: usize, b: usize) -> f64 {
+        self.pairs
+            .iter()
+            .find(|(x, y, _)| (*x == a && *y == b) || (*x == b && *y == a))
+            .map_or(0.0, |p| p.2)
+    }
+}
+
+/// Computes [`Separability`] for a channel.
+pub fn separability(p: &Problem) -> Separability {
+    let candidates = p.candidates();
+    let theta = p.nominal_theta(&candidates);
+    let r0 = p.residuals(&p.effects(&candidates, &theta), &p.epochs);
+    let j = p.jacobian(&candidates, &theta, &p.epochs, &r0);
+    let norms: Vec<f64> = (0..j.ncols()).map(|k| j.column(k).norm()).collect();
+    let largest = norms.iter().cloned().fold(0.0, f64::max);
+    let cols_of = |c: usize| {
+        let (off, len) = offset_of(&candidates, c);
+        (off..off + len)
+            .filter(|&k| norms[k] > 1e-9 * largest)
+            .collect::<Vec<_>>()
+    };
+    let mut unexcited = Vec::new();
+    for &c in &candidates {
+        let (off, len) = offset_of(&candidates, c);
+        let dead: Vec<usize> = (0..len)
+            .filter(|&i| norms[off + i] <= 1e-9 * largest)
+            .collect();
+        if !dead.is_empty() {
+            unexcited.push((c, dead));
+        }
+    }
+    // R² of column `k` regressed on the columns `of` (least squares).
+    let r2 = |k: usize, of: &[usize]| -> f64 {
+        if of.is_empty() || norms[k] == 0.0 {
+            return 0.0;
+        }
+        let a = DMatrix::from_fn(j.nrows(), of.len(), |r, c| j[(r, of[c])] / norms[of[c]]);
+        let y = j.column(k) / norms[k];
+        let ata = a.transpose() * &a;
+        let aty = a.transpose() * &y;
+        match ata.cholesky() {
+            Some(ch) => {
+                let x = ch.solve(&aty);
+                (aty.dot(&x)).clamp(0.0, 1.0)
+            }
+            None => 1.0,
+        }
+    };
+    let mut pairs = Vec::new();
+    for (ia, &a) in candidates.iter().enumerate() {
+        for &b in &candidates[ia + 1..] {
+            let (ca, cb) = (cols_of(a), cols_of(b));
+            let mut best: f64 = 0.0;
+            for &k in &cb {
+                best = best.max(r2(k, &ca));
+            }
+            for &k in &ca {
+                best = best.max(r2(k, &cb));
+            }
+            pairs.push((a, b, best.sqrt()));
+        }
+    }
+    Separability {
+        candidates,
+        pairs,
+        unexcited,
+    }
+}
+
+/// A candidate's name.
+pub fn name(c: usize) -> &'static str {
+    CANDIDATES[c].name
+}
+
+/// The candidate entry.
+pub fn candidate(c: usize) -> &'static Candidate {
+    &CANDIDATES[c]
+}

@@ -1,0 +1,301 @@
+//! Model discovery: where the simulator's sensor models disagree with measured data, which named
+//! effect explains it, and what is left.
+//!
+//! Each sensor channel's readings are compared with what the simulator's own sensor model
+//! ([`auvnav_sim::sensors`]) predicts from the reference motion (the simulated truth, or another
+//! reference) under a set of effects. The candidates are the simulator's named effects
+//! (`auvnav sim --list-effects`), in their units and sign conventions; [`fit`] estimates them,
+//! selects them greedily by time-block cross-validation and checks which ones the motion can
+//! separate; [`describe`] characterises what is left (whiteness, spectrum, correlation with the
+//! motion). [`command`] is `auvnav discover`.
+
+pub mod command;
+pub mod describe;
+pub mod fit;
+pub mod hidden;
+
+use auvnav_core::earth;
+use auvnav_shm_schema::TruthStateV1;
+use auvnav_sim::effects::Effects;
+use auvnav_sim::sensors::{DepthModel, DvlInstallation, MagnetometerModel};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use serde::Serialize;
+
+/// The reference motion at one time.
+#[derive(Debug, Clone, Copy)]
+pub struct RefState {
+    pub t_s: f64,
+    pub c_body_to_ned: Matrix3<f64>,
+    pub velocity_ned: Vector3<f64>,
+    /// Angular rate w.r.t. the Earth (body axes, rad/s).
+    pub omega_eb_body: Vector3<f64>,
+    pub height_m: f64,
+    pub specific_force_body: Vector3<f64>,
+}
+
+/// The reference motion: samples in time order, interpolated linearly (attitude by slerp).
+#[derive(Debug, Clone, Default)]
+pub struct Reference {
+    samples: Vec<(f64, UnitQuaternion<f64>, RefState)>,
+}
+
+impl Reference {
+    /// From simulated truth messages (any order; repeated times keep the first).
+    pub fn from_truth(truth: &[TruthStateV1]) -> Reference {
+        let mut samples: Vec<_> = truth
+            .iter()
+            .filter(|m| m.euler_rad.iter().all(|x| x.is_finite()))
+            .map(|m| {
+                let q = m.quaternion_body_to_ned;
+                let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                    q[0], q[1], q[2], q[3],
+                ));
+                let c = q.to_rotation_matrix().into_inner();
+                let w_ie = c.transpose() * earth::earth_rate_ned(m.latitude_rad);
+                let t_s = m.host_time_ns as f64 * 1e-9;
+                (
+                    t_s,
+                    q,
+                    RefState {
+                        t_s,
+                        c_body_to_ned: c,
+                        velocity_ned: Vector3::from(m.velocity_ned_m_s),
+                        omega_eb_body: Vector3::from(m.angular_rate_rad_s) - w_ie,
+                        height_m: m.height_m,
+                        specific_force_body: Vector3::from(m.specific_force_m_s2),
+                    },
+                )
+            })
+            .collect();
+        samples.sort_by(|a, b| a.0.total_cmp(&b.0));
+        samples.dedup_by(|a, b| a.0 == b.0);
+        Reference { samples }
+    }
+
+    pub fn len(&self) -> usize {
+        self.samples.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.samples.is_empty()
+    }
+
+    /// Time span covered (s).
+    pub fn span(&self) -> Option<(f64, f64)> {
+        Some((self.samples.first()?.0, self.samples.last()?.0))
+    }
+
+    /// The state at `t_s`, or None outside the reference or across a gap longer than 1 s.
+    pub fn at(&self, t_s: f64) -> Option<RefState> {
+        let s = &self.samples;
+        let i = s.partition_point(|x| x.0 <= t_s);
+        if i == 0 {
+            return None;
+        }
+        let (t0, q0, a) = &s[i - 1];
+        if *t0 == t_s {
+            return Some(*a);
+        }
+        let (t1, q1, b) = s.get(i)?;
+        if t1 - t0 > 1.0 {
+            return None;
+        }
+        let f = (t_s - t0) / (t1 - t0);
+        let lerp = |x: &Vector3<f64>, y: &Vector3<f64>| x + (y - x) * f;
+        Some(RefState {
+            t_s,
+            c_body_to_ned: q0.slerp(q1, f).to_rotation_matrix().into_inner(),
+            velocity_ned: lerp(&a.velocity_ned, &b.velocity_ned),
+            omega_eb_body: lerp(&a.omega_eb_body, &b.omega_eb_body),
+            height_m: a.height_m + (b.height_m - a.height_m) * f,
+            specific_force_body: lerp(&a.specific_force_body, &b.specific_force_body),
+        })
+    }
+}
+
+/// A sensor channel discovery compares with the reference.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ChannelKind {
+    /// DVL velocity in the DVL frame (m/s, 3 components).
+    Dvl,
+    /// Depth (m).
+    Depth,
+    /// Magnetometer field in the sensor frame (µT, 3 components).
+    Magnetometer,
+}
+
+impl ChannelKind {
+    pub const ALL: [ChannelKind; 3] = [
+        ChannelKind::Dvl,
+        ChannelKind::Depth,
+        ChannelKind::Magnetometer,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            ChannelKind::Dvl => "dvl",
+            ChannelKind::Depth => "depth",
+            ChannelKind::Magnetometer => "magnetometer",
+        }
+    }
+
+    pub fn dims(self) -> usize {
+        match self {
+            ChannelKind::Depth => 1,
+            _ => 3,
+        }
+    }
+
+    pub fn unit(self) -> &'static str {
+        match self {
+            ChannelKind::Dvl => "m/s",
+            ChannelKind::Depth => "m",
+            ChannelKind::Magnetometer => "uT",
+        }
+    }
+
+    /// What the simulator's sensor model reads at stamp `t_s` under `e`, from the reference;
+    /// None where the reference does not cover the time of validity.
+    pub fn predict(self, e: &Effects, reference: &Reference, t_s: f64) -> Option<[f64; 3]> {
+        match self {
+            ChannelKind::Dvl => {
+                let r = reference.at(t_s - e.dvl_time_offset)?;
+                let v = DvlInstallation::from_effects(e).velocity(
+                    &r.c_body_to_ned,
+                    &r.velocity_ned,
+                    &r.omega_eb_body,
+                );
+                Some(v.into())
+            }
+            ChannelKind::Depth => {
+                let r = reference.at(t_s)?;
+                Some([DepthModel::reading(e, -r.height_m), 0.0, 0.0])
+            }
+            ChannelKind::Magnetometer => {
+                let r = reference.at(t_s)?;
+                Some(MagnetometerModel::reading(e, &r.c_body_to_ned).into())
+            }
+        }
+    }
+}
+
+/// One channel's measured readings (stamp s, value in the channel's unit).
+#[derive(Debug, Clone)]
+pub struct Channel {
+    pub kind: ChannelKind,
+    pub times: Vec<f64>,
+    pub values: Vec<[f64; 3]>,
+    /// Readings left out (invalid, non-finite).
+    pub skipped: usize,
+}
+
+impl Channel {
+    pub fn new(kind: ChannelKind) -> Channel {
+        Channel {
+            kind,
+            times: Vec::new(),
+            values: Vec::new(),
+            skipped: 0,
+        }
+    }
+
+    pub fn push(&mut self, t_s: f64, v: [f64; 3]) {
+        if t_s.is_finite() && v[..self.kind.dims()].iter().all(|x| x.is_finite()) {
+            self.times.push(t_s);
+            self.values.push(v);
+        } else {
+            self.skipped += 1;
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.times.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.times.is_empty()
+    }
+}
+
+/// A candidate cause: one of the simulator's effects, the channel it acts on, and the step of
+/// its numerical derivative (in the effect's unit).
+#[derive(Debug, Clone, Copy)]
+pub struct Candidate {
+    pub name: &'static str,
+    pub channel: ChannelKind,
+    pub step: f64,
+}
+
+/// The candidates, in vocabulary order. Left out, with the reason: `dvl.sound_speed` and
+/// `depth.density`'s twin would be exact aliases (`dvl.sound_speed` scales the velocity exactly
+/// as `dvl.scale_factor` does, reported under that name); noise, outlier and lock-loss effects
+/// are statistics of the residual, described rather than fitted; `mag.soft_iron` is calibrated by
+/// `auvnav calibrate mag`.
+pub const CANDIDATES: &[Candidate] = &[
+    Candidate {
+        name: "dvl.scale_factor",
+        channel: ChannelKind::Dvl,
+        step: 1e-4,
+    },
+    Candidate {
+        name: "dvl.mount_roll",
+        channel: ChannelKind::Dvl,
+        step: 0.01,
+    },
+    Candidate {
+        name: "dvl.mount_pitch",
+        channel: ChannelKind::Dvl,
+        step: 0.01,
+    },
+    Candidate {
+        name: "dvl.mount_yaw",
+        channel: ChannelKind::Dvl,
+        step: 0.01,
+    },
+    Candidate {
+        name: "dvl.lever_arm",
+        channel: ChannelKind::Dvl,
+        step: 0.01,
+    },
+    Candidate {
+        name: "dvl.time_offset",
+        channel: ChannelKind::Dvl,
+        step: 0.005,
+    },
+    Candidate {
+        name: "depth.bias",
+        channel: ChannelKind::Depth,
+        step: 0.01,
+    },
+    Candidate {
+        name: "depth.density",
+        channel: ChannelKind::Depth,
+        step: 0.1,
+    },
+    Candidate {
+        name: "mag.hard_iron",
+        channel: ChannelKind::Magnetometer,
+        step: 0.1,
+    },
+    Candidate {
+        name: "mag.declination",
+        channel: ChannelKind::Magnetometer,
+        step: 0.01,
+    },
+    Candidate {
+        name: "mag.inclination",
+        channel: ChannelKind::Magnetometer,
+        step: 0.01,
+    },
+    Candidate {
+        name: "mag.intensity",
+        channel: ChannelKind::Magnetometer,
+        step: 0.1,
+    },
+];
+
+/// The effect's specification in the simulator's vocabulary.
+pub fn spec(name: &str) -> Option<&'static auvnav_sim::effects::EffectSpec> {
+    auvnav_sim::effects::SPECS.iter().find(|s| s.name == name)
+}
