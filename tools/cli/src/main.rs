@@ -169,6 +169,18 @@ enum ImportWhat {
 
 #[derive(Subcommand)]
 enum BenchWhat {
+    /// Model discovery: hidden-effect trials (seeded draws of an effect and a magnitude) and
+    /// null trials; rates of right names and false discoveries, confusion table, time per trial.
+    Discover {
+        /// Trials with a hidden effect.
+        #[arg(long, default_value_t = 200)]
+        hidden: usize,
+        /// Trials with nothing hidden.
+        #[arg(long, default_value_t = 100)]
+        null: usize,
+        #[arg(long)]
+        json: bool,
+    },
     /// Cost of one USBL update (loose/tight × ukf/akf/aukf) on the docking scenario.
     Usbl {
         /// Seconds of the docking scenario (one fix per second).
@@ -499,6 +511,9 @@ fn main() -> std::process::ExitCode {
                     methods
                 };
                 auvnav_tools::bench::calibrate(seed, &methods, json)
+            }
+            BenchWhat::Discover { hidden, null, json } => {
+                auvnav_tools::bench::discover(hidden, null, json)
             }
             BenchWhat::Mag {
                 samples,

@@ -7,6 +7,7 @@ use serde::Serialize;
 
 mod calibrate;
 mod decode;
+mod discover;
 mod latency;
 mod mag;
 mod studies;
@@ -14,6 +15,7 @@ mod throughput;
 
 pub use calibrate::*;
 pub use decode::*;
+pub use discover::*;
 pub use latency::*;
 pub use mag::*;
 pub use studies::*;
