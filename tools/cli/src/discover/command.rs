@@ -412,7 +412,9 @@ fn print_text(r: &DiscoverReport) {
             c.held_out_mse_selected
         );
     }
-    if r.effects.is_empty() {
+    if r.channels.is_empty() {
+        println!("  nothing analysed (see the notes)");
+    } else if r.effects.is_empty() {
         println!("  effects found: none (the nominal model explains the data)");
     } else {
         println!("  effects found:");

@@ -321,8 +321,8 @@ pub struct Separability {
     pub candidates: Vec<usize>,
     /// Largest canonical correlation between two candidates' columns (symmetric).
     pub pairs: Vec<(usize, usize, f64)>,
-    /// Per candidate: components the motion does not excite (sensitivity below 1e-9 of the
-    /// channel's largest).
+    /// Per candidate: components the motion does not excite (the whole range of the effect would
+    /// move the residual by less than a tenth of its RMS).
     pub unexcited: Vec<(usize, Vec<usize>)>,
 }
 
@@ -342,19 +342,26 @@ pub fn separability(p: &Problem) -> Separability {
     let r0 = p.residuals(&p.effects(&candidates, &theta), &p.epochs);
     let j = p.jacobian(&candidates, &theta, &p.epochs, &r0);
     let norms: Vec<f64> = (0..j.ncols()).map(|k| j.column(k).norm()).collect();
-    let largest = norms.iter().cloned().fold(0.0, f64::max);
+    // A component is excited when the largest value its range allows would move the residual
+    // by at least a tenth of its RMS at the nominal model (per reading, RMS over the epochs).
+    let rows = (r0.len().max(1)) as f64;
+    let noise = (r0.iter().map(|x| x * x).sum::<f64>() / rows).sqrt();
+    let mut excited = vec![false; norms.len()];
+    for &c in &candidates {
+        let (off, len) = offset_of(&candidates, c);
+        let half_range = spec(CANDIDATES[c].name).map_or(1.0, |s| 0.5 * (s.max - s.min));
+        for k in off..off + len {
+            excited[k] = norms[k] / rows.sqrt() * half_range >= 0.1 * noise && norms[k] > 0.0;
+        }
+    }
     let cols_of = |c: usize| {
         let (off, len) = offset_of(&candidates, c);
-        (off..off + len)
-            .filter(|&k| norms[k] > 1e-9 * largest)
-            .collect::<Vec<_>>()
+        (off..off + len).filter(|&k| excited[k]).collect::<Vec<_>>()
     };
     let mut unexcited = Vec::new();
     for &c in &candidates {
         let (off, len) = offset_of(&candidates, c);
-        let dead: Vec<usize> = (0..len)
-            .filter(|&i| norms[off + i] <= 1e-9 * largest)
-            .collect();
+        let dead: Vec<usize> = (0..len).filter(|&i| !excited[off + i]).collect();
         if !dead.is_empty() {
             unexcited.push((c, dead));
         }

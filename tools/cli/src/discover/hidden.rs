@@ -13,71 +13,68 @@ use auvnav_sim::{SimConfig, simulate_to_log};
 use serde::Serialize;
 use std::path::Path;
 
-/// The voyage of the trials: turns, speed and depth changes (what excites the DVL, depth and
-/// magnetometer effects), with realistic sensor noise.
-pub const SCENARIO: &str = r#"
-name = "discovery"
-description = "turns, speed and depth changes with sensor noise: the hidden-effect trials"
-seabed_depth_m = 80.0
-
-[start]
-latitude_deg = 31.0
-longitude_deg = 120.0
-depth_m = 20.0
-heading_deg = 0.0
-speed_m_s = 1.5
-
-[[legs]]
-kind = "straight"
-duration_s = 30.0
-
-[[legs]]
-kind = "turn"
-angle_deg = 120.0
-rate_deg_s = 4.0
-bank_deg = 6.0
-
-[[legs]]
-kind = "speed"
-target_m_s = 2.5
-accel_m_s2 = 0.05
-
-[[legs]]
-kind = "depth"
-change_m = 15.0
-pitch_deg = 10.0
-
-[[legs]]
-kind = "turn"
-angle_deg = -200.0
-rate_deg_s = 5.0
-bank_deg = -8.0
-
-[[legs]]
-kind = "speed"
-target_m_s = 1.0
-accel_m_s2 = 0.05
-
-[[legs]]
-kind = "depth"
-change_m = -10.0
-pitch_deg = 8.0
-
-[[legs]]
-kind = "turn"
-angle_deg = 150.0
-rate_deg_s = 3.0
-bank_deg = 5.0
-
-[[legs]]
-kind = "straight"
-duration_s = 30.0
-
-[effects]
-"dvl.noise" = 0.01
-"depth.noise" = 0.05
-"mag.noise" = 0.1
-"#;
+/// The voyage of trial `seed`: turns, speed and depth changes (what excites the DVL, depth and
+/// magnetometer effects) in a fixed order, with their angles, rates, banks, speeds and depths
+/// drawn per seed, and realistic sensor noise.
+pub fn scenario(seed: u64) -> String {
+    let mut rng = Rng::new(seed, "discover.trajectory");
+    let mut u = |lo: f64, hi: f64| lo + rng.uniform() * (hi - lo);
+    let sign = |x: f64, s: f64| if s < 0.5 { -x } else { x };
+    let mut legs = String::new();
+    let turn = |legs: &mut String, u: &mut dyn FnMut(f64, f64) -> f64| {
+        let s = u(0.0, 1.0);
+        legs.push_str(&format!(
+            "[[legs]]\nkind = \"turn\"\nangle_deg = {}\nrate_deg_s = {}\nbank_deg = {}\n\n",
+            sign(u(90.0, 220.0), s),
+            u(2.0, 6.0),
+            sign(u(3.0, 10.0), s)
+        ));
+    };
+    legs.push_str(&format!(
+        "[[legs]]\nkind = \"straight\"\nduration_s = {}\n\n",
+        u(20.0, 40.0)
+    ));
+    turn(&mut legs, &mut u);
+    legs.push_str(&format!(
+        "[[legs]]\nkind = \"speed\"\ntarget_m_s = {}\naccel_m_s2 = {}\n\n",
+        u(2.0, 2.8),
+        u(0.03, 0.08)
+    ));
+    legs.push_str(&format!(
+        "[[legs]]\nkind = \"depth\"\nchange_m = {}\npitch_deg = {}\n\n",
+        u(5.0, 15.0),
+        u(6.0, 12.0)
+    ));
+    turn(&mut legs, &mut u);
+    legs.push_str(&format!(
+        "[[legs]]\nkind = \"speed\"\ntarget_m_s = {}\naccel_m_s2 = {}\n\n",
+        u(0.8, 1.4),
+        u(0.03, 0.08)
+    ));
+    legs.push_str(&format!(
+        "[[legs]]\nkind = \"depth\"\nchange_m = {}\npitch_deg = {}\n\n",
+        -u(4.0, 10.0),
+        u(6.0, 12.0)
+    ));
+    turn(&mut legs, &mut u);
+    legs.push_str(&format!(
+        "[[legs]]\nkind = \"straight\"\nduration_s = {}\n\n",
+        u(20.0, 40.0)
+    ));
+    format!(
+        "name = \"discovery\"\n\
+         description = \"turns, speed and depth changes with sensor noise: hidden-effect trial\"\n\
+         seabed_depth_m = 80.0\n\n\
+         [start]\nlatitude_deg = {}\nlongitude_deg = {}\ndepth_m = {}\nheading_deg = {}\nspeed_m_s = {}\n\n\
+         {legs}\
+         [effects]\n\"dvl.noise\" = 0.01\n\"depth.noise\" = 0.05\n\"mag.noise\" = 0.1\n",
+        u(-60.0, 60.0),
+        u(-180.0, 180.0),
+        u(20.0, 30.0),
+        u(0.0, 360.0),
+        u(1.2, 1.8),
+    )
+}
 
 /// Effects the trials hide, with the magnitude range drawn from (per component, either sign, as
 /// an offset from the nominal value). `dvl.mount_roll` is left out: with the velocity along the
@@ -147,7 +144,7 @@ pub fn trial(
     hidden: Option<Hidden>,
     dir: &Path,
 ) -> anyhow::Result<(Trial, DiscoverReport)> {
-    let scenario = Scenario::parse(SCENARIO, "discovery trials")?;
+    let scenario = Scenario::parse(&scenario(seed), "discovery trial")?;
     let mut effects = scenario.effects()?;
     if let Some(h) = &hidden {
         effects.set(&h.name, &h.value)?;
