@@ -115,48 +115,75 @@ pub struct DiscoverReport {
     pub wall_seconds: f64,
 }
 
-/// The channels and the reference of the logs.
-pub fn read_logs(paths: &[PathBuf]) -> anyhow::Result<(Vec<Channel>, Reference)> {
-    let mut truth = Vec::new();
-    let mut channels: Vec<Channel> = ChannelKind::ALL.iter().map(|&k| Channel::new(k)).collect();
+/// Collects the channels and the reference from log messages.
+#[derive(Default)]
+pub struct Collector {
+    truth: Vec<auvnav_shm_schema::TruthStateV1>,
+    channels: Vec<Channel>,
+}
+
+impl Collector {
+    pub fn new() -> Collector {
+        Collector {
+            truth: Vec::new(),
+            channels: ChannelKind::ALL.iter().map(|&k| Channel::new(k)).collect(),
+        }
+    }
+
+    pub fn add(&mut self, m: &LogMessage) {
+        match m {
+            LogMessage::Truth(t) => self.truth.push(*t),
+            LogMessage::Dvl(d) => {
+                let c = &mut self.channels[0];
+                if d.validity & DvlVelocityV1::VALID_VELOCITY != 0 {
+                    c.push(d.host_time_ns as f64 * 1e-9, d.velocity_dvl_m_s);
+                } else {
+                    c.skipped += 1;
+                }
+            }
+            LogMessage::Depth(d) => {
+                let c = &mut self.channels[1];
+                if d.validity & DepthV1::VALID_DEPTH != 0 {
+                    c.push(d.host_time_ns as f64 * 1e-9, [d.depth_m, 0.0, 0.0]);
+                } else {
+                    c.skipped += 1;
+                }
+            }
+            LogMessage::Magnetometer(m) => {
+                let c = &mut self.channels[2];
+                if m.validity & MagnetometerV1::VALID_FIELD != 0 {
+                    c.push(m.host_time_ns as f64 * 1e-9, m.field_t.map(|b| b * 1e6));
+                } else {
+                    c.skipped += 1;
+                }
+            }
+            _ => {}
+        }
+    }
+
+    pub fn finish(self) -> (Vec<Channel>, Reference) {
+        (self.channels, Reference::from_truth(&self.truth))
+    }
+}
+
+/// The channels and the reference of the logs, and the number of messages that did not decode.
+pub fn read_logs(paths: &[PathBuf]) -> anyhow::Result<(Vec<Channel>, Reference, usize)> {
+    let mut c = Collector::new();
+    let mut undecodable = 0;
     for p in paths {
         let mut reader = LogReader::open(p).with_context(|| format!("opening {}", p.display()))?;
         while let Some(raw) = reader
             .next_message()
             .with_context(|| format!("reading {}", p.display()))?
         {
-            let Ok(m) = raw.decode_any() else { continue };
-            match m {
-                LogMessage::Truth(t) => truth.push(t),
-                LogMessage::Dvl(d) => {
-                    let c = &mut channels[0];
-                    if d.validity & DvlVelocityV1::VALID_VELOCITY != 0 {
-                        c.push(d.host_time_ns as f64 * 1e-9, d.velocity_dvl_m_s);
-                    } else {
-                        c.skipped += 1;
-                    }
-                }
-                LogMessage::Depth(d) => {
-                    let c = &mut channels[1];
-                    if d.validity & DepthV1::VALID_DEPTH != 0 {
-                        c.push(d.host_time_ns as f64 * 1e-9, [d.depth_m, 0.0, 0.0]);
-                    } else {
-                        c.skipped += 1;
-                    }
-                }
-                LogMessage::Magnetometer(m) => {
-                    let c = &mut channels[2];
-                    if m.validity & MagnetometerV1::VALID_FIELD != 0 {
-                        c.push(m.host_time_ns as f64 * 1e-9, m.field_t.map(|b| b * 1e6));
-                    } else {
-                        c.skipped += 1;
-                    }
-                }
-                _ => {}
+            match raw.decode_any() {
+                Ok(m) => c.add(&m),
+                Err(_) => undecodable += 1,
             }
         }
     }
-    Ok((channels, Reference::from_truth(&truth)))
+    let (channels, reference) = c.finish();
+    Ok((channels, reference, undecodable))
 }
 
 fn json_of(v: &[f64]) -> serde_json::Value {
@@ -215,6 +242,15 @@ pub fn discover(
                 p.epochs.len(),
                 ch.len(),
                 10 * fit::FOLDS
+            ));
+            continue;
+        }
+        let r0 = p.residuals(nominal, &p.epochs);
+        if r0.iter().all(|x| *x == 0.0) {
+            r.notes.push(format!(
+                "{}: identical to the reference prediction (derived from the reference?): nothing \
+                 to learn from it",
+                kind.name()
             ));
             continue;
         }
@@ -377,7 +413,7 @@ pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
         let (name, values) = parse_setting(s)?;
         nominal.set(&name, &values)?;
     }
-    let (channels, reference) = read_logs(&a.logs)?;
+    let (channels, reference, undecodable) = read_logs(&a.logs)?;
     let mut r = discover(
         &channels,
         &reference,
@@ -385,6 +421,11 @@ pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
         a.fit_fraction,
         &Selection::default(),
     );
+    if undecodable > 0 {
+        r.notes.push(format!(
+            "{undecodable} messages in the logs did not decode and were left out"
+        ));
+    }
     r.inputs = a.logs.iter().map(|p| p.display().to_string()).collect();
     r.reference = a.reference.clone();
     if a.json {

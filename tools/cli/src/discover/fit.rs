@@ -30,7 +30,7 @@ impl<'a> Problem<'a> {
                 channel
                     .kind
                     .predict(&nominal, reference, channel.times[i])
-                    .is_some()
+                    .is_some_and(|p| p.iter().all(|x| x.is_finite()))
             })
             .collect();
         Problem {

@@ -157,7 +157,7 @@ pub fn trial(
     };
     let log = dir.join(format!("trial-{seed}.mcap"));
     simulate_to_log(&cfg, &log).context("simulating the trial")?;
-    let (channels, reference) = read_logs(std::slice::from_ref(&log))?;
+    let (channels, reference, _) = read_logs(std::slice::from_ref(&log))?;
     let _ = std::fs::remove_file(&log);
     let report = discover(
         &channels,

@@ -40,11 +40,19 @@ pub struct Reference {
 }
 
 impl Reference {
-    /// From simulated truth messages (any order; repeated times keep the first).
+    /// From truth messages (any order; repeated times keep the first). Samples without a finite
+    /// attitude, velocity or position are left out. A reference without angular rates (an
+    /// imported reference solution) gets them from its attitude: the rotation between
+    /// neighbouring samples; a missing specific force is zero (it only serves as a regressor).
     pub fn from_truth(truth: &[TruthStateV1]) -> Reference {
         let mut samples: Vec<_> = truth
             .iter()
-            .filter(|m| m.euler_rad.iter().all(|x| x.is_finite()))
+            .filter(|m| {
+                m.quaternion_body_to_ned.iter().all(|x| x.is_finite())
+                    && m.velocity_ned_m_s.iter().all(|x| x.is_finite())
+                    && m.height_m.is_finite()
+                    && m.latitude_rad.is_finite()
+            })
             .map(|m| {
                 let q = m.quaternion_body_to_ned;
                 let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
@@ -53,6 +61,8 @@ impl Reference {
                 let c = q.to_rotation_matrix().into_inner();
                 let w_ie = c.transpose() * earth::earth_rate_ned(m.latitude_rad);
                 let t_s = m.host_time_ns as f64 * 1e-9;
+                let rate = Vector3::from(m.angular_rate_rad_s);
+                let force = Vector3::from(m.specific_force_m_s2);
                 (
                     t_s,
                     q,
@@ -60,15 +70,40 @@ impl Reference {
                         t_s,
                         c_body_to_ned: c,
                         velocity_ned: Vector3::from(m.velocity_ned_m_s),
-                        omega_eb_body: Vector3::from(m.angular_rate_rad_s) - w_ie,
+                        // NaN marks "derive from the attitude" below.
+                        omega_eb_body: if rate.iter().all(|x| x.is_finite()) {
+                            rate - w_ie
+                        } else {
+                            Vector3::repeat(f64::NAN)
+                        },
                         height_m: m.height_m,
-                        specific_force_body: Vector3::from(m.specific_force_m_s2),
+                        specific_force_body: if force.iter().all(|x| x.is_finite()) {
+                            force
+                        } else {
+                            Vector3::zeros()
+                        },
                     },
                 )
             })
             .collect();
         samples.sort_by(|a, b| a.0.total_cmp(&b.0));
         samples.dedup_by(|a, b| a.0 == b.0);
+        // Rates from the attitude (central differences; one-sided at the ends), w.r.t. the
+        // Earth: the reference attitude is relative to the local level frame.
+        let n = samples.len();
+        for i in 0..n {
+            if samples[i].2.omega_eb_body.iter().all(|x| x.is_finite()) {
+                continue;
+            }
+            let (a, b) = (i.saturating_sub(1), (i + 1).min(n.saturating_sub(1)));
+            let dt = samples[b].0 - samples[a].0;
+            samples[i].2.omega_eb_body = if a != b && dt > 0.0 && dt <= 2.0 {
+                // Body rate: q_b = q_a · exp(ω dt / 2) in body axes.
+                (samples[a].1.inverse() * samples[b].1).scaled_axis() / dt
+            } else {
+                Vector3::zeros()
+            };
+        }
         Reference { samples }
     }
 
