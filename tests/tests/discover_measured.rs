@@ -62,3 +62,76 @@ fn snapir_dvl_lever_arm_and_lag_are_found_without_being_asked() {
         "only {agree} of 13 segments agree with the hand analysis"
     );
 }
+
+#[test]
+fn effects_hidden_in_measured_data_are_found_on_top_of_what_it_contains() {
+    use auvnav_sim::perturb::{Perturbation, perturb_log};
+    use auvnav_tools::discover::command::read_logs;
+    let Some(dir) = auvnav_tests::measured_data("snapir-auv", "imu_01.csv") else {
+        return;
+    };
+    let tmp = std::env::temp_dir().join(format!("auvnav-discover-perturb-{}", std::process::id()));
+    std::fs::create_dir_all(&tmp).expect("temp dir");
+    let (yaw, scale) = (1.5, 0.996);
+    for segment in [3u32, 8] {
+        let base = tmp.join(format!("s{segment}.mcap"));
+        let out = std::process::Command::new(auvnav_tests::processes::binary("auvnav"))
+            .args(["import", "snapir"])
+            .arg(&dir)
+            .args(["--segment", &segment.to_string(), "--out"])
+            .arg(&base)
+            .output()
+            .expect("running auvnav import");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let perturbed = tmp.join(format!("s{segment}p.mcap"));
+        let p = Perturbation::parse(
+            &[
+                format!("dvl.mount_yaw={yaw}"),
+                format!("dvl.scale_factor={scale}"),
+            ],
+            1,
+        )
+        .expect("perturbation");
+        perturb_log(&base, &perturbed, &p).expect("perturb");
+        let run = |path: &std::path::Path, nominal: &auvnav_sim::effects::Effects| {
+            let (channels, reference, _) = read_logs(&[path.to_path_buf()]).expect("read");
+            discover(&channels, &reference, nominal, 0.7, &Selection::default())
+        };
+        // What the data contain, then the perturbed data on top of it.
+        let first = run(&base, &Default::default());
+        let mut nominal = auvnav_sim::effects::Effects::default();
+        for e in &first.effects {
+            let v: Vec<f64> = match &e.value {
+                serde_json::Value::Array(a) => a.iter().filter_map(|x| x.as_f64()).collect(),
+                x => x.as_f64().into_iter().collect(),
+            };
+            nominal.set(&e.name, &v).expect("effect");
+        }
+        let second = run(&perturbed, &nominal);
+        let change = |name: &str| {
+            second.effects.iter().find(|e| e.name == name).map(|e| {
+                let (v, n) = (
+                    e.value.as_f64().unwrap_or(f64::NAN),
+                    e.nominal.as_f64().unwrap_or(f64::NAN),
+                );
+                (v, n)
+            })
+        };
+        let (y, y0) = change("dvl.mount_yaw").expect("the hidden yaw found");
+        let (s, s0) = change("dvl.scale_factor").expect("the hidden scale found");
+        eprintln!(
+            "segment {segment}: yaw {y0:.4} -> {y:.4} deg (hidden +{yaw}), scale {s0:.5} -> {s:.5} (hidden x{scale})"
+        );
+        assert!(((y - y0) - yaw).abs() <= 0.1 * yaw, "yaw change {}", y - y0);
+        assert!(
+            ((s / s0 - 1.0) - (scale - 1.0)).abs() <= 0.1 * (1.0 - scale),
+            "scale change {}",
+            s / s0
+        );
+    }
+    let _ = std::fs::remove_dir_all(&tmp);
+}

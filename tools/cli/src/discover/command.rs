@@ -23,6 +23,11 @@ pub struct DiscoverArgs {
     /// simulator's defaults).
     #[arg(long = "effect", value_name = "NAME=VALUE")]
     pub effects: Vec<String>,
+    /// Start from the effects a previous `auvnav discover --json` report found (what the data
+    /// already contain), so that this run reports what changed on top of them; `--effect`
+    /// settings apply after it.
+    #[arg(long, value_name = "REPORT.json")]
+    pub nominal_from: Option<PathBuf>,
     /// Fraction of each channel (in time order) the held-out gain is fitted on; the rest scores it.
     #[arg(long, default_value_t = 0.7)]
     pub fit_fraction: f64,
@@ -40,6 +45,8 @@ pub struct FoundEffect {
     pub value: serde_json::Value,
     /// One-sigma of the estimate (same shape; null where the motion does not determine it).
     pub std: serde_json::Value,
+    /// The nominal model's value (the change found is `value` − `nominal`).
+    pub nominal: serde_json::Value,
     pub unit: String,
     pub channel: ChannelKind,
     /// Why it was kept.
@@ -246,7 +253,11 @@ pub fn discover(
             continue;
         }
         let r0 = p.residuals(nominal, &p.epochs);
-        if r0.iter().all(|x| *x == 0.0) {
+        let d = kind.dims();
+        let identical = p.epochs.iter().enumerate().all(|(n, &i)| {
+            (0..d).all(|k| r0[n * d + k].abs() <= 1e-9 * (1.0 + ch.values[i][k].abs()))
+        });
+        if identical {
             r.notes.push(format!(
                 "{}: identical to the reference prediction (derived from the reference?): nothing \
                  to learn from it",
@@ -292,6 +303,7 @@ pub fn discover(
                 name: name.into(),
                 value: json_of(&f.theta[off..off + len]),
                 std: json_of(&std),
+                nominal: json_of(&nominal.get(name).unwrap_or_default()),
                 unit: spec(name).map_or("", |s| s.unit).into(),
                 channel: kind,
                 evidence,
@@ -397,6 +409,35 @@ pub fn discover(
     r
 }
 
+/// Sets the effects a discover JSON report found.
+pub fn nominal_from_report(nominal: &mut Effects, path: &std::path::Path) -> anyhow::Result<()> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let v: serde_json::Value = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a discover JSON report", path.display()))?;
+    let Some(effects) = v.get("effects").and_then(|e| e.as_array()) else {
+        bail!(
+            "{}: no `effects` list (not a discover report)",
+            path.display()
+        );
+    };
+    for e in effects {
+        let name = e.get("name").and_then(|n| n.as_str()).unwrap_or_default();
+        let values: Option<Vec<f64>> = match e.get("value") {
+            Some(serde_json::Value::Array(a)) => a.iter().map(|x| x.as_f64()).collect(),
+            Some(x) => x.as_f64().map(|x| vec![x]),
+            None => None,
+        };
+        let Some(values) = values else {
+            bail!("{}: effect {name:?} has no numeric value", path.display());
+        };
+        nominal
+            .set(name, &values)
+            .with_context(|| format!("{}: effect {name:?}", path.display()))?;
+    }
+    Ok(())
+}
+
 /// `auvnav discover`.
 pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
     if a.reference != "truth" {
@@ -409,6 +450,9 @@ pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
         bail!("--fit-fraction {}: expected 0 < f < 1", a.fit_fraction);
     }
     let mut nominal = Effects::default();
+    if let Some(p) = &a.nominal_from {
+        nominal_from_report(&mut nominal, p)?;
+    }
     for s in &a.effects {
         let (name, values) = parse_setting(s)?;
         nominal.set(&name, &values)?;
@@ -461,8 +505,8 @@ fn print_text(r: &DiscoverReport) {
         println!("  effects found:");
         for e in &r.effects {
             println!(
-                "    {} = {} ± {} {}  ({})",
-                e.name, e.value, e.std, e.unit, e.evidence
+                "    {} = {} ± {} {} (nominal {})  ({})",
+                e.name, e.value, e.std, e.unit, e.nominal, e.evidence
             );
         }
     }
