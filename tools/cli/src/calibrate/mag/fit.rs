@@ -488,6 +488,31 @@ impl Normal {
     }
 }
 
+/// The derivative row of `g · v·(K d)` with respect to the full parameters (K11, K22, K33, K12,
+/// K13, K23, b, λ) for a symmetric K: `v` the vector the residual projects on, `d` = reading −
+/// hard iron, `kv` = Kᵀv, `lambda` the λ entry.
+#[inline]
+fn symmetric_row(
+    v: &Vector3<f64>,
+    d: &Vector3<f64>,
+    kv: &Vector3<f64>,
+    g: f64,
+    lambda: f64,
+) -> [f64; 10] {
+    [
+        v.x * d.x * g,
+        v.y * d.y * g,
+        v.z * d.z * g,
+        (v.x * d.y + v.y * d.x) * g,
+        (v.x * d.z + v.z * d.x) * g,
+        (v.y * d.z + v.z * d.y) * g,
+        -kv.x * g,
+        -kv.y * g,
+        -kv.z * g,
+        lambda,
+    ]
+}
+
 /// Normal equations of the model at `p`: (JᵀJ, Jᵀr, Σr², residual count). `units` holds each
 /// sample's unit specific force ([`unit_forces`]).
 fn normal_equations(
@@ -551,37 +576,14 @@ fn normal_equations(
         let nb = bb.norm().max(1e-12);
         let r1 = nb / field_ut - 1.0;
         let kb = k.transpose() * bb;
-        let g = 1.0 / (nb * field_ut);
-        let row = [
-            bb.x * d.x * g,
-            bb.y * d.y * g,
-            bb.z * d.z * g,
-            (bb.x * d.y + bb.y * d.x) * g,
-            (bb.x * d.z + bb.z * d.x) * g,
-            (bb.y * d.z + bb.z * d.y) * g,
-            -kb.x * g,
-            -kb.y * g,
-            -kb.z * g,
-            0.0,
-        ];
-        ne.add(&map(&row), r1);
+        ne.add(
+            &map(&symmetric_row(&bb, &d, &kb, 1.0 / (nb * field_ut), 0.0)),
+            r1,
+        );
         if let Some(f) = f {
             let r2 = f.dot(&bb) / field_ut - lambda;
             let kf = k.transpose() * f;
-            let g = 1.0 / field_ut;
-            let row = [
-                f.x * d.x * g,
-                f.y * d.y * g,
-                f.z * d.z * g,
-                (f.x * d.y + f.y * d.x) * g,
-                (f.x * d.z + f.z * d.x) * g,
-                (f.y * d.z + f.z * d.y) * g,
-                -kf.x * g,
-                -kf.y * g,
-                -kf.z * g,
-                -1.0,
-            ];
-            ne.add(&map(&row), r2);
+            ne.add(&map(&symmetric_row(f, &d, &kf, 1.0 / field_ut, -1.0)), r2);
         }
     }
     ne.finish()
