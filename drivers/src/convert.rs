@@ -298,17 +298,27 @@ pub fn xsens_sample(
     if m.specific.iter().all(|x| x.is_finite()) {
         m.status |= ImuSampleV1::STATUS_ACCEL_VALID;
     }
-    if let Some(t) = d.temperature_c
-        && (-60.0..=120.0).contains(&t)
-    {
-        m.temperature_c = t as f32;
+    if let Some(t) = xsens_temperature(d) {
+        m.temperature_c = t;
         m.status |= ImuSampleV1::STATUS_TEMPERATURE_VALID;
     }
-    if let Some(t) = d.sample_time_fine {
-        m.device_time_ns = u64::from(t) * 100_000;
+    if let Some(t) = xsens_device_time_ns(d) {
+        m.device_time_ns = t;
         m.status |= ImuSampleV1::STATUS_DEVICE_TIME_VALID;
     }
     Some(m)
+}
+
+/// The temperature of an Xsens message when plausible (°C, −60..120).
+fn xsens_temperature(d: &MtData2) -> Option<f32> {
+    d.temperature_c
+        .filter(|t| (-60.0..=120.0).contains(t))
+        .map(|t| t as f32)
+}
+
+/// The device time of an Xsens message: sample time fine (units of 100 µs) in ns.
+fn xsens_device_time_ns(d: &MtData2) -> Option<u64> {
+    d.sample_time_fine.map(|t| u64::from(t) * 100_000)
 }
 
 /// The magnetic field of an Xsens MTData2 message as a magnetometer message: the normalised field
@@ -333,14 +343,12 @@ pub fn xsens_magnetometer(
     if norm.is_finite() && norm < 1e-3 {
         m.validity |= MagnetometerV1::VALID_FIELD;
     }
-    if let Some(t) = d.temperature_c
-        && (-60.0..=120.0).contains(&t)
-    {
-        m.temperature_c = t as f32;
+    if let Some(t) = xsens_temperature(d) {
+        m.temperature_c = t;
         m.validity |= MagnetometerV1::VALID_TEMPERATURE;
     }
-    if let Some(t) = d.sample_time_fine {
-        m.device_time_ns = u64::from(t) * 100_000;
+    if let Some(t) = xsens_device_time_ns(d) {
+        m.device_time_ns = t;
         m.validity |= MagnetometerV1::VALID_DEVICE_TIME;
     }
     Some(m)

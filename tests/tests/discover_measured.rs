@@ -4,7 +4,7 @@
 //! two causes with compatible values in most segments, and lower the held-out DVL residual.
 //! Under CI the data must be present.
 
-use auvnav_tools::discover::command::{Collector, discover};
+use auvnav_tools::discover::command::{Collector, discover, values_of};
 use auvnav_tools::discover::fit::Selection;
 use auvnav_tools::import::{TimeBase, snapir_messages};
 
@@ -105,10 +105,7 @@ fn effects_hidden_in_measured_data_are_found_on_top_of_what_it_contains() {
         let first = run(&base, &Default::default());
         let mut nominal = auvnav_sim::effects::Effects::default();
         for e in &first.effects {
-            let v: Vec<f64> = match &e.value {
-                serde_json::Value::Array(a) => a.iter().filter_map(|x| x.as_f64()).collect(),
-                x => x.as_f64().into_iter().collect(),
-            };
+            let v = values_of(&e.value).expect("a numeric effect value");
             nominal.set(&e.name, &v).expect("effect");
         }
         let second = run(&perturbed, &nominal);

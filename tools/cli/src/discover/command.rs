@@ -193,6 +193,20 @@ pub fn read_logs(paths: &[PathBuf]) -> anyhow::Result<(Vec<Channel>, Reference, 
     Ok((channels, reference, undecodable))
 }
 
+/// The numbers of an effect value as the report writes it ([`json_of`]: a number or an array);
+/// None when a component is not a number.
+pub fn values_of(v: &serde_json::Value) -> Option<Vec<f64>> {
+    match v {
+        serde_json::Value::Array(a) => a.iter().map(|x| x.as_f64()).collect(),
+        x => x.as_f64().map(|x| vec![x]),
+    }
+}
+
+/// Component `k` of residuals interleaved `d` per epoch.
+fn component(res: &[f64], d: usize, k: usize) -> Vec<f64> {
+    res.iter().skip(k).step_by(d).copied().collect()
+}
+
 fn json_of(v: &[f64]) -> serde_json::Value {
     let num = |x: f64| {
         serde_json::Number::from_f64(x).map_or(serde_json::Value::Null, serde_json::Value::Number)
@@ -343,13 +357,10 @@ pub fn discover(
         ];
         let split = |res: &[f64]| -> Vec<Description> {
             (0..d)
-                .map(|k| {
-                    let comp: Vec<f64> = res.iter().skip(k).step_by(d).copied().collect();
-                    describe(&times, &comp, &regressors)
-                })
+                .map(|k| describe(&times, &component(res, d, k), &regressors))
                 .collect()
         };
-        let nominal_desc = split(&p.residuals(nominal, &p.epochs));
+        let nominal_desc = split(&r0);
         let selected_desc = split(&p.residuals(&p.effects(&set, &f.theta), &p.epochs));
         for (k, desc) in selected_desc.iter().enumerate() {
             if desc.white {
@@ -382,7 +393,7 @@ pub fn discover(
         let rms = |res: Vec<f64>| -> Vec<f64> {
             (0..d)
                 .map(|k| {
-                    let v: Vec<f64> = res.iter().skip(k).step_by(d).copied().collect();
+                    let v = component(&res, d, k);
                     (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
                 })
                 .collect()
@@ -423,12 +434,7 @@ pub fn nominal_from_report(nominal: &mut Effects, path: &std::path::Path) -> any
     };
     for e in effects {
         let name = e.get("name").and_then(|n| n.as_str()).unwrap_or_default();
-        let values: Option<Vec<f64>> = match e.get("value") {
-            Some(serde_json::Value::Array(a)) => a.iter().map(|x| x.as_f64()).collect(),
-            Some(x) => x.as_f64().map(|x| vec![x]),
-            None => None,
-        };
-        let Some(values) = values else {
+        let Some(values) = e.get("value").and_then(values_of) else {
             bail!("{}: effect {name:?} has no numeric value", path.display());
         };
         nominal

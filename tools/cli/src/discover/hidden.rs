@@ -3,7 +3,7 @@
 //! name came back with its value within 10 %. Null trials hide nothing. The tests run a few; the
 //! benchmark (`auvnav bench discover`) runs many and reports the rates and the confusion table.
 
-use super::command::{DiscoverReport, discover, read_logs};
+use super::command::{DiscoverReport, discover, read_logs, values_of};
 use super::fit::Selection;
 use anyhow::Context;
 use auvnav_sim::effects::Effects;
@@ -171,12 +171,8 @@ pub fn trial(
     if let Some(h) = &hidden
         && let Some(e) = report.effects.iter().find(|e| e.name == h.name)
     {
-        let est: Vec<f64> = match &e.value {
-            serde_json::Value::Array(a) => {
-                a.iter().map(|x| x.as_f64().unwrap_or(f64::NAN)).collect()
-            }
-            v => vec![v.as_f64().unwrap_or(f64::NAN)],
-        };
+        // A component that is not a number makes the error NaN: not correct.
+        let est = values_of(&e.value).unwrap_or_else(|| vec![f64::NAN; h.value.len()]);
         let nominal = Effects::default().get(&h.name).unwrap_or_default();
         let err: f64 = est
             .iter()
