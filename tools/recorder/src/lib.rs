@@ -186,13 +186,16 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
         .notes
         .insert("record.prefix".into(), a.prefix.clone());
     let bus = Bus::new(&format!("record{}", std::process::id()), &a.prefix)?;
+    // Aid topics are drained before the IMU in every pass, as the daemon takes them: an aid
+    // that arrived with a backlog of IMU samples is written before them, so that replay meets it
+    // where the daemon did (replay applies messages in the log's order).
     let mut channels: Vec<Box<dyn Drain>> = vec![
-        channel::<ImuSampleV1>(&bus, topic::IMU, qos::SENSOR)?,
         channel::<DvlVelocityV1>(&bus, topic::DVL, qos::SENSOR)?,
         channel::<UsblFixV1>(&bus, topic::USBL, qos::SENSOR)?,
         channel::<DepthV1>(&bus, topic::DEPTH, qos::SENSOR)?,
         channel::<MagnetometerV1>(&bus, topic::MAGNETOMETER, qos::SENSOR)?,
         channel::<GnssFixV1>(&bus, topic::GNSS, qos::SENSOR)?,
+        channel::<ImuSampleV1>(&bus, topic::IMU, qos::SENSOR)?,
         channel::<NavSolutionV1>(&bus, topic::NAV_SOLUTION, qos::NAVIGATION)?,
         channel::<AidDiagnosticsV1>(&bus, topic::NAV_AID_DIAGNOSTICS, qos::NAVIGATION)?,
         channel::<ProcessHealthV1>(&bus, topic::HEALTH, qos::HEALTH)?,
