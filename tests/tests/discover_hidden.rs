@@ -3,7 +3,11 @@
 //! under its name with the value within 10 % and nothing else; null data gives no effect. A
 //! DVL roll, which this motion does not excite, is reported as such instead of being fitted.
 
-use auvnav_tools::discover::hidden::{Hidden, draw, trial};
+use auvnav_sim::effects::{Effects, set};
+use auvnav_tools::discover::command::{discover, read_logs};
+use auvnav_tools::discover::extend::effect_set_toml;
+use auvnav_tools::discover::fit::Selection;
+use auvnav_tools::discover::hidden::{Hidden, draw, simulate, trial};
 
 struct Dir(std::path::PathBuf);
 impl Drop for Dir {
@@ -66,4 +70,45 @@ fn an_effect_the_motion_does_not_excite_is_reported_not_fitted() {
         "{:?}",
         r.unobservable
     );
+}
+
+/// What discovery writes as the extended model (`effects.toml`) simulates data that discovery,
+/// started from that model, finds nothing more in, with residuals of the size the first data
+/// showed: the extension reproduces the residual statistics (on another trajectory and seed).
+#[test]
+fn the_extended_model_reproduces_the_residuals_and_leaves_nothing_to_find() {
+    let d = dir("discover-extend");
+    let hidden = Hidden {
+        name: "dvl.lever_arm".into(),
+        value: vec![-0.8, 0.2, 0.4],
+    };
+    let (t, first) = trial(9301, Some(hidden), &d.0).expect("trial");
+    assert!(t.correct, "{:#?}", first.effects);
+    let text = effect_set_toml(&first);
+    let settings = set::parse(&text).expect("effect set reads back");
+    let names: Vec<&str> = settings.iter().map(|(n, _)| n.as_str()).collect();
+    for n in ["dvl.lever_arm", "dvl.noise", "depth.noise", "mag.noise"] {
+        assert!(names.contains(&n), "{n} missing from\n{text}");
+    }
+    let log = simulate(9302, &settings, &d.0).expect("simulate the extension");
+    let (channels, reference, _) = read_logs(std::slice::from_ref(&log)).expect("read");
+    let mut nominal = Effects::default();
+    set::apply(&mut nominal, &settings).expect("apply");
+    let second = discover(&channels, &reference, &nominal, 0.7, &Selection::default());
+    assert!(second.effects.is_empty(), "{:#?}", second.effects);
+    for (a, b) in first.channels.iter().zip(&second.channels) {
+        assert_eq!(a.channel, b.channel);
+        let ratio = b.held_out_mse_nominal / a.held_out_mse_selected;
+        println!(
+            "{}: measured residual {:.4e}, simulated with the extension {:.4e} (ratio {ratio:.2})",
+            a.channel.name(),
+            a.held_out_mse_selected,
+            b.held_out_mse_nominal
+        );
+        assert!(
+            (0.7..1.4).contains(&ratio),
+            "{}: ratio {ratio}",
+            a.channel.name()
+        );
+    }
 }

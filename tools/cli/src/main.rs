@@ -90,8 +90,15 @@ struct PerturbArgs {
     /// The log to perturb.
     log: PathBuf,
     /// An effect: NAME=VALUE or NAME=V1,V2,V3 (repeatable).
-    #[arg(long = "effect", value_name = "NAME=VALUE", required = true)]
+    #[arg(
+        long = "effect",
+        value_name = "NAME=VALUE",
+        required_unless_present = "effects_from"
+    )]
     effects: Vec<String>,
+    /// Effects from an effect set file (`[effects]` table), applied before `--effect`.
+    #[arg(long, value_name = "FILE")]
+    effects_from: Option<PathBuf>,
     /// Seed of the noise effects.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -104,7 +111,15 @@ struct PerturbArgs {
 }
 
 fn run_perturb(a: &PerturbArgs) -> anyhow::Result<()> {
-    let p = sim::perturb::Perturbation::parse(&a.effects, a.seed)?;
+    let mut settings = Vec::new();
+    if let Some(p) = &a.effects_from {
+        for (name, v) in read_effect_set(p)? {
+            let v: Vec<String> = v.iter().map(|x| x.to_string()).collect();
+            settings.push(format!("{name}={}", v.join(",")));
+        }
+    }
+    settings.extend(a.effects.iter().cloned());
+    let p = sim::perturb::Perturbation::parse(&settings, a.seed)?;
     let counts = sim::perturb::perturb_log(&a.log, &a.out, &p)?;
     if a.json {
         println!(
@@ -288,6 +303,11 @@ struct SimArgs {
     /// Switch an effect on: NAME=VALUE or NAME=V1,V2,V3 (repeatable; see --list-effects).
     #[arg(long = "effect", value_name = "NAME=VALUE")]
     effects: Vec<String>,
+    /// Effects from a file: the `[effects]` table of an effect set (`auvnav discover
+    /// --write-effects`, a report directory's `effects.toml`) or of a scenario file; applied on
+    /// top of the scenario's effects, before `--effect`.
+    #[arg(long, value_name = "FILE")]
+    effects_from: Option<PathBuf>,
     /// Drop the scenario's own effects and start from ideal sensors.
     #[arg(long)]
     clean: bool,
@@ -315,7 +335,10 @@ fn run_campaign(a: &SimArgs, name: &str) -> anyhow::Result<()> {
     let Some(dir) = a.out.as_ref() else {
         bail!("--out DIR is required with --campaign (the directory for the voyages)");
     };
-    let mut installation = Vec::new();
+    let mut installation = match &a.effects_from {
+        Some(p) => read_effect_set(p)?,
+        None => Vec::new(),
+    };
     for setting in &a.effects {
         installation.push(effects::parse_setting(setting)?);
     }
@@ -343,6 +366,13 @@ fn run_campaign(a: &SimArgs, name: &str) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The settings of an effect set file (`[effects]` table).
+fn read_effect_set(path: &std::path::Path) -> anyhow::Result<Vec<(String, Vec<f64>)>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    effects::set::parse(&text).with_context(|| format!("effect set {}", path.display()))
+}
+
 fn sim_config(a: &SimArgs) -> anyhow::Result<SimConfig> {
     let scenario = Scenario::load(&a.scenario)?;
     let mut fx = if a.clean {
@@ -350,6 +380,9 @@ fn sim_config(a: &SimArgs) -> anyhow::Result<SimConfig> {
     } else {
         scenario.effects()?
     };
+    if let Some(p) = &a.effects_from {
+        effects::set::apply(&mut fx, &read_effect_set(p)?)?;
+    }
     for setting in &a.effects {
         let (name, values) = effects::parse_setting(setting)?;
         fx.set(&name, &values)?;

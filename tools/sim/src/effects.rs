@@ -272,6 +272,100 @@ pub fn parse_setting(s: &str) -> Result<(String, Vec<f64>), EffectError> {
     Ok((name.to_string(), values))
 }
 
+/// An effect set file: a TOML `[effects]` table (dotted name → number or list of numbers), the
+/// same table a scenario file holds. `auvnav discover --write-effects` writes one;
+/// `auvnav sim --effects-from`, `auvnav perturb --effects-from` and `auvnav discover
+/// --nominal-from` read it. Other tables and keys in the file are left alone, so a scenario file
+/// or a discover report directory's `effects.toml` serve alike.
+pub mod set {
+    use super::{EffectError, Effects};
+    use std::fmt::Write as _;
+
+    #[derive(Debug, thiserror::Error)]
+    pub enum EffectSetError {
+        #[error("not TOML: {0}")]
+        Toml(#[from] toml::de::Error),
+        #[error("no [effects] table")]
+        NoTable,
+        #[error("effect {0:?}: expected a number or a list of numbers")]
+        NotNumeric(String),
+        #[error(transparent)]
+        Effect(#[from] EffectError),
+    }
+
+    /// Reads the `[effects]` table: the settings in file order, each checked against the
+    /// vocabulary (name, number of components, range).
+    pub fn parse(text: &str) -> Result<Vec<(String, Vec<f64>)>, EffectSetError> {
+        let doc: toml::Table = toml::from_str(text)?;
+        let Some(table) = doc.get("effects").and_then(|t| t.as_table()) else {
+            return Err(EffectSetError::NoTable);
+        };
+        let number = |v: &toml::Value| v.as_float().or_else(|| v.as_integer().map(|i| i as f64));
+        let mut out = Vec::new();
+        let mut check = Effects::default();
+        for (name, value) in table {
+            let values = match value {
+                toml::Value::Array(a) => a.iter().map(number).collect::<Option<Vec<f64>>>(),
+                v => number(v).map(|x| vec![x]),
+            }
+            .ok_or_else(|| EffectSetError::NotNumeric(name.clone()))?;
+            check.set(name, &values)?;
+            out.push((name.clone(), values));
+        }
+        Ok(out)
+    }
+
+    /// The `[effects]` table of `settings`, after `comment` lines (each prefixed with `# `).
+    /// Numbers keep all their digits, so that reading the file back gives the same values.
+    pub fn to_toml(comment: &str, settings: &[(String, Vec<f64>)]) -> String {
+        let mut s = String::new();
+        for line in comment.lines() {
+            let _ = writeln!(s, "# {line}");
+        }
+        let _ = writeln!(s, "[effects]");
+        let num = |x: f64| {
+            let t = format!("{x:?}");
+            if t.contains('.') || t.contains('e') || t.contains("inf") || t.contains("NaN") {
+                t
+            } else {
+                format!("{t}.0")
+            }
+        };
+        for (name, v) in settings {
+            let value = if v.len() == 1 {
+                num(v[0])
+            } else {
+                format!(
+                    "[{}]",
+                    v.iter().map(|&x| num(x)).collect::<Vec<_>>().join(", ")
+                )
+            };
+            let _ = writeln!(s, "\"{name}\" = {value}");
+        }
+        s
+    }
+
+    /// Applies the settings to `e`.
+    pub fn apply(e: &mut Effects, settings: &[(String, Vec<f64>)]) -> Result<(), EffectError> {
+        for (name, v) in settings {
+            e.set(name, v)?;
+        }
+        Ok(())
+    }
+
+    /// The effects of `e` that differ from the neutral defaults, in listing order.
+    pub fn differences(e: &Effects) -> Vec<(String, Vec<f64>)> {
+        let d = Effects::default();
+        super::SPECS
+            .iter()
+            .filter_map(|s| {
+                let v = e.get(s.name)?;
+                (Some(&v) != d.get(s.name).as_ref()).then(|| (s.name.to_string(), v))
+            })
+            .collect()
+    }
+}
+
 /// The effect list as printed by `auvnav sim --list-effects`.
 pub fn listing() -> String {
     let mut s = String::new();
@@ -294,6 +388,50 @@ pub fn listing() -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_effect_set_file_reads_back_what_was_written() {
+        let mut e = Effects::default();
+        e.set("dvl.lever_arm", &[-1.8512345678901234, 0.0, 0.25])
+            .expect("valid");
+        e.set("dvl.time_offset", &[-1.0]).expect("valid");
+        e.set("depth.density", &[1000.0]).expect("valid");
+        let diff = set::differences(&e);
+        assert_eq!(
+            diff.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>(),
+            ["dvl.lever_arm", "dvl.time_offset", "depth.density"]
+        );
+        let text = set::to_toml("found by discover\nsecond line", &diff);
+        assert!(text.starts_with("# found by discover\n# second line\n[effects]\n"));
+        let back = set::parse(&text).expect("valid");
+        let mut f = Effects::default();
+        set::apply(&mut f, &back).expect("valid");
+        assert_eq!(e, f);
+    }
+
+    #[test]
+    fn an_effect_set_file_with_a_bad_entry_is_refused_with_its_name() {
+        for (text, what) in [
+            ("[effects]\n\"dvl.scale\" = 1.0\n", "unknown effect"),
+            ("[effects]\n\"dvl.lever_arm\" = [1.0, 2.0]\n", "expected 3"),
+            (
+                "[effects]\n\"dvl.scale_factor\" = 2.0\n",
+                "outside the allowed range",
+            ),
+            (
+                "[effects]\n\"dvl.scale_factor\" = \"x\"\n",
+                "a number or a list",
+            ),
+            ("[other]\nx = 1\n", "no [effects] table"),
+            ("[effects\n", "not TOML"),
+        ] {
+            let err = set::parse(text).expect_err("refused").to_string();
+            assert!(err.contains(what), "{text:?}: {err}");
+        }
+        // Integers are numbers; other tables are left alone.
+        let v = set::parse("name = \"s\"\n[effects]\n\"depth.bias\" = 1\n").expect("valid");
+        assert_eq!(v, vec![("depth.bias".to_string(), vec![1.0])]);
+    }
 
     #[test]
     fn every_spec_is_settable_and_its_default_is_in_range() {

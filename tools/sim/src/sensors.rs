@@ -152,8 +152,17 @@ pub fn dvl_beam_directions() -> [Vector3<f64>; 4] {
     })
 }
 
-/// The DVL: beam velocities with noise, least-squares instrument velocity, mounting rotation,
-/// lever arm, scale factor, sound speed, time offset and loss of bottom lock.
+/// Standard deviation of each DVL-frame velocity component per unit of beam noise
+/// (`dvl.noise`): the square roots of the diagonal of (BᵀB)⁻¹ of the least-squares solution.
+pub fn dvl_velocity_std_per_beam_noise() -> Vector3<f64> {
+    let b = nalgebra::Matrix4x3::from_rows(&dvl_beam_directions().map(|v| v.transpose()));
+    (b.transpose() * b)
+        .try_inverse()
+        .unwrap_or_else(Matrix3::identity)
+        .diagonal()
+        .map(f64::sqrt)
+}
+
 /// The DVL's installation as the simulator models it (`dvl.mount_*`, `dvl.lever_arm`,
 /// `dvl.scale_factor`, `dvl.sound_speed`): what a locked, noise-free DVL reads for a body motion.
 /// Model discovery predicts DVL readings with the same code.
@@ -193,6 +202,8 @@ impl DvlInstallation {
     }
 }
 
+/// The DVL: beam velocities with noise, least-squares instrument velocity, mounting rotation,
+/// lever arm, scale factor, sound speed, time offset and loss of bottom lock.
 pub struct DvlModel {
     rng: Rng,
     beams: [Vector3<f64>; 4],
@@ -223,7 +234,7 @@ impl DvlModel {
             pinv,
             install: DvlInstallation::from_effects(e),
             noise: e.dvl_noise,
-            velocity_std: btb_inv.diagonal().map(f64::sqrt) * e.dvl_noise,
+            velocity_std: dvl_velocity_std_per_beam_noise() * e.dvl_noise,
             loss_rate: e.dvl_bottom_lock_loss_rate,
             loss_duration: e.dvl_bottom_lock_loss_duration,
             max_altitude: e.dvl_max_altitude,

@@ -3,6 +3,7 @@
 use super::describe::{Description, describe};
 use super::fit::{self, Problem, Selection};
 use super::{Channel, ChannelKind, Reference, spec};
+use crate::calibrate::report::write_atomically;
 use anyhow::{Context, bail};
 use auvnav_log::{LogMessage, LogReader};
 use auvnav_shm_schema::{DepthV1, DvlVelocityV1, MagnetometerV1};
@@ -24,9 +25,9 @@ pub struct DiscoverArgs {
     #[arg(long = "effect", value_name = "NAME=VALUE")]
     pub effects: Vec<String>,
     /// Start from the effects a previous `auvnav discover --json` report found (what the data
-    /// already contain), so that this run reports what changed on top of them; `--effect`
-    /// settings apply after it.
-    #[arg(long, value_name = "REPORT.json")]
+    /// already contain), or from an effect set file (`.toml`, e.g. `--write-effects`), so that
+    /// this run reports what changed on top of them; `--effect` settings apply after it.
+    #[arg(long, value_name = "REPORT.json|EFFECTS.toml")]
     pub nominal_from: Option<PathBuf>,
     /// Fraction of each channel (in time order) the held-out gain is fitted on; the rest scores it.
     #[arg(long, default_value_t = 0.7)]
@@ -34,6 +35,22 @@ pub struct DiscoverArgs {
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
+    /// Write a report directory: report.md with plots (SVG), report.json, effects.toml and
+    /// navigation.toml.
+    #[arg(long, value_name = "DIR")]
+    pub report: Option<PathBuf>,
+    /// Write the extended model as an effect set (`auvnav sim --effects-from FILE`): the nominal
+    /// effects, the effects found and each channel's residual noise.
+    #[arg(long, value_name = "FILE")]
+    pub write_effects: Option<PathBuf>,
+    /// Write the navigator configuration of the effects found (`[navigation.dvl]`,
+    /// `[navigation.magnetometer]`).
+    #[arg(long, value_name = "FILE")]
+    pub write_config: Option<PathBuf>,
+    /// Do not replay the logs through the navigator to compare the navigation error before and
+    /// after.
+    #[arg(long)]
+    pub no_navigation: bool,
 }
 
 /// An effect discovery keeps.
@@ -105,6 +122,26 @@ pub struct ChannelGain {
     pub rms_after: Vec<f64>,
 }
 
+/// The noise a channel shows once the effects found are modelled, as the simulator's noise
+/// effect (`dvl.noise` per beam, `depth.noise`, `mag.noise` per axis).
+#[derive(Debug, Clone, Serialize)]
+pub struct NoiseEstimate {
+    pub name: String,
+    pub value: f64,
+    pub unit: String,
+    pub channel: ChannelKind,
+    pub note: String,
+}
+
+/// One channel's residual series (for the report's plots), interleaved per component.
+#[derive(Debug, Clone)]
+pub struct ResidualSeries {
+    pub channel: ChannelKind,
+    pub times: Vec<f64>,
+    pub nominal: Vec<f64>,
+    pub selected: Vec<f64>,
+}
+
 /// The report (`--json`, version 1).
 #[derive(Debug, Clone, Serialize)]
 pub struct DiscoverReport {
@@ -117,9 +154,26 @@ pub struct DiscoverReport {
     pub unobservable: Vec<Unobservable>,
     pub unexplained: Vec<Unexplained>,
     pub gain: Vec<ChannelGain>,
+    /// Noise per channel with the effects found (what `effects.toml` gives the simulator).
+    pub noise: Vec<NoiseEstimate>,
+    /// Navigation error before/after, per log with an IMU and a reference (the navigator's
+    /// configuration from the nominal effects, then from the effects found on the first
+    /// `fit_fraction` of each channel).
+    pub navigation: Vec<super::extend::NavigationGain>,
     /// What could not be analysed, and why.
     pub notes: Vec<String>,
     pub wall_seconds: f64,
+    /// The nominal effects.
+    #[serde(skip)]
+    pub nominal_model: Effects,
+    /// The nominal effects with the effects found (fitted on all readings).
+    #[serde(skip)]
+    pub model: Effects,
+    /// The same, fitted on the first `fit_fraction` of each channel only.
+    #[serde(skip)]
+    pub held_out_model: Effects,
+    #[serde(skip)]
+    pub residuals: Vec<ResidualSeries>,
 }
 
 /// Collects the channels and the reference from log messages.
@@ -237,8 +291,14 @@ pub fn discover(
         unobservable: Vec::new(),
         unexplained: Vec::new(),
         gain: Vec::new(),
+        noise: Vec::new(),
+        navigation: Vec::new(),
         notes: Vec::new(),
         wall_seconds: 0.0,
+        nominal_model: nominal.clone(),
+        model: nominal.clone(),
+        held_out_model: nominal.clone(),
+        residuals: Vec::new(),
     };
     if reference.len() < 2 {
         r.notes.push(
@@ -361,7 +421,9 @@ pub fn discover(
                 .collect()
         };
         let nominal_desc = split(&r0);
-        let selected_desc = split(&p.residuals(&p.effects(&set, &f.theta), &p.epochs));
+        let full = p.effects(&set, &f.theta);
+        let r1 = p.residuals(&full, &p.epochs);
+        let selected_desc = split(&r1);
         for (k, desc) in selected_desc.iter().enumerate() {
             if desc.white {
                 continue;
@@ -398,11 +460,29 @@ pub fn discover(
                 })
                 .collect()
         };
+        let held_out = p.effects(&set, &ft.theta);
         r.gain.push(ChannelGain {
             channel: kind,
             fit_fraction,
             rms_before: rms(p.residuals(nominal, test)),
-            rms_after: rms(p.residuals(&p.effects(&set, &ft.theta), test)),
+            rms_after: rms(p.residuals(&held_out, test)),
+        });
+        for &c in &set {
+            let name = fit::name(c);
+            for (model, from) in [(&mut r.model, &full), (&mut r.held_out_model, &held_out)] {
+                if let Some(v) = from.get(name) {
+                    // In range: the fit clamps to the effect's range.
+                    let _ = model.set(name, &v);
+                }
+            }
+        }
+        let rms_all: Vec<f64> = selected_desc.iter().map(|d| d.rms).collect();
+        r.noise.push(super::extend::noise_estimate(kind, &rms_all));
+        r.residuals.push(ResidualSeries {
+            channel: kind,
+            times: times.clone(),
+            nominal: r0.clone(),
+            selected: r1,
         });
         r.channels.push(ChannelReport {
             channel: kind,
@@ -420,10 +500,16 @@ pub fn discover(
     r
 }
 
-/// Sets the effects a discover JSON report found.
+/// Sets the effects a discover JSON report found, or those of an effect set file (`.toml`).
 pub fn nominal_from_report(nominal: &mut Effects, path: &std::path::Path) -> anyhow::Result<()> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    if path.extension().is_some_and(|x| x == "toml") {
+        let settings = auvnav_sim::effects::set::parse(&text)
+            .with_context(|| format!("effect set {}", path.display()))?;
+        auvnav_sim::effects::set::apply(nominal, &settings)?;
+        return Ok(());
+    }
     let v: serde_json::Value = serde_json::from_str(&text)
         .with_context(|| format!("{}: not a discover JSON report", path.display()))?;
     let Some(effects) = v.get("effects").and_then(|e| e.as_array()) else {
@@ -478,6 +564,20 @@ pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
     }
     r.inputs = a.logs.iter().map(|p| p.display().to_string()).collect();
     r.reference = a.reference.clone();
+    if !a.no_navigation {
+        let start = std::time::Instant::now();
+        super::extend::navigation_gain(&a.logs, &mut r);
+        r.wall_seconds += start.elapsed().as_secs_f64();
+    }
+    if let Some(p) = &a.write_effects {
+        write_atomically(p, &super::extend::effect_set_toml(&r))?;
+    }
+    if let Some(p) = &a.write_config {
+        write_atomically(p, &super::extend::navigator_toml(&r)?)?;
+    }
+    if let Some(dir) = &a.report {
+        super::report::write_report_dir(dir, &r)?;
+    }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
     } else {
@@ -553,6 +653,26 @@ fn print_text(r: &DiscoverReport) {
                 .iter()
                 .find(|c| c.channel == g.channel)
                 .map_or("", |c| c.unit.as_str())
+        );
+    }
+    for n in &r.noise {
+        println!(
+            "  noise with the effects found: {} = {:.5} {}",
+            n.name, n.value, n.unit
+        );
+    }
+    for n in &r.navigation {
+        println!(
+            "  navigation {}: end error {:.2} m -> {:.2} m, CEP50 {:.3} % -> {:.3} %, heading RMS {:.3} -> {:.3} deg, DVL rejected {} -> {}",
+            n.log,
+            n.before.horizontal_error_final_m,
+            n.after.horizontal_error_final_m,
+            n.before.error_per_distance_cep50_percent,
+            n.after.error_per_distance_cep50_percent,
+            n.before.heading_error_rms_deg,
+            n.after.heading_error_rms_deg,
+            n.dvl_rejected_before,
+            n.dvl_rejected_after
         );
     }
     for n in &r.notes {

@@ -53,7 +53,7 @@ pub fn describe(t: &[f64], r: &[f64], regressors: &[(&str, Vec<f64>)]) -> Descri
         lag1: acf(1),
         ljung_box_q: q,
         white: q < CHI2_20_99,
-        peak_hz: spectral_peak(t, r, mean),
+        peak_hz: spectral_peak(t, r),
         correlated_with: regressors
             .iter()
             .filter_map(|(name, x)| {
@@ -88,37 +88,42 @@ pub fn correlation(x: &[f64], y: &[f64]) -> f64 {
     }
 }
 
-/// The strongest line of the periodogram (at most 512 points, evenly resampled by index; 128
-/// frequencies up to the Nyquist frequency of the mean interval), when it stands ten times above
-/// the median power.
-fn spectral_peak(t: &[f64], r: &[f64], mean: f64) -> Option<f64> {
-    let n = r.len();
+/// The periodogram of `r` (mean removed): at most 512 points, evenly resampled by index; 128
+/// frequencies up to the Nyquist frequency of the mean interval. Empty for fewer than 32 points
+/// or no time span.
+pub fn periodogram(t: &[f64], r: &[f64]) -> Vec<(f64, f64)> {
+    let n = r.len().min(t.len());
     if n < 32 {
-        return None;
+        return Vec::new();
     }
+    let mean = r[..n].iter().sum::<f64>() / n as f64;
     let stride = n.div_ceil(512);
     let idx: Vec<usize> = (0..n).step_by(stride).collect();
     let dt = (t[n - 1] - t[0]) / (n - 1) as f64 * stride as f64;
     if dt.is_nan() || dt <= 0.0 {
-        return None;
+        return Vec::new();
     }
     let nyquist = 0.5 / dt;
-    let freqs: Vec<f64> = (1..=128).map(|k| nyquist * k as f64 / 128.0).collect();
-    let power: Vec<f64> = freqs
-        .iter()
-        .map(|f| {
+    (1..=128)
+        .map(|k| {
+            let f = nyquist * k as f64 / 128.0;
             let (mut c, mut s) = (0.0, 0.0);
             for &i in &idx {
                 let ph = 2.0 * std::f64::consts::PI * f * (t[i] - t[0]);
                 c += (r[i] - mean) * ph.cos();
                 s += (r[i] - mean) * ph.sin();
             }
-            c * c + s * s
+            (f, (c * c + s * s) / idx.len() as f64)
         })
-        .collect();
-    let mut sorted = power.clone();
+        .collect()
+}
+
+/// The strongest line of the [`periodogram`], when it stands ten times above the median power.
+fn spectral_peak(t: &[f64], r: &[f64]) -> Option<f64> {
+    let power = periodogram(t, r);
+    let mut sorted: Vec<f64> = power.iter().map(|p| p.1).collect();
     sorted.sort_by(f64::total_cmp);
-    let median = sorted[sorted.len() / 2];
-    let (k, p) = power.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1))?;
-    (*p > 10.0 * median && median > 0.0).then_some(freqs[k])
+    let median = *sorted.get(sorted.len() / 2)?;
+    let &(f, p) = power.iter().max_by(|a, b| a.1.total_cmp(&b.1))?;
+    (p > 10.0 * median && median > 0.0).then_some(f)
 }

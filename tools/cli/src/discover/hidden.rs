@@ -138,17 +138,16 @@ pub struct Trial {
     pub false_discovery: bool,
 }
 
-/// Runs one trial in `dir`: simulate with the hidden effect (or none), discover, score.
-pub fn trial(
+/// Simulates the voyage of trial `seed` with its scenario's noise and `settings` on top, into
+/// `dir/trial-SEED.mcap`.
+pub fn simulate(
     seed: u64,
-    hidden: Option<Hidden>,
+    settings: &[(String, Vec<f64>)],
     dir: &Path,
-) -> anyhow::Result<(Trial, DiscoverReport)> {
+) -> anyhow::Result<std::path::PathBuf> {
     let scenario = Scenario::parse(&scenario(seed), "discovery trial")?;
     let mut effects = scenario.effects()?;
-    if let Some(h) = &hidden {
-        effects.set(&h.name, &h.value)?;
-    }
+    auvnav_sim::effects::set::apply(&mut effects, settings)?;
     let cfg = SimConfig {
         scenario,
         effects,
@@ -157,6 +156,20 @@ pub fn trial(
     };
     let log = dir.join(format!("trial-{seed}.mcap"));
     simulate_to_log(&cfg, &log).context("simulating the trial")?;
+    Ok(log)
+}
+
+/// Runs one trial in `dir`: simulate with the hidden effect (or none), discover, score.
+pub fn trial(
+    seed: u64,
+    hidden: Option<Hidden>,
+    dir: &Path,
+) -> anyhow::Result<(Trial, DiscoverReport)> {
+    let settings: Vec<(String, Vec<f64>)> = hidden
+        .iter()
+        .map(|h| (h.name.clone(), h.value.clone()))
+        .collect();
+    let log = simulate(seed, &settings, dir)?;
     let (channels, reference, _) = read_logs(std::slice::from_ref(&log))?;
     let _ = std::fs::remove_file(&log);
     let report = discover(

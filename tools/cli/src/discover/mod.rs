@@ -11,8 +11,10 @@
 
 pub mod command;
 pub mod describe;
+pub mod extend;
 pub mod fit;
 pub mod hidden;
+pub mod report;
 
 use auvnav_core::earth;
 use auvnav_shm_schema::TruthStateV1;

@@ -1,0 +1,257 @@
+//! What discovery found, in the forms other tools take: an effect set for the simulator
+//! (`auvnav sim --effects-from`), a navigator configuration (the calibration the daemon and
+//! `auvnav replay` take), and the navigation error before/after on the logs.
+
+use super::ChannelKind;
+use super::command::DiscoverReport;
+use crate::accuracy::Accuracy;
+use crate::replay::{self, Replay, ReplayArgs, ReplayConfig};
+use anyhow::Context;
+use auvnav_core::aid::magnetometer::MagnetometerConfig;
+use auvnav_core::config::DvlInstallation;
+use auvnav_sim::effects::{self, Effects};
+use auvnav_sim::sensors::{MagnetometerModel, dvl_velocity_std_per_beam_noise};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+/// The simulator's noise effect of a channel from the RMS per component of its residual with the
+/// effects found. `dvl.noise` is per beam: each DVL-frame component's RMS is divided by what one
+/// unit of beam noise gives that component.
+pub fn noise_estimate(kind: ChannelKind, rms: &[f64]) -> super::command::NoiseEstimate {
+    let (name, value) = match kind {
+        ChannelKind::Dvl => {
+            let per = dvl_velocity_std_per_beam_noise();
+            let m = rms
+                .iter()
+                .zip(per.iter())
+                .map(|(r, f)| (r / f).powi(2))
+                .sum::<f64>()
+                / rms.len().max(1) as f64;
+            ("dvl.noise", m.sqrt())
+        }
+        ChannelKind::Depth => ("depth.noise", rms.first().copied().unwrap_or(0.0)),
+        ChannelKind::Magnetometer => (
+            "mag.noise",
+            (rms.iter().map(|r| r * r).sum::<f64>() / rms.len().max(1) as f64).sqrt(),
+        ),
+    };
+    let spec = super::spec(name);
+    let value = spec.map_or(value, |s| value.clamp(s.min, s.max));
+    super::command::NoiseEstimate {
+        name: name.into(),
+        value,
+        unit: spec.map_or("", |s| s.unit).into(),
+        channel: kind,
+        note: "RMS of the residual with the effects found: an upper bound on the white noise \
+               when structure is left unexplained"
+            .into(),
+    }
+}
+
+/// The effect set of the extended model: every effect that differs from the simulator's
+/// defaults (the nominal settings and the effects found), and each analysed channel's noise.
+pub fn effect_set(r: &DiscoverReport) -> Vec<(String, Vec<f64>)> {
+    let mut model = r.model.clone();
+    for n in &r.noise {
+        let _ = model.set(&n.name, &[n.value]);
+    }
+    effects::set::differences(&model)
+}
+
+/// The effect set file's text.
+pub fn effect_set_toml(r: &DiscoverReport) -> String {
+    let comment = format!(
+        "Effect set from `auvnav discover` on {}.\n\
+         The nominal model, the effects found and each channel's residual noise, in the\n\
+         simulator's names and units: `auvnav sim --effects-from THIS_FILE` simulates with them.",
+        r.inputs.join(", ")
+    );
+    effects::set::to_toml(&comment, &effect_set(r))
+}
+
+/// The navigator's installation tables for a model: the DVL installation when the DVL channel was
+/// analysed, the magnetometer calibration when the magnetometer channel was.
+pub fn navigator_tables(
+    e: &Effects,
+    analysed: &[ChannelKind],
+    source: &str,
+) -> (Option<DvlInstallation>, Option<MagnetometerConfig>) {
+    let dvl = analysed
+        .contains(&ChannelKind::Dvl)
+        .then(|| DvlInstallation {
+            mount_deg: [e.dvl_mount_roll, e.dvl_mount_pitch, e.dvl_mount_yaw],
+            // The simulator's sound-speed error scales the velocity as c / 1500.
+            scale_factor: e.dvl_scale_factor * e.dvl_sound_speed / 1500.0,
+            lever_arm_m: e.dvl_lever_arm,
+            time_offset_s: e.dvl_time_offset,
+            source: source.into(),
+        });
+    let mag = analysed
+        .contains(&ChannelKind::Magnetometer)
+        .then(|| MagnetometerConfig {
+            source: source.into(),
+            ..MagnetometerModel::navigator_config(e)
+        });
+    (dvl, mag)
+}
+
+fn analysed(r: &DiscoverReport) -> Vec<ChannelKind> {
+    r.channels.iter().map(|c| c.channel).collect()
+}
+
+/// The navigator configuration file's text (`[navigation.dvl]`, `[navigation.magnetometer]`),
+/// from the effects found on all readings; the depth effects, which the navigator does not model,
+/// are listed as comments.
+pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
+    #[derive(Serialize)]
+    struct Navigation {
+        #[serde(skip_serializing_if = "Option::is_none")]
+        dvl: Option<DvlInstallation>,
+        #[serde(skip_serializing_if = "Option::is_none")]
+        magnetometer: Option<MagnetometerConfig>,
+    }
+    #[derive(Serialize)]
+    struct File {
+        navigation: Navigation,
+    }
+    let source = format!("auvnav discover on {}", r.inputs.join(", "));
+    let (dvl, magnetometer) = navigator_tables(&r.model, &analysed(r), &source);
+    let body = toml::to_string(&File {
+        navigation: Navigation { dvl, magnetometer },
+    })?;
+    let mut head = String::from(
+        "# Navigator configuration from `auvnav discover`: the installation the data show.\n\
+         # Merge these tables into the daemon's configuration or pass the file to\n\
+         # `auvnav replay --config` (with an [initial] table for logs without a reference).\n",
+    );
+    for name in ["depth.bias", "depth.density"] {
+        if let Some(e) = r.effects.iter().find(|e| e.name == name) {
+            head.push_str(&format!(
+                "# {name} = {} {} found: the navigator has no depth correction; not applied.\n",
+                e.value, e.unit
+            ));
+        }
+    }
+    Ok(head + &body)
+}
+
+/// Navigation error of one log before/after.
+#[derive(Debug, Clone, Serialize)]
+pub struct NavigationGain {
+    pub log: String,
+    /// Where the rest of the configuration came from (the log header or the defaults).
+    pub configuration: String,
+    pub before: Accuracy,
+    pub after: Accuracy,
+    pub dvl_fused_before: u64,
+    pub dvl_rejected_before: u64,
+    pub dvl_fused_after: u64,
+    pub dvl_rejected_after: u64,
+}
+
+/// Replays each log with an IMU and a reference twice: with the navigator tables of the nominal
+/// effects and with those of the effects fitted on the first part of each channel; the rest of
+/// the configuration is what `auvnav replay LOG` would use. Logs without an IMU or a reference
+/// are skipped with a note.
+pub fn navigation_gain(logs: &[PathBuf], r: &mut DiscoverReport) {
+    let kinds = analysed(r);
+    if !kinds.contains(&ChannelKind::Dvl) && !kinds.contains(&ChannelKind::Magnetometer) {
+        return;
+    }
+    for log in logs {
+        match navigation_of(log, r, &kinds) {
+            Ok(Some(g)) => {
+                let (b, a) = (&g.before, &g.after);
+                if a.horizontal_error_final_m > b.horizontal_error_final_m
+                    && a.error_per_distance_cep50_percent > b.error_per_distance_cep50_percent
+                {
+                    r.notes.push(format!(
+                        "{}: the navigation error grows with the effects found (end {:.2} -> {:.2} m, \
+                         CEP50 {:.3} -> {:.3} %): they describe the sensors against the reference, \
+                         and the reference is not the IMU's motion (its velocity at another point \
+                         or time). Check against the navigator's own estimates (estimate_dvl_* in \
+                         [navigation]) before using navigation.toml",
+                        g.log,
+                        b.horizontal_error_final_m,
+                        a.horizontal_error_final_m,
+                        b.error_per_distance_cep50_percent,
+                        a.error_per_distance_cep50_percent
+                    ));
+                }
+                r.navigation.push(g)
+            }
+            Ok(None) => r.notes.push(format!(
+                "{}: no IMU or no reference: navigation error not compared",
+                log.display()
+            )),
+            Err(e) => r.notes.push(format!(
+                "{}: navigation replay failed: {e:#}",
+                log.display()
+            )),
+        }
+    }
+}
+
+fn navigation_of(
+    log: &Path,
+    r: &DiscoverReport,
+    kinds: &[ChannelKind],
+) -> anyhow::Result<Option<NavigationGain>> {
+    let args = ReplayArgs {
+        log: log.to_path_buf(),
+        config: None,
+        out: None,
+        decimate: 1,
+        min_distance: 100.0,
+        usbl: None,
+        json: true,
+    };
+    let (base, source) = replay::replay_config(&args)?;
+    let with = |e: &Effects| -> ReplayConfig {
+        let mut cfg = base.clone();
+        let (dvl, mag) = navigator_tables(e, kinds, "auvnav discover");
+        if let Some(d) = dvl {
+            cfg.navigation.set_dvl_installation(d);
+        }
+        // The magnetometer aid is only recalibrated where the configuration uses it.
+        if let (Some(m), Some(old)) = (mag, cfg.navigation.magnetometer.as_ref()) {
+            cfg.navigation.magnetometer = Some(MagnetometerConfig {
+                heading_std_deg: old.heading_std_deg,
+                gate_chi2: old.gate_chi2,
+                field_tolerance: old.field_tolerance,
+                min_interval_s: old.min_interval_s,
+                ..m
+            });
+        }
+        cfg
+    };
+    let run = |cfg: &ReplayConfig| -> anyhow::Result<Option<(Accuracy, u64, u64)>> {
+        let mut replay = Replay::new(cfg, args.min_distance);
+        replay::run_log(log, &mut replay, &mut |_| Ok(()))
+            .with_context(|| format!("replaying {}", log.display()))?;
+        if replay.counts.imu == 0 {
+            return Ok(None);
+        }
+        let c = replay.nav_counters();
+        Ok(replay
+            .accuracy()
+            .filter(|a| a.epochs > 0)
+            .map(|a| (a, c.dvl_fused, c.dvl_rejected)))
+    };
+    let Some((before, fb, rb)) = run(&with(&r.nominal_model))? else {
+        return Ok(None);
+    };
+    let Some((after, fa, ra)) = run(&with(&r.held_out_model))? else {
+        return Ok(None);
+    };
+    Ok(Some(NavigationGain {
+        log: log.display().to_string(),
+        configuration: source,
+        before,
+        after,
+        dvl_fused_before: fb,
+        dvl_rejected_before: rb,
+        dvl_fused_after: fa,
+        dvl_rejected_after: ra,
+    }))
+}

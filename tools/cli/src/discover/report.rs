@@ -1,0 +1,284 @@
+//! `auvnav discover --report DIR`: `report.md` with the findings and plots (residuals before and
+//! after, their spectra, the held-out evidence), `report.json`, `effects.toml` and
+//! `navigation.toml`.
+
+use super::ChannelKind;
+use super::command::{DiscoverReport, ResidualSeries};
+use super::describe::periodogram;
+use super::extend;
+use crate::calibrate::report::write_atomically;
+use crate::calibrate::svg::{PALETTE, Series, plot};
+use anyhow::Context;
+use std::fmt::Write as _;
+use std::path::Path;
+
+const AXES: [&str; 3] = ["x", "y", "z"];
+
+fn component_name(kind: ChannelKind, k: usize) -> String {
+    if kind.dims() == 1 {
+        kind.name().to_string()
+    } else {
+        format!("{} {}", kind.name(), AXES[k])
+    }
+}
+
+fn line(name: String, points: Vec<(f64, f64)>, color: &'static str, markers: bool) -> Series {
+    Series {
+        name,
+        points,
+        color,
+        markers,
+        dashed: false,
+    }
+}
+
+/// Per component: residual against time, nominal and with the effects found.
+fn residual_plots(s: &ResidualSeries) -> Vec<(String, String)> {
+    let d = s.channel.dims();
+    let t0 = s.times.first().copied().unwrap_or(0.0);
+    (0..d)
+        .map(|k| {
+            let pick = |r: &[f64]| -> Vec<(f64, f64)> {
+                s.times
+                    .iter()
+                    .zip(r.iter().skip(k).step_by(d))
+                    .map(|(t, v)| (t - t0, *v))
+                    .collect()
+            };
+            let svg = plot(
+                &format!("{} residual", component_name(s.channel, k)),
+                "time since the first reading (s)",
+                &format!("measured - predicted ({})", s.channel.unit()),
+                &[
+                    line("nominal model".into(), pick(&s.nominal), PALETTE[1], true),
+                    line("effects found".into(), pick(&s.selected), PALETTE[0], true),
+                ],
+                false,
+            );
+            (format!("residual_{}_{}.svg", s.channel.name(), k), svg)
+        })
+        .collect()
+}
+
+/// The periodogram of each residual (summed over components), nominal and with the effects.
+fn spectrum_plot(s: &ResidualSeries) -> (String, String) {
+    let d = s.channel.dims();
+    let summed = |r: &[f64]| -> Vec<(f64, f64)> {
+        let mut total: Vec<(f64, f64)> = Vec::new();
+        for k in 0..d {
+            let c: Vec<f64> = r.iter().skip(k).step_by(d).copied().collect();
+            for (i, (f, p)) in periodogram(&s.times, &c).into_iter().enumerate() {
+                match total.get_mut(i) {
+                    Some(x) => x.1 += p,
+                    None => total.push((f, p)),
+                }
+            }
+        }
+        // Power in decibels (relative), so that lines and floor are both visible.
+        total
+            .into_iter()
+            .map(|(f, p)| (f, 10.0 * p.max(1e-30).log10()))
+            .collect()
+    };
+    let svg = plot(
+        &format!("{} residual spectrum", s.channel.name()),
+        "frequency (Hz)",
+        &format!("power (dB, {}^2 per bin, relative)", s.channel.unit()),
+        &[
+            line(
+                "nominal model".into(),
+                summed(&s.nominal),
+                PALETTE[1],
+                false,
+            ),
+            line(
+                "effects found".into(),
+                summed(&s.selected),
+                PALETTE[0],
+                false,
+            ),
+        ],
+        false,
+    );
+    (format!("spectrum_{}.svg", s.channel.name()), svg)
+}
+
+/// An effect value or standard deviation for a table: five significant digits.
+fn short(v: &serde_json::Value) -> String {
+    let one = |x: &serde_json::Value| match x.as_f64() {
+        Some(x) if x != 0.0 && (x.abs() < 1e-3 || x.abs() >= 1e5) => format!("{x:.4e}"),
+        Some(x) => {
+            let digits = (4 - x.abs().log10().floor() as i32).clamp(0, 8) as usize;
+            format!("{x:.digits$}")
+        }
+        None => "–".into(),
+    };
+    match v {
+        serde_json::Value::Array(a) => {
+            format!("[{}]", a.iter().map(one).collect::<Vec<_>>().join(", "))
+        }
+        x => one(x),
+    }
+}
+
+/// The report's Markdown.
+fn markdown(r: &DiscoverReport, figures: &[(ChannelKind, Vec<String>)]) -> String {
+    let mut m = String::new();
+    let _ = writeln!(m, "# Model discovery\n");
+    let _ = writeln!(
+        m,
+        "Inputs: {}  \nReference: {}  \nWall time: {:.2} s\n",
+        r.inputs.join(", "),
+        r.reference,
+        r.wall_seconds
+    );
+    let _ = writeln!(m, "## Effects found\n");
+    if r.effects.is_empty() {
+        let _ = writeln!(
+            m,
+            "None: the nominal model explains the data within the selection thresholds.\n"
+        );
+    } else {
+        let _ = writeln!(
+            m,
+            "| effect | value | std | nominal | unit | channel | held-out gain | evidence |\n|---|---|---|---|---|---|---|---|"
+        );
+        for e in &r.effects {
+            let _ = writeln!(
+                m,
+                "| `{}` | {} | {} | {} | {} | {} | {:.1} % | {} |",
+                e.name,
+                short(&e.value),
+                short(&e.std),
+                short(&e.nominal),
+                e.unit,
+                e.channel.name(),
+                100.0 * e.gain,
+                e.evidence
+            );
+        }
+        let _ = writeln!(m);
+    }
+    if !r.unseparable.is_empty() {
+        let _ = writeln!(m, "## Not separable on this motion\n");
+        for u in &r.unseparable {
+            let _ = writeln!(
+                m,
+                "- `{}` and `{}` (correlation {:.3}): {}",
+                u.effects[0], u.effects[1], u.correlation, u.note
+            );
+        }
+        let _ = writeln!(m);
+    }
+    if !r.unobservable.is_empty() {
+        let _ = writeln!(m, "## Not excited by this motion\n");
+        for u in &r.unobservable {
+            let _ = writeln!(m, "- `{}` components {:?}", u.name, u.components);
+        }
+        let _ = writeln!(m);
+    }
+    let _ = writeln!(m, "## Held-out gain\n");
+    let _ = writeln!(
+        m,
+        "Effects fitted on the first part of each channel, residual RMS on the rest.\n\n| channel | fit on | component | RMS nominal | RMS with the effects |\n|---|---|---|---|---|"
+    );
+    for g in &r.gain {
+        for (k, (b, a)) in g.rms_before.iter().zip(&g.rms_after).enumerate() {
+            let _ = writeln!(
+                m,
+                "| {} | {:.0} % | {} | {:.4} {u} | {:.4} {u} |",
+                g.channel.name(),
+                100.0 * g.fit_fraction,
+                component_name(g.channel, k),
+                b,
+                a,
+                u = g.channel.unit()
+            );
+        }
+    }
+    let _ = writeln!(m);
+    if !r.navigation.is_empty() {
+        let _ = writeln!(
+            m,
+            "## Navigation error\n\nEach log replayed with the nominal installation and with the \
+             effects fitted on the first part of the readings (the rest of the configuration: \
+             the log's own or the defaults).\n\n| log | end error before | after | CEP50 before | after | heading RMS before | after | DVL rejected before | after |\n|---|---|---|---|---|---|---|---|---|"
+        );
+        for n in &r.navigation {
+            let _ = writeln!(
+                m,
+                "| {} | {:.2} m | {:.2} m | {:.3} % | {:.3} % | {:.3}° | {:.3}° | {} | {} |",
+                n.log,
+                n.before.horizontal_error_final_m,
+                n.after.horizontal_error_final_m,
+                n.before.error_per_distance_cep50_percent,
+                n.after.error_per_distance_cep50_percent,
+                n.before.heading_error_rms_deg,
+                n.after.heading_error_rms_deg,
+                n.dvl_rejected_before,
+                n.dvl_rejected_after
+            );
+        }
+        let _ = writeln!(m);
+    }
+    let _ = writeln!(m, "## Unexplained structure\n");
+    if r.unexplained.is_empty() {
+        let _ = writeln!(m, "None: every residual is white with the effects found.\n");
+    } else {
+        for u in &r.unexplained {
+            let _ = writeln!(
+                m,
+                "- {}: {}",
+                component_name(u.channel, u.component),
+                u.note
+            );
+        }
+        let _ = writeln!(m);
+    }
+    if !r.noise.is_empty() {
+        let _ = writeln!(m, "## Noise with the effects found\n");
+        for n in &r.noise {
+            let _ = writeln!(m, "- `{}` = {:.5} {} ({})", n.name, n.value, n.unit, n.note);
+        }
+        let _ = writeln!(m);
+    }
+    let _ = writeln!(
+        m,
+        "## Files\n\n- `effects.toml`: the extended model for `auvnav sim --effects-from`\n- `navigation.toml`: the installation for the navigator (`auvnav replay --config`, the daemon)\n- `report.json`: this report for scripts\n"
+    );
+    for (kind, files) in figures {
+        let _ = writeln!(m, "## Residuals: {}\n", kind.name());
+        for f in files {
+            let _ = writeln!(m, "![{f}]({f})\n");
+        }
+    }
+    if !r.notes.is_empty() {
+        let _ = writeln!(m, "## Notes\n");
+        for n in &r.notes {
+            let _ = writeln!(m, "- {n}");
+        }
+    }
+    m
+}
+
+/// Writes the report directory.
+pub fn write_report_dir(dir: &Path, r: &DiscoverReport) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    write_atomically(&dir.join("report.json"), &serde_json::to_string_pretty(r)?)?;
+    write_atomically(&dir.join("effects.toml"), &extend::effect_set_toml(r))?;
+    write_atomically(&dir.join("navigation.toml"), &extend::navigator_toml(r)?)?;
+    let mut figures = Vec::new();
+    for s in &r.residuals {
+        let mut files = Vec::new();
+        for (name, svg) in residual_plots(s)
+            .into_iter()
+            .chain(std::iter::once(spectrum_plot(s)))
+        {
+            write_atomically(&dir.join(&name), &svg)?;
+            files.push(name);
+        }
+        figures.push((s.channel, files));
+    }
+    write_atomically(&dir.join("report.md"), &markdown(r, &figures))?;
+    Ok(())
+}
