@@ -2,11 +2,12 @@
 //! solution), with nothing said about what to look for. `docs/measured-data.md` found by hand a
 //! DVL about 1.85 m aft of the IMU and a DVL/reference lag near 1 s; discovery must name the same
 //! two causes with compatible values in most segments, and lower the held-out DVL residual.
-//! Under CI the data must be present.
+//! The RDI PD0 transect with GPS: the DVL heading offset against the GPS course. Under CI the
+//! data must be present.
 
 use auvnav_tools::discover::command::{Collector, discover, values_of};
 use auvnav_tools::discover::fit::Selection;
-use auvnav_tools::import::{TimeBase, snapir_messages};
+use auvnav_tools::import::{GpsVelocity, TimeBase, pd0_messages, snapir_messages};
 
 #[test]
 fn snapir_dvl_lever_arm_and_lag_are_found_without_being_asked() {
@@ -131,4 +132,57 @@ fn effects_hidden_in_measured_data_are_found_on_top_of_what_it_contains() {
         );
     }
     let _ = std::fs::remove_dir_all(&tmp);
+}
+
+/// RDI PD0 bottom track against GPS (`auvnav import pd0`, WinRiver transect in ship
+/// coordinates; the reference attitude is the DVL's own compass). The heading of the DVL frame
+/// against the GPS course must come out as a mounting yaw near the local declination (WMM2015
+/// gives 18.25° E at 2015.0 there, about 20° E extrapolated to the 2010 survey; a compass
+/// deviation of a few degrees on top is expected), the same with the GPS velocity from VTG or
+/// from GGA positions, and it must lower the five-block held-out residual.
+#[test]
+fn rdi_pd0_heading_offset_against_gps_is_found() {
+    let Some(dir) = auvnav_tests::measured_data("rdi-pd0", "raw/winriver02_transect.PD0") else {
+        return;
+    };
+    let bytes = std::fs::read(dir.join("raw/winriver02_transect.PD0")).expect("read");
+    let mut yaws = Vec::new();
+    for velocity in [GpsVelocity::Vtg, GpsVelocity::Gga] {
+        let (messages, summary) = pd0_messages(&bytes, velocity).expect("import");
+        assert_eq!(summary.coordinate_system, "ship");
+        assert!(summary.reference > 800, "{summary:?}");
+        let mut c = Collector::new();
+        for (_, m) in &messages {
+            c.add(m);
+        }
+        let (channels, reference) = c.finish();
+        let r = discover(
+            &channels,
+            &reference,
+            &Default::default(),
+            0.7,
+            &Selection::default(),
+        );
+        let yaw = r
+            .effects
+            .iter()
+            .find(|e| e.name == "dvl.mount_yaw")
+            .and_then(|e| e.value.as_f64());
+        let dvl = r
+            .channels
+            .iter()
+            .find(|c| c.channel == auvnav_tools::discover::ChannelKind::Dvl)
+            .expect("DVL analysed");
+        eprintln!(
+            "{velocity:?}: found {:?}, mount yaw {yaw:?} deg, held-out {:.3e} -> {:.3e}",
+            r.effects.iter().map(|e| &e.name).collect::<Vec<_>>(),
+            dvl.held_out_mse_nominal,
+            dvl.held_out_mse_selected
+        );
+        let yaw = yaw.expect("dvl.mount_yaw found");
+        assert!((12.0..24.0).contains(&yaw), "{velocity:?}: yaw {yaw}");
+        assert!(dvl.held_out_mse_selected < 0.5 * dvl.held_out_mse_nominal);
+        yaws.push(yaw);
+    }
+    assert!((yaws[0] - yaws[1]).abs() < 1.0, "{yaws:?}");
 }

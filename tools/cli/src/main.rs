@@ -180,6 +180,9 @@ enum ImportWhat {
     /// A segment of the Snapir AUV data set (IMU, DVL, reference solution as truth, depth from
     /// the reference).
     Snapir(auvnav_tools::import::SnapirArgs),
+    /// A Teledyne RDI PD0 file with GPS (WinRiver NMEA blocks): the bottom track as the DVL
+    /// channel, the GPS velocity over ground with the DVL's own attitude as the reference
+    Pd0(auvnav_tools::import::Pd0Args),
 }
 
 #[derive(Subcommand)]
@@ -450,6 +453,30 @@ fn run_replay(a: &auvnav_tools::replay::ReplayArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+fn run_import_pd0(a: &auvnav_tools::import::Pd0Args) -> anyhow::Result<()> {
+    let s = auvnav_tools::import::pd0(a)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&s)?);
+    } else {
+        eprintln!(
+            "{}: {} ensembles ({} coordinates, {:.0} s): {} with a bottom-track velocity, {} reference records from {} GGA fixes and {} VTG ({:?} velocity); {} without a fix, {} with a bad time, {} decoder errors",
+            a.out.display(),
+            s.ensembles,
+            s.coordinate_system,
+            s.duration_s,
+            s.bottom_track_velocity,
+            s.reference,
+            s.gga,
+            s.vtg,
+            s.velocity,
+            s.gga_no_fix,
+            s.bad_time,
+            s.decoder_errors
+        );
+    }
+    Ok(())
+}
+
 fn run_import_snapir(a: &auvnav_tools::import::SnapirArgs) -> anyhow::Result<()> {
     let s = auvnav_tools::import::snapir(a)?;
     if a.json {
@@ -525,6 +552,7 @@ fn main() -> std::process::ExitCode {
         Command::Perturb(a) => run_perturb(&a),
         Command::Import { what } => match what {
             ImportWhat::Snapir(a) => run_import_snapir(&a),
+            ImportWhat::Pd0(a) => run_import_pd0(&a),
         },
         Command::Bench { what } => match what {
             BenchWhat::Sim {
