@@ -112,3 +112,26 @@ fn the_extended_model_reproduces_the_residuals_and_leaves_nothing_to_find() {
         );
     }
 }
+
+/// Two different effects hidden at once (other seeds than the benchmark's): both named, each
+/// within 10 %, nothing else.
+#[test]
+fn two_hidden_effects_are_both_found() {
+    use auvnav_tools::discover::hidden::{draw_pair, trial_set};
+    let d = dir("discover-pairs");
+    for seed in [9401, 9402, 9403] {
+        let h = draw_pair(seed);
+        let (t, r) = trial_set(seed, &h, &d.0).expect("trial");
+        println!(
+            "seed {seed}: hidden {:?}; found {:?}, relative errors {:?}",
+            h.iter().map(|h| (&h.name, &h.value)).collect::<Vec<_>>(),
+            t.found,
+            t.relative_errors
+        );
+        assert!(
+            t.correct,
+            "seed {seed}: {h:?}, report effects {:#?}",
+            r.effects
+        );
+    }
+}

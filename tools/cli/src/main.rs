@@ -196,6 +196,16 @@ enum BenchWhat {
         /// Trials with nothing hidden.
         #[arg(long, default_value_t = 100)]
         null: usize,
+        /// Trials with two different effects hidden at once.
+        #[arg(long, default_value_t = 100)]
+        pairs: usize,
+        /// Detection floor: trials per effect at each fraction (1, 1/2, 1/4, 1/8) of the drawn
+        /// magnitudes (0: skip; at most 100).
+        #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u64).range(0..=100))]
+        floor: u64,
+        /// The measured data directory (`../shared/data`): also time discovery on each data set.
+        #[arg(long, value_name = "DIR")]
+        data: Option<PathBuf>,
         #[arg(long)]
         json: bool,
     },
@@ -573,9 +583,21 @@ fn main() -> std::process::ExitCode {
                 };
                 auvnav_tools::bench::calibrate(seed, &methods, json)
             }
-            BenchWhat::Discover { hidden, null, json } => {
-                auvnav_tools::bench::discover(hidden, null, json)
-            }
+            BenchWhat::Discover {
+                hidden,
+                null,
+                pairs,
+                floor,
+                data,
+                json,
+            } => auvnav_tools::bench::discover(&auvnav_tools::bench::DiscoverBench {
+                hidden,
+                null,
+                pairs,
+                floor: floor as usize,
+                data,
+                json,
+            }),
             BenchWhat::Mag {
                 samples,
                 repeat,

@@ -1,9 +1,13 @@
 //! `auvnav bench discover`: hidden-effect trials over many seeded draws (the right name with the
 //! value within 10 %, and nothing else), null trials (false discoveries), the confusion table
-//! (which effects were reported for which hidden one) and the wall time per trial.
+//! (which effects were reported for which hidden one) and the wall time per trial; trials with two
+//! effects hidden at once; the detection floor (each effect at fractions of its smallest drawn
+//! magnitude); and the wall time of discovery on each measured data set.
 
 use crate::calibrate::Progress;
-use crate::discover::hidden::{Trial, draw, trial};
+use crate::discover::hidden::{
+    HIDDEN, SetTrial, Trial, draw, draw_of, draw_pair, scaled, trial, trial_set,
+};
 use crate::parallel::{default_threads, map_runs};
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -33,17 +37,150 @@ struct Summary {
     null_false_discovery_rate: f64,
     per_effect: Vec<PerEffect>,
     median_trial_wall_seconds: f64,
+    /// Trials with two effects hidden at once.
+    pair_trials: usize,
+    pairs_correct: usize,
+    pairs_correct_rate: f64,
+    /// Pair trials where an effect that was not hidden was reported.
+    pairs_false_discoveries: usize,
+    /// Per effect and magnitude fraction: how often the name was reported, and how often it was
+    /// right within 10 % with nothing else.
+    floor: Vec<FloorRow>,
+    /// Discovery on the measured data sets (import in memory and discovery, per item).
+    measured: Vec<MeasuredTiming>,
     wall_seconds: f64,
     threads: usize,
     trials: Vec<Trial>,
+    pairs: Vec<SetTrial>,
 }
 
-/// Runs `hidden` trials (seeds 1..=hidden) and `null` trials (seeds 100 001..) on `threads`.
-pub fn discover(hidden: usize, null: usize, json: bool) -> anyhow::Result<()> {
+#[derive(Debug, Serialize)]
+struct FloorRow {
+    effect: String,
+    /// Fraction of the magnitudes the main trials draw from (`HIDDEN` range).
+    fraction: f64,
+    /// Smallest and largest magnitude of this row (offset from nominal, per component).
+    magnitude: [f64; 2],
+    trials: usize,
+    named: usize,
+    correct: usize,
+}
+
+#[derive(Debug, Serialize)]
+pub struct MeasuredTiming {
+    data_set: String,
+    items: usize,
+    median_seconds: f64,
+    max_seconds: f64,
+    total_seconds: f64,
+    /// Effects found per item (names).
+    found: Vec<Vec<String>>,
+}
+
+/// Options of `auvnav bench discover`.
+#[derive(Debug, Clone)]
+pub struct DiscoverBench {
+    pub hidden: usize,
+    pub null: usize,
+    pub pairs: usize,
+    /// Trials per effect and magnitude fraction of the detection floor (0: none).
+    pub floor: usize,
+    /// `../shared/data` (or another copy): time discovery on the measured data sets in it.
+    pub data: Option<std::path::PathBuf>,
+    pub json: bool,
+}
+
+/// Fractions of the drawn magnitudes the detection floor tries.
+pub const FLOOR_FRACTIONS: [f64; 4] = [1.0, 0.5, 0.25, 0.125];
+
+/// Times discovery on the Snapir segments and the RDI PD0 transect found under `data`.
+fn measured_timings(data: &std::path::Path) -> anyhow::Result<Vec<MeasuredTiming>> {
+    use crate::discover::command::{Collector, discover};
+    use crate::discover::fit::Selection;
+    let run = |messages: &[(&str, auvnav_log::LogMessage)]| {
+        let mut c = Collector::new();
+        for (_, m) in messages {
+            c.add(m);
+        }
+        let (channels, reference) = c.finish();
+        let r = discover(
+            &channels,
+            &reference,
+            &Default::default(),
+            0.7,
+            &Selection::default(),
+        );
+        r.effects.iter().map(|e| e.name.clone()).collect::<Vec<_>>()
+    };
+    let timing = |name: &str, items: Vec<(f64, Vec<String>)>| {
+        let mut t: Vec<f64> = items.iter().map(|x| x.0).collect();
+        t.sort_by(f64::total_cmp);
+        MeasuredTiming {
+            data_set: name.into(),
+            items: t.len(),
+            median_seconds: t.get(t.len() / 2).copied().unwrap_or(0.0),
+            max_seconds: t.last().copied().unwrap_or(0.0),
+            total_seconds: t.iter().sum(),
+            found: items.into_iter().map(|x| x.1).collect(),
+        }
+    };
+    let mut out = Vec::new();
+    let snapir = data.join("snapir-auv");
+    if snapir.join("imu_01.csv").exists() {
+        let mut items = Vec::new();
+        for segment in 1..=13 {
+            let t0 = std::time::Instant::now();
+            let (messages, _) = crate::import::snapir_messages(
+                &snapir,
+                segment,
+                crate::import::TimeBase::Nominal,
+                true,
+            )?;
+            let found = run(&messages);
+            items.push((t0.elapsed().as_secs_f64(), found));
+        }
+        out.push(timing("snapir-auv (13 segments of 400 s)", items));
+    }
+    let pd0 = data.join("rdi-pd0/raw/winriver02_transect.PD0");
+    if pd0.exists() {
+        let t0 = std::time::Instant::now();
+        let bytes = std::fs::read(&pd0)?;
+        let (messages, _) = crate::import::pd0_messages(&bytes, crate::import::GpsVelocity::Auto)?;
+        let found = run(&messages);
+        out.push(timing(
+            "rdi-pd0 winriver02_transect (463 s)",
+            vec![(t0.elapsed().as_secs_f64(), found)],
+        ));
+    }
+    if out.is_empty() {
+        anyhow::bail!("{}: no measured data set found", data.display());
+    }
+    Ok(out)
+}
+
+/// Runs `hidden` trials (seeds 1..=hidden), `null` trials (seeds 100 001..), `pairs` trials with
+/// two effects (seeds 200 001..) and the detection floor (seeds 300 000 + 1000 × effect + 100 ×
+/// fraction + k; at most 100 per fraction) on
+/// all cores, then the measured data sets one at a time.
+pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
+    let (hidden, null, json) = (o.hidden, o.null, o.json);
     let start = std::time::Instant::now();
     let threads = default_threads();
     let dir = std::env::temp_dir().join(format!("auvnav-bench-discover-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
+    let floor_jobs: Vec<(usize, f64, u64)> = (0..HIDDEN.len())
+        .flat_map(|e| {
+            FLOOR_FRACTIONS
+                .iter()
+                .enumerate()
+                .flat_map(move |(fi, &f)| {
+                    (0..o.floor).map(move |j| {
+                        (e, f, 300_000 + 1000 * e as u64 + 100 * fi as u64 + j as u64)
+                    })
+                })
+        })
+        .collect();
+    let extra = o.pairs + floor_jobs.len();
     let total = hidden + null;
     let progress = Mutex::new((Progress::new(!json), 0usize));
     let results = map_runs(total, threads, |k| {
@@ -62,8 +199,55 @@ pub fn discover(hidden: usize, null: usize, json: bool) -> anyhow::Result<()> {
         }
         Ok((t, t0.elapsed().as_secs_f64()))
     });
-    let _ = std::fs::remove_dir_all(&dir);
     let results = results?;
+    let set_results = map_runs(extra, threads, |k| {
+        let (seed, h) = if k < o.pairs {
+            let seed = 200_001 + k as u64;
+            (seed, draw_pair(seed).to_vec())
+        } else {
+            let (e, f, seed) = floor_jobs[k - o.pairs];
+            (seed, vec![scaled(&draw_of(seed, e), f)])
+        };
+        let (t, _) = trial_set(seed, &h, &dir)?;
+        if let Ok(mut p) = progress.lock() {
+            p.1 += 1;
+            let done = p.1;
+            p.0.update("discovery trials", done, total + extra);
+        }
+        Ok(t)
+    });
+    let _ = std::fs::remove_dir_all(&dir);
+    let set_results = set_results?;
+    let (pairs, floor_trials) = set_results.split_at(o.pairs);
+    let mut floor = Vec::new();
+    for (e, (name, lo, hi)) in HIDDEN.iter().enumerate() {
+        for &f in &FLOOR_FRACTIONS {
+            let rows: Vec<&SetTrial> = floor_jobs
+                .iter()
+                .zip(floor_trials)
+                .filter(|((je, jf, _), _)| *je == e && *jf == f)
+                .map(|(_, t)| t)
+                .collect();
+            if rows.is_empty() {
+                continue;
+            }
+            floor.push(FloorRow {
+                effect: name.to_string(),
+                fraction: f,
+                magnitude: [lo * f, hi * f],
+                trials: rows.len(),
+                named: rows
+                    .iter()
+                    .filter(|t| t.found.contains(&name.to_string()))
+                    .count(),
+                correct: rows.iter().filter(|t| t.correct).count(),
+            });
+        }
+    }
+    let measured = match &o.data {
+        Some(d) => measured_timings(d)?,
+        None => Vec::new(),
+    };
     let mut walls: Vec<f64> = results.iter().map(|r| r.1).collect();
     walls.sort_by(f64::total_cmp);
     let trials: Vec<Trial> = results.into_iter().map(|r| r.0).collect();
@@ -111,9 +295,17 @@ pub fn discover(hidden: usize, null: usize, json: bool) -> anyhow::Result<()> {
         null_false_discovery_rate: null_fd as f64 / without.len().max(1) as f64,
         per_effect: per.into_values().collect(),
         median_trial_wall_seconds: walls.get(walls.len() / 2).copied().unwrap_or(0.0),
+        pair_trials: pairs.len(),
+        pairs_correct: pairs.iter().filter(|t| t.correct).count(),
+        pairs_correct_rate: pairs.iter().filter(|t| t.correct).count() as f64
+            / pairs.len().max(1) as f64,
+        pairs_false_discoveries: pairs.iter().filter(|t| t.false_discovery).count(),
+        floor,
+        measured,
         wall_seconds: start.elapsed().as_secs_f64(),
         threads,
         trials,
+        pairs: pairs.to_vec(),
     };
     if json {
         println!("{}", serde_json::to_string_pretty(&s)?);
@@ -149,6 +341,42 @@ pub fn discover(hidden: usize, null: usize, json: bool) -> anyhow::Result<()> {
                 .map(|(k, v)| format!("{k} x{v}"))
                 .collect::<Vec<_>>()
                 .join(", ")
+        );
+    }
+    if s.pair_trials > 0 {
+        println!(
+            "two effects hidden: {}/{} both named within 10 % and nothing else ({:.1} %); {} with an effect reported that was not hidden",
+            s.pairs_correct,
+            s.pair_trials,
+            100.0 * s.pairs_correct_rate,
+            s.pairs_false_discoveries
+        );
+        for t in s.pairs.iter().filter(|t| !t.correct) {
+            println!(
+                "  seed {}: hidden {:?}, found {:?}, relative errors {:?}",
+                t.seed,
+                t.hidden.iter().map(|h| &h.name).collect::<Vec<_>>(),
+                t.found,
+                t.relative_errors
+            );
+        }
+    }
+    if !s.floor.is_empty() {
+        println!(
+            "detection floor: {:<18} {:>8} {:>22} {:>6} {:>6} {:>8}",
+            "effect", "fraction", "magnitude", "trials", "named", "correct"
+        );
+        for r in &s.floor {
+            println!(
+                "                 {:<18} {:>8} {:>10.4}..{:<10.4} {:>6} {:>6} {:>8}",
+                r.effect, r.fraction, r.magnitude[0], r.magnitude[1], r.trials, r.named, r.correct
+            );
+        }
+    }
+    for m in &s.measured {
+        println!(
+            "measured {}: median {:.2} s, max {:.2} s, total {:.2} s over {} item(s) (import in memory + discovery)",
+            m.data_set, m.median_seconds, m.max_seconds, m.total_seconds, m.items
         );
     }
     println!(

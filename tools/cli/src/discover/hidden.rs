@@ -105,6 +105,15 @@ pub struct Hidden {
 pub fn draw(seed: u64) -> Hidden {
     let mut rng = Rng::new(seed, "discover.hidden");
     let k = (rng.next_u64() % HIDDEN.len() as u64) as usize;
+    magnitude(&mut rng, k)
+}
+
+/// Draws a magnitude of effect `HIDDEN[k]` for trial `seed`.
+pub fn draw_of(seed: u64, k: usize) -> Hidden {
+    magnitude(&mut Rng::new(seed, "discover.hidden.of"), k % HIDDEN.len())
+}
+
+fn magnitude(rng: &mut Rng, k: usize) -> Hidden {
     let (name, lo, hi) = HIDDEN[k];
     let nominal = Effects::default().get(name).unwrap_or_default();
     let value = nominal
@@ -118,6 +127,112 @@ pub fn draw(seed: u64) -> Hidden {
         name: name.into(),
         value,
     }
+}
+
+/// Two different effects for trial `seed`, each with a magnitude drawn as in [`draw`].
+pub fn draw_pair(seed: u64) -> [Hidden; 2] {
+    let first = draw(seed);
+    let mut k = 0;
+    loop {
+        let second = draw(seed.wrapping_mul(7919).wrapping_add(1_000_003 + k));
+        if second.name != first.name {
+            return [first, second];
+        }
+        k += 1;
+    }
+}
+
+/// `h` with its offset from the nominal value scaled by `fraction` (for the detection floor).
+pub fn scaled(h: &Hidden, fraction: f64) -> Hidden {
+    let nominal = Effects::default().get(&h.name).unwrap_or_default();
+    Hidden {
+        name: h.name.clone(),
+        value: h
+            .value
+            .iter()
+            .zip(&nominal)
+            .map(|(v, n)| n + (v - n) * fraction)
+            .collect(),
+    }
+}
+
+/// What a trial with several hidden effects gave.
+#[derive(Debug, Clone, Serialize)]
+pub struct SetTrial {
+    pub seed: u64,
+    pub hidden: Vec<Hidden>,
+    /// Names discovery reported, in order.
+    pub found: Vec<String>,
+    /// Per hidden effect: its estimate and |estimate − hidden| / |hidden − nominal| when found.
+    pub estimates: Vec<Option<Vec<f64>>>,
+    pub relative_errors: Vec<Option<f64>>,
+    /// Every hidden effect named with its value within 10 %, and nothing else.
+    pub correct: bool,
+    /// Some effect reported that was not hidden.
+    pub false_discovery: bool,
+}
+
+/// Runs one trial with the effects `hidden` (none: a null trial) in `dir`.
+pub fn trial_set(
+    seed: u64,
+    hidden: &[Hidden],
+    dir: &Path,
+) -> anyhow::Result<(SetTrial, DiscoverReport)> {
+    let settings: Vec<(String, Vec<f64>)> = hidden
+        .iter()
+        .map(|h| (h.name.clone(), h.value.clone()))
+        .collect();
+    let log = simulate(seed, &settings, dir)?;
+    let read = read_logs(std::slice::from_ref(&log));
+    let _ = std::fs::remove_file(&log);
+    let (channels, reference, _) = read?;
+    let report = discover(
+        &channels,
+        &reference,
+        &Effects::default(),
+        0.7,
+        &Selection::default(),
+    );
+    let found: Vec<String> = report.effects.iter().map(|e| e.name.clone()).collect();
+    let norm = |a: &[f64], b: &[f64]| -> f64 {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
+    let (mut estimates, mut relative_errors) = (Vec::new(), Vec::new());
+    for h in hidden {
+        match report.effects.iter().find(|e| e.name == h.name) {
+            Some(e) => {
+                // A component that is not a number makes the error NaN: not correct.
+                let est = values_of(&e.value).unwrap_or_else(|| vec![f64::NAN; h.value.len()]);
+                let nominal = Effects::default().get(&h.name).unwrap_or_default();
+                relative_errors.push(Some(norm(&est, &h.value) / norm(&h.value, &nominal)));
+                estimates.push(Some(est));
+            }
+            None => {
+                relative_errors.push(None);
+                estimates.push(None);
+            }
+        }
+    }
+    let false_discovery = found.iter().any(|n| !hidden.iter().any(|h| &h.name == n));
+    let correct = !false_discovery
+        && found.len() == hidden.len()
+        && relative_errors.iter().all(|r| r.is_some_and(|r| r <= 0.1));
+    Ok((
+        SetTrial {
+            seed,
+            hidden: hidden.to_vec(),
+            found,
+            estimates,
+            relative_errors,
+            correct,
+            false_discovery,
+        },
+        report,
+    ))
 }
 
 /// What one trial gave.
@@ -165,61 +280,16 @@ pub fn trial(
     hidden: Option<Hidden>,
     dir: &Path,
 ) -> anyhow::Result<(Trial, DiscoverReport)> {
-    let settings: Vec<(String, Vec<f64>)> = hidden
-        .iter()
-        .map(|h| (h.name.clone(), h.value.clone()))
-        .collect();
-    let log = simulate(seed, &settings, dir)?;
-    let (channels, reference, _) = read_logs(std::slice::from_ref(&log))?;
-    let _ = std::fs::remove_file(&log);
-    let report = discover(
-        &channels,
-        &reference,
-        &Effects::default(),
-        0.7,
-        &Selection::default(),
-    );
-    let found: Vec<String> = report.effects.iter().map(|e| e.name.clone()).collect();
-    let (mut estimate, mut relative_error, mut correct) = (None, None, false);
-    if let Some(h) = &hidden
-        && let Some(e) = report.effects.iter().find(|e| e.name == h.name)
-    {
-        // A component that is not a number makes the error NaN: not correct.
-        let est = values_of(&e.value).unwrap_or_else(|| vec![f64::NAN; h.value.len()]);
-        let nominal = Effects::default().get(&h.name).unwrap_or_default();
-        let err: f64 = est
-            .iter()
-            .zip(&h.value)
-            .map(|(a, b)| (a - b).powi(2))
-            .sum::<f64>()
-            .sqrt();
-        let size: f64 = h
-            .value
-            .iter()
-            .zip(&nominal)
-            .map(|(a, b)| (a - b).powi(2))
-            .sum::<f64>()
-            .sqrt();
-        let rel = err / size;
-        correct = rel <= 0.1 && found.len() == 1;
-        relative_error = Some(rel);
-        estimate = Some(est);
-    }
-    let false_discovery = found
-        .iter()
-        .any(|n| hidden.as_ref().is_none_or(|h| &h.name != n));
-    if hidden.is_none() {
-        correct = found.is_empty();
-    }
+    let (t, report) = trial_set(seed, hidden.as_slice(), dir)?;
     Ok((
         Trial {
             seed,
+            estimate: t.estimates.first().cloned().flatten(),
+            relative_error: t.relative_errors.first().copied().flatten(),
             hidden,
-            found,
-            estimate,
-            relative_error,
-            correct,
-            false_discovery,
+            found: t.found,
+            correct: t.correct,
+            false_discovery: t.false_discovery,
         },
         report,
     ))
