@@ -5,7 +5,7 @@
 //! The RDI PD0 transect with GPS: the DVL heading offset against the GPS course. Under CI the
 //! data must be present.
 
-use auvnav_tools::discover::command::{Collector, discover, values_of};
+use auvnav_tools::discover::command::{discover, discover_messages, values_of};
 use auvnav_tools::discover::fit::Selection;
 use auvnav_tools::import::{GpsVelocity, TimeBase, pd0_messages, snapir_messages};
 
@@ -18,18 +18,7 @@ fn snapir_dvl_lever_arm_and_lag_are_found_without_being_asked() {
     for segment in 1..=13 {
         let (messages, _) =
             snapir_messages(&dir, segment, TimeBase::Nominal, true).expect("import");
-        let mut c = Collector::new();
-        for (_, m) in &messages {
-            c.add(m);
-        }
-        let (channels, reference) = c.finish();
-        let r = discover(
-            &channels,
-            &reference,
-            &Default::default(),
-            0.7,
-            &Selection::default(),
-        );
+        let r = discover_messages(messages.iter().map(|(_, m)| m));
         let value = |name: &str| {
             r.effects
                 .iter()
@@ -151,18 +140,7 @@ fn rdi_pd0_heading_offset_against_gps_is_found() {
         let (messages, summary) = pd0_messages(&bytes, velocity).expect("import");
         assert_eq!(summary.coordinate_system, "ship");
         assert!(summary.reference > 800, "{summary:?}");
-        let mut c = Collector::new();
-        for (_, m) in &messages {
-            c.add(m);
-        }
-        let (channels, reference) = c.finish();
-        let r = discover(
-            &channels,
-            &reference,
-            &Default::default(),
-            0.7,
-            &Selection::default(),
-        );
+        let r = discover_messages(messages.iter().map(|(_, m)| m));
         let yaw = r
             .effects
             .iter()

@@ -95,22 +95,12 @@ pub const FLOOR_FRACTIONS: [f64; 4] = [1.0, 0.5, 0.25, 0.125];
 
 /// Times discovery on the Snapir segments and the RDI PD0 transect found under `data`.
 fn measured_timings(data: &std::path::Path) -> anyhow::Result<Vec<MeasuredTiming>> {
-    use crate::discover::command::{Collector, discover};
-    use crate::discover::fit::Selection;
     let run = |messages: &[(&str, auvnav_log::LogMessage)]| {
-        let mut c = Collector::new();
-        for (_, m) in messages {
-            c.add(m);
-        }
-        let (channels, reference) = c.finish();
-        let r = discover(
-            &channels,
-            &reference,
-            &Default::default(),
-            0.7,
-            &Selection::default(),
-        );
-        r.effects.iter().map(|e| e.name.clone()).collect::<Vec<_>>()
+        crate::discover::command::discover_messages(messages.iter().map(|(_, m)| m))
+            .effects
+            .into_iter()
+            .map(|e| e.name)
+            .collect::<Vec<_>>()
     };
     let timing = |name: &str, items: Vec<(f64, Vec<String>)>| {
         let mut t: Vec<f64> = items.iter().map(|x| x.0).collect();

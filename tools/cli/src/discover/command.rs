@@ -227,6 +227,23 @@ impl Collector {
     }
 }
 
+/// Discovery with the default nominal model and selection on messages already in memory (an
+/// importer's output).
+pub fn discover_messages<'a>(messages: impl IntoIterator<Item = &'a LogMessage>) -> DiscoverReport {
+    let mut c = Collector::new();
+    for m in messages {
+        c.add(m);
+    }
+    let (channels, reference) = c.finish();
+    discover(
+        &channels,
+        &reference,
+        &Effects::default(),
+        0.7,
+        &Selection::default(),
+    )
+}
+
 /// The channels and the reference of the logs, and the number of messages that did not decode.
 pub fn read_logs(paths: &[PathBuf]) -> anyhow::Result<(Vec<Channel>, Reference, usize)> {
     let mut c = Collector::new();
