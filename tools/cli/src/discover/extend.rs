@@ -80,8 +80,8 @@ pub fn navigator_tables(
         .contains(&ChannelKind::Dvl)
         .then(|| DvlInstallation {
             mount_deg: [e.dvl_mount_roll, e.dvl_mount_pitch, e.dvl_mount_yaw],
-            // The simulator's sound-speed error scales the velocity as c / 1500.
-            scale_factor: e.dvl_scale_factor * e.dvl_sound_speed / 1500.0,
+            // The simulator's velocity scale: the scale factor with the sound-speed error in it.
+            scale_factor: auvnav_sim::sensors::DvlInstallation::from_effects(e).scale,
             lever_arm_m: e.dvl_lever_arm,
             time_offset_s: e.dvl_time_offset,
             source: source.into(),
@@ -254,4 +254,30 @@ fn navigation_of(
         dvl_fused_after: fa,
         dvl_rejected_after: ra,
     }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_navigator_installation_carries_the_simulators_velocity_scale_and_geometry() {
+        let mut e = Effects::default();
+        for (n, v) in [
+            ("dvl.scale_factor", vec![1.01]),
+            ("dvl.sound_speed", vec![1470.0]),
+            ("dvl.mount_yaw", vec![1.5]),
+            ("dvl.lever_arm", vec![-1.0, 0.1, 0.2]),
+            ("dvl.time_offset", vec![0.3]),
+        ] {
+            e.set(n, &v).expect("valid");
+        }
+        let (dvl, mag) = navigator_tables(&e, &[ChannelKind::Dvl], "test");
+        let d = dvl.expect("DVL analysed");
+        assert!((d.scale_factor - 1.01 * 1500.0 / 1470.0).abs() < 1e-12);
+        assert_eq!(d.mount_deg, [0.0, 0.0, 1.5]);
+        assert_eq!(d.lever_arm_m, [-1.0, 0.1, 0.2]);
+        assert_eq!(d.time_offset_s, 0.3);
+        assert!(mag.is_none());
+    }
 }
