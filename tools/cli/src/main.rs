@@ -183,6 +183,10 @@ enum ImportWhat {
     /// A Teledyne RDI PD0 file with GPS (WinRiver NMEA blocks): the bottom track as the DVL
     /// channel, the GPS velocity over ground with the DVL's own attitude as the reference
     Pd0(auvnav_tools::import::Pd0Args),
+    /// A magnetometer recording in CSV (magnetometer and accelerometer columns, as
+    /// `auvnav calibrate mag` reads them): the magnetometer channel and the specific force, for
+    /// `auvnav discover` without a reference attitude.
+    MagCsv(auvnav_tools::import::MagCsvArgs),
 }
 
 #[derive(Subcommand)]
@@ -487,6 +491,26 @@ fn run_import_pd0(a: &auvnav_tools::import::Pd0Args) -> anyhow::Result<()> {
     Ok(())
 }
 
+fn run_import_mag_csv(a: &auvnav_tools::import::MagCsvArgs) -> anyhow::Result<()> {
+    let s = auvnav_tools::import::mag_csv(a)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&s)?);
+    } else {
+        eprintln!(
+            "{}: {} magnetometer readings ({:.0} s), {} with an accelerometer reading; field {}, accelerometer {}; {} rows skipped, {} out of order",
+            a.out.display(),
+            s.readings,
+            s.duration_s,
+            s.with_accelerometer,
+            s.field_unit,
+            s.accelerometer_unit,
+            s.skipped,
+            s.out_of_order
+        );
+    }
+    Ok(())
+}
+
 fn run_import_snapir(a: &auvnav_tools::import::SnapirArgs) -> anyhow::Result<()> {
     let s = auvnav_tools::import::snapir(a)?;
     if a.json {
@@ -563,6 +587,7 @@ fn main() -> std::process::ExitCode {
         Command::Import { what } => match what {
             ImportWhat::Snapir(a) => run_import_snapir(&a),
             ImportWhat::Pd0(a) => run_import_pd0(&a),
+            ImportWhat::MagCsv(a) => run_import_mag_csv(&a),
         },
         Command::Bench { what } => match what {
             BenchWhat::Sim {

@@ -483,6 +483,13 @@ impl MagnetometerModel {
             + Vector3::from(e.mag_hard_iron)
     }
 
+    /// The body field (µT) a reading `h` implies under the effects' soft and hard iron: the
+    /// inverse of [`MagnetometerModel::reading`]; None when the soft iron is singular.
+    pub fn body_field(e: &Effects, h: &Vector3<f64>) -> Option<Vector3<f64>> {
+        let s = Matrix3::from_row_slice(&e.mag_soft_iron).try_inverse()?;
+        Some(s * (h - Vector3::from(e.mag_hard_iron)))
+    }
+
     pub fn new(e: &Effects, seed: u64) -> MagnetometerModel {
         MagnetometerModel {
             rng: Rng::new(seed, "magnetometer"),

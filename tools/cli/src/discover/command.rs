@@ -75,8 +75,10 @@ pub struct FoundEffect {
 /// Two effects the motion cannot tell apart.
 #[derive(Debug, Clone, Serialize)]
 pub struct Unseparable {
-    pub effects: [String; 2],
-    /// Largest canonical correlation of their sensitivities on this motion.
+    /// Two effects, or an effect and the group of effects that together mimic it.
+    pub effects: Vec<String>,
+    /// Largest canonical correlation of their sensitivities on this motion (for a group: of the
+    /// first effect's component with the group's).
     pub correlation: f64,
     pub note: String,
 }
@@ -181,6 +183,10 @@ pub struct DiscoverReport {
 pub struct Collector {
     truth: Vec<auvnav_shm_schema::TruthStateV1>,
     channels: Vec<Channel>,
+    /// Specific force summed since the last magnetometer reading, and the mean at that reading.
+    force_sum: [f64; 3],
+    force_n: usize,
+    last_force: Option<[f64; 3]>,
 }
 
 impl Collector {
@@ -188,6 +194,9 @@ impl Collector {
         Collector {
             truth: Vec::new(),
             channels: ChannelKind::ALL.iter().map(|&k| Channel::new(k)).collect(),
+            force_sum: [0.0; 3],
+            force_n: 0,
+            last_force: None,
         }
     }
 
@@ -210,12 +219,31 @@ impl Collector {
                     c.skipped += 1;
                 }
             }
+            LogMessage::Imu(x) => {
+                if let Some(f) = crate::calibrate::mag::input::specific_force(x) {
+                    for k in 0..3 {
+                        self.force_sum[k] += f[k];
+                    }
+                    self.force_n += 1;
+                }
+            }
             LogMessage::Magnetometer(m) => {
-                let c = &mut self.channels[2];
+                if self.force_n > 0 {
+                    self.last_force = Some(self.force_sum.map(|x| x / self.force_n as f64));
+                }
+                self.force_sum = [0.0; 3];
+                self.force_n = 0;
+                let t = m.host_time_ns as f64 * 1e-9;
+                let field = m.field_t.map(|b| b * 1e6);
                 if m.validity & MagnetometerV1::VALID_FIELD != 0 {
-                    c.push(m.host_time_ns as f64 * 1e-9, m.field_t.map(|b| b * 1e6));
+                    self.channels[2].push(t, field);
+                    match self.last_force {
+                        Some(f) => self.channels[3].push_field(t, field, f),
+                        None => self.channels[3].skipped += 1,
+                    }
                 } else {
-                    c.skipped += 1;
+                    self.channels[2].skipped += 1;
+                    self.channels[3].skipped += 1;
                 }
             }
             _ => {}
@@ -317,19 +345,46 @@ pub fn discover(
         held_out_model: nominal.clone(),
         residuals: Vec::new(),
     };
-    if reference.len() < 2 {
+    let no_reference = reference.len() < 2;
+    if no_reference {
         r.notes.push(
-            "no reference motion in the logs: nothing can be compared (simulated logs carry the \
-             truth topic)"
+            "no reference motion in the logs: only channels that need none (the magnetic field's \
+             magnitude and dip) can be analysed (simulated logs carry the truth topic)"
                 .into(),
         );
-        return r;
     }
     for ch in channels {
         let kind = ch.kind;
+        if kind == ChannelKind::MagneticField
+            && r.channels
+                .iter()
+                .any(|c| c.channel == ChannelKind::Magnetometer)
+        {
+            // The full field vector against the reference attitude says more.
+            continue;
+        }
         if ch.is_empty() {
-            r.notes
-                .push(format!("{}: no valid readings in the logs", kind.name()));
+            if kind != ChannelKind::MagneticField {
+                r.notes
+                    .push(format!("{}: no valid readings in the logs", kind.name()));
+            } else if channels
+                .iter()
+                .any(|c| c.kind == ChannelKind::Magnetometer && !c.is_empty())
+            {
+                r.notes.push(
+                    "magnetic_field: no accelerometer readings with the magnetometer's: the \
+                     field's dip cannot be formed"
+                        .into(),
+                );
+            }
+            continue;
+        }
+        if no_reference && kind.needs_reference() {
+            r.notes.push(format!(
+                "{}: {} readings, but no reference motion to compare them with",
+                kind.name(),
+                ch.len()
+            ));
             continue;
         }
         let p = Problem::new(ch, reference, nominal.clone());
@@ -366,6 +421,12 @@ pub fn discover(
         let (steps, base_mse) = fit::select(&p, sel, &sep);
         let set: Vec<usize> = steps.iter().map(|s| s.candidate).collect();
         let f = p.fit(&set, &p.epochs);
+        let full = p.effects(&set, &f.theta);
+        // Effects a group of other candidates mimics together, at the fitted model.
+        let confounded = {
+            let at_fit = Problem::new(ch, reference, full.clone());
+            fit::confounded(&fit::separability(&at_fit), &set, sel.max_correlation)
+        };
         for s in &steps {
             let (off, len) = fit::offset_of(&set, s.candidate);
             let name = fit::name(s.candidate);
@@ -383,10 +444,49 @@ pub fn discover(
                     fit::name(*rival)
                 ));
                 r.unseparable.push(Unseparable {
-                    effects: [name.into(), fit::name(*rival).into()],
+                    effects: vec![name.into(), fit::name(*rival).into()],
                     correlation: *corr,
                     note: format!(
                         "the motion cannot separate them; reported as {name}, which scored best"
+                    ),
+                });
+            }
+            for c in confounded.iter().filter(|c| c.candidate == s.candidate) {
+                let group: Vec<&str> = c.group.iter().map(|&g| fit::name(g)).collect();
+                let held: Vec<String> = group
+                    .iter()
+                    .map(|g| {
+                        let v = full.get(g).unwrap_or_default();
+                        format!("{g} = {}", json_of(&v))
+                    })
+                    .collect();
+                evidence.push_str(&format!(
+                    "; component {} is mimicked by {} together (correlation {:.3}): its estimate \
+                     and std hold only with {}",
+                    c.component,
+                    group.join(" and "),
+                    c.correlation,
+                    held.join(", ")
+                ));
+                let mut effects = vec![name.to_string()];
+                effects.extend(group.iter().map(|g| g.to_string()));
+                let same_set = |u: &Unseparable| {
+                    let (mut a, mut b) = (u.effects.clone(), effects.clone());
+                    a.sort();
+                    b.sort();
+                    a == b
+                };
+                if r.unseparable.iter().any(same_set) {
+                    continue;
+                }
+                r.unseparable.push(Unseparable {
+                    effects,
+                    correlation: c.correlation,
+                    note: format!(
+                        "component {} of {name} is a combination of the others on this motion: \
+                         the data cannot determine them together; {name} is reported with the \
+                         others at the model's values",
+                        c.component
                     ),
                 });
             }
@@ -411,7 +511,7 @@ pub fn discover(
                 })
             {
                 r.unseparable.push(Unseparable {
-                    effects: [fit::name(a).into(), fit::name(b).into()],
+                    effects: vec![fit::name(a).into(), fit::name(b).into()],
                     correlation: c,
                     note: "not separable on this motion".into(),
                 });
@@ -424,21 +524,24 @@ pub fn discover(
         let reg = |g: &dyn Fn(&super::RefState) -> f64| -> Vec<f64> {
             states.iter().map(|s| s.as_ref().map_or(0.0, g)).collect()
         };
-        let regressors: Vec<(&str, Vec<f64>)> = vec![
-            ("speed", reg(&|s| s.velocity_ned.norm())),
-            ("yaw_rate", reg(&|s| s.omega_eb_body.z)),
-            ("pitch_rate", reg(&|s| s.omega_eb_body.y)),
-            ("forward_specific_force", reg(&|s| s.specific_force_body.x)),
-            ("depth", reg(&|s| -s.height_m)),
-            ("time", times.iter().map(|t| t - times[0]).collect()),
-        ];
+        let regressors: Vec<(&str, Vec<f64>)> = if kind == ChannelKind::MagneticField {
+            field_regressors(ch, &p.epochs, &times, nominal)
+        } else {
+            vec![
+                ("speed", reg(&|s| s.velocity_ned.norm())),
+                ("yaw_rate", reg(&|s| s.omega_eb_body.z)),
+                ("pitch_rate", reg(&|s| s.omega_eb_body.y)),
+                ("forward_specific_force", reg(&|s| s.specific_force_body.x)),
+                ("depth", reg(&|s| -s.height_m)),
+                ("time", times.iter().map(|t| t - times[0]).collect()),
+            ]
+        };
         let split = |res: &[f64]| -> Vec<Description> {
             (0..d)
                 .map(|k| describe(&times, &component(res, d, k), &regressors))
                 .collect()
         };
         let nominal_desc = split(&r0);
-        let full = p.effects(&set, &f.theta);
         let r1 = p.residuals(&full, &p.epochs);
         let selected_desc = split(&r1);
         for (k, desc) in selected_desc.iter().enumerate() {
@@ -515,6 +618,49 @@ pub fn discover(
     }
     r.wall_seconds = start.elapsed().as_secs_f64();
     r
+}
+
+/// The motion regressors of the magnetic-field channel, from the readings themselves: the
+/// specific force's deviation from its median magnitude (accelerations the dip takes for tilt),
+/// the vertical's direction in sensor axes (tilt), the nominally corrected field's direction in
+/// sensor axes (what a soft iron or a mis-scaled axis correlates with) and time.
+fn field_regressors(
+    ch: &Channel,
+    epochs: &[usize],
+    times: &[f64],
+    nominal: &Effects,
+) -> Vec<(&'static str, Vec<f64>)> {
+    use nalgebra::Vector3;
+    let force: Vec<Vector3<f64>> = epochs.iter().map(|&i| Vector3::from(ch.force[i])).collect();
+    let mut mags: Vec<f64> = force.iter().map(|f| f.norm()).collect();
+    mags.sort_by(f64::total_cmp);
+    let median = mags.get(mags.len() / 2).copied().unwrap_or(1.0).max(1e-12);
+    let field: Vec<Vector3<f64>> = epochs
+        .iter()
+        .map(|&i| {
+            auvnav_sim::sensors::MagnetometerModel::body_field(
+                nominal,
+                &Vector3::from(ch.values[i]),
+            )
+            .and_then(|b| b.try_normalize(1e-12))
+            .unwrap_or_else(Vector3::zeros)
+        })
+        .collect();
+    let up = |k: usize| -> Vec<f64> { force.iter().map(|f| f[k] / f.norm()).collect() };
+    let dir = |k: usize| -> Vec<f64> { field.iter().map(|b| b[k]).collect() };
+    vec![
+        (
+            "dynamic_acceleration",
+            force.iter().map(|f| f.norm() / median - 1.0).collect(),
+        ),
+        ("vertical_x", up(0)),
+        ("vertical_y", up(1)),
+        ("vertical_z", up(2)),
+        ("field_direction_x", dir(0)),
+        ("field_direction_y", dir(1)),
+        ("field_direction_z", dir(2)),
+        ("time", times.iter().map(|t| t - times[0]).collect()),
+    ]
 }
 
 /// Sets the effects a discover JSON report found, or those of an effect set file (`.toml`).
@@ -635,8 +781,10 @@ fn print_text(r: &DiscoverReport) {
     }
     for u in &r.unseparable {
         println!(
-            "  unseparable: {} and {} (correlation {:.3}): {}",
-            u.effects[0], u.effects[1], u.correlation, u.note
+            "  unseparable: {} (correlation {:.3}): {}",
+            u.effects.join(" and "),
+            u.correlation,
+            u.note
         );
     }
     for u in &r.unobservable {

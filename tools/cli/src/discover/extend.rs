@@ -30,7 +30,7 @@ pub fn noise_estimate(kind: ChannelKind, rms: &[f64]) -> super::command::NoiseEs
             ("dvl.noise", m.sqrt())
         }
         ChannelKind::Depth => ("depth.noise", rms.first().copied().unwrap_or(0.0)),
-        ChannelKind::Magnetometer => (
+        ChannelKind::Magnetometer | ChannelKind::MagneticField => (
             "mag.noise",
             (rms.iter().map(|r| r * r).sum::<f64>() / rms.len().max(1) as f64).sqrt(),
         ),
@@ -86,12 +86,22 @@ pub fn navigator_tables(
             time_offset_s: e.dvl_time_offset,
             source: source.into(),
         });
-    let mag = analysed
-        .contains(&ChannelKind::Magnetometer)
-        .then(|| MagnetometerConfig {
+    let mag = if analysed.contains(&ChannelKind::Magnetometer) {
+        Some(MagnetometerConfig {
             source: source.into(),
             ..MagnetometerModel::navigator_config(e)
-        });
+        })
+    } else if analysed.contains(&ChannelKind::MagneticField) {
+        // Without a reference attitude the declination is not observed: leave it to the field
+        // model (the configuration then needs `model_date` or `declination_deg`).
+        Some(MagnetometerConfig {
+            source: source.into(),
+            declination_deg: None,
+            ..MagnetometerModel::navigator_config(e)
+        })
+    } else {
+        None
+    };
     (dvl, mag)
 }
 
@@ -124,6 +134,19 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
          # Merge these tables into the daemon's configuration or pass the file to\n\
          # `auvnav replay --config` (with an [initial] table for logs without a reference).\n",
     );
+    if analysed(r).contains(&ChannelKind::MagneticField) {
+        head.push_str(
+            "# The magnetometer was analysed without a reference attitude: the declination is not\n\
+             # determined; add `model_date` (or `declination_deg`) to [navigation.magnetometer].\n",
+        );
+    }
+    for u in &r.unseparable {
+        head.push_str(&format!(
+            "# Not determined by these data: {} ({}); check before use.\n",
+            u.effects.join(" with "),
+            u.note
+        ));
+    }
     for name in ["depth.bias", "depth.density"] {
         if let Some(e) = r.effects.iter().find(|e| e.name == name) {
             head.push_str(&format!(

@@ -25,12 +25,12 @@ pub struct Problem<'a> {
 
 impl<'a> Problem<'a> {
     pub fn new(channel: &'a Channel, reference: &'a Reference, nominal: Effects) -> Problem<'a> {
+        let d = channel.kind.dims();
         let epochs = (0..channel.len())
             .filter(|&i| {
                 channel
-                    .kind
-                    .predict(&nominal, reference, channel.times[i])
-                    .is_some_and(|p| p.iter().all(|x| x.is_finite()))
+                    .residual(&nominal, reference, i)
+                    .is_some_and(|r| r[..d].iter().all(|x| x.is_finite()))
             })
             .collect();
         Problem {
@@ -79,13 +79,8 @@ impl<'a> Problem<'a> {
         let d = self.channel.kind.dims();
         let mut r = Vec::with_capacity(epochs.len() * d);
         for &i in epochs {
-            let z = self.channel.values[i];
-            match self
-                .channel
-                .kind
-                .predict(e, self.reference, self.channel.times[i])
-            {
-                Some(p) => r.extend((0..d).map(|k| z[k] - p[k])),
+            match self.channel.residual(e, self.reference, i) {
+                Some(x) => r.extend(x[..d].iter().map(|v| if v.is_finite() { *v } else { 0.0 })),
                 None => r.extend(std::iter::repeat_n(0.0, d)),
             }
         }
@@ -315,7 +310,7 @@ pub fn offset_of(set: &[usize], candidate: usize) -> (usize, usize) {
 
 /// Which candidates the motion excites and which it cannot tell apart, from the Jacobian of the
 /// residuals at the nominal model.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct Separability {
     /// Candidates of the channel.
     pub candidates: Vec<usize>,
@@ -324,6 +319,10 @@ pub struct Separability {
     /// Per candidate: components the motion does not excite (the whole range of the effect would
     /// move the residual by less than a tenth of its RMS).
     pub unexcited: Vec<(usize, Vec<usize>)>,
+    /// The residuals' Jacobian over all candidates (columns in candidate order) and which of its
+    /// columns the motion excites.
+    pub jacobian: DMatrix<f64>,
+    pub excited: Vec<bool>,
 }
 
 impl Separability {
@@ -366,23 +365,7 @@ pub fn separability(p: &Problem) -> Separability {
             unexcited.push((c, dead));
         }
     }
-    // R² of column `k` regressed on the columns `of` (least squares).
-    let r2 = |k: usize, of: &[usize]| -> f64 {
-        if of.is_empty() || norms[k] == 0.0 {
-            return 0.0;
-        }
-        let a = DMatrix::from_fn(j.nrows(), of.len(), |r, c| j[(r, of[c])] / norms[of[c]]);
-        let y = j.column(k) / norms[k];
-        let ata = a.transpose() * &a;
-        let aty = a.transpose() * &y;
-        match ata.cholesky() {
-            Some(ch) => {
-                let x = ch.solve(&aty);
-                (aty.dot(&x)).clamp(0.0, 1.0)
-            }
-            None => 1.0,
-        }
-    };
+    let r2 = |k: usize, of: &[usize]| r_squared(&j, &norms, k, of);
     let mut pairs = Vec::new();
     for (ia, &a) in candidates.iter().enumerate() {
         for &b in &candidates[ia + 1..] {
@@ -401,7 +384,92 @@ pub fn separability(p: &Problem) -> Separability {
         candidates,
         pairs,
         unexcited,
+        jacobian: j,
+        excited,
     }
+}
+
+/// R² of Jacobian column `k` regressed on the columns `of` (least squares, columns normalised).
+fn r_squared(j: &DMatrix<f64>, norms: &[f64], k: usize, of: &[usize]) -> f64 {
+    if of.is_empty() || norms[k] == 0.0 {
+        return 0.0;
+    }
+    let a = DMatrix::from_fn(j.nrows(), of.len(), |r, c| j[(r, of[c])] / norms[of[c]]);
+    let y = j.column(k) / norms[k];
+    let ata = a.transpose() * &a;
+    let aty = a.transpose() * &y;
+    match ata.cholesky() {
+        Some(ch) => {
+            let x = ch.solve(&aty);
+            (aty.dot(&x)).clamp(0.0, 1.0)
+        }
+        None => 1.0,
+    }
+}
+
+/// A selected effect the motion cannot separate from a group of other candidates together
+/// (though perhaps from each alone): one of its components is, to correlation `correlation`,
+/// a combination of theirs, so its estimate holds only with them at their nominal values.
+#[derive(Debug, Clone)]
+pub struct Confounded {
+    pub candidate: usize,
+    pub component: usize,
+    pub group: Vec<usize>,
+    pub correlation: f64,
+}
+
+/// The selected candidates confounded with a group of others, from the Jacobian at the fitted
+/// model (`s` computed on a problem whose nominal is the fitted model). The group is built
+/// greedily: the candidate that explains most of the component first, until the correlation
+/// passes `threshold`; groups of one are the pairs [`Separability::pairs`] already reports.
+pub fn confounded(s: &Separability, selected: &[usize], threshold: f64) -> Vec<Confounded> {
+    let j = &s.jacobian;
+    let norms: Vec<f64> = (0..j.ncols()).map(|k| j.column(k).norm()).collect();
+    let cols_of = |c: usize| {
+        let (off, len) = offset_of(&s.candidates, c);
+        (off..off + len)
+            .filter(|&k| s.excited[k])
+            .collect::<Vec<_>>()
+    };
+    let mut out = Vec::new();
+    for &c in selected {
+        let (off, _) = offset_of(&s.candidates, c);
+        let others: Vec<usize> = s.candidates.iter().copied().filter(|&o| o != c).collect();
+        for k in cols_of(c) {
+            let all: Vec<usize> = others.iter().flat_map(|&o| cols_of(o)).collect();
+            if r_squared(j, &norms, k, &all).sqrt() <= threshold {
+                continue;
+            }
+            let mut group: Vec<usize> = Vec::new();
+            let mut best = 0.0;
+            while best <= threshold && group.len() < others.len() {
+                let Some((o, r)) = others
+                    .iter()
+                    .filter(|o| !group.contains(o))
+                    .map(|&o| {
+                        let mut g = group.clone();
+                        g.push(o);
+                        let cols: Vec<usize> = g.iter().flat_map(|&x| cols_of(x)).collect();
+                        (o, r_squared(j, &norms, k, &cols).sqrt())
+                    })
+                    .max_by(|a, b| a.1.total_cmp(&b.1))
+                else {
+                    break;
+                };
+                group.push(o);
+                best = r;
+            }
+            if group.len() > 1 {
+                out.push(Confounded {
+                    candidate: c,
+                    component: k - off,
+                    group,
+                    correlation: best,
+                });
+            }
+        }
+    }
+    out
 }
 
 /// A candidate's name.

@@ -160,13 +160,19 @@ pub enum ChannelKind {
     Depth,
     /// Magnetometer field in the sensor frame (µT, 3 components).
     Magnetometer,
+    /// The magnetometer without a reference attitude: the calibrated field's magnitude against
+    /// `mag.intensity`, and its dip against the accelerometer's vertical against
+    /// `mag.inclination`, as the field error across the field (µT: intensity × dip error in
+    /// rad). Both are free of the attitude, so recordings without a reference can be analysed.
+    MagneticField,
 }
 
 impl ChannelKind {
-    pub const ALL: [ChannelKind; 3] = [
+    pub const ALL: [ChannelKind; 4] = [
         ChannelKind::Dvl,
         ChannelKind::Depth,
         ChannelKind::Magnetometer,
+        ChannelKind::MagneticField,
     ];
 
     pub fn name(self) -> &'static str {
@@ -174,21 +180,29 @@ impl ChannelKind {
             ChannelKind::Dvl => "dvl",
             ChannelKind::Depth => "depth",
             ChannelKind::Magnetometer => "magnetometer",
+            ChannelKind::MagneticField => "magnetic_field",
         }
     }
 
     pub fn dims(self) -> usize {
         match self {
             ChannelKind::Depth => 1,
+            ChannelKind::MagneticField => 2,
             _ => 3,
         }
+    }
+
+    /// Whether the channel is compared with the reference motion (the attitude-free magnetic
+    /// field is not).
+    pub fn needs_reference(self) -> bool {
+        self != ChannelKind::MagneticField
     }
 
     pub fn unit(self) -> &'static str {
         match self {
             ChannelKind::Dvl => "m/s",
             ChannelKind::Depth => "m",
-            ChannelKind::Magnetometer => "uT",
+            ChannelKind::Magnetometer | ChannelKind::MagneticField => "uT",
         }
     }
 
@@ -213,6 +227,8 @@ impl ChannelKind {
                 let r = reference.at(t_s)?;
                 Some(MagnetometerModel::reading(e, &r.c_body_to_ned).into())
             }
+            // Implicit: see [`Channel::residual`].
+            ChannelKind::MagneticField => None,
         }
     }
 }
@@ -223,6 +239,9 @@ pub struct Channel {
     pub kind: ChannelKind,
     pub times: Vec<f64>,
     pub values: Vec<[f64; 3]>,
+    /// The specific force (m/s², sensor axes) at each reading of the magnetic-field channel
+    /// (empty for the other channels).
+    pub force: Vec<[f64; 3]>,
     /// Readings left out (invalid, non-finite).
     pub skipped: usize,
 }
@@ -233,8 +252,48 @@ impl Channel {
             kind,
             times: Vec::new(),
             values: Vec::new(),
+            force: Vec::new(),
             skipped: 0,
         }
+    }
+
+    /// A magnetometer reading (µT) with the specific force at its time (any unit: only the
+    /// direction counts).
+    pub fn push_field(&mut self, t_s: f64, field_ut: [f64; 3], force: [f64; 3]) {
+        let ok = t_s.is_finite()
+            && field_ut.iter().chain(&force).all(|x| x.is_finite())
+            && Vector3::from(force).norm() > 0.0;
+        if ok {
+            self.times.push(t_s);
+            self.values.push(field_ut);
+            self.force.push(force);
+        } else {
+            self.skipped += 1;
+        }
+    }
+
+    /// Reading `i` measured − predicted under `e` (the first `dims` components); None where the
+    /// prediction is not available (outside the reference). The magnetic-field channel is
+    /// implicit: the reading is corrected by the effects' soft and hard iron (the inverse of the
+    /// simulator's model), and its magnitude and dip are compared with the field's.
+    pub fn residual(&self, e: &Effects, reference: &Reference, i: usize) -> Option<[f64; 3]> {
+        let z = self.values[i];
+        if self.kind == ChannelKind::MagneticField {
+            let body = MagnetometerModel::body_field(e, &Vector3::from(z))?;
+            let down = -Vector3::from(*self.force.get(i)?).normalize();
+            let norm = body.norm();
+            if norm <= 0.0 {
+                return None;
+            }
+            let dip = (down.dot(&body) / norm).clamp(-1.0, 1.0).asin();
+            return Some([
+                norm - e.mag_intensity,
+                e.mag_intensity * (dip - e.mag_inclination.to_radians()),
+                0.0,
+            ]);
+        }
+        let p = self.kind.predict(e, reference, self.times[i])?;
+        Some([z[0] - p[0], z[1] - p[1], z[2] - p[2]])
     }
 
     pub fn push(&mut self, t_s: f64, v: [f64; 3]) {
@@ -268,7 +327,8 @@ pub struct Candidate {
 /// `depth.density`'s twin would be exact aliases (`dvl.sound_speed` scales the velocity exactly
 /// as `dvl.scale_factor` does, reported under that name); noise, outlier and lock-loss effects
 /// are statistics of the residual, described rather than fitted; `mag.soft_iron` is calibrated by
-/// `auvnav calibrate mag`.
+/// `auvnav calibrate mag`. Without a reference attitude (the magnetic-field channel)
+/// `mag.declination` does not act on the reading at all.
 pub const CANDIDATES: &[Candidate] = &[
     Candidate {
         name: "dvl.scale_factor",
@@ -328,6 +388,21 @@ pub const CANDIDATES: &[Candidate] = &[
     Candidate {
         name: "mag.intensity",
         channel: ChannelKind::Magnetometer,
+        step: 0.1,
+    },
+    Candidate {
+        name: "mag.hard_iron",
+        channel: ChannelKind::MagneticField,
+        step: 0.1,
+    },
+    Candidate {
+        name: "mag.inclination",
+        channel: ChannelKind::MagneticField,
+        step: 0.01,
+    },
+    Candidate {
+        name: "mag.intensity",
+        channel: ChannelKind::MagneticField,
         step: 0.1,
     },
 ];

@@ -164,8 +164,14 @@ fn markdown(r: &DiscoverReport, figures: &[(ChannelKind, Vec<String>)]) -> Strin
         for u in &r.unseparable {
             let _ = writeln!(
                 m,
-                "- `{}` and `{}` (correlation {:.3}): {}",
-                u.effects[0], u.effects[1], u.correlation, u.note
+                "- {} (correlation {:.3}): {}",
+                u.effects
+                    .iter()
+                    .map(|e| format!("`{e}`"))
+                    .collect::<Vec<_>>()
+                    .join(" and "),
+                u.correlation,
+                u.note
             );
         }
         let _ = writeln!(m);

@@ -114,7 +114,8 @@ pub fn read_log(path: &Path) -> anyhow::Result<Recording> {
     Ok(out)
 }
 
-fn specific_force(x: &ImuSampleV1) -> Option<Vector3<f64>> {
+/// The specific force of an IMU sample (rates or increments), None when not valid.
+pub fn specific_force(x: &ImuSampleV1) -> Option<Vector3<f64>> {
     if x.status & ImuSampleV1::STATUS_ACCEL_VALID == 0
         || x.interval_s.is_nan()
         || x.interval_s <= 0.0
