@@ -315,6 +315,53 @@ impl DepthV1 {
 }
 
 message! {
+    /// Ranges from each receiver (hydrophone) of an acoustic positioning array to the responder,
+    /// with the device's own position fix: what a long- or short-baseline system such as an
+    /// underwater GPS reports per acoustic update.
+    #[type_name("auvnav/AcousticRanges/v1")]
+    #[schema_name("auvnav_msgs/msg/AcousticRangesV1")]
+    pub struct AcousticRangesV1 {
+        /// Host time at read return (ns, CLOCK_MONOTONIC; simulated time in simulated logs).
+        pub host_time_ns: u64,
+        /// Device clock (ns); valid with VALID_DEVICE_TIME.
+        pub device_time_ns: u64,
+        /// Sequence number assigned by the publisher.
+        pub sequence: u64,
+        /// Range from receiver i to the responder (m, 0..10000); valid with `VALID_RANGE << i`.
+        pub range_m: [f64; 4],
+        /// Receiver positions the device is configured with (array frame: x, y, z down, m, per receiver); valid with VALID_RECEIVER_POSITIONS.
+        pub receiver_position_m: [f64; 12],
+        /// The device's responder position fix in the array frame (x, y, z down, m); valid with VALID_POSITION.
+        pub position_array_m: [f64; 3],
+        /// One-sigma the device gives its fix (m); valid with VALID_POSITION_STD.
+        pub position_std_m: f32,
+        /// Noise level per receiver (dB re device reference); valid with VALID_SIGNAL.
+        pub noise_db: [f32; 4],
+        /// Received signal strength per receiver (dB re device reference); valid with VALID_SIGNAL.
+        pub rssi_db: [f32; 4],
+        /// Validity bit flags (AcousticRangesV1::VALID_*).
+        pub validity: u32,
+        /// Reserved, zero.
+        pub reserved: [u32; 2],
+    }
+}
+
+impl AcousticRangesV1 {
+    /// Range of receiver i valid: `VALID_RANGE << i`, i in 0..4.
+    pub const VALID_RANGE: u32 = 1 << 0;
+    pub const VALID_POSITION: u32 = 1 << 4;
+    pub const VALID_POSITION_STD: u32 = 1 << 5;
+    pub const VALID_SIGNAL: u32 = 1 << 6;
+    pub const VALID_RECEIVER_POSITIONS: u32 = 1 << 7;
+    pub const VALID_DEVICE_TIME: u32 = 1 << 8;
+
+    /// Whether receiver `i`'s range is valid.
+    pub fn range_valid(&self, i: usize) -> bool {
+        i < 4 && self.validity & (Self::VALID_RANGE << i) != 0
+    }
+}
+
+message! {
     /// Magnetic flux density measured by a three-axis magnetometer.
     #[type_name("auvnav/Magnetometer/v1")]
     #[schema_name("auvnav_msgs/msg/MagnetometerV1")]
@@ -659,6 +706,7 @@ pub fn all_schemas() -> Vec<(&'static str, &'static str, String)> {
         entry::<UsblFixV1>(),
         entry::<DepthV1>(),
         entry::<MagnetometerV1>(),
+        entry::<AcousticRangesV1>(),
         entry::<GnssFixV1>(),
         entry::<NavSolutionV1>(),
         entry::<AidDiagnosticsV1>(),

@@ -12,6 +12,9 @@ pub const USBL: &str = "usbl";
 pub const DEPTH: &str = "depth";
 /// Magnetometer ([`crate::MagnetometerV1`]).
 pub const MAGNETOMETER: &str = "magnetometer";
+/// Per-receiver acoustic ranges with the device's fix ([`crate::AcousticRangesV1`]; recorded and
+/// imported, not yet fused by the daemon).
+pub const ACOUSTIC_RANGES: &str = "acoustic_ranges";
 /// GNSS fixes ([`crate::GnssFixV1`]).
 pub const GNSS: &str = "gnss";
 /// Navigation solution ([`crate::NavSolutionV1`]).

@@ -25,6 +25,11 @@ fn layouts_are_pinned() {
             size_of::<MagnetometerV1>(),
             align_of::<MagnetometerV1>(),
         ),
+        (
+            "AcousticRangesV1",
+            size_of::<AcousticRangesV1>(),
+            align_of::<AcousticRangesV1>(),
+        ),
         ("GnssFixV1", size_of::<GnssFixV1>(), align_of::<GnssFixV1>()),
         (
             "NavSolutionV1",
@@ -54,6 +59,7 @@ fn layouts_are_pinned() {
         ("UsblFixV1", 144, 8),
         ("DepthV1", 56, 8),
         ("MagnetometerV1", 56, 8),
+        ("AcousticRangesV1", 224, 8),
         ("GnssFixV1", 96, 8),
         ("NavSolutionV1", 248, 8),
         ("AidDiagnosticsV1", 136, 8),
@@ -96,6 +102,7 @@ fn schemas_describe_the_whole_struct() {
         size_of::<UsblFixV1>(),
         size_of::<DepthV1>(),
         size_of::<MagnetometerV1>(),
+        size_of::<AcousticRangesV1>(),
         size_of::<GnssFixV1>(),
         size_of::<NavSolutionV1>(),
         size_of::<AidDiagnosticsV1>(),
@@ -135,6 +142,7 @@ fn every_type_roundtrips_through_bytes() {
     roundtrip_bytes::<UsblFixV1>();
     roundtrip_bytes::<DepthV1>();
     roundtrip_bytes::<MagnetometerV1>();
+    roundtrip_bytes::<AcousticRangesV1>();
     roundtrip_bytes::<GnssFixV1>();
     roundtrip_bytes::<NavSolutionV1>();
     roundtrip_bytes::<AidDiagnosticsV1>();
@@ -178,6 +186,7 @@ fn every_type_roundtrips_through_iceoryx2() {
     roundtrip_iceoryx2::<UsblFixV1>(&node, &prefix);
     roundtrip_iceoryx2::<DepthV1>(&node, &prefix);
     roundtrip_iceoryx2::<MagnetometerV1>(&node, &prefix);
+    roundtrip_iceoryx2::<AcousticRangesV1>(&node, &prefix);
     roundtrip_iceoryx2::<GnssFixV1>(&node, &prefix);
     roundtrip_iceoryx2::<NavSolutionV1>(&node, &prefix);
     roundtrip_iceoryx2::<AidDiagnosticsV1>(&node, &prefix);

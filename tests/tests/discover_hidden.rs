@@ -218,3 +218,131 @@ fn magnetometer_effects_are_found_without_a_reference_attitude() {
         );
     }
 }
+
+/// Acoustic updates of a four-receiver array whose receivers sit `offsets` from where the
+/// device's configuration puts them, with range noise and multipath outliers, for a responder
+/// moving about the array; the ranges come from the simulator's own model
+/// (`auvnav_sim::sensors::hydrophone_ranges`).
+fn acoustic_updates(
+    seed: u64,
+    offsets: &[f64; 12],
+    noise_m: f64,
+    outlier_fraction: f64,
+) -> Vec<auvnav_log::LogMessage> {
+    use auvnav_shm_schema::AcousticRangesV1;
+    use nalgebra::Vector3;
+    let mut e = Effects::default();
+    e.set("usbl.hydrophone_offset", offsets).expect("offsets");
+    let nominal = auvnav_sim::sensors::hydrophone_positions(2.0);
+    let mut receivers = [0.0; 12];
+    for (k, h) in nominal.iter().enumerate() {
+        receivers[3 * k..3 * k + 3].copy_from_slice(h.as_slice());
+    }
+    let mut rng = auvnav_sim::rng::Rng::new(seed, "acoustic test");
+    (0..2000u64)
+        .map(|i| {
+            let t = i as f64;
+            // A responder wandering 10–80 m from the array at 2–20 m depth.
+            let p = Vector3::new(
+                45.0 * (t / 300.0).cos() + 20.0 * (t / 47.0).sin(),
+                45.0 * (t / 300.0).sin() + 15.0 * (t / 61.0).cos(),
+                11.0 + 9.0 * (t / 150.0).sin(),
+            );
+            let mut r = auvnav_sim::sensors::hydrophone_ranges(&e, &nominal, &p);
+            for x in &mut r {
+                *x += rng.gauss(noise_m);
+                if rng.uniform() < outlier_fraction {
+                    *x += 2.0 + 8.0 * rng.uniform();
+                }
+            }
+            auvnav_log::LogMessage::AcousticRanges(AcousticRangesV1 {
+                host_time_ns: i * 1_000_000_000,
+                device_time_ns: i * 1_000_000_000,
+                sequence: i,
+                range_m: r,
+                receiver_position_m: receivers,
+                position_array_m: p.into(),
+                position_std_m: 0.1,
+                noise_db: [0.0; 4],
+                rssi_db: [0.0; 4],
+                validity: 0xf
+                    | AcousticRangesV1::VALID_POSITION
+                    | AcousticRangesV1::VALID_RECEIVER_POSITIONS,
+                reserved: [0; 2],
+            })
+        })
+        .collect()
+}
+
+#[test]
+fn receiver_geometry_and_outliers_are_found_in_acoustic_ranges() {
+    use auvnav_tools::discover::ChannelKind;
+    use auvnav_tools::discover::command::{discover_messages, values_of};
+    // Null: the configured geometry is right; noise and outliers only.
+    let r = discover_messages(&acoustic_updates(9401, &[0.0; 12], 0.05, 0.02));
+    assert!(
+        r.channels
+            .iter()
+            .any(|c| c.channel == ChannelKind::AcousticRanges),
+        "{:?}",
+        r.notes
+    );
+    assert!(r.effects.is_empty(), "null geometry: {:#?}", r.effects);
+    let fraction = r
+        .noise
+        .iter()
+        .find(|n| n.name == "usbl.outlier_fraction")
+        .map(|n| n.value)
+        .expect("outliers counted");
+    assert!((0.015..=0.025).contains(&fraction), "{fraction}");
+    let noise = r
+        .noise
+        .iter()
+        .find(|n| n.name == "usbl.range_noise")
+        .map(|n| n.value)
+        .expect("range noise");
+    assert!((0.045..=0.056).contains(&noise), "{noise}");
+    // Receivers displaced by 0.1–0.6 m (other seeds: other displacements).
+    for seed in [9402u64, 9403] {
+        let mut rng = auvnav_sim::rng::Rng::new(seed, "offsets");
+        let offsets: [f64; 12] = std::array::from_fn(|_| {
+            let m = 0.1 + 0.5 * rng.uniform();
+            if rng.uniform() < 0.5 { -m } else { m }
+        });
+        let r = discover_messages(&acoustic_updates(seed, &offsets, 0.05, 0.02));
+        let found = r
+            .effects
+            .iter()
+            .find(|e| e.name == "usbl.hydrophone_offset")
+            .and_then(|e| values_of(&e.value))
+            .expect("the receiver offsets are found");
+        let err: f64 = found
+            .iter()
+            .zip(&offsets)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let size: f64 = offsets.iter().map(|x| x * x).sum::<f64>().sqrt();
+        println!("seed {seed}: {offsets:?} -> {found:?} ({:.3})", err / size);
+        assert!(
+            err <= 0.1 * size,
+            "seed {seed}: {found:?} against {offsets:?}"
+        );
+        assert!(
+            !r.effects.iter().any(|e| e.name == "usbl.sound_speed"),
+            "{:#?}",
+            r.effects
+        );
+        // The report folder takes a four-component channel.
+        let dir = std::env::temp_dir().join(format!(
+            "auvnav-acoustic-report-{}-{seed}",
+            std::process::id()
+        ));
+        auvnav_tools::discover::report::write_report_dir(&dir, &r).expect("report");
+        let md = std::fs::read_to_string(dir.join("report.md")).expect("report.md");
+        assert!(md.contains("acoustic_ranges r3"), "{md}");
+        assert!(dir.join("residual_acoustic_ranges_3.svg").exists());
+        assert!(dir.join("spectrum_acoustic_ranges.svg").exists());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

@@ -3,8 +3,8 @@
 //! DVL about 1.85 m aft of the IMU and a DVL/reference lag near 1 s; discovery must name the same
 //! two causes with compatible values in most segments, and lower the held-out DVL residual.
 //! The RDI PD0 transect with GPS: the DVL heading offset against the GPS course. The
-//! magnetometer recordings without a reference attitude: the field's magnitude and dip. Under CI
-//! the data must be present.
+//! magnetometer recordings without a reference attitude: the field's magnitude and dip. The UGPS
+//! G2 acoustic ranges against the device's own fixes. Under CI the data must be present.
 
 use auvnav_tools::discover::command::{discover, discover_messages, values_of};
 use auvnav_tools::discover::fit::Selection;
@@ -248,4 +248,57 @@ fn magnetometer_recordings_without_reference_attitude() {
         "{:#?}",
         r.unexplained
     );
+}
+
+/// The UGPS G2 dive: four receivers' ranges against the device's fixes. The log does not give
+/// the receivers' positions, so discovery must find them (an array about a metre across, the
+/// geometry the device's solver used), lower every receiver's held-out residual by far more than
+/// a factor of five, and count the multipath outliers rather than fit them.
+#[test]
+fn ugps_receiver_geometry_and_multipath_are_found() {
+    use auvnav_tools::discover::ChannelKind;
+    let Some(dir) = auvnav_tests::measured_data("ugps-g2", "2024-12-05_22-12-34_g2_acoustic.csv")
+    else {
+        return;
+    };
+    let (messages, s) = auvnav_tools::import::ugps_messages(&dir).expect("import");
+    assert!(s.updates > 1500 && s.with_position > 1500, "{s:?}");
+    let r = discover_messages(messages.iter().map(|(_, m)| m));
+    assert!(
+        r.notes.iter().any(|n| n.contains("configured positions")),
+        "{:?}",
+        r.notes
+    );
+    let h = r
+        .effects
+        .iter()
+        .find(|e| e.name == "usbl.hydrophone_offset")
+        .and_then(|e| values_of(&e.value))
+        .expect("the receivers' positions are found");
+    let at = |k: usize| nalgebra::Vector3::new(h[3 * k], h[3 * k + 1], h[3 * k + 2]);
+    for i in 0..4 {
+        for j in i + 1..4 {
+            let d = (at(i) - at(j)).norm();
+            assert!(
+                (0.1..3.0).contains(&d),
+                "receivers {i}, {j}: {d} m apart: {h:?}"
+            );
+        }
+    }
+    let g = r
+        .gain
+        .iter()
+        .find(|g| g.channel == ChannelKind::AcousticRanges)
+        .expect("gain");
+    for k in 0..4 {
+        assert!(g.rms_after[k] < 0.2 * g.rms_before[k], "{g:?}");
+        assert!(g.rms_after[k] < 0.15, "{g:?}");
+    }
+    let outliers = r
+        .noise
+        .iter()
+        .find(|n| n.name == "usbl.outlier_fraction")
+        .map(|n| n.value)
+        .expect("outliers counted");
+    assert!((0.005..0.05).contains(&outliers), "{outliers}");
 }

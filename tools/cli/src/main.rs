@@ -187,6 +187,9 @@ enum ImportWhat {
     /// `auvnav calibrate mag` reads them): the magnetometer channel and the specific force, for
     /// `auvnav discover` without a reference attitude.
     MagCsv(auvnav_tools::import::MagCsvArgs),
+    /// A Water Linked Underwater GPS G2 acoustic log (CSV): per-receiver ranges with the
+    /// system's own fixes, for `auvnav discover` (receiver geometry, range noise, outliers).
+    UgpsG2(auvnav_tools::import::UgpsArgs),
 }
 
 #[derive(Subcommand)]
@@ -511,6 +514,26 @@ fn run_import_mag_csv(a: &auvnav_tools::import::MagCsvArgs) -> anyhow::Result<()
     Ok(())
 }
 
+fn run_import_ugps(a: &auvnav_tools::import::UgpsArgs) -> anyhow::Result<()> {
+    let s = auvnav_tools::import::ugps(a)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&s)?);
+    } else {
+        eprintln!(
+            "{}: {} acoustic updates ({:.0} s) from {} rows, {} with a position fix; valid ranges per receiver {:?}; {} repeated rows and {} malformed left out",
+            a.out.display(),
+            s.updates,
+            s.duration_s,
+            s.rows,
+            s.with_position,
+            s.ranges,
+            s.repeated,
+            s.malformed
+        );
+    }
+    Ok(())
+}
+
 fn run_import_snapir(a: &auvnav_tools::import::SnapirArgs) -> anyhow::Result<()> {
     let s = auvnav_tools::import::snapir(a)?;
     if a.json {
@@ -588,6 +611,7 @@ fn main() -> std::process::ExitCode {
             ImportWhat::Snapir(a) => run_import_snapir(&a),
             ImportWhat::Pd0(a) => run_import_pd0(&a),
             ImportWhat::MagCsv(a) => run_import_mag_csv(&a),
+            ImportWhat::UgpsG2(a) => run_import_ugps(&a),
         },
         Command::Bench { what } => match what {
             BenchWhat::Sim {

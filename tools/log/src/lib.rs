@@ -26,8 +26,8 @@
 //! its last complete chunk; the reader then reports [`LogError::Truncated`].
 
 use auvnav_shm_schema::{
-    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, Message,
-    NavSolutionV1, ProcessHealthV1, TruthStateV1, UsblFixV1,
+    AcousticRangesV1, AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1,
+    MagnetometerV1, Message, NavSolutionV1, ProcessHealthV1, TruthStateV1, UsblFixV1,
 };
 use mcap::records::{MessageHeader, Metadata, Record};
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
@@ -369,6 +369,7 @@ impl RawLogMessage {
             s if s == UsblFixV1::SCHEMA_NAME => LogMessage::Usbl(self.decode()?),
             s if s == DepthV1::SCHEMA_NAME => LogMessage::Depth(self.decode()?),
             s if s == MagnetometerV1::SCHEMA_NAME => LogMessage::Magnetometer(self.decode()?),
+            s if s == AcousticRangesV1::SCHEMA_NAME => LogMessage::AcousticRanges(self.decode()?),
             s if s == GnssFixV1::SCHEMA_NAME => LogMessage::Gnss(self.decode()?),
             s if s == NavSolutionV1::SCHEMA_NAME => LogMessage::NavSolution(self.decode()?),
             s if s == AidDiagnosticsV1::SCHEMA_NAME => LogMessage::AidDiagnostics(self.decode()?),
@@ -387,6 +388,7 @@ pub enum LogMessage {
     Usbl(UsblFixV1),
     Depth(DepthV1),
     Magnetometer(MagnetometerV1),
+    AcousticRanges(AcousticRangesV1),
     Gnss(GnssFixV1),
     NavSolution(NavSolutionV1),
     AidDiagnostics(AidDiagnosticsV1),

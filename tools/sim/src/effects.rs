@@ -223,6 +223,10 @@ effects! {
     usbl_array_yaw: f64 = "usbl.array_yaw", unit "deg", range -30.0..=30.0, default [0.0];
     /// Error of the surveyed array position: the true array sits this far (N, E, D) from the surveyed one.
     usbl_array_offset: [f64; 3] = "usbl.array_offset", unit "m", range -100.0..=100.0, default [0.0, 0.0, 0.0];
+    /// Displacement of each hydrophone (receiver) 1..4 from its nominal place in the array frame
+    /// (x, y, z down per hydrophone, row by row): an array whose geometry differs from its
+    /// configuration, seen in the range differences and in per-receiver ranges.
+    usbl_hydrophone_offset: [f64; 12] = "usbl.hydrophone_offset", unit "m", range -100.0..=100.0, default [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
     /// USBL latency: a fix is delivered (and stamped) this long after its time of validity.
     usbl_latency: f64 = "usbl.latency", unit "s", range 0.0..=5.0, default [0.0];
     /// True sound speed for the acoustic ranging; the USBL assumes 1500 m/s.

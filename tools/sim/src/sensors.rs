@@ -309,6 +309,21 @@ pub fn hydrophone_positions(baseline_m: f64) -> [Vector3<f64>; 4] {
     ]
 }
 
+/// The true hydrophone (receiver) positions in the array frame: the nominal ones displaced by
+/// `usbl.hydrophone_offset`.
+pub fn true_hydrophones(e: &Effects, nominal: &[Vector3<f64>; 4]) -> [Vector3<f64>; 4] {
+    let o = &e.usbl_hydrophone_offset;
+    std::array::from_fn(|k| nominal[k] + Vector3::new(o[3 * k], o[3 * k + 1], o[3 * k + 2]))
+}
+
+/// The range (m) from each hydrophone to a responder at `p` (array frame) that a device measures
+/// with the assumed sound speed: the true geometry (the effects' hydrophone offsets) scaled by
+/// the sound-speed error. Model discovery predicts per-receiver ranges with the same code.
+pub fn hydrophone_ranges(e: &Effects, nominal: &[Vector3<f64>; 4], p: &Vector3<f64>) -> [f64; 4] {
+    let scale = ASSUMED_SOUND_SPEED / e.usbl_sound_speed;
+    true_hydrophones(e, nominal).map(|h| (p - h).norm() * scale)
+}
+
 /// The docking-station USBL: slant range from the central transducer, range differences across
 /// the hydrophone baselines, angles and the device's own position fix, from the true geometry
 /// (true array position and yaw = surveyed + the offset and yaw effects).
@@ -339,7 +354,7 @@ impl UsblModel {
             rng: Rng::new(seed, "usbl"),
             true_array,
             c_ned_to_array: c_array_to_ned.inverse().into_inner(),
-            hydrophones: hydrophone_positions(station.baseline_m),
+            hydrophones: true_hydrophones(e, &hydrophone_positions(station.baseline_m)),
             responder: Vector3::from(station.responder_lever_arm_m),
             range_scale: ASSUMED_SOUND_SPEED / e.usbl_sound_speed,
             e: e.clone(),

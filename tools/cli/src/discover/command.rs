@@ -6,7 +6,7 @@ use super::{Channel, ChannelKind, Reference, spec};
 use crate::calibrate::report::write_atomically;
 use anyhow::{Context, bail};
 use auvnav_log::{LogMessage, LogReader};
-use auvnav_shm_schema::{DepthV1, DvlVelocityV1, MagnetometerV1};
+use auvnav_shm_schema::{AcousticRangesV1, DepthV1, DvlVelocityV1, MagnetometerV1};
 use auvnav_sim::effects::{Effects, parse_setting};
 use serde::Serialize;
 use std::path::PathBuf;
@@ -219,6 +219,27 @@ impl Collector {
                     c.skipped += 1;
                 }
             }
+            LogMessage::AcousticRanges(a) => {
+                let c = &mut self.channels[4];
+                if a.validity & AcousticRangesV1::VALID_POSITION == 0 {
+                    c.skipped += 1;
+                    return;
+                }
+                if a.validity & AcousticRangesV1::VALID_RECEIVER_POSITIONS != 0
+                    && c.is_empty()
+                    && a.receiver_position_m.iter().all(|x| x.is_finite())
+                {
+                    c.receivers = a.receiver_position_m;
+                }
+                let ranges = std::array::from_fn(|k| {
+                    if a.range_valid(k) && a.range_m[k] > 0.0 {
+                        a.range_m[k]
+                    } else {
+                        f64::NAN
+                    }
+                });
+                c.push_ranges(a.host_time_ns as f64 * 1e-9, ranges, a.position_array_m);
+            }
             LogMessage::Imu(x) => {
                 if let Some(f) = crate::calibrate::mag::input::specific_force(x) {
                     for k in 0..3 {
@@ -349,7 +370,8 @@ pub fn discover(
     if no_reference {
         r.notes.push(
             "no reference motion in the logs: only channels that need none (the magnetic field's \
-             magnitude and dip) can be analysed (simulated logs carry the truth topic)"
+             magnitude and dip, acoustic ranges against the device's own fixes) can be analysed \
+             (simulated logs carry the truth topic)"
                 .into(),
         );
     }
@@ -387,6 +409,21 @@ pub fn discover(
             ));
             continue;
         }
+        if kind == ChannelKind::AcousticRanges && ch.receivers.iter().all(|x| *x == 0.0) {
+            r.notes.push(
+                "acoustic_ranges: the logs do not give the receivers' configured positions: \
+                 usbl.hydrophone_offset is each receiver's position in the frame of the device's \
+                 fixes, not a correction to a configured geometry"
+                    .into(),
+            );
+        }
+        let screened;
+        let ch = if kind.partial() {
+            screened = screen_outliers(ch, reference, nominal, &mut r);
+            &screened
+        } else {
+            ch
+        };
         let p = Problem::new(ch, reference, nominal.clone());
         if p.epochs.len() < 10 * fit::FOLDS {
             r.notes.push(format!(
@@ -526,6 +563,18 @@ pub fn discover(
         };
         let regressors: Vec<(&str, Vec<f64>)> = if kind == ChannelKind::MagneticField {
             field_regressors(ch, &p.epochs, &times, nominal)
+        } else if kind == ChannelKind::AcousticRanges {
+            let fix = |g: &dyn Fn(&[f64; 3]) -> f64| -> Vec<f64> {
+                p.epochs.iter().map(|&i| g(&ch.force[i])).collect()
+            };
+            vec![
+                ("slant_range", fix(&|x| x[0].hypot(x[1]).hypot(x[2]))),
+                ("horizontal_range", fix(&|x| x[0].hypot(x[1]))),
+                ("fix_depth", fix(&|x| x[2])),
+                ("fix_x", fix(&|x| x[0])),
+                ("fix_y", fix(&|x| x[1])),
+                ("time", times.iter().map(|t| t - times[0]).collect()),
+            ]
         } else {
             vec![
                 ("speed", reg(&|s| s.velocity_ned.norm())),
@@ -536,9 +585,24 @@ pub fn discover(
                 ("time", times.iter().map(|t| t - times[0]).collect()),
             ]
         };
+        // Components a partial reading lacks (a receiver without a range) are left out.
+        let present = |epochs: &[usize], k: usize| -> Vec<bool> {
+            epochs
+                .iter()
+                .map(|&i| ch.values[i][k].is_finite())
+                .collect()
+        };
         let split = |res: &[f64]| -> Vec<Description> {
             (0..d)
-                .map(|k| describe(&times, &component(res, d, k), &regressors))
+                .map(|k| {
+                    let keep = present(&p.epochs, k);
+                    let pick = |v: &[f64]| -> Vec<f64> {
+                        v.iter().zip(&keep).filter(|x| *x.1).map(|x| *x.0).collect()
+                    };
+                    let regs: Vec<(&str, Vec<f64>)> =
+                        regressors.iter().map(|(n, v)| (*n, pick(v))).collect();
+                    describe(&pick(&times), &pick(&component(res, d, k)), &regs)
+                })
                 .collect()
         };
         let nominal_desc = split(&r0);
@@ -575,7 +639,12 @@ pub fn discover(
         let rms = |res: Vec<f64>| -> Vec<f64> {
             (0..d)
                 .map(|k| {
-                    let v = component(&res, d, k);
+                    let v: Vec<f64> = component(&res, d, k)
+                        .into_iter()
+                        .zip(present(test, k))
+                        .filter(|x| x.1)
+                        .map(|x| x.0)
+                        .collect();
                     (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
                 })
                 .collect()
@@ -620,6 +689,86 @@ pub fn discover(
     r
 }
 
+/// Outliers beyond this many robust standard deviations (1.4826 × the median absolute residual)
+/// are left out of a partial channel before the analysis.
+pub const OUTLIER_SIGMAS: f64 = 5.0;
+
+/// A partial channel (acoustic ranges) without its outliers: every candidate is fitted on all
+/// readings, and the components whose residual lies beyond [`OUTLIER_SIGMAS`] robust standard
+/// deviations of that component are set aside (NaN); the count, their sizes and the outlier
+/// fraction (`usbl.outlier_fraction`, for the effect set) go into the report. A least-squares fit
+/// of the geometry would otherwise follow a few multipath ranges tens of metres long.
+fn screen_outliers(
+    ch: &Channel,
+    reference: &Reference,
+    nominal: &Effects,
+    r: &mut DiscoverReport,
+) -> Channel {
+    let p = Problem::new(ch, reference, nominal.clone());
+    let mut out = ch.clone();
+    if p.epochs.len() < 10 * fit::FOLDS {
+        return out;
+    }
+    let all = p.candidates();
+    let f = p.fit(&all, &p.epochs);
+    let res = p.residuals(&p.effects(&all, &f.theta), &p.epochs);
+    let d = ch.kind.dims();
+    let (mut total, mut outliers) = (0usize, Vec::new());
+    for k in 0..d {
+        let idx: Vec<usize> = (0..p.epochs.len())
+            .filter(|&n| ch.values[p.epochs[n]][k].is_finite())
+            .collect();
+        let mut abs: Vec<f64> = idx.iter().map(|&n| res[n * d + k].abs()).collect();
+        if abs.is_empty() {
+            continue;
+        }
+        total += abs.len();
+        abs.sort_by(f64::total_cmp);
+        let sigma = 1.4826 * abs[abs.len() / 2];
+        for &n in &idx {
+            let e = res[n * d + k];
+            if sigma > 0.0 && e.abs() > OUTLIER_SIGMAS * sigma {
+                out.values[p.epochs[n]][k] = f64::NAN;
+                outliers.push(e);
+            }
+        }
+    }
+    if !outliers.is_empty() {
+        let fraction = outliers.len() as f64 / total.max(1) as f64;
+        let longer = outliers.iter().filter(|e| **e > 0.0).count();
+        let (lo, hi) = outliers
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), e| {
+                (lo.min(e.abs()), hi.max(e.abs()))
+            });
+        r.notes.push(format!(
+            "{}: {} of {} readings ({:.2} %) are outliers beyond {OUTLIER_SIGMAS} robust \
+             standard deviations of a fit of every candidate, {} of them longer than predicted \
+             (multipath), |error| {lo:.2} to {hi:.2} {}: left out of the analysis",
+            ch.kind.name(),
+            outliers.len(),
+            total,
+            100.0 * fraction,
+            longer,
+            ch.kind.unit()
+        ));
+        if ch.kind == ChannelKind::AcousticRanges {
+            r.noise.push(NoiseEstimate {
+                name: "usbl.outlier_fraction".into(),
+                value: fraction,
+                unit: "1".into(),
+                channel: ch.kind,
+                note: format!(
+                    "readings beyond {OUTLIER_SIGMAS} robust standard deviations; sizes \
+                     {lo:.2} to {hi:.2} m ({longer} of {} longer than predicted)",
+                    outliers.len()
+                ),
+            });
+        }
+    }
+    out
+}
+
 /// The motion regressors of the magnetic-field channel, from the readings themselves: the
 /// specific force's deviation from its median magnitude (accelerations the dip takes for tilt),
 /// the vertical's direction in sensor axes (tilt), the nominally corrected field's direction in
@@ -640,7 +789,7 @@ fn field_regressors(
         .map(|&i| {
             auvnav_sim::sensors::MagnetometerModel::body_field(
                 nominal,
-                &Vector3::from(ch.values[i]),
+                &Vector3::new(ch.values[i][0], ch.values[i][1], ch.values[i][2]),
             )
             .and_then(|b| b.try_normalize(1e-12))
             .unwrap_or_else(Vector3::zeros)
@@ -795,9 +944,8 @@ fn print_text(r: &DiscoverReport) {
     }
     for u in &r.unexplained {
         println!(
-            "  unexplained: {} component {}: {}",
-            u.channel.name(),
-            u.component,
+            "  unexplained: {}: {}",
+            u.channel.component_label(u.component),
             u.note
         );
     }

@@ -92,18 +92,30 @@ pub fn correlation(x: &[f64], y: &[f64]) -> f64 {
 /// frequencies up to the Nyquist frequency of the mean interval. Empty for fewer than 32 points
 /// or no time span.
 pub fn periodogram(t: &[f64], r: &[f64]) -> Vec<(f64, f64)> {
-    let n = r.len().min(t.len());
+    periodogram_up_to(t, r, None)
+}
+
+/// The Nyquist frequency [`periodogram`] uses for times `t` (None: fewer than 32 or no span).
+pub fn periodogram_nyquist(t: &[f64]) -> Option<f64> {
+    let n = t.len();
     if n < 32 {
-        return Vec::new();
+        return None;
     }
-    let mean = r[..n].iter().sum::<f64>() / n as f64;
     let stride = n.div_ceil(512);
-    let idx: Vec<usize> = (0..n).step_by(stride).collect();
     let dt = (t[n - 1] - t[0]) / (n - 1) as f64 * stride as f64;
-    if dt.is_nan() || dt <= 0.0 {
+    (dt > 0.0).then(|| 0.5 / dt)
+}
+
+/// [`periodogram`] on 128 frequencies up to `nyquist` (None: the series' own), so that series
+/// with different gaps share one frequency grid.
+pub fn periodogram_up_to(t: &[f64], r: &[f64], nyquist: Option<f64>) -> Vec<(f64, f64)> {
+    let n = r.len().min(t.len());
+    let Some(own) = periodogram_nyquist(&t[..n]) else {
         return Vec::new();
-    }
-    let nyquist = 0.5 / dt;
+    };
+    let nyquist = nyquist.unwrap_or(own);
+    let mean = r[..n].iter().sum::<f64>() / n as f64;
+    let idx: Vec<usize> = (0..n).step_by(n.div_ceil(512)).collect();
     (1..=128)
         .map(|k| {
             let f = nyquist * k as f64 / 128.0;

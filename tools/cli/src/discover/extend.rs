@@ -30,6 +30,10 @@ pub fn noise_estimate(kind: ChannelKind, rms: &[f64]) -> super::command::NoiseEs
             ("dvl.noise", m.sqrt())
         }
         ChannelKind::Depth => ("depth.noise", rms.first().copied().unwrap_or(0.0)),
+        ChannelKind::AcousticRanges => (
+            "usbl.range_noise",
+            (rms.iter().map(|r| r * r).sum::<f64>() / rms.len().max(1) as f64).sqrt(),
+        ),
         ChannelKind::Magnetometer | ChannelKind::MagneticField => (
             "mag.noise",
             (rms.iter().map(|r| r * r).sum::<f64>() / rms.len().max(1) as f64).sqrt(),
@@ -146,6 +150,18 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
             u.effects.join(" with "),
             u.note
         ));
+    }
+    if analysed(r).contains(&ChannelKind::AcousticRanges) {
+        for e in r.effects.iter().filter(|e| e.name.starts_with("usbl.")) {
+            head.push_str(&format!("# {} = {} {} found", e.name, e.value, e.unit));
+            head.push_str(if e.name == "usbl.hydrophone_offset" {
+                ": relative to the receiver positions the logs give (their origin when they give\n\
+                 # none); [navigation.usbl] hydrophone_offset_m is relative to the array the\n\
+                 # daemon configures (baseline_m): convert before use.\n"
+            } else {
+                ": the navigator estimates the range error on line; not applied.\n"
+            });
+        }
     }
     for name in ["depth.bias", "depth.density"] {
         if let Some(e) = r.effects.iter().find(|e| e.name == name) {

@@ -28,9 +28,13 @@ impl<'a> Problem<'a> {
         let d = channel.kind.dims();
         let epochs = (0..channel.len())
             .filter(|&i| {
-                channel
-                    .residual(&nominal, reference, i)
-                    .is_some_and(|r| r[..d].iter().all(|x| x.is_finite()))
+                channel.residual(&nominal, reference, i).is_some_and(|r| {
+                    if channel.kind.partial() {
+                        r[..d].iter().any(|x| x.is_finite())
+                    } else {
+                        r[..d].iter().all(|x| x.is_finite())
+                    }
+                })
             })
             .collect();
         Problem {

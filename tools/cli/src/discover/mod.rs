@@ -165,14 +165,19 @@ pub enum ChannelKind {
     /// `mag.inclination`, as the field error across the field (µT: intensity × dip error in
     /// rad). Both are free of the attitude, so recordings without a reference can be analysed.
     MagneticField,
+    /// Range from each receiver (hydrophone 1..4) of an acoustic positioning array to the
+    /// responder (m), against the ranges the device's own position fix and the receiver geometry
+    /// give: the geometry, the sound speed and the range noise and outliers, without a reference.
+    AcousticRanges,
 }
 
 impl ChannelKind {
-    pub const ALL: [ChannelKind; 4] = [
+    pub const ALL: [ChannelKind; 5] = [
         ChannelKind::Dvl,
         ChannelKind::Depth,
         ChannelKind::Magnetometer,
         ChannelKind::MagneticField,
+        ChannelKind::AcousticRanges,
     ];
 
     pub fn name(self) -> &'static str {
@@ -181,6 +186,7 @@ impl ChannelKind {
             ChannelKind::Depth => "depth",
             ChannelKind::Magnetometer => "magnetometer",
             ChannelKind::MagneticField => "magnetic_field",
+            ChannelKind::AcousticRanges => "acoustic_ranges",
         }
     }
 
@@ -188,14 +194,42 @@ impl ChannelKind {
         match self {
             ChannelKind::Depth => 1,
             ChannelKind::MagneticField => 2,
+            ChannelKind::AcousticRanges => 4,
             _ => 3,
         }
     }
 
+    /// The name of each component, as reports print it.
+    pub fn component_names(self) -> &'static [&'static str] {
+        match self {
+            ChannelKind::Depth => &["depth"],
+            ChannelKind::MagneticField => &["magnitude", "dip"],
+            ChannelKind::AcousticRanges => &["r0", "r1", "r2", "r3"],
+            ChannelKind::Dvl | ChannelKind::Magnetometer => &["x", "y", "z"],
+        }
+    }
+
+    /// `channel component`, e.g. `dvl x` or `acoustic_ranges r2`.
+    pub fn component_label(self, k: usize) -> String {
+        match self.component_names().get(k) {
+            Some(c) if self.dims() > 1 => format!("{} {c}", self.name()),
+            Some(_) => self.name().to_string(),
+            None => format!("{} {k}", self.name()),
+        }
+    }
+
     /// Whether the channel is compared with the reference motion (the attitude-free magnetic
-    /// field is not).
+    /// field and the acoustic ranges, against the device's own fix, are not).
     pub fn needs_reference(self) -> bool {
-        self != ChannelKind::MagneticField
+        !matches!(
+            self,
+            ChannelKind::MagneticField | ChannelKind::AcousticRanges
+        )
+    }
+
+    /// Whether a reading may lack some components (a receiver without a range this time).
+    pub fn partial(self) -> bool {
+        self == ChannelKind::AcousticRanges
     }
 
     pub fn unit(self) -> &'static str {
@@ -203,6 +237,7 @@ impl ChannelKind {
             ChannelKind::Dvl => "m/s",
             ChannelKind::Depth => "m",
             ChannelKind::Magnetometer | ChannelKind::MagneticField => "uT",
+            ChannelKind::AcousticRanges => "m",
         }
     }
 
@@ -227,21 +262,29 @@ impl ChannelKind {
                 let r = reference.at(t_s)?;
                 Some(MagnetometerModel::reading(e, &r.c_body_to_ned).into())
             }
-            // Implicit: see [`Channel::residual`].
-            ChannelKind::MagneticField => None,
+            // Implicit, or against the reading's own fix: see [`Channel::residual`].
+            ChannelKind::MagneticField | ChannelKind::AcousticRanges => None,
         }
     }
 }
+
+/// Most components a channel has (the acoustic ranges: four receivers).
+pub const MAX_DIMS: usize = 4;
 
 /// One channel's measured readings (stamp s, value in the channel's unit).
 #[derive(Debug, Clone)]
 pub struct Channel {
     pub kind: ChannelKind,
     pub times: Vec<f64>,
-    pub values: Vec<[f64; 3]>,
-    /// The specific force (m/s², sensor axes) at each reading of the magnetic-field channel
-    /// (empty for the other channels).
+    /// The readings (the first `dims` components; NaN where a partial reading has none).
+    pub values: Vec<[f64; MAX_DIMS]>,
+    /// Per reading, what the prediction needs besides the reference: the specific force (m/s²,
+    /// sensor axes) of the magnetic-field channel, the device's fix (array frame, m) of the
+    /// acoustic ranges (empty for the other channels).
     pub force: Vec<[f64; 3]>,
+    /// The receiver positions the acoustic device is configured with (array frame, m; zero when
+    /// the recording does not say).
+    pub receivers: [f64; 12],
     /// Readings left out (invalid, non-finite).
     pub skipped: usize,
 }
@@ -253,7 +296,23 @@ impl Channel {
             times: Vec::new(),
             values: Vec::new(),
             force: Vec::new(),
+            receivers: [0.0; 12],
             skipped: 0,
+        }
+    }
+
+    /// An acoustic update: the ranges per receiver (NaN where none) and the device's fix.
+    pub fn push_ranges(&mut self, t_s: f64, ranges: [f64; 4], fix: [f64; 3]) {
+        let ok = t_s.is_finite()
+            && fix.iter().all(|x| x.is_finite())
+            && ranges.iter().any(|x| x.is_finite())
+            && ranges.iter().all(|x| !x.is_infinite());
+        if ok {
+            self.times.push(t_s);
+            self.values.push(ranges);
+            self.force.push(fix);
+        } else {
+            self.skipped += 1;
         }
     }
 
@@ -265,7 +324,8 @@ impl Channel {
             && Vector3::from(force).norm() > 0.0;
         if ok {
             self.times.push(t_s);
-            self.values.push(field_ut);
+            self.values
+                .push([field_ut[0], field_ut[1], field_ut[2], 0.0]);
             self.force.push(force);
         } else {
             self.skipped += 1;
@@ -276,10 +336,27 @@ impl Channel {
     /// prediction is not available (outside the reference). The magnetic-field channel is
     /// implicit: the reading is corrected by the effects' soft and hard iron (the inverse of the
     /// simulator's model), and its magnitude and dip are compared with the field's.
-    pub fn residual(&self, e: &Effects, reference: &Reference, i: usize) -> Option<[f64; 3]> {
+    pub fn residual(
+        &self,
+        e: &Effects,
+        reference: &Reference,
+        i: usize,
+    ) -> Option<[f64; MAX_DIMS]> {
         let z = self.values[i];
+        if self.kind == ChannelKind::AcousticRanges {
+            let nominal: [Vector3<f64>; 4] = std::array::from_fn(|k| {
+                Vector3::new(
+                    self.receivers[3 * k],
+                    self.receivers[3 * k + 1],
+                    self.receivers[3 * k + 2],
+                )
+            });
+            let p = Vector3::from(*self.force.get(i)?);
+            let predicted = auvnav_sim::sensors::hydrophone_ranges(e, &nominal, &p);
+            return Some(std::array::from_fn(|k| z[k] - predicted[k]));
+        }
         if self.kind == ChannelKind::MagneticField {
-            let body = MagnetometerModel::body_field(e, &Vector3::from(z))?;
+            let body = MagnetometerModel::body_field(e, &Vector3::new(z[0], z[1], z[2]))?;
             let down = -Vector3::from(*self.force.get(i)?).normalize();
             let norm = body.norm();
             if norm <= 0.0 {
@@ -290,16 +367,17 @@ impl Channel {
                 norm - e.mag_intensity,
                 e.mag_intensity * (dip - e.mag_inclination.to_radians()),
                 0.0,
+                0.0,
             ]);
         }
         let p = self.kind.predict(e, reference, self.times[i])?;
-        Some([z[0] - p[0], z[1] - p[1], z[2] - p[2]])
+        Some([z[0] - p[0], z[1] - p[1], z[2] - p[2], 0.0])
     }
 
     pub fn push(&mut self, t_s: f64, v: [f64; 3]) {
         if t_s.is_finite() && v[..self.kind.dims()].iter().all(|x| x.is_finite()) {
             self.times.push(t_s);
-            self.values.push(v);
+            self.values.push([v[0], v[1], v[2], 0.0]);
         } else {
             self.skipped += 1;
         }
@@ -389,6 +467,16 @@ pub const CANDIDATES: &[Candidate] = &[
         name: "mag.intensity",
         channel: ChannelKind::Magnetometer,
         step: 0.1,
+    },
+    Candidate {
+        name: "usbl.hydrophone_offset",
+        channel: ChannelKind::AcousticRanges,
+        step: 0.01,
+    },
+    Candidate {
+        name: "usbl.sound_speed",
+        channel: ChannelKind::AcousticRanges,
+        step: 1.0,
     },
     Candidate {
         name: "mag.hard_iron",

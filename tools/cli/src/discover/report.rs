@@ -4,7 +4,7 @@
 
 use super::ChannelKind;
 use super::command::{DiscoverReport, ResidualSeries};
-use super::describe::periodogram;
+use super::describe::{periodogram_nyquist, periodogram_up_to};
 use super::extend;
 use crate::calibrate::report::write_atomically;
 use crate::calibrate::svg::{PALETTE, Series, plot};
@@ -12,14 +12,8 @@ use anyhow::Context;
 use std::fmt::Write as _;
 use std::path::Path;
 
-const AXES: [&str; 3] = ["x", "y", "z"];
-
 fn component_name(kind: ChannelKind, k: usize) -> String {
-    if kind.dims() == 1 {
-        kind.name().to_string()
-    } else {
-        format!("{} {}", kind.name(), AXES[k])
-    }
+    kind.component_label(k)
 }
 
 fn line(name: String, points: Vec<(f64, f64)>, color: &'static str, markers: bool) -> Series {
@@ -42,6 +36,7 @@ fn residual_plots(s: &ResidualSeries) -> Vec<(String, String)> {
                 s.times
                     .iter()
                     .zip(r.iter().skip(k).step_by(d))
+                    .filter(|(_, v)| v.is_finite())
                     .map(|(t, v)| (t - t0, *v))
                     .collect()
             };
@@ -65,9 +60,17 @@ fn spectrum_plot(s: &ResidualSeries) -> (String, String) {
     let d = s.channel.dims();
     let summed = |r: &[f64]| -> Vec<(f64, f64)> {
         let mut total: Vec<(f64, f64)> = Vec::new();
+        // One frequency grid for every component, though a component may miss readings.
+        let nyquist = periodogram_nyquist(&s.times);
         for k in 0..d {
-            let c: Vec<f64> = r.iter().skip(k).step_by(d).copied().collect();
-            for (i, (f, p)) in periodogram(&s.times, &c).into_iter().enumerate() {
+            let (t, c): (Vec<f64>, Vec<f64>) = s
+                .times
+                .iter()
+                .zip(r.iter().skip(k).step_by(d))
+                .filter(|(_, v)| v.is_finite())
+                .map(|(t, v)| (*t, *v))
+                .unzip();
+            for (i, (f, p)) in periodogram_up_to(&t, &c, nyquist).into_iter().enumerate() {
                 match total.get_mut(i) {
                     Some(x) => x.1 += p,
                     None => total.push((f, p)),

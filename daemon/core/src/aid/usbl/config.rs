@@ -45,6 +45,9 @@ pub struct UsblConfig {
     pub array_yaw_deg: f64,
     /// Distance between opposite hydrophones (m). Default 0.5.
     pub baseline_m: f64,
+    /// Calibrated displacement of hydrophones 1..4 from their nominal places (x, y, z down in the
+    /// array frame per hydrophone, m; `usbl.hydrophone_offset`). Default 0.
+    pub hydrophone_offset_m: [f64; 12],
     /// Responder position in the vehicle body frame (m). Default 0.
     pub responder_lever_arm_m: [f64; 3],
     /// Slant-range noise (m). Default 0.1.
@@ -97,6 +100,7 @@ impl Default for UsblConfig {
             array_height_m: 0.0,
             array_yaw_deg: 0.0,
             baseline_m: 0.5,
+            hydrophone_offset_m: [0.0; 12],
             responder_lever_arm_m: [0.0; 3],
             range_std_m: 0.1,
             range_difference_std_m: 0.002,
@@ -153,6 +157,13 @@ impl UsblConfig {
             "baseline_m",
             self.baseline_m > 0.0 && self.baseline_m <= 10.0,
             "must be in (0, 10]",
+        );
+        need(
+            "hydrophone_offset_m",
+            self.hydrophone_offset_m
+                .iter()
+                .all(|x| x.abs() <= 0.5 * self.baseline_m.max(0.0) + 10.0),
+            "each component must be finite and within baseline/2 + 10 m",
         );
         for (key, v) in [
             ("range_std_m", self.range_std_m),

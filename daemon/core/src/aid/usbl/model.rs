@@ -257,9 +257,9 @@ impl ResponderGeometry {
 }
 
 impl UsblConfig {
-    /// The surveyed array.
+    /// The surveyed array, with the hydrophones displaced by the calibrated offsets.
     pub fn array(&self) -> UsblArray {
-        UsblArray::level(
+        let mut a = UsblArray::level(
             Geodetic {
                 latitude_rad: self.array_latitude_deg.to_radians(),
                 longitude_rad: self.array_longitude_deg.to_radians(),
@@ -267,6 +267,11 @@ impl UsblConfig {
             },
             self.array_yaw_deg.to_radians(),
             self.baseline_m,
-        )
+        );
+        let o = &self.hydrophone_offset_m;
+        for (k, h) in a.hydrophones.iter_mut().enumerate() {
+            *h += Vector3::new(o[3 * k], o[3 * k + 1], o[3 * k + 2]);
+        }
+        a
     }
 }
