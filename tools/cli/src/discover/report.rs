@@ -111,7 +111,13 @@ fn short(v: &serde_json::Value) -> String {
     let one = |x: &serde_json::Value| match x.as_f64() {
         Some(x) if x != 0.0 && (x.abs() < 1e-3 || x.abs() >= 1e5) => format!("{x:.4e}"),
         Some(x) => {
-            let digits = (4 - x.abs().log10().floor() as i32).clamp(0, 8) as usize;
+            // Zero (log10 = -inf) and non-finite values get no decimals rather than overflow.
+            let magnitude = x.abs().log10().floor();
+            let digits = if magnitude.is_finite() {
+                (4 - magnitude as i32).clamp(0, 8) as usize
+            } else {
+                0
+            };
             format!("{x:.digits$}")
         }
         None => "–".into(),
