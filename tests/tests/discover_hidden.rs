@@ -7,7 +7,7 @@ use auvnav_sim::effects::{Effects, set};
 use auvnav_tools::discover::command::{discover, read_logs};
 use auvnav_tools::discover::extend::effect_set_toml;
 use auvnav_tools::discover::fit::Selection;
-use auvnav_tools::discover::hidden::{Hidden, draw, simulate, trial};
+use auvnav_tools::discover::hidden::{Hidden, draw, simulate, trial, trial_set};
 
 struct Dir(std::path::PathBuf);
 impl Drop for Dir {
@@ -47,7 +47,8 @@ fn null_data_gives_no_effect() {
         let (t, r) = trial(seed, None, &d.0).expect("trial");
         assert!(t.found.is_empty(), "seed {seed}: {:#?}", r.effects);
         // Every channel was analysed and is white around the nominal model.
-        assert_eq!(r.channels.len(), 3, "{:?}", r.notes);
+        // (DVL, depth, magnetometer, gyro and accelerometer.)
+        assert_eq!(r.channels.len(), 5, "{:?}", r.notes);
         assert!(r.unexplained.len() <= 1, "{:#?}", r.unexplained);
     }
 }
@@ -344,5 +345,49 @@ fn receiver_geometry_and_outliers_are_found_in_acoustic_ranges() {
         assert!(dir.join("residual_acoustic_ranges_3.svg").exists());
         assert!(dir.join("spectrum_acoustic_ranges.svg").exists());
         let _ = std::fs::remove_dir_all(&dir);
+    }
+}
+
+/// IMU errors against the reference motion: a gyro bias on every axis, a scale factor on the
+/// yaw gyro (the axis the turns excite) and a horizontal accelerometer bias, hidden together in
+/// a trial voyage with the trial's IMU noise (magnitudes drawn per seed); each must come back
+/// within 10 % and nothing else.
+#[test]
+fn imu_errors_are_found_against_the_reference_motion() {
+    let d = dir("discover-imu");
+    for seed in [9501u64, 9502] {
+        let mut rng = auvnav_sim::rng::Rng::new(seed, "imu magnitudes");
+        let mut draw = |lo: f64, hi: f64| {
+            let m = lo + (hi - lo) * rng.uniform();
+            if rng.uniform() < 0.5 { -m } else { m }
+        };
+        let hidden = [
+            Hidden {
+                name: "imu.gyro_bias".into(),
+                value: vec![draw(0.5, 5.0), draw(0.5, 5.0), draw(0.5, 5.0)],
+            },
+            Hidden {
+                name: "imu.gyro_scale_factor".into(),
+                value: vec![0.0, 0.0, draw(1000.0, 5000.0)],
+            },
+            Hidden {
+                name: "imu.accel_bias".into(),
+                value: vec![draw(100.0, 1000.0), draw(100.0, 1000.0), 0.0],
+            },
+        ];
+        let (t, r) = trial_set(seed, &hidden, &d.0).expect("trial");
+        println!(
+            "seed {seed}: hidden {hidden:?}; found {:?}, estimates {:?}, relative errors {:?}",
+            t.found, t.estimates, t.relative_errors
+        );
+        assert!(t.correct, "seed {seed}: {:#?}", r.effects);
+        // The Allan deviation of what is left is reported for both IMU channels.
+        for c in r
+            .channels
+            .iter()
+            .filter(|c| c.unit == "deg/h" || c.unit == "ug")
+        {
+            assert!(c.allan.len() >= 4, "{:?}", c.channel);
+        }
     }
 }

@@ -12,8 +12,10 @@ use auvnav_shm_schema::{
 };
 use nalgebra::{Matrix3, Matrix3x4, Rotation3, Vector3};
 
-const DEG_PER_H: f64 = std::f64::consts::PI / 180.0 / 3600.0;
-const MICRO_G: f64 = 9.806_65e-6;
+/// One degree per hour in rad/s (the unit of the gyro effects).
+pub const DEG_PER_H: f64 = std::f64::consts::PI / 180.0 / 3600.0;
+/// One micro-g in m/s² (the unit of the accelerometer effects).
+pub const MICRO_G: f64 = 9.806_65e-6;
 /// Sound speed the acoustic devices assume (m/s).
 pub const ASSUMED_SOUND_SPEED: f64 = 1500.0;
 /// Water density the depth sensor assumes (kg/m^3).
@@ -48,11 +50,28 @@ pub struct ImuModel {
     sequence: u64,
 }
 
+/// Scale factor (ppm per axis) times misalignment (mrad, small rotation) of an IMU triad.
+fn triad_error(scale_ppm: [f64; 3], misalignment_mrad: [f64; 3]) -> Matrix3<f64> {
+    Matrix3::from_diagonal(&Vector3::from(scale_ppm).map(|x| 1.0 + x * 1e-6))
+        * (Matrix3::identity() - skew(&(Vector3::from(misalignment_mrad) * 1e-3)))
+}
+
 impl ImuModel {
+    /// The gyro reading (rad/s) of the true rate `omega_ib` under the constant effects: scale
+    /// factor and misalignment, then the bias (no noise, no Gauss-Markov bias, no quantisation).
+    pub fn gyro_reading(e: &Effects, omega_ib: &Vector3<f64>) -> Vector3<f64> {
+        triad_error(e.imu_gyro_scale_factor, e.imu_gyro_misalignment) * omega_ib
+            + Vector3::from(e.imu_gyro_bias) * DEG_PER_H
+    }
+
+    /// The accelerometer reading (m/s²) of the true specific force, as [`Self::gyro_reading`].
+    pub fn accel_reading(e: &Effects, f_b: &Vector3<f64>) -> Vector3<f64> {
+        triad_error(e.imu_accel_scale_factor, e.imu_accel_misalignment) * f_b
+            + Vector3::from(e.imu_accel_bias) * MICRO_G
+    }
+
     pub fn new(e: &Effects, seed: u64, rate_hz: f64) -> ImuModel {
         let dt = 1.0 / rate_hz;
-        let sf = |v: [f64; 3]| Matrix3::from_diagonal(&Vector3::from(v).map(|x| 1.0 + x * 1e-6));
-        let mis = |v: [f64; 3]| Matrix3::identity() - skew(&(Vector3::from(v) * 1e-3));
         let tau = e.imu_bias_correlation_time;
         let decay = (-dt / tau).exp();
         let drive = (1.0 - decay * decay).sqrt();
@@ -65,8 +84,8 @@ impl ImuModel {
         ImuModel {
             rng,
             dt,
-            gyro_error: sf(e.imu_gyro_scale_factor) * mis(e.imu_gyro_misalignment),
-            accel_error: sf(e.imu_accel_scale_factor) * mis(e.imu_accel_misalignment),
+            gyro_error: triad_error(e.imu_gyro_scale_factor, e.imu_gyro_misalignment),
+            accel_error: triad_error(e.imu_accel_scale_factor, e.imu_accel_misalignment),
             gyro_bias: Vector3::from(e.imu_gyro_bias) * DEG_PER_H,
             accel_bias: Vector3::from(e.imu_accel_bias) * MICRO_G,
             gyro_gm,

@@ -6,7 +6,7 @@ use super::{Channel, ChannelKind, Reference, spec};
 use crate::calibrate::report::write_atomically;
 use anyhow::{Context, bail};
 use auvnav_log::{LogMessage, LogReader};
-use auvnav_shm_schema::{AcousticRangesV1, DepthV1, DvlVelocityV1, MagnetometerV1};
+use auvnav_shm_schema::{AcousticRangesV1, DepthV1, DvlVelocityV1, ImuSampleV1, MagnetometerV1};
 use auvnav_sim::effects::{Effects, parse_setting};
 use serde::Serialize;
 use std::path::PathBuf;
@@ -113,6 +113,17 @@ pub struct ChannelReport {
     pub nominal: Vec<Description>,
     /// Per component: the residual with the selected effects.
     pub selected: Vec<Description>,
+    /// The IMU channels: the Allan deviation of the residual with the selected effects, per
+    /// cluster time (empty for the other channels).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub allan: Vec<AllanPoint>,
+}
+
+/// One cluster time of an Allan deviation: per component, in the channel's unit.
+#[derive(Debug, Clone, Serialize)]
+pub struct AllanPoint {
+    pub tau_s: f64,
+    pub deviation: Vec<f64>,
 }
 
 /// The held-out gain of one channel: fit on the first part, residual RMS on the rest.
@@ -187,6 +198,9 @@ pub struct Collector {
     force_sum: [f64; 3],
     force_n: usize,
     last_force: Option<[f64; 3]>,
+    /// The IMU samples, compared with the reference over intervals once it is complete.
+    imu: Vec<super::imu::ImuSample>,
+    last_imu_time: Option<f64>,
 }
 
 impl Collector {
@@ -197,6 +211,8 @@ impl Collector {
             force_sum: [0.0; 3],
             force_n: 0,
             last_force: None,
+            imu: Vec::new(),
+            last_imu_time: None,
         }
     }
 
@@ -241,11 +257,37 @@ impl Collector {
                 c.push_ranges(a.host_time_ns as f64 * 1e-9, ranges, a.position_array_m);
             }
             LogMessage::Imu(x) => {
-                if let Some(f) = crate::calibrate::mag::input::specific_force(x) {
+                let force = crate::calibrate::mag::input::specific_force(x);
+                if let Some(f) = force {
                     for k in 0..3 {
                         self.force_sum[k] += f[k];
                     }
                     self.force_n += 1;
+                }
+                let t = x.host_time_ns as f64 * 1e-9;
+                let dt = if x.interval_s.is_finite() && x.interval_s > 0.0 {
+                    Some(x.interval_s)
+                } else {
+                    self.last_imu_time.map(|p| t - p).filter(|d| *d > 0.0)
+                };
+                self.last_imu_time = Some(t);
+                let rate = (x.status & ImuSampleV1::STATUS_GYRO_VALID != 0)
+                    .then(|| auvnav_sim::perturb::imu_rate(x))
+                    .filter(|w| w.iter().all(|v| v.is_finite()));
+                let force = force.filter(|f| f.iter().all(|v| v.is_finite()));
+                match dt {
+                    Some(dt_s) if dt_s <= 1.0 && (rate.is_some() || force.is_some()) => {
+                        self.imu.push(super::imu::ImuSample {
+                            t_end_s: t,
+                            dt_s,
+                            rate,
+                            force,
+                        })
+                    }
+                    _ => {
+                        self.channels[5].skipped += 1;
+                        self.channels[6].skipped += 1;
+                    }
                 }
             }
             LogMessage::Magnetometer(m) => {
@@ -271,8 +313,21 @@ impl Collector {
         }
     }
 
-    pub fn finish(self) -> (Vec<Channel>, Reference) {
-        (self.channels, Reference::from_truth(&self.truth))
+    pub fn finish(mut self) -> (Vec<Channel>, Reference) {
+        let reference = Reference::from_truth(&self.truth);
+        self.imu.sort_by(|a, b| a.t_end_s.total_cmp(&b.t_end_s));
+        let (gyro, accel) = super::imu::imu_channels(&self.imu, &reference);
+        let skipped = self.channels[5].skipped;
+        self.channels[5] = Channel {
+            skipped: gyro.skipped + skipped,
+            ..gyro
+        };
+        let skipped = self.channels[6].skipped;
+        self.channels[6] = Channel {
+            skipped: accel.skipped + skipped,
+            ..accel
+        };
+        (self.channels, reference)
     }
 }
 
@@ -620,6 +675,13 @@ pub fn discover(
                 desc.rms,
                 kind.unit()
             );
+            if desc.lag1 < -0.25 {
+                note.push_str(
+                    "; successive residuals anti-correlated: the noise of a difference (a \
+                     reference's attitude or velocity noise enters neighbouring intervals with \
+                     opposite signs)",
+                );
+            }
             if let Some(f) = desc.peak_hz {
                 note.push_str(&format!("; periodic at {f:.4} Hz"));
             }
@@ -666,7 +728,14 @@ pub fn discover(
             }
         }
         let rms_all: Vec<f64> = selected_desc.iter().map(|d| d.rms).collect();
-        r.noise.push(super::extend::noise_estimate(kind, &rms_all));
+        let spacing_s = median_spacing(&times);
+        let allan = if matches!(kind, ChannelKind::Gyro | ChannelKind::Accelerometer) {
+            allan_points(&r1, d, spacing_s)
+        } else {
+            Vec::new()
+        };
+        r.noise
+            .push(super::extend::noise_estimate(kind, &rms_all, spacing_s));
         r.residuals.push(ResidualSeries {
             channel: kind,
             times: times.clone(),
@@ -683,6 +752,7 @@ pub fn discover(
             held_out_mse_selected: steps.last().map_or(base_mse, |s| s.mse_after),
             nominal: nominal_desc,
             selected: selected_desc,
+            allan,
         });
     }
     r.wall_seconds = start.elapsed().as_secs_f64();
@@ -767,6 +837,27 @@ fn screen_outliers(
         }
     }
     out
+}
+
+/// The Allan deviation of each component of `res` (`d` components, readings `spacing_s` apart).
+fn allan_points(res: &[f64], d: usize, spacing_s: f64) -> Vec<AllanPoint> {
+    let per: Vec<Vec<(f64, f64)>> = (0..d)
+        .map(|k| super::imu::allan_deviation(&component(res, d, k), spacing_s))
+        .collect();
+    let n = per.iter().map(Vec::len).min().unwrap_or(0);
+    (0..n)
+        .map(|i| AllanPoint {
+            tau_s: per[0][i].0,
+            deviation: per.iter().map(|c| c[i].1).collect(),
+        })
+        .collect()
+}
+
+/// The median interval between successive readings (s; 0 for fewer than two).
+fn median_spacing(times: &[f64]) -> f64 {
+    let mut d: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
+    d.sort_by(f64::total_cmp);
+    d.get(d.len() / 2).copied().unwrap_or(0.0)
 }
 
 /// The motion regressors of the magnetic-field channel, from the readings themselves: the

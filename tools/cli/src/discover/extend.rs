@@ -16,9 +16,26 @@ use std::path::{Path, PathBuf};
 
 /// The simulator's noise effect of a channel from the RMS per component of its residual with the
 /// effects found. `dvl.noise` is per beam: each DVL-frame component's RMS is divided by what one
-/// unit of beam noise gives that component.
-pub fn noise_estimate(kind: ChannelKind, rms: &[f64]) -> super::command::NoiseEstimate {
+/// unit of beam noise gives that component. The IMU channels are means over intervals of
+/// `spacing_s`: white noise of density N gives N / √spacing, so the random walks are the RMS
+/// times √spacing (in the effects' units).
+pub fn noise_estimate(
+    kind: ChannelKind,
+    rms: &[f64],
+    spacing_s: f64,
+) -> super::command::NoiseEstimate {
+    let rms_all = (rms.iter().map(|r| r * r).sum::<f64>() / rms.len().max(1) as f64).sqrt();
     let (name, value) = match kind {
+        // deg/h × √s → deg/√h: × √(s / 3600).
+        ChannelKind::Gyro => (
+            "imu.angle_random_walk",
+            rms_all * (spacing_s / 3600.0).sqrt(),
+        ),
+        // µg × √s → m/s/√h: × 9.80665e-6 × √s × 60.
+        ChannelKind::Accelerometer => (
+            "imu.velocity_random_walk",
+            rms_all * auvnav_sim::sensors::MICRO_G * spacing_s.sqrt() * 60.0,
+        ),
         ChannelKind::Dvl => {
             let per = dvl_velocity_std_per_beam_noise();
             let m = rms
@@ -30,14 +47,8 @@ pub fn noise_estimate(kind: ChannelKind, rms: &[f64]) -> super::command::NoiseEs
             ("dvl.noise", m.sqrt())
         }
         ChannelKind::Depth => ("depth.noise", rms.first().copied().unwrap_or(0.0)),
-        ChannelKind::AcousticRanges => (
-            "usbl.range_noise",
-            (rms.iter().map(|r| r * r).sum::<f64>() / rms.len().max(1) as f64).sqrt(),
-        ),
-        ChannelKind::Magnetometer | ChannelKind::MagneticField => (
-            "mag.noise",
-            (rms.iter().map(|r| r * r).sum::<f64>() / rms.len().max(1) as f64).sqrt(),
-        ),
+        ChannelKind::AcousticRanges => ("usbl.range_noise", rms_all),
+        ChannelKind::Magnetometer | ChannelKind::MagneticField => ("mag.noise", rms_all),
     };
     let spec = super::spec(name);
     let value = spec.map_or(value, |s| value.clamp(s.min, s.max));
@@ -162,6 +173,13 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
                 ": the navigator estimates the range error on line; not applied.\n"
             });
         }
+    }
+    for e in r.effects.iter().filter(|e| e.name.starts_with("imu.")) {
+        head.push_str(&format!(
+            "# {} = {} {} found: the navigator estimates the IMU biases on line \
+             (initial_*_bias_std_*) and corrects no scale factor or misalignment; not applied.\n",
+            e.name, e.value, e.unit
+        ));
     }
     for name in ["depth.bias", "depth.density"] {
         if let Some(e) = r.effects.iter().find(|e| e.name == name) {

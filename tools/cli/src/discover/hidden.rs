@@ -67,7 +67,8 @@ pub fn scenario(seed: u64) -> String {
          seabed_depth_m = 80.0\n\n\
          [start]\nlatitude_deg = {}\nlongitude_deg = {}\ndepth_m = {}\nheading_deg = {}\nspeed_m_s = {}\n\n\
          {legs}\
-         [effects]\n\"dvl.noise\" = 0.01\n\"depth.noise\" = 0.05\n\"mag.noise\" = 0.1\n",
+         [effects]\n\"dvl.noise\" = 0.01\n\"depth.noise\" = 0.05\n\"mag.noise\" = 0.1\n\
+         \"imu.angle_random_walk\" = 0.01\n\"imu.velocity_random_walk\" = 0.01\n",
         u(-60.0, 60.0),
         u(-180.0, 180.0),
         u(20.0, 30.0),

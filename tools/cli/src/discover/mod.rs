@@ -14,12 +14,15 @@ pub mod describe;
 pub mod extend;
 pub mod fit;
 pub mod hidden;
+pub mod imu;
 pub mod report;
 
 use auvnav_core::earth;
 use auvnav_shm_schema::TruthStateV1;
 use auvnav_sim::effects::Effects;
-use auvnav_sim::sensors::{DepthModel, DvlInstallation, MagnetometerModel};
+use auvnav_sim::sensors::{
+    DEG_PER_H, DepthModel, DvlInstallation, ImuModel, MICRO_G, MagnetometerModel,
+};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use serde::Serialize;
 
@@ -32,6 +35,7 @@ pub struct RefState {
     /// Angular rate w.r.t. the Earth (body axes, rad/s).
     pub omega_eb_body: Vector3<f64>,
     pub height_m: f64,
+    pub latitude_rad: f64,
     pub specific_force_body: Vector3<f64>,
 }
 
@@ -79,6 +83,7 @@ impl Reference {
                             Vector3::repeat(f64::NAN)
                         },
                         height_m: m.height_m,
+                        latitude_rad: m.latitude_rad,
                         specific_force_body: if force.iter().all(|x| x.is_finite()) {
                             force
                         } else {
@@ -117,6 +122,11 @@ impl Reference {
         self.samples.is_empty()
     }
 
+    /// The sample times (s), in order.
+    pub fn times(&self) -> Vec<f64> {
+        self.samples.iter().map(|s| s.0).collect()
+    }
+
     /// Time span covered (s).
     pub fn span(&self) -> Option<(f64, f64)> {
         Some((self.samples.first()?.0, self.samples.last()?.0))
@@ -145,6 +155,7 @@ impl Reference {
             velocity_ned: lerp(&a.velocity_ned, &b.velocity_ned),
             omega_eb_body: lerp(&a.omega_eb_body, &b.omega_eb_body),
             height_m: a.height_m + (b.height_m - a.height_m) * f,
+            latitude_rad: a.latitude_rad + (b.latitude_rad - a.latitude_rad) * f,
             specific_force_body: lerp(&a.specific_force_body, &b.specific_force_body),
         })
     }
@@ -169,15 +180,23 @@ pub enum ChannelKind {
     /// responder (m), against the ranges the device's own position fix and the receiver geometry
     /// give: the geometry, the sound speed and the range noise and outliers, without a reference.
     AcousticRanges,
+    /// The gyro's mean rate over an interval between reference samples (deg/h, 3 components),
+    /// from its integrated rotation, against the reference's change of attitude.
+    Gyro,
+    /// The accelerometer's mean specific force over an interval (µg, 3 components), integrated
+    /// in the level frame, against the reference's change of velocity with gravity and Coriolis.
+    Accelerometer,
 }
 
 impl ChannelKind {
-    pub const ALL: [ChannelKind; 5] = [
+    pub const ALL: [ChannelKind; 7] = [
         ChannelKind::Dvl,
         ChannelKind::Depth,
         ChannelKind::Magnetometer,
         ChannelKind::MagneticField,
         ChannelKind::AcousticRanges,
+        ChannelKind::Gyro,
+        ChannelKind::Accelerometer,
     ];
 
     pub fn name(self) -> &'static str {
@@ -187,6 +206,8 @@ impl ChannelKind {
             ChannelKind::Magnetometer => "magnetometer",
             ChannelKind::MagneticField => "magnetic_field",
             ChannelKind::AcousticRanges => "acoustic_ranges",
+            ChannelKind::Gyro => "gyro",
+            ChannelKind::Accelerometer => "accelerometer",
         }
     }
 
@@ -205,7 +226,10 @@ impl ChannelKind {
             ChannelKind::Depth => &["depth"],
             ChannelKind::MagneticField => &["magnitude", "dip"],
             ChannelKind::AcousticRanges => &["r0", "r1", "r2", "r3"],
-            ChannelKind::Dvl | ChannelKind::Magnetometer => &["x", "y", "z"],
+            ChannelKind::Dvl
+            | ChannelKind::Magnetometer
+            | ChannelKind::Gyro
+            | ChannelKind::Accelerometer => &["x", "y", "z"],
         }
     }
 
@@ -238,6 +262,8 @@ impl ChannelKind {
             ChannelKind::Depth => "m",
             ChannelKind::Magnetometer | ChannelKind::MagneticField => "uT",
             ChannelKind::AcousticRanges => "m",
+            ChannelKind::Gyro => "deg/h",
+            ChannelKind::Accelerometer => "ug",
         }
     }
 
@@ -262,8 +288,12 @@ impl ChannelKind {
                 let r = reference.at(t_s)?;
                 Some(MagnetometerModel::reading(e, &r.c_body_to_ned).into())
             }
-            // Implicit, or against the reading's own fix: see [`Channel::residual`].
-            ChannelKind::MagneticField | ChannelKind::AcousticRanges => None,
+            // Implicit, against the reading's own fix, or over intervals: see
+            // [`Channel::residual`].
+            ChannelKind::MagneticField
+            | ChannelKind::AcousticRanges
+            | ChannelKind::Gyro
+            | ChannelKind::Accelerometer => None,
         }
     }
 }
@@ -280,7 +310,8 @@ pub struct Channel {
     pub values: Vec<[f64; MAX_DIMS]>,
     /// Per reading, what the prediction needs besides the reference: the specific force (m/s²,
     /// sensor axes) of the magnetic-field channel, the device's fix (array frame, m) of the
-    /// acoustic ranges (empty for the other channels).
+    /// acoustic ranges, the reference's mean rate or specific force of the IMU channels (empty
+    /// for the other channels).
     pub force: Vec<[f64; 3]>,
     /// The receiver positions the acoustic device is configured with (array frame, m; zero when
     /// the recording does not say).
@@ -311,6 +342,23 @@ impl Channel {
             self.times.push(t_s);
             self.values.push(ranges);
             self.force.push(fix);
+        } else {
+            self.skipped += 1;
+        }
+    }
+
+    /// An IMU interval: the measured mean (the reference's plus the integrated error) and the
+    /// reference's mean, in the channel's unit.
+    pub fn push_imu(&mut self, t_s: f64, measured: Vector3<f64>, reference: Vector3<f64>) {
+        if t_s.is_finite()
+            && measured
+                .iter()
+                .chain(reference.iter())
+                .all(|x| x.is_finite())
+        {
+            self.times.push(t_s);
+            self.values.push([measured.x, measured.y, measured.z, 0.0]);
+            self.force.push(reference.into());
         } else {
             self.skipped += 1;
         }
@@ -354,6 +402,20 @@ impl Channel {
             let p = Vector3::from(*self.force.get(i)?);
             let predicted = auvnav_sim::sensors::hydrophone_ranges(e, &nominal, &p);
             return Some(std::array::from_fn(|k| z[k] - predicted[k]));
+        }
+        if matches!(self.kind, ChannelKind::Gyro | ChannelKind::Accelerometer) {
+            let truth = Vector3::from(*self.force.get(i)?);
+            let predicted = if self.kind == ChannelKind::Gyro {
+                ImuModel::gyro_reading(e, &(truth * DEG_PER_H)) / DEG_PER_H
+            } else {
+                ImuModel::accel_reading(e, &(truth * MICRO_G)) / MICRO_G
+            };
+            return Some([
+                z[0] - predicted.x,
+                z[1] - predicted.y,
+                z[2] - predicted.z,
+                0.0,
+            ]);
         }
         if self.kind == ChannelKind::MagneticField {
             let body = MagnetometerModel::body_field(e, &Vector3::new(z[0], z[1], z[2]))?;
@@ -477,6 +539,36 @@ pub const CANDIDATES: &[Candidate] = &[
         name: "usbl.sound_speed",
         channel: ChannelKind::AcousticRanges,
         step: 1.0,
+    },
+    Candidate {
+        name: "imu.gyro_bias",
+        channel: ChannelKind::Gyro,
+        step: 1.0,
+    },
+    Candidate {
+        name: "imu.gyro_scale_factor",
+        channel: ChannelKind::Gyro,
+        step: 100.0,
+    },
+    Candidate {
+        name: "imu.gyro_misalignment",
+        channel: ChannelKind::Gyro,
+        step: 0.1,
+    },
+    Candidate {
+        name: "imu.accel_bias",
+        channel: ChannelKind::Accelerometer,
+        step: 10.0,
+    },
+    Candidate {
+        name: "imu.accel_scale_factor",
+        channel: ChannelKind::Accelerometer,
+        step: 100.0,
+    },
+    Candidate {
+        name: "imu.accel_misalignment",
+        channel: ChannelKind::Accelerometer,
+        step: 0.1,
     },
     Candidate {
         name: "mag.hard_iron",

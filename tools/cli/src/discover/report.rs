@@ -106,6 +106,38 @@ fn spectrum_plot(s: &ResidualSeries) -> (String, String) {
     (format!("spectrum_{}.svg", s.channel.name()), svg)
 }
 
+/// The Allan deviation of an IMU channel's residual with the effects found, per component, on
+/// logarithmic axes (None for channels without one).
+fn allan_plot(c: &super::command::ChannelReport) -> Option<(String, String)> {
+    if c.allan.is_empty() {
+        return None;
+    }
+    let series: Vec<Series> = (0..c.channel.dims())
+        .map(|k| {
+            let points = c
+                .allan
+                .iter()
+                .filter(|a| a.deviation[k] > 0.0)
+                .map(|a| (a.tau_s.log10(), a.deviation[k].log10()))
+                .collect();
+            line(
+                component_name(c.channel, k),
+                points,
+                PALETTE[k % PALETTE.len()],
+                true,
+            )
+        })
+        .collect();
+    let svg = plot(
+        &format!("{} residual Allan deviation", c.channel.name()),
+        "log10 cluster time (s)",
+        &format!("log10 Allan deviation ({})", c.channel.unit()),
+        &series,
+        false,
+    );
+    Some((format!("allan_{}.svg", c.channel.name()), svg))
+}
+
 /// An effect value or standard deviation for a table: five significant digits.
 fn short(v: &serde_json::Value) -> String {
     let one = |x: &serde_json::Value| match x.as_f64() {
@@ -250,6 +282,25 @@ fn markdown(r: &DiscoverReport, figures: &[(ChannelKind, Vec<String>)]) -> Strin
         }
         let _ = writeln!(m);
     }
+    for c in r.channels.iter().filter(|c| !c.allan.is_empty()) {
+        let _ = writeln!(
+            m,
+            "## Allan deviation: {} residual ({})\n\nWith the effects found; at 1 s it \
+             includes the reference's own noise.\n",
+            c.channel.name(),
+            c.unit
+        );
+        let names: Vec<String> = (0..c.channel.dims())
+            .map(|k| component_name(c.channel, k))
+            .collect();
+        let _ = writeln!(m, "| tau (s) | {} |", names.join(" | "));
+        let _ = writeln!(m, "|---|{}", "---|".repeat(names.len()));
+        for a in &c.allan {
+            let v: Vec<String> = a.deviation.iter().map(|x| format!("{x:.4}")).collect();
+            let _ = writeln!(m, "| {:.0} | {} |", a.tau_s, v.join(" | "));
+        }
+        let _ = writeln!(m);
+    }
     if !r.noise.is_empty() {
         let _ = writeln!(m, "## Noise with the effects found\n");
         for n in &r.noise {
@@ -285,9 +336,15 @@ pub fn write_report_dir(dir: &Path, r: &DiscoverReport) -> anyhow::Result<()> {
     let mut figures = Vec::new();
     for s in &r.residuals {
         let mut files = Vec::new();
+        let allan = r
+            .channels
+            .iter()
+            .find(|c| c.channel == s.channel)
+            .and_then(allan_plot);
         for (name, svg) in residual_plots(s)
             .into_iter()
             .chain(std::iter::once(spectrum_plot(s)))
+            .chain(allan)
         {
             write_atomically(&dir.join(&name), &svg)?;
             files.push(name);
