@@ -620,7 +620,7 @@ pub fn discover(
             field_regressors(ch, &p.epochs, &times, nominal)
         } else if kind == ChannelKind::AcousticRanges {
             let fix = |g: &dyn Fn(&[f64; 3]) -> f64| -> Vec<f64> {
-                p.epochs.iter().map(|&i| g(&ch.force[i])).collect()
+                p.epochs.iter().map(|&i| g(&ch.auxiliary[i])).collect()
             };
             vec![
                 ("slant_range", fix(&|x| x[0].hypot(x[1]).hypot(x[2]))),
@@ -871,7 +871,10 @@ fn field_regressors(
     nominal: &Effects,
 ) -> Vec<(&'static str, Vec<f64>)> {
     use nalgebra::Vector3;
-    let force: Vec<Vector3<f64>> = epochs.iter().map(|&i| Vector3::from(ch.force[i])).collect();
+    let force: Vec<Vector3<f64>> = epochs
+        .iter()
+        .map(|&i| Vector3::from(ch.auxiliary[i]))
+        .collect();
     let mut mags: Vec<f64> = force.iter().map(|f| f.norm()).collect();
     mags.sort_by(f64::total_cmp);
     let median = mags.get(mags.len() / 2).copied().unwrap_or(1.0).max(1e-12);

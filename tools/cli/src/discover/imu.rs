@@ -31,7 +31,7 @@ pub struct ImuSample {
 /// The gyro and accelerometer channels of `samples` (sorted by time) against `reference`:
 /// per interval, the value is the reference's mean rate (deg/h) or specific force (µg) in body
 /// axes at the interval's middle plus the integrated measurement error, and the channel's
-/// `force` holds the reference's mean alone (what the effects act on).
+/// `auxiliary` holds the reference's mean alone (what the effects act on).
 pub fn imu_channels(samples: &[ImuSample], reference: &Reference) -> (Channel, Channel) {
     let mut gyro = Channel::new(ChannelKind::Gyro);
     let mut accel = Channel::new(ChannelKind::Accelerometer);

@@ -212,12 +212,7 @@ impl ChannelKind {
     }
 
     pub fn dims(self) -> usize {
-        match self {
-            ChannelKind::Depth => 1,
-            ChannelKind::MagneticField => 2,
-            ChannelKind::AcousticRanges => 4,
-            _ => 3,
-        }
+        self.component_names().len()
     }
 
     /// The name of each component, as reports print it.
@@ -312,7 +307,7 @@ pub struct Channel {
     /// sensor axes) of the magnetic-field channel, the device's fix (array frame, m) of the
     /// acoustic ranges, the reference's mean rate or specific force of the IMU channels (empty
     /// for the other channels).
-    pub force: Vec<[f64; 3]>,
+    pub auxiliary: Vec<[f64; 3]>,
     /// The receiver positions the acoustic device is configured with (array frame, m; zero when
     /// the recording does not say).
     pub receivers: [f64; 12],
@@ -326,7 +321,7 @@ impl Channel {
             kind,
             times: Vec::new(),
             values: Vec::new(),
-            force: Vec::new(),
+            auxiliary: Vec::new(),
             receivers: [0.0; 12],
             skipped: 0,
         }
@@ -341,7 +336,7 @@ impl Channel {
         if ok {
             self.times.push(t_s);
             self.values.push(ranges);
-            self.force.push(fix);
+            self.auxiliary.push(fix);
         } else {
             self.skipped += 1;
         }
@@ -358,7 +353,7 @@ impl Channel {
         {
             self.times.push(t_s);
             self.values.push([measured.x, measured.y, measured.z, 0.0]);
-            self.force.push(reference.into());
+            self.auxiliary.push(reference.into());
         } else {
             self.skipped += 1;
         }
@@ -374,7 +369,7 @@ impl Channel {
             self.times.push(t_s);
             self.values
                 .push([field_ut[0], field_ut[1], field_ut[2], 0.0]);
-            self.force.push(force);
+            self.auxiliary.push(force);
         } else {
             self.skipped += 1;
         }
@@ -399,12 +394,12 @@ impl Channel {
                     self.receivers[3 * k + 2],
                 )
             });
-            let p = Vector3::from(*self.force.get(i)?);
+            let p = Vector3::from(*self.auxiliary.get(i)?);
             let predicted = auvnav_sim::sensors::hydrophone_ranges(e, &nominal, &p);
             return Some(std::array::from_fn(|k| z[k] - predicted[k]));
         }
         if matches!(self.kind, ChannelKind::Gyro | ChannelKind::Accelerometer) {
-            let truth = Vector3::from(*self.force.get(i)?);
+            let truth = Vector3::from(*self.auxiliary.get(i)?);
             let predicted = if self.kind == ChannelKind::Gyro {
                 ImuModel::gyro_reading(e, &(truth * DEG_PER_H)) / DEG_PER_H
             } else {
@@ -419,7 +414,7 @@ impl Channel {
         }
         if self.kind == ChannelKind::MagneticField {
             let body = MagnetometerModel::body_field(e, &Vector3::new(z[0], z[1], z[2]))?;
-            let down = -Vector3::from(*self.force.get(i)?).normalize();
+            let down = -Vector3::from(*self.auxiliary.get(i)?).normalize();
             let norm = body.norm();
             if norm <= 0.0 {
                 return None;
