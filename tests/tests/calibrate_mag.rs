@@ -175,7 +175,7 @@ fn bad_input_gives_named_errors_or_constrained_fits() {
     let e3 = run(write(&dir, "wrong.csv", "a,b,c\n1,2,3\n")).expect_err("wrong columns");
     assert!(e3.to_string().contains("magnetometer columns"), "{e3}");
     let mut a = CalibrateMagArgs::new(vec![write(&dir, "named.csv", &csv(&d, true, false))]);
-    a.mag_columns = Some(vec!["mx".into(), "my".into(), "mz".into()]);
+    a.columns.mag_columns = Some(vec!["mx".into(), "my".into(), "mz".into()]);
     let e4 = calibrate_mag(&a).expect_err("missing named column");
     assert!(e4.to_string().contains("no column \"mx\""), "{e4}");
     let e5 = run(dir.join("absent.csv")).expect_err("missing file");

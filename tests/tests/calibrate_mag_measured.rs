@@ -14,13 +14,13 @@ fn nortek_vector_hard_iron_shrinks_the_held_out_spreads() {
         return;
     };
     let mut a = CalibrateMagArgs::new(vec![dir.join("vector_data_imu01.VEC.csv")]);
-    a.mag_columns = Some(vec!["mag_x".into(), "mag_y".into(), "mag_z".into()]);
-    a.accel_columns = Some(vec![
+    a.columns.mag_columns = Some(vec!["mag_x".into(), "mag_y".into(), "mag_z".into()]);
+    a.columns.accel_columns = Some(vec![
         "accel_m_s2_x".into(),
         "accel_m_s2_y".into(),
         "accel_m_s2_z".into(),
     ]);
-    a.time_column = Some("time_utc".into());
+    a.columns.time_column = Some("time_utc".into());
     let r = calibrate_mag(&a).expect("calibration");
     let before = r
         .spreads

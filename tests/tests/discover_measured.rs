@@ -171,10 +171,12 @@ fn mag_csv(file: std::path::PathBuf, columns: Option<[&str; 7]>) -> Vec<auvnav_l
     let a = auvnav_tools::import::MagCsvArgs {
         file,
         out: std::path::PathBuf::new(),
-        time_column: columns.map(|c| c[0].to_string()),
-        mag_columns: columns.and_then(|c| owned(&c[1..4])),
-        accel_columns: columns.and_then(|c| owned(&c[4..7])),
-        mag_unit: None,
+        columns: auvnav_tools::calibrate::mag::input::CsvColumnArgs {
+            time_column: columns.map(|c| c[0].to_string()),
+            mag_columns: columns.and_then(|c| owned(&c[1..4])),
+            accel_columns: columns.and_then(|c| owned(&c[4..7])),
+            mag_unit: None,
+        },
         json: false,
     };
     let (messages, s) = auvnav_tools::import::mag_csv_messages(&a).expect("import");

@@ -815,18 +815,8 @@ pub struct MagCsvArgs {
     /// Output log (written atomically).
     #[arg(long)]
     pub out: PathBuf,
-    /// Time column (seconds, or ISO-8601 UTC); default: the first column named `time…`.
-    #[arg(long)]
-    pub time_column: Option<String>,
-    /// The three magnetometer columns; default: the first three named `…mag…`.
-    #[arg(long, value_delimiter = ',')]
-    pub mag_columns: Option<Vec<String>>,
-    /// The three accelerometer columns; default: the first three named `…acc…`.
-    #[arg(long, value_delimiter = ',')]
-    pub accel_columns: Option<Vec<String>>,
-    /// Field unit: T, uT, nT or gauss (default: decided from the readings' magnitude).
-    #[arg(long)]
-    pub mag_unit: Option<String>,
+    #[command(flatten)]
+    pub columns: crate::calibrate::mag::input::CsvColumnArgs,
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
@@ -859,20 +849,7 @@ pub fn mag_csv_messages(
     a: &MagCsvArgs,
 ) -> anyhow::Result<(Vec<(&'static str, LogMessage)>, MagCsvSummary)> {
     use auvnav_shm_schema::MagnetometerV1;
-    let three = |v: &Option<Vec<String>>, what: &str| -> anyhow::Result<Option<[String; 3]>> {
-        match v {
-            None => Ok(None),
-            Some(v) => <[String; 3]>::try_from(v.clone()).map(Some).map_err(|v| {
-                anyhow::anyhow!("--{what}-columns: three names X,Y,Z expected, got {v:?}")
-            }),
-        }
-    };
-    let cols = crate::calibrate::mag::input::CsvColumns {
-        time: a.time_column.clone(),
-        mag: three(&a.mag_columns, "mag")?,
-        accel: three(&a.accel_columns, "accel")?,
-        mag_unit: a.mag_unit.clone(),
-    };
+    let cols = a.columns.columns()?;
     let rec = crate::calibrate::mag::input::read_csv(&a.file, &cols)?;
     let mut s = MagCsvSummary {
         skipped: rec.skipped,

@@ -2,7 +2,7 @@
 //! recording and evaluation on the rest, verdict.
 
 use super::fit::{self, Calibration, MagSample, Model, SwarmSettings};
-use super::input::{self, CsvColumns, Recording};
+use super::input::{self, CsvColumnArgs, Recording};
 use super::{Coverage, MagMethod, ReferenceField, Spreads, Thresholds};
 use anyhow::{Context, bail};
 use clap::Args;
@@ -53,18 +53,8 @@ pub struct CalibrateMagArgs {
     /// Swarm iterations (seed method; 100 particles).
     #[arg(long, default_value_t = 150)]
     pub iterations: usize,
-    /// CSV: the time column (seconds or ISO-8601 UTC).
-    #[arg(long)]
-    pub time_column: Option<String>,
-    /// CSV: the three magnetometer columns X,Y,Z.
-    #[arg(long, value_delimiter = ',')]
-    pub mag_columns: Option<Vec<String>>,
-    /// CSV: the three accelerometer columns X,Y,Z.
-    #[arg(long, value_delimiter = ',')]
-    pub accel_columns: Option<Vec<String>>,
-    /// CSV: the field unit (T, uT, nT, gauss); default: decided from the magnitude.
-    #[arg(long)]
-    pub mag_unit: Option<String>,
+    #[command(flatten)]
+    pub columns: CsvColumnArgs,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
@@ -284,19 +274,7 @@ pub fn calibrate_mag(a: &CalibrateMagArgs) -> anyhow::Result<MagReport> {
     if !(a.fit_fraction > 0.0 && a.fit_fraction <= 1.0) {
         bail!("--fit-fraction {}: expected 0 < f <= 1", a.fit_fraction);
     }
-    let three = |v: &Option<Vec<String>>, what: &str| -> anyhow::Result<Option<[String; 3]>> {
-        match v {
-            None => Ok(None),
-            Some(v) if v.len() == 3 => Ok(Some([v[0].clone(), v[1].clone(), v[2].clone()])),
-            Some(v) => bail!("--{what}-columns takes three names X,Y,Z, got {}", v.len()),
-        }
-    };
-    let cols = CsvColumns {
-        time: a.time_column.clone(),
-        mag: three(&a.mag_columns, "mag")?,
-        accel: three(&a.accel_columns, "accel")?,
-        mag_unit: a.mag_unit.clone(),
-    };
+    let cols = a.columns.columns()?;
     let mut fit_set = Vec::new();
     let mut eval_set = Vec::new();
     let mut first: Option<Recording> = None;

@@ -153,6 +153,44 @@ pub struct CsvColumns {
     pub mag_unit: Option<String>,
 }
 
+/// The command-line options that choose a CSV file's columns (`auvnav calibrate mag`,
+/// `auvnav import mag-csv`).
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct CsvColumnArgs {
+    /// CSV: the time column (seconds or ISO-8601 UTC); default: the first column named `time…`.
+    #[arg(long)]
+    pub time_column: Option<String>,
+    /// CSV: the three magnetometer columns X,Y,Z; default: the first three named `…mag…`.
+    #[arg(long, value_delimiter = ',')]
+    pub mag_columns: Option<Vec<String>>,
+    /// CSV: the three accelerometer columns X,Y,Z; default: the first three named `…acc…`.
+    #[arg(long, value_delimiter = ',')]
+    pub accel_columns: Option<Vec<String>>,
+    /// CSV: the field unit (T, uT, nT, gauss); default: decided from the readings' magnitude.
+    #[arg(long)]
+    pub mag_unit: Option<String>,
+}
+
+impl CsvColumnArgs {
+    /// The column choice, refusing a column list that does not name three columns.
+    pub fn columns(&self) -> anyhow::Result<CsvColumns> {
+        let three = |v: &Option<Vec<String>>, what: &str| -> anyhow::Result<Option<[String; 3]>> {
+            match v {
+                None => Ok(None),
+                Some(v) => <[String; 3]>::try_from(v.clone()).map(Some).map_err(|v| {
+                    anyhow::anyhow!("--{what}-columns takes three names X,Y,Z, got {v:?}")
+                }),
+            }
+        };
+        Ok(CsvColumns {
+            time: self.time_column.clone(),
+            mag: three(&self.mag_columns, "mag")?,
+            accel: three(&self.accel_columns, "accel")?,
+            mag_unit: self.mag_unit.clone(),
+        })
+    }
+}
+
 /// Seconds since the Unix epoch of an ISO-8601 UTC time "YYYY-MM-DDTHH:MM:SS[.fff][Z]".
 fn iso_seconds(s: &str) -> Option<f64> {
     let s = s.trim().trim_end_matches('Z');
