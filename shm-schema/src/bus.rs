@@ -169,7 +169,7 @@ impl Bus {
         Ok(BusSubscriber {
             subscriber,
             listener,
-            next_sequence: None,
+            next_sequence: Vec::new(),
             gaps: 0,
             service: full,
         })
@@ -220,7 +220,9 @@ impl<T: Message + Sequenced> BusPublisher<T> {
 pub struct BusSubscriber<T: Message> {
     subscriber: iceoryx2::port::subscriber::Subscriber<ipc::Service, T, ()>,
     listener: iceoryx2::port::listener::Listener<ipc::Service>,
-    next_sequence: Option<u64>,
+    /// The next sequence number expected from each publisher (a topic can have several: the
+    /// health topic has one per process).
+    next_sequence: Vec<(iceoryx2::identifiers::UniquePublisherId, u64)>,
     gaps: u64,
     service: String,
 }
@@ -235,12 +237,16 @@ impl<T: Message + Sequenced> BusSubscriber<T> {
         Ok(sample.map(|s| {
             let msg = *s.payload();
             let seq = msg.sequence();
-            if let Some(expected) = self.next_sequence
-                && seq > expected
-            {
-                self.gaps += seq - expected;
+            let publisher = s.header().publisher_id();
+            match self.next_sequence.iter_mut().find(|(p, _)| *p == publisher) {
+                Some((_, expected)) => {
+                    if seq > *expected {
+                        self.gaps += seq - *expected;
+                    }
+                    *expected = seq + 1;
+                }
+                None => self.next_sequence.push((publisher, seq + 1)),
             }
-            self.next_sequence = Some(seq + 1);
             msg
         }))
     }

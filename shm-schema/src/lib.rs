@@ -665,6 +665,38 @@ message! {
     }
 }
 
+message! {
+    /// An aid message the fusion daemon applied late: it arrived after the IMU stream had passed
+    /// its time stamp + the aid delay, and was applied just before the next IMU sample instead.
+    /// Recorded so that a replay of the log applies it at the same point of the IMU stream.
+    #[type_name("auvnav/LateAid/v1")]
+    #[schema_name("auvnav_msgs/msg/LateAidV1")]
+    pub struct LateAidV1 {
+        /// Host time of the IMU sample before which the aid was applied (ns, CLOCK_MONOTONIC).
+        pub host_time_ns: u64,
+        /// Sequence number of this record.
+        pub sequence: u64,
+        /// Sequence number of that IMU sample.
+        pub imu_sequence: u64,
+        /// Host time stamp of the aid message (ns).
+        pub aid_host_time_ns: u64,
+        /// Sequence number of the aid message (assigned by its publisher).
+        pub aid_sequence: u64,
+        /// The aid's topic (LateAidV1::TOPIC_*: 1 DVL, 2 depth, 3 GNSS, 4 USBL, 5 magnetometer).
+        pub aid_topic: u32,
+        /// Reserved, zero.
+        pub reserved: u32,
+    }
+}
+
+impl LateAidV1 {
+    pub const TOPIC_DVL: u32 = 1;
+    pub const TOPIC_DEPTH: u32 = 2;
+    pub const TOPIC_GNSS: u32 = 3;
+    pub const TOPIC_USBL: u32 = 4;
+    pub const TOPIC_MAGNETOMETER: u32 = 5;
+}
+
 /// Bytes per [`RawBytesV1`] message.
 pub const RAW_CHUNK: usize = 1024;
 
@@ -711,6 +743,7 @@ pub fn all_schemas() -> Vec<(&'static str, &'static str, String)> {
         entry::<NavSolutionV1>(),
         entry::<AidDiagnosticsV1>(),
         entry::<ProcessHealthV1>(),
+        entry::<LateAidV1>(),
         entry::<TruthStateV1>(),
         entry::<RawBytesV1>(),
     ]

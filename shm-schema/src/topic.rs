@@ -21,6 +21,8 @@ pub const GNSS: &str = "gnss";
 pub const NAV_SOLUTION: &str = "nav/solution";
 /// Per-aid-source diagnostics ([`crate::AidDiagnosticsV1`]).
 pub const NAV_AID_DIAGNOSTICS: &str = "nav/aid_diagnostics";
+/// Aid messages the daemon applied late ([`crate::LateAidV1`]), for replay.
+pub const NAV_LATE_AIDS: &str = "nav/late_aids";
 /// Process health of every process ([`crate::ProcessHealthV1`]).
 pub const HEALTH: &str = "health";
 /// Raw device bytes of one driver ([`crate::RawBytesV1`]): `raw/<driver name>`.

@@ -46,6 +46,7 @@ fn layouts_are_pinned() {
             size_of::<ProcessHealthV1>(),
             align_of::<ProcessHealthV1>(),
         ),
+        ("LateAidV1", size_of::<LateAidV1>(), align_of::<LateAidV1>()),
         (
             "TruthStateV1",
             size_of::<TruthStateV1>(),
@@ -64,6 +65,7 @@ fn layouts_are_pinned() {
         ("NavSolutionV1", 248, 8),
         ("AidDiagnosticsV1", 136, 8),
         ("ProcessHealthV1", 120, 8),
+        ("LateAidV1", 48, 8),
         ("TruthStateV1", 168, 8),
     ];
     assert_eq!(layouts, expected);
@@ -107,6 +109,7 @@ fn schemas_describe_the_whole_struct() {
         size_of::<NavSolutionV1>(),
         size_of::<AidDiagnosticsV1>(),
         size_of::<ProcessHealthV1>(),
+        size_of::<LateAidV1>(),
         size_of::<TruthStateV1>(),
     ];
     for ((type_name, schema_name, def), size) in all_schemas().into_iter().zip(sizes) {
@@ -147,6 +150,7 @@ fn every_type_roundtrips_through_bytes() {
     roundtrip_bytes::<NavSolutionV1>();
     roundtrip_bytes::<AidDiagnosticsV1>();
     roundtrip_bytes::<ProcessHealthV1>();
+    roundtrip_bytes::<LateAidV1>();
     roundtrip_bytes::<TruthStateV1>();
 }
 
@@ -191,6 +195,7 @@ fn every_type_roundtrips_through_iceoryx2() {
     roundtrip_iceoryx2::<NavSolutionV1>(&node, &prefix);
     roundtrip_iceoryx2::<AidDiagnosticsV1>(&node, &prefix);
     roundtrip_iceoryx2::<ProcessHealthV1>(&node, &prefix);
+    roundtrip_iceoryx2::<LateAidV1>(&node, &prefix);
     roundtrip_iceoryx2::<TruthStateV1>(&node, &prefix);
 }
 

@@ -7,11 +7,11 @@ use auvnav_core::feed::SensorMessage;
 use auvnav_core::session::{Session, SessionConfig, SessionOutput};
 use auvnav_core::strapdown::NavState;
 use auvnav_log::LogMessage;
-use auvnav_shm_schema::{AidDiagnosticsV1, NavSolutionV1};
+use auvnav_shm_schema::{AidDiagnosticsV1, LateAidV1, NavSolutionV1};
 use auvnav_sim::{self as sim, SimConfig, scenario::Scenario};
 use auvnav_tools::replay::{Output, Replay};
 
-type Outputs = (Vec<NavSolutionV1>, Vec<AidDiagnosticsV1>);
+type Outputs = (Vec<NavSolutionV1>, Vec<AidDiagnosticsV1>, Vec<LateAidV1>);
 
 fn messages(scenario: &str, seconds: f64, seed: u64) -> Vec<LogMessage> {
     let scenario = Scenario::load(scenario).expect("scenario");
@@ -42,6 +42,7 @@ fn collect(out: &mut Outputs) -> impl FnMut(SessionOutput) -> anyhow::Result<()>
         match o {
             SessionOutput::Solution(s) => out.0.push(*s),
             SessionOutput::Diagnostics(d) => out.1.push(*d),
+            SessionOutput::LateAid(r) => out.2.push(*r),
         }
         Ok(())
     }
@@ -113,6 +114,7 @@ fn replay(msgs: &[LogMessage], cfg: &SessionConfig) -> Outputs {
         match o {
             Output::Solution(s) => out.0.push(*s),
             Output::Diagnostics(d) => out.1.push(*d),
+            Output::LateAid(r) => out.2.push(*r),
             Output::Truth(_) => {}
         }
         Ok(())
@@ -124,10 +126,38 @@ fn replay(msgs: &[LogMessage], cfg: &SessionConfig) -> Outputs {
     out
 }
 
+/// The messages in the order they would reach a process whose deliveries are each delayed by a
+/// random time up to `max_delay_s` (stable for equal arrival times). IMU samples keep their order
+/// (one driver publishes them in turn); truth records (not a process's input) arrive at once.
+fn arrival_order(msgs: &[LogMessage], max_delay_s: f64, seed: u64) -> Vec<(u64, LogMessage)> {
+    let mut rng = sim::rng::Rng::new(seed, "arrival");
+    let mut last_imu = 0;
+    let mut arrived: Vec<(u64, LogMessage)> = msgs
+        .iter()
+        .map(|m| {
+            let delay_ns = (rng.uniform() * max_delay_s * 1e9) as u64;
+            match m {
+                LogMessage::Truth(t) => (t.host_time_ns, *m),
+                LogMessage::Imu(x) => {
+                    last_imu = (x.host_time_ns + delay_ns).max(last_imu);
+                    (last_imu, *m)
+                }
+                m => (m.sensor().map_or(0, |x| x.host_time_ns()) + delay_ns, *m),
+            }
+        })
+        .collect();
+    arrived.sort_by_key(|(t, _)| *t);
+    arrived
+}
+
 fn assert_same(a: &Outputs, b: &Outputs, what: &str) {
     assert!(a.0.len() > 1000, "{what}: {} solutions", a.0.len());
     assert_eq!(a.0.len(), b.0.len(), "{what}: number of solutions");
     assert_eq!(a.1.len(), b.1.len(), "{what}: number of diagnostics");
+    assert_eq!(a.2.len(), b.2.len(), "{what}: number of late aids");
+    if let Some((i, (x, y))) = a.2.iter().zip(&b.2).enumerate().find(|(_, (x, y))| x != y) {
+        panic!("{what}: late aid {i} differs: {x:?} vs {y:?}");
+    }
     for (i, (x, y)) in a.0.iter().zip(&b.0).enumerate() {
         assert!(
             bytemuck::bytes_of(x) == bytemuck::bytes_of(y),
@@ -190,7 +220,7 @@ fn test_ratio_above_one_means_rejected_for_every_aid() {
     .expect("simulate");
     let mut cfg = SessionConfig::default();
     cfg.navigation.usbl = Some(station.usbl_config());
-    let (_, diagnostics) = replay(&msgs, &cfg);
+    let (_, diagnostics, _) = replay(&msgs, &cfg);
     let mut rejected_usbl = 0;
     for d in &diagnostics {
         let rejected = d.flags & AidDiagnosticsV1::FLAG_REJECTED != 0;
@@ -217,4 +247,98 @@ fn test_ratio_above_one_means_rejected_for_every_aid() {
         }
     }
     assert!(rejected_usbl > 5, "{rejected_usbl} USBL outliers rejected");
+}
+
+/// A log whose messages were written out of time order (each delayed by up to the aid delay, and
+/// then by up to half a second) replays exactly as the log in time order.
+#[test]
+fn replay_of_a_shuffled_log_is_identical() {
+    let msgs = messages("lawnmower", 120.0, 21);
+    let cfg = SessionConfig {
+        aid_delay_s: 0.02,
+        ..Default::default()
+    };
+    let in_order = replay(&msgs, &cfg);
+    assert!(in_order.2.is_empty(), "no late aids in time order");
+    for (max_delay_s, seed) in [(0.02, 1), (0.5, 2)] {
+        let shuffled: Vec<LogMessage> = arrival_order(&msgs, max_delay_s, seed)
+            .into_iter()
+            .map(|(_, m)| m)
+            .collect();
+        let moved = shuffled
+            .windows(2)
+            .filter(|w| match (w[0].sensor(), w[1].sensor()) {
+                (Some(a), Some(b)) => a.host_time_ns() > b.host_time_ns(),
+                _ => false,
+            })
+            .count();
+        assert!(moved > 100, "{moved} messages out of order");
+        assert_same(
+            &in_order,
+            &replay(&shuffled, &cfg),
+            &format!("shuffled by up to {max_delay_s} s"),
+        );
+    }
+}
+
+/// A daemon that received some aids after the IMU had passed their due point applied them late;
+/// its late-aid records in the recording make the replay apply them at the same IMU samples, even
+/// though the recorder wrote the messages in yet another order.
+#[test]
+fn replay_applies_the_daemons_late_aids_where_the_daemon_did() {
+    let msgs = messages("lawnmower", 120.0, 22);
+    let cfg = SessionConfig {
+        aid_delay_s: 0.02,
+        ..Default::default()
+    };
+    // The daemon: deliveries delayed by up to 0.1 s (five times the aid delay).
+    let mut live = Outputs::default();
+    let mut log = Vec::new();
+    let mut session = Session::new(&cfg);
+    for (arrival, m) in arrival_order(&msgs, 0.1, 3) {
+        if let LogMessage::Truth(_) = m {
+            if !session.started() {
+                session
+                    .start(start_of(&msgs), "truth", &mut collect(&mut live))
+                    .expect("start");
+            }
+            continue;
+        }
+        let Some(x) = m.sensor().filter(|_| session.started()) else {
+            continue;
+        };
+        let before = live.2.len();
+        session.feed(&x, &mut collect(&mut live)).expect("feed");
+        // The records reach the recorder when the daemon publishes them.
+        log.extend(
+            live.2[before..]
+                .iter()
+                .map(|r| (arrival, LogMessage::LateAid(*r))),
+        );
+    }
+    session.finish(&mut collect(&mut live)).expect("finish");
+    assert!(live.2.len() > 10, "{} late aids", live.2.len());
+    assert_eq!(live.2.len() as u64, session.late_aids);
+    // The recorder: the same messages, in its own arrival order, with the records.
+    log.extend(arrival_order(&msgs, 0.1, 4));
+    log.sort_by_key(|(t, _)| *t);
+    let recording: Vec<LogMessage> = log.into_iter().map(|(_, m)| m).collect();
+    let replayed = replay(&recording, &cfg);
+    // The replay starts at the first truth record, the live session at its start: compare from
+    // the start on.
+    assert_same(&live, &replayed, "live with late aids vs replay");
+    // Without the records, the replay applies every aid in time and differs.
+    let without: Vec<LogMessage> = recording
+        .into_iter()
+        .filter(|m| !matches!(m, LogMessage::LateAid(_)))
+        .collect();
+    let differs = replay(&without, &cfg);
+    assert!(differs.2.is_empty());
+    assert!(
+        live.0
+            .iter()
+            .zip(&differs.0)
+            .any(|(a, b)| bytemuck::bytes_of(a) != bytemuck::bytes_of(b)),
+        "late aids change the solution"
+    );
 }

@@ -4,7 +4,7 @@
 //! session decides the order in which aids meet the IMU stream (time stamp + aid delay, then
 //! kind, then sequence), so a figure measured by any of them measures the code the daemon runs.
 use auvnav_shm_schema::{
-    DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, UsblFixV1,
+    DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1, MagnetometerV1, UsblFixV1,
 };
 
 /// A sensor message for the navigation session.
@@ -29,5 +29,29 @@ impl SensorMessage {
             SensorMessage::Usbl(m) => m.host_time_ns,
             SensorMessage::Magnetometer(m) => m.host_time_ns,
         }
+    }
+
+    /// The publisher's sequence number.
+    pub fn sequence(&self) -> u64 {
+        match self {
+            SensorMessage::Imu(m) => m.sequence,
+            SensorMessage::Dvl(m) => m.sequence,
+            SensorMessage::Depth(m) => m.sequence,
+            SensorMessage::Gnss(m) => m.sequence,
+            SensorMessage::Usbl(m) => m.sequence,
+            SensorMessage::Magnetometer(m) => m.sequence,
+        }
+    }
+
+    /// The aid topic code of a late-aid record (`LateAidV1::TOPIC_*`); `None` for the IMU.
+    pub fn aid_topic(&self) -> Option<u32> {
+        Some(match self {
+            SensorMessage::Imu(_) => return None,
+            SensorMessage::Dvl(_) => LateAidV1::TOPIC_DVL,
+            SensorMessage::Depth(_) => LateAidV1::TOPIC_DEPTH,
+            SensorMessage::Gnss(_) => LateAidV1::TOPIC_GNSS,
+            SensorMessage::Usbl(_) => LateAidV1::TOPIC_USBL,
+            SensorMessage::Magnetometer(_) => LateAidV1::TOPIC_MAGNETOMETER,
+        })
     }
 }

@@ -11,7 +11,9 @@ use crate::earth::Geodetic;
 use crate::feed::SensorMessage;
 use crate::navigator::Navigator;
 use crate::strapdown::NavState;
-use auvnav_shm_schema::{AidDiagnosticsV1, DvlVelocityV1, ImuSampleV1, NavMode, NavSolutionV1};
+use auvnav_shm_schema::{
+    AidDiagnosticsV1, DvlVelocityV1, ImuSampleV1, LateAidV1, NavMode, NavSolutionV1,
+};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use serde::Serialize;
 
@@ -20,6 +22,9 @@ use serde::Serialize;
 pub enum SessionOutput<'a> {
     Solution(&'a NavSolutionV1),
     Diagnostics(&'a AidDiagnosticsV1),
+    /// An aid message that came after the IMU stream had passed its due point, applied just
+    /// before the IMU sample this record names (the daemon publishes it for replay).
+    LateAid(&'a LateAidV1),
 }
 
 /// Where the initial state came from, stated in the outputs of the tools.
@@ -34,23 +39,21 @@ pub struct InitialReport {
     pub euler_deg: [f64; 3],
 }
 
-/// Order in which queued aid messages are applied: time stamp, then kind, then the publisher's
-/// sequence number. A USBL fix is queued by delivery like the others; the navigator evaluates it
+/// Order in which queued aid messages are applied: time stamp, then kind (`LateAidV1::TOPIC_*`),
+/// then the publisher's sequence number. A USBL fix is queued by delivery like the others; the navigator evaluates it
 /// against the vehicle's pose at its (earlier) time of validity.
-fn aid_key(m: &SensorMessage) -> (u64, u8, u64) {
-    match m {
-        SensorMessage::Dvl(m) => (m.host_time_ns, 0, m.sequence),
-        SensorMessage::Depth(m) => (m.host_time_ns, 1, m.sequence),
-        SensorMessage::Gnss(m) => (m.host_time_ns, 2, m.sequence),
-        SensorMessage::Usbl(m) => (m.host_time_ns, 3, m.sequence),
-        SensorMessage::Magnetometer(m) => (m.host_time_ns, 4, m.sequence),
-        // Never queued: IMU samples are processed as they come.
-        SensorMessage::Imu(m) => (m.host_time_ns, u8::MAX, m.sequence),
-    }
+fn aid_key(m: &SensorMessage) -> (u64, u32, u64) {
+    // IMU samples are never queued (processed as they come): last.
+    (
+        m.host_time_ns(),
+        m.aid_topic().unwrap_or(u32::MAX),
+        m.sequence(),
+    )
 }
 
-/// An aid message waiting for its turn.
-struct Pending(SensorMessage);
+/// An aid message waiting for its turn; `late` when it came after the IMU had passed its due
+/// point.
+struct Pending(SensorMessage, bool);
 
 impl PartialEq for Pending {
     fn eq(&self, o: &Self) -> bool {
@@ -82,8 +85,10 @@ pub struct Session {
     /// Sensor messages before the initial state was known (skipped).
     pub before_start: u64,
     /// Aid messages that arrived after the IMU had passed their time + delay (applied at the
-    /// next IMU sample; a replay cannot reproduce their timing exactly).
+    /// next IMU sample, and reported as [`SessionOutput::LateAid`] so that a recording carries
+    /// where).
     pub late_aids: u64,
+    late_sequence: u64,
     alignment: Option<AlignmentConfig>,
     aligner: Option<InMotionAligner>,
     last_omega: Vector3<f64>,
@@ -116,6 +121,7 @@ impl Session {
             last_imu_ns: 0,
             before_start: 0,
             late_aids: 0,
+            late_sequence: 0,
             alignment: cfg.alignment.clone(),
             aligner: None,
             last_omega: Vector3::zeros(),
@@ -251,9 +257,23 @@ impl Session {
             if aid_key(&p.0).0.saturating_add(self.aid_delay_ns) >= x.host_time_ns {
                 break;
             }
-            let Some(Pending(aid)) = self.pending.pop() else {
+            let Some(Pending(aid, late)) = self.pending.pop() else {
                 break;
             };
+            if late {
+                self.late_sequence += 1;
+                let (aid_host_time_ns, aid_topic, aid_sequence) = aid_key(&aid);
+                let record = LateAidV1 {
+                    host_time_ns: x.host_time_ns,
+                    sequence: self.late_sequence,
+                    imu_sequence: x.sequence,
+                    aid_host_time_ns,
+                    aid_sequence,
+                    aid_topic,
+                    reserved: 0,
+                };
+                out(SessionOutput::LateAid(&record))?;
+            }
             self.apply(aid, out)?;
         }
         self.last_imu_ns = self.last_imu_ns.max(x.host_time_ns);
@@ -613,7 +633,7 @@ impl Session {
         &mut self,
         out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
     ) -> Result<(), E> {
-        while let Some(Pending(aid)) = self.pending.pop() {
+        while let Some(Pending(aid, _)) = self.pending.pop() {
             self.apply(aid, out)?;
         }
         Ok(())
@@ -638,9 +658,10 @@ impl Session {
     /// Queues an aid message (applied before the first IMU sample stamped after its time + the
     /// aid delay); counted as late when the IMU has already passed that point.
     fn queue(&mut self, aid: SensorMessage) {
-        if aid_key(&aid).0.saturating_add(self.aid_delay_ns) < self.last_imu_ns {
+        let late = aid_key(&aid).0.saturating_add(self.aid_delay_ns) < self.last_imu_ns;
+        if late {
             self.late_aids += 1;
         }
-        self.pending.push(Pending(aid));
+        self.pending.push(Pending(aid, late));
     }
 }

@@ -13,7 +13,7 @@ use auvnav_core::session::{Session, SessionOutput};
 use auvnav_shm_schema::bus::{Bus, BusError, BusPublisher, BusSubscriber};
 use auvnav_shm_schema::clock::monotonic_ns;
 use auvnav_shm_schema::{
-    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1,
+    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1, MagnetometerV1,
     NavSolutionV1, ProcessHealthV1, ProcessState, UsblFixV1, qos, topic,
 };
 use iceoryx2::prelude::*;
@@ -92,6 +92,7 @@ impl Csv {
 struct Outputs {
     solution: BusPublisher<NavSolutionV1>,
     diagnostics: BusPublisher<AidDiagnosticsV1>,
+    late_aids: BusPublisher<LateAidV1>,
     nav_csv: Option<Csv>,
     diag_csv: Option<Csv>,
     decimation: u64,
@@ -120,6 +121,12 @@ impl Outputs {
                     csv::write_diagnostics_row(&mut c.w, d)?;
                 }
                 if self.diagnostics.publish(*d).is_err() {
+                    self.errors += 1;
+                }
+            }
+            SessionOutput::LateAid(r) => {
+                // Recorded, so that a replay applies the aid where this daemon did.
+                if self.late_aids.publish(*r).is_err() {
                     self.errors += 1;
                 }
             }
@@ -189,6 +196,9 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
             .map_err(e)?,
         diagnostics: bus
             .publisher::<AidDiagnosticsV1>(topic::NAV_AID_DIAGNOSTICS, qos::NAVIGATION)
+            .map_err(e)?,
+        late_aids: bus
+            .publisher::<LateAidV1>(topic::NAV_LATE_AIDS, qos::NAVIGATION)
             .map_err(e)?,
         nav_csv: Csv::create(&cfg.output.nav_csv, csv::NAV_HEADER)?,
         diag_csv: Csv::create(&cfg.output.diagnostics_csv, csv::DIAGNOSTICS_HEADER)?,

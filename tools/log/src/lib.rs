@@ -26,7 +26,7 @@
 //! its last complete chunk; the reader then reports [`LogError::Truncated`].
 
 use auvnav_shm_schema::{
-    AcousticRangesV1, AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1,
+    AcousticRangesV1, AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1,
     MagnetometerV1, Message, NavSolutionV1, ProcessHealthV1, TruthStateV1, UsblFixV1,
 };
 use mcap::records::{MessageHeader, Metadata, Record};
@@ -374,6 +374,7 @@ impl RawLogMessage {
             s if s == NavSolutionV1::SCHEMA_NAME => LogMessage::NavSolution(self.decode()?),
             s if s == AidDiagnosticsV1::SCHEMA_NAME => LogMessage::AidDiagnostics(self.decode()?),
             s if s == ProcessHealthV1::SCHEMA_NAME => LogMessage::Health(self.decode()?),
+            s if s == LateAidV1::SCHEMA_NAME => LogMessage::LateAid(self.decode()?),
             s if s == TruthStateV1::SCHEMA_NAME => LogMessage::Truth(self.decode()?),
             _ => LogMessage::Unknown,
         })
@@ -393,6 +394,8 @@ pub enum LogMessage {
     NavSolution(NavSolutionV1),
     AidDiagnostics(AidDiagnosticsV1),
     Health(ProcessHealthV1),
+    /// An aid message the daemon applied late, and where (replay applies it there too).
+    LateAid(LateAidV1),
     Truth(TruthStateV1),
     /// A schema this program does not know (a newer or foreign channel): skipped by users.
     Unknown,

@@ -12,8 +12,8 @@ use anyhow::{Context, bail};
 use auvnav_log::{LogError, LogHeader, LogReader, LogWriter, write_log_atomically};
 use auvnav_shm_schema::bus::{Bus, BusSubscriber, Sequenced};
 use auvnav_shm_schema::{
-    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, Message,
-    NavSolutionV1, ProcessHealthV1, RawBytesV1, TruthStateV1, UsblFixV1, qos, topic,
+    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1, MagnetometerV1,
+    Message, NavSolutionV1, ProcessHealthV1, RawBytesV1, TruthStateV1, UsblFixV1, qos, topic,
 };
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -186,9 +186,9 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
         .notes
         .insert("record.prefix".into(), a.prefix.clone());
     let bus = Bus::new(&format!("record{}", std::process::id()), &a.prefix)?;
-    // Aid topics are drained before the IMU in every pass, as the daemon takes them: an aid
-    // that arrived with a backlog of IMU samples is written before them, so that replay meets it
-    // where the daemon did (replay applies messages in the log's order).
+    // Aid topics are drained before the IMU in every pass, as the daemon takes them, so the log
+    // is close to time order; replay puts messages in their time-stamp order anyway (within a
+    // window) and applies aids the daemon took late where its `nav/late_aids` records say.
     let mut channels: Vec<Box<dyn Drain>> = vec![
         channel::<DvlVelocityV1>(&bus, topic::DVL, qos::SENSOR)?,
         channel::<UsblFixV1>(&bus, topic::USBL, qos::SENSOR)?,
@@ -198,6 +198,7 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
         channel::<ImuSampleV1>(&bus, topic::IMU, qos::SENSOR)?,
         channel::<NavSolutionV1>(&bus, topic::NAV_SOLUTION, qos::NAVIGATION)?,
         channel::<AidDiagnosticsV1>(&bus, topic::NAV_AID_DIAGNOSTICS, qos::NAVIGATION)?,
+        channel::<LateAidV1>(&bus, topic::NAV_LATE_AIDS, qos::NAVIGATION)?,
         channel::<ProcessHealthV1>(&bus, topic::HEALTH, qos::HEALTH)?,
         channel::<TruthStateV1>(&bus, topic::TRUTH, qos::SENSOR)?,
     ];
@@ -206,8 +207,19 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
     }
     let mut log =
         LogWriter::create(out, &header).with_context(|| format!("creating {}", out.display()))?;
-    // A second handle to sync the file's data to the disk after each flush.
-    let sync_handle = std::fs::File::open(out).ok();
+    // A second handle syncs the file's data to the disk after each flush, on its own thread: a
+    // sync can take hundreds of milliseconds on a busy disk, while the bus buffers hold a few
+    // hundred milliseconds of a fast topic. The latest request is enough (a bounded channel of
+    // one: a sync still running covers the next).
+    let (sync_tx, sync_rx) = crossbeam::channel::bounded::<()>(1);
+    let syncer = std::fs::File::open(out).ok().map(|f| {
+        std::thread::spawn(move || {
+            while sync_rx.recv().is_ok() {
+                let _ = f.sync_data();
+            }
+            let _ = f.sync_data();
+        })
+    });
     let start = Instant::now();
     let flush_every = Duration::from_secs_f64(a.flush_s);
     let mut next_flush = start + flush_every;
@@ -246,9 +258,7 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
                 failed = Some(format!("flushing {}: {}", out.display(), with_causes(&e)));
                 break;
             }
-            if let Some(f) = &sync_handle {
-                let _ = f.sync_data();
-            }
+            let _ = sync_tx.try_send(());
             summary.flushes += 1;
             next_flush += flush_every;
         }
@@ -288,6 +298,27 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
             summary.error = Some(e);
         }
     }
+    drop(sync_tx);
+    if let Some(h) = syncer {
+        let _ = h.join();
+    }
+    let lost: u64 = summary.topics.values().map(|t| t.gaps).sum();
+    let lossy: Vec<String> = summary
+        .topics
+        .iter()
+        .filter(|(_, t)| t.gaps > 0)
+        .map(|(name, t)| format!("{name} {}", t.gaps))
+        .collect();
+    eprintln!(
+        "auvnav record: stopping; {} messages in {:.1} s, {lost} lost on the bus{}",
+        summary.messages,
+        summary.seconds,
+        if lossy.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", lossy.join(", "))
+        }
+    );
     print(a.json, &summary);
     if summary.error.is_some() {
         bail!(

@@ -204,7 +204,7 @@ pub fn run(a: &ReplayArgs) -> anyhow::Result<ReplayReport> {
                             }
                         }
                         Output::Diagnostics(d) => write_diagnostics_row(&mut diag_w, d)?,
-                        Output::Truth(_) => {}
+                        Output::Truth(_) | Output::LateAid(_) => {}
                     }
                     Ok(())
                 })?
@@ -237,6 +237,7 @@ pub fn run(a: &ReplayArgs) -> anyhow::Result<ReplayReport> {
                         }
                         Output::Diagnostics(d) => w.write(topic::NAV_AID_DIAGNOSTICS, d)?,
                         Output::Truth(t) => w.write(topic::TRUTH, t)?,
+                        Output::LateAid(r) => w.write(topic::NAV_LATE_AIDS, r)?,
                     }
                     Ok(())
                 })?
@@ -347,6 +348,19 @@ pub fn print_report(r: &ReplayReport) {
         println!(
             "  skipped: {} IMU out of order, {} IMU invalid, {} late aids, {} before the initial state; {} IMU gaps bridged",
             n.imu_out_of_order, n.imu_invalid, n.aid_late, r.counts.before_start, n.imu_gaps
+        );
+    }
+    let c = &r.counts;
+    if c.written_out_of_order > 0 || c.late_aid_records > 0 || c.late_aids > 0 {
+        println!(
+            "  order: {} messages written out of time order put in their place ({} beyond the {:.0} s window); \
+             {} aids applied late as the daemon's {} late-aid records say ({} records unmatched)",
+            c.written_out_of_order,
+            c.beyond_reorder_window,
+            super::order::REORDER_WINDOW_NS as f64 * 1e-9,
+            c.late_aids,
+            c.late_aid_records,
+            c.late_aid_records_unmatched
         );
     }
     if let Some(e) = &r.log_error {

@@ -1,9 +1,10 @@
 //! `auvnav replay`: runs a log through the navigation core as fast as it can.
 //!
 //! The log's sensor messages go through the navigation session's feed (`Session::feed`), the
-//! path the daemon runs, in log order; the session orders the aids against the IMU stream as the
-//! daemon does. The
-//! initial state comes from the configuration's `[initial]` table when it has one, otherwise from
+//! path the daemon runs, in time-stamp order ([`order`]: the log's write order can differ from the
+//! order in which the daemon met the messages); the session orders the aids against the IMU stream
+//! as the daemon does, and aids the daemon applied late are applied where its late-aid records
+//! say. The initial state comes from the configuration's `[initial]` table when it has one, otherwise from
 //! the first record of the log's truth channel (simulated truth, or the reference solution of an
 //! imported data set); sensor messages before that are counted and skipped. When the log has a
 //! truth channel, the solution is compared with it at every truth epoch (linear interpolation
@@ -13,6 +14,7 @@
 //! around it (arguments, configuration, outputs, report).
 
 mod command;
+pub mod order;
 pub use command::*;
 
 use crate::accuracy::{Accuracy, AccuracyTracker};
@@ -22,7 +24,7 @@ use auvnav_core::navigator::{NavCounters, Navigator};
 use auvnav_core::session::{Session, SessionOutput};
 use auvnav_core::strapdown::NavState;
 use auvnav_log::{LogError, LogHeader, LogMessage, LogReader, write_log_atomically};
-use auvnav_shm_schema::{AidDiagnosticsV1, NavSolutionV1, TruthStateV1, topic};
+use auvnav_shm_schema::{AidDiagnosticsV1, LateAidV1, NavSolutionV1, TruthStateV1, topic};
 use serde::Serialize;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -51,6 +53,8 @@ pub enum Output<'a> {
     Diagnostics(&'a AidDiagnosticsV1),
     /// A truth record of the input, passed through so outputs can be compared with it.
     Truth(&'a TruthStateV1),
+    /// An aid message this replay applied late (after the IMU had passed its due point).
+    LateAid(&'a LateAidV1),
 }
 
 /// What a replay skipped or could not use, per kind of input.
@@ -77,6 +81,17 @@ pub struct ReplayCounts {
     pub malformed: u64,
     /// Truth records older than the solution they would be compared with (skipped).
     pub truth_late: u64,
+    /// Messages written after a message with a later time stamp (put in their place).
+    pub written_out_of_order: u64,
+    /// Messages written more than the reorder window behind (fed as they came).
+    pub beyond_reorder_window: u64,
+    /// The daemon's records of aids it applied late, found in the log.
+    pub late_aid_records: u64,
+    /// Of those, records whose aid was not found in the window (the replay may differ from the
+    /// live solution from there on).
+    pub late_aid_records_unmatched: u64,
+    /// Aid messages this replay applied late (after the IMU had passed their due point).
+    pub late_aids: u64,
 }
 
 /// Estimated parameters at the end of a replay.
@@ -110,6 +125,7 @@ impl FinalParameters {
 /// The replay state machine, fed one message at a time.
 pub struct Replay {
     session: Session,
+    order: order::FeedOrder,
     tracker: AccuracyTracker,
     has_truth: bool,
     prev_solution: Option<NavSolutionV1>,
@@ -123,6 +139,7 @@ impl Replay {
     pub fn new(cfg: &ReplayConfig, min_distance_m: f64) -> Replay {
         Replay {
             session: Session::new(cfg),
+            order: order::FeedOrder::default(),
             tracker: AccuracyTracker::new(min_distance_m),
             has_truth: false,
             prev_solution: None,
@@ -157,16 +174,50 @@ impl Replay {
                 Ok(())
             }
             SessionOutput::Diagnostics(d) => out(Output::Diagnostics(d)),
+            SessionOutput::LateAid(r) => out(Output::LateAid(r)),
         }
     }
 
-    /// Processes one message in log order; outputs go to `out`.
+    /// Takes one message in log order; the messages whose place in the time-stamp order is
+    /// settled go through the session, their outputs to `out`.
     pub fn process(
         &mut self,
         m: &LogMessage,
         out: &mut dyn FnMut(Output) -> anyhow::Result<()>,
     ) -> anyhow::Result<()> {
         self.counts.messages += 1;
+        match m {
+            LogMessage::Unknown => self.counts.unknown += 1,
+            LogMessage::LateAid(r) => {
+                self.counts.late_aid_records += 1;
+                self.order.apply_late_record(r);
+            }
+            m if self.order.push(m) => {
+                while let Some(m) = self.order.pop_ready() {
+                    self.feed(&m, out)?;
+                }
+            }
+            _ => self.counts.unused += 1,
+        }
+        self.note_order();
+        Ok(())
+    }
+
+    fn note_order(&mut self) {
+        let o = &self.order;
+        self.counts.written_out_of_order = o.out_of_order;
+        self.counts.beyond_reorder_window = o.beyond_window;
+        self.counts.late_aid_records_unmatched = o.late_records_unmatched;
+        self.counts.late_aids = self.session.late_aids;
+        self.counts.before_start = self.session.before_start;
+    }
+
+    /// Feeds one message in time-stamp order.
+    fn feed(
+        &mut self,
+        m: &LogMessage,
+        out: &mut dyn FnMut(Output) -> anyhow::Result<()>,
+    ) -> anyhow::Result<()> {
         let mut fwd = Self::forward(
             &mut self.prev_solution,
             &mut self.pending_truth,
@@ -196,7 +247,6 @@ impl Replay {
                 }
                 self.compare(t);
             }
-            LogMessage::Unknown => self.counts.unknown += 1,
             other => match other.sensor() {
                 Some(x) => {
                     *match x {
@@ -214,7 +264,6 @@ impl Replay {
                 None => self.counts.unused += 1,
             },
         }
-        self.counts.before_start = self.session.before_start;
         Ok(())
     }
 
@@ -223,13 +272,19 @@ impl Replay {
         &mut self,
         out: &mut dyn FnMut(Output) -> anyhow::Result<()>,
     ) -> anyhow::Result<()> {
+        while let Some(m) = self.order.pop_any() {
+            self.feed(&m, out)?;
+        }
         let mut fwd = Self::forward(
             &mut self.prev_solution,
             &mut self.pending_truth,
             &mut self.tracker,
             out,
         );
-        self.session.finish(&mut fwd)
+        self.session.finish(&mut fwd)?;
+        drop(fwd);
+        self.note_order();
+        Ok(())
     }
 
     fn note_time(&mut self, t_ns: u64) {

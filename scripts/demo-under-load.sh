@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Runs `auvnav demo` (real processes on pseudo-terminals) N times in a row while other processes
+# keep every core busy, and counts the runs whose replay of the recording is byte-identical to the
+# live solution.
+#
+#   scripts/demo-under-load.sh [RUNS] [-- extra demo options]
+#
+# Needs the release binaries (cargo build --release). Prints one line per run and a summary; exits
+# 3 when a run did not reproduce (or did not stop cleanly), 0 otherwise.
+set -euo pipefail
+runs=${1:-20}
+shift || true
+[ "${1:-}" = "--" ] && shift
+here=$(cd "$(dirname "$0")/.." && pwd)
+auvnav=${AUVNAV:-$here/target/release/auvnav}
+[ -x "$auvnav" ] || { echo "no $auvnav: run cargo build --release first" >&2; exit 2; }
+cores=$(nproc)
+load=()
+for _ in $(seq "$cores"); do
+    (while :; do :; done) &
+    load+=($!)
+done
+trap 'kill "${load[@]}" 2>/dev/null || true' EXIT
+out=$(mktemp -d)
+identical=0
+for i in $(seq "$runs"); do
+    if "$auvnav" demo --json --out "$out/run$i" "$@" >"$out/run$i.json" 2>"$out/run$i.err"; then
+        identical=$((identical + 1))
+        echo "run $i: byte-identical"
+    else
+        echo "run $i: NOT reproduced (see $out/run$i.json, $out/run$i.err)"
+    fi
+done
+echo "$identical of $runs runs byte-identical with $cores busy-loop processes on $cores cores"
+[ "$identical" -eq "$runs" ] || exit 3
+rm -rf "$out"
