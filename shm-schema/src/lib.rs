@@ -25,6 +25,7 @@
 
 pub mod bus;
 pub mod clock;
+pub mod logging;
 pub mod qos;
 pub mod topic;
 

@@ -77,6 +77,59 @@ pub fn position_rates(lat: f64, height_m: f64, v_ned: &Vector3<f64>) -> Vector3<
     Vector3::new(v_ned.x / rm, v_ned.y / (rn * lat.cos()), -v_ned.z)
 }
 
+/// The Earth model at one latitude and height, from one sine and cosine and one square root:
+/// what the strapdown step needs at the IMU rate. The same quantities as the functions above
+/// (to rounding: `x sqrt(x)` for `x^1.5`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LocalEarth {
+    pub sin_lat: f64,
+    pub cos_lat: f64,
+    /// Meridian radius plus height, R_M + h (m).
+    pub rm_h: f64,
+    /// Prime-vertical radius plus height, R_N + h (m).
+    pub rn_h: f64,
+    /// Normal gravity (m/s^2).
+    pub gravity: f64,
+}
+
+impl LocalEarth {
+    pub fn at(lat: f64, height_m: f64) -> LocalEarth {
+        let (s, c) = lat.sin_cos();
+        let s2 = s * s;
+        let d = 1.0 - E2 * s2;
+        let sd = d.sqrt();
+        let g0 = GAMMA_E * (1.0 + SOMIGLIANA_K * s2) / sd;
+        let h = height_m;
+        LocalEarth {
+            sin_lat: s,
+            cos_lat: c,
+            rm_h: A * (1.0 - E2) / (d * sd) + h,
+            rn_h: A / sd + h,
+            gravity: g0
+                * (1.0 - 2.0 / A * (1.0 + F + M_RATIO - 2.0 * F * s2) * h + 3.0 / (A * A) * h * h),
+        }
+    }
+
+    /// Earth rate in NED, omega_ie^n (rad/s).
+    pub fn earth_rate(&self) -> Vector3<f64> {
+        Vector3::new(OMEGA_IE * self.cos_lat, 0.0, -OMEGA_IE * self.sin_lat)
+    }
+
+    /// Transport rate omega_en^n (rad/s) for NED velocity `v`.
+    pub fn transport_rate(&self, v: &Vector3<f64>) -> Vector3<f64> {
+        Vector3::new(
+            v.y / self.rn_h,
+            -v.x / self.rm_h,
+            -v.y * (self.sin_lat / self.cos_lat) / self.rn_h,
+        )
+    }
+
+    /// Rates of latitude, longitude (rad/s) and height (m/s) for NED velocity `v`.
+    pub fn position_rates(&self, v: &Vector3<f64>) -> Vector3<f64> {
+        Vector3::new(v.x / self.rm_h, v.y / (self.rn_h * self.cos_lat), -v.z)
+    }
+}
+
 /// Earth-centred Earth-fixed coordinates (m) of a geodetic position.
 pub fn to_ecef(p: &Geodetic) -> Vector3<f64> {
     let (sl, cl) = p.latitude_rad.sin_cos();

@@ -153,8 +153,7 @@ impl NavCore {
         let f = f - self.accel_bias;
         self.last_omega_ib = w;
         self.last_f_body = f;
-        let c_before = self.sd.state.c_body_to_ned();
-        self.sd.propagate(&ImuIncrement {
+        let c_before = self.sd.propagate(&ImuIncrement {
             dtheta: w * dt,
             dv: f * dt,
             dt,

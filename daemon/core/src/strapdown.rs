@@ -59,8 +59,9 @@ impl Strapdown {
         Strapdown { state, prev: None }
     }
 
-    /// Integrates one interval ending at `state.time_s + inc.dt`.
-    pub fn propagate(&mut self, inc: &ImuIncrement) {
+    /// Integrates one interval ending at `state.time_s + inc.dt`; returns the attitude matrix
+    /// body → NED at the interval start.
+    pub fn propagate(&mut self, inc: &ImuIncrement) -> Matrix3<f64> {
         let s = &mut self.state;
         let dt = inc.dt;
         let (dth_prev, dv_prev) = match self.prev {
@@ -72,12 +73,12 @@ impl Strapdown {
             + 0.5 * inc.dtheta.cross(&inc.dv)
             + (dth_prev.cross(&inc.dv) + dv_prev.cross(&inc.dtheta)) / 12.0;
 
-        let lat = s.position.latitude_rad;
-        let h = s.position.height_m;
+        // The Earth model at the interval start (one sine/cosine for the whole step).
+        let local = earth::LocalEarth::at(s.position.latitude_rad, s.position.height_m);
         let v_old = s.velocity_ned;
-        let w_ie = earth::earth_rate_ned(lat);
-        let w_en = earth::transport_rate_ned(lat, h, &v_old);
-        let g = earth::gravity_ned(lat, h);
+        let w_ie = local.earth_rate();
+        let w_en = local.transport_rate(&v_old);
+        let g = Vector3::new(0.0, 0.0, local.gravity);
         let c_bn = s.c_body_to_ned();
         let zeta = (w_ie + w_en) * dt;
         let dv_n = c_bn * dv_b - 0.5 * zeta.cross(&(c_bn * inc.dv));
@@ -89,13 +90,14 @@ impl Strapdown {
         s.q_body_to_ned.renormalize_fast();
 
         let v_mean = 0.5 * (v_old + v_new);
-        let rates = earth::position_rates(lat, h, &v_mean);
+        let rates = local.position_rates(&v_mean);
         s.position.latitude_rad += rates.x * dt;
         s.position.longitude_rad += rates.y * dt;
         s.position.height_m += rates.z * dt;
         s.velocity_ned = v_new;
         s.time_s += dt;
         self.prev = Some(*inc);
+        c_bn
     }
 }
 

@@ -345,40 +345,89 @@ impl RawLogMessage {
                 T::SCHEMA_NAME
             )));
         }
-        let expected = CDR_HEADER.len() + std::mem::size_of::<T>();
-        if self.data.len() != expected {
-            return Err(bad(format!(
-                "{} bytes, expected {expected}",
-                self.data.len()
-            )));
-        }
-        if self.data[..4] != CDR_HEADER {
-            return Err(bad(format!(
-                "encapsulation header {:02x?} is not little-endian CDR",
-                &self.data[..4]
-            )));
-        }
-        Ok(bytemuck::pod_read_unaligned(&self.data[4..]))
+        decode_pod(&self.topic, &self.data)
     }
 
     /// Decodes into the typed [`LogMessage`] by schema name.
     pub fn decode_any(&self) -> Result<LogMessage, LogError> {
-        Ok(match &*self.schema_name {
-            s if s == ImuSampleV1::SCHEMA_NAME => LogMessage::Imu(self.decode()?),
-            s if s == DvlVelocityV1::SCHEMA_NAME => LogMessage::Dvl(self.decode()?),
-            s if s == UsblFixV1::SCHEMA_NAME => LogMessage::Usbl(self.decode()?),
-            s if s == DepthV1::SCHEMA_NAME => LogMessage::Depth(self.decode()?),
-            s if s == MagnetometerV1::SCHEMA_NAME => LogMessage::Magnetometer(self.decode()?),
-            s if s == AcousticRangesV1::SCHEMA_NAME => LogMessage::AcousticRanges(self.decode()?),
-            s if s == GnssFixV1::SCHEMA_NAME => LogMessage::Gnss(self.decode()?),
-            s if s == NavSolutionV1::SCHEMA_NAME => LogMessage::NavSolution(self.decode()?),
-            s if s == AidDiagnosticsV1::SCHEMA_NAME => LogMessage::AidDiagnostics(self.decode()?),
-            s if s == ProcessHealthV1::SCHEMA_NAME => LogMessage::Health(self.decode()?),
-            s if s == LateAidV1::SCHEMA_NAME => LogMessage::LateAid(self.decode()?),
-            s if s == TruthStateV1::SCHEMA_NAME => LogMessage::Truth(self.decode()?),
-            _ => LogMessage::Unknown,
-        })
+        decode_bytes(MessageKind::of(&self.schema_name), &self.topic, &self.data)
     }
+}
+
+/// The message types a log channel can carry, resolved once per channel from its schema name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum MessageKind {
+    Imu,
+    Dvl,
+    Usbl,
+    Depth,
+    Magnetometer,
+    AcousticRanges,
+    Gnss,
+    NavSolution,
+    AidDiagnostics,
+    Health,
+    LateAid,
+    Truth,
+    Unknown,
+}
+
+impl MessageKind {
+    fn of(schema_name: &str) -> MessageKind {
+        match schema_name {
+            s if s == ImuSampleV1::SCHEMA_NAME => MessageKind::Imu,
+            s if s == DvlVelocityV1::SCHEMA_NAME => MessageKind::Dvl,
+            s if s == UsblFixV1::SCHEMA_NAME => MessageKind::Usbl,
+            s if s == DepthV1::SCHEMA_NAME => MessageKind::Depth,
+            s if s == MagnetometerV1::SCHEMA_NAME => MessageKind::Magnetometer,
+            s if s == AcousticRangesV1::SCHEMA_NAME => MessageKind::AcousticRanges,
+            s if s == GnssFixV1::SCHEMA_NAME => MessageKind::Gnss,
+            s if s == NavSolutionV1::SCHEMA_NAME => MessageKind::NavSolution,
+            s if s == AidDiagnosticsV1::SCHEMA_NAME => MessageKind::AidDiagnostics,
+            s if s == ProcessHealthV1::SCHEMA_NAME => MessageKind::Health,
+            s if s == LateAidV1::SCHEMA_NAME => MessageKind::LateAid,
+            s if s == TruthStateV1::SCHEMA_NAME => MessageKind::Truth,
+            _ => MessageKind::Unknown,
+        }
+    }
+}
+
+/// `T` from a message's bytes (CDR encapsulation header, then the struct), checking both; the
+/// bytes are read in place (no allocation).
+fn decode_pod<T: Message>(topic: &str, data: &[u8]) -> Result<T, LogError> {
+    let bad = |reason: String| LogError::BadMessage {
+        topic: topic.to_string(),
+        reason,
+    };
+    let expected = CDR_HEADER.len() + std::mem::size_of::<T>();
+    if data.len() != expected {
+        return Err(bad(format!("{} bytes, expected {expected}", data.len())));
+    }
+    if data[..4] != CDR_HEADER {
+        return Err(bad(format!(
+            "encapsulation header {:02x?} is not little-endian CDR",
+            &data[..4]
+        )));
+    }
+    Ok(bytemuck::pod_read_unaligned(&data[4..]))
+}
+
+fn decode_bytes(kind: MessageKind, topic: &str, data: &[u8]) -> Result<LogMessage, LogError> {
+    Ok(match kind {
+        MessageKind::Imu => LogMessage::Imu(decode_pod(topic, data)?),
+        MessageKind::Dvl => LogMessage::Dvl(decode_pod(topic, data)?),
+        MessageKind::Usbl => LogMessage::Usbl(decode_pod(topic, data)?),
+        MessageKind::Depth => LogMessage::Depth(decode_pod(topic, data)?),
+        MessageKind::Magnetometer => LogMessage::Magnetometer(decode_pod(topic, data)?),
+        MessageKind::AcousticRanges => LogMessage::AcousticRanges(decode_pod(topic, data)?),
+        MessageKind::Gnss => LogMessage::Gnss(decode_pod(topic, data)?),
+        MessageKind::NavSolution => LogMessage::NavSolution(decode_pod(topic, data)?),
+        MessageKind::AidDiagnostics => LogMessage::AidDiagnostics(decode_pod(topic, data)?),
+        MessageKind::Health => LogMessage::Health(decode_pod(topic, data)?),
+        MessageKind::LateAid => LogMessage::LateAid(decode_pod(topic, data)?),
+        MessageKind::Truth => LogMessage::Truth(decode_pod(topic, data)?),
+        MessageKind::Unknown => LogMessage::Unknown,
+    })
 }
 
 /// A decoded log message.
@@ -430,12 +479,20 @@ pub struct ChannelInfo {
 /// Streams the records of a log with bounded memory.
 pub struct LogReader<R: Read> {
     source: R,
+    /// The file read, for error messages (`<log>` for other sources).
+    path: PathBuf,
     reader: LinearReader,
     schemas: HashMap<u16, Arc<str>>,
-    channels: HashMap<u16, ChannelInfo>,
+    /// The channels and their message kinds, by channel id.
+    channels: Vec<Option<(ChannelInfo, MessageKind)>>,
     header: Option<LogHeader>,
+    /// `read_header` in progress: return once the header record is read.
+    stop_at_header: bool,
     done: bool,
 }
+
+/// What [`LogReader::next_decoded`] read: a message, or one whose bytes do not match its schema.
+pub type Decoded = Result<LogMessage, LogError>;
 
 impl LogReader<std::io::BufReader<File>> {
     pub fn open(path: &Path) -> Result<Self, LogError> {
@@ -443,7 +500,9 @@ impl LogReader<std::io::BufReader<File>> {
             path: path.to_path_buf(),
             source,
         })?;
-        Ok(Self::new(std::io::BufReader::with_capacity(1 << 20, file)))
+        let mut r = Self::new(std::io::BufReader::with_capacity(1 << 20, file));
+        r.path = path.to_path_buf();
+        Ok(r)
     }
 }
 
@@ -454,10 +513,12 @@ impl<R: Read> LogReader<R> {
             .with_prevalidate_chunk_crcs(true);
         LogReader {
             source,
+            path: PathBuf::from("<log>"),
             reader: LinearReader::new_with_options(options),
             schemas: HashMap::new(),
-            channels: HashMap::new(),
+            channels: Vec::new(),
             header: None,
+            stop_at_header: false,
             done: false,
         }
     }
@@ -469,21 +530,19 @@ impl<R: Read> LogReader<R> {
 
     /// Channels seen so far.
     pub fn channels(&self) -> impl Iterator<Item = &ChannelInfo> {
-        self.channels.values()
+        self.channels.iter().flatten().map(|(c, _)| c)
     }
 
     /// Reads up to the first message and returns the header; fails for logs that are not ours or
     /// are too new. Call before [`Self::next_message`] when the header matters.
     pub fn read_header(&mut self) -> Result<LogHeader, LogError> {
-        while self.header.is_none() {
-            match self.next_record()? {
-                Some(Some(msg)) => {
-                    // A message before the header: keep nothing; the file is not ours.
-                    let _ = msg;
-                    return Err(LogError::MissingHeader);
-                }
-                Some(None) => {}
-                None => return Err(LogError::MissingHeader),
+        if self.header.is_none() {
+            self.stop_at_header = true;
+            let first = self.next_with(|_, _, _, _| ());
+            self.stop_at_header = false;
+            if first?.is_some() {
+                // A message before the header: the file is not ours.
+                return Err(LogError::MissingHeader);
             }
         }
         self.header.clone().ok_or(LogError::MissingHeader)
@@ -491,17 +550,26 @@ impl<R: Read> LogReader<R> {
 
     /// The next message, `Ok(None)` at the end of the log.
     pub fn next_message(&mut self) -> Result<Option<RawLogMessage>, LogError> {
-        loop {
-            match self.next_record()? {
-                Some(Some(m)) => return Ok(Some(m)),
-                Some(None) => continue,
-                None => return Ok(None),
-            }
-        }
+        self.next_with(|ch, _, header, data| RawLogMessage {
+            topic: ch.topic.clone(),
+            schema_name: ch.schema_name.clone(),
+            log_time_ns: header.log_time,
+            data: data.to_vec(),
+        })
     }
 
-    /// `Some(Some(msg))` for a message, `Some(None)` for another record, `None` at the end.
-    fn next_record(&mut self) -> Result<Option<Option<RawLogMessage>>, LogError> {
+    /// The next message decoded in place (no allocation per message): the fast path of replay.
+    /// The inner error is a message whose bytes do not match its schema (the reader goes on).
+    pub fn next_decoded(&mut self) -> Result<Option<Decoded>, LogError> {
+        self.next_with(|ch, kind, _, data| decode_bytes(kind, &ch.topic, data))
+    }
+
+    /// The next message through `f`, records of other kinds handled on the way; `None` at the
+    /// end.
+    fn next_with<T>(
+        &mut self,
+        mut f: impl FnMut(&ChannelInfo, MessageKind, &MessageHeader, &[u8]) -> T,
+    ) -> Result<Option<T>, LogError> {
         if self.done {
             return Ok(None);
         }
@@ -521,11 +589,27 @@ impl<R: Read> LogReader<R> {
                 }
                 Some(Ok(LinearReadEvent::ReadRequest(n))) => Err(n),
                 Some(Ok(LinearReadEvent::Record { data, opcode })) => {
-                    Ok(mcap::parse_record(opcode, data)?.into_owned())
+                    match mcap::parse_record(opcode, data)? {
+                        // Messages are read in place.
+                        Record::Message { header, data } => {
+                            let id = header.channel_id;
+                            let Some(Some((ch, kind))) = self.channels.get(usize::from(id)) else {
+                                return Err(LogError::UnknownChannel(id));
+                            };
+                            return Ok(Some(f(ch, *kind, &header, &data)));
+                        }
+                        other => Ok(other.into_owned()),
+                    }
                 }
             };
             let need = match event {
-                Ok(record) => return self.handle(record).map(Some),
+                Ok(record) => {
+                    self.handle(record)?;
+                    if self.stop_at_header && self.header.is_some() {
+                        return Ok(None);
+                    }
+                    continue;
+                }
                 Err(n) => n,
             };
             let buf = self.reader.insert(need);
@@ -536,7 +620,7 @@ impl<R: Read> LogReader<R> {
                     Err(source) => {
                         self.done = true;
                         return Err(LogError::Io {
-                            path: PathBuf::from("<log>"),
+                            path: self.path.clone(),
                             source,
                         });
                     }
@@ -546,7 +630,8 @@ impl<R: Read> LogReader<R> {
         }
     }
 
-    fn handle(&mut self, record: Record<'_>) -> Result<Option<RawLogMessage>, LogError> {
+    /// A record other than a message.
+    fn handle(&mut self, record: Record<'_>) -> Result<(), LogError> {
         match record {
             Record::Schema { header, .. } => {
                 self.schemas
@@ -558,8 +643,12 @@ impl<R: Read> LogReader<R> {
                     .get(&c.schema_id)
                     .cloned()
                     .unwrap_or_else(|| Arc::from(""));
-                self.channels.insert(
-                    c.id,
+                let i = usize::from(c.id);
+                if self.channels.len() <= i {
+                    self.channels.resize(i + 1, None);
+                }
+                let kind = MessageKind::of(&schema_name);
+                self.channels[i] = Some((
                     ChannelInfo {
                         id: c.id,
                         topic: Arc::from(c.topic.as_str()),
@@ -567,7 +656,8 @@ impl<R: Read> LogReader<R> {
                         message_encoding: c.message_encoding,
                         metadata: c.metadata,
                     },
-                );
+                    kind,
+                ));
             }
             Record::Metadata(m) if m.name == HEADER_METADATA && self.header.is_none() => {
                 let h = LogHeader::from_metadata(m.metadata)?;
@@ -578,21 +668,9 @@ impl<R: Read> LogReader<R> {
                 }
                 self.header = Some(h);
             }
-            Record::Message { header, data } => {
-                let ch = self
-                    .channels
-                    .get(&header.channel_id)
-                    .ok_or(LogError::UnknownChannel(header.channel_id))?;
-                return Ok(Some(RawLogMessage {
-                    topic: ch.topic.clone(),
-                    schema_name: ch.schema_name.clone(),
-                    log_time_ns: header.log_time,
-                    data: data.into_owned(),
-                }));
-            }
             _ => {}
         }
-        Ok(None)
+        Ok(())
     }
 }
 

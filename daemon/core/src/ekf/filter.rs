@@ -160,13 +160,25 @@ impl ErrorFilter {
         self.p[(index, index)] = std * std;
     }
 
-    /// The transition factor `exp(-dt / tau)` of each parameter state over `dt`.
+    /// The transition factor `exp(-dt / tau)` of each parameter state over `dt` (1 for the
+    /// constants).
     pub fn param_transition(&self, dt: f64) -> SVector<f64, PARAMS> {
-        self.param_correlation_s.map(|tau| (-dt / tau).exp())
+        self.param_correlation_s.map(|tau| {
+            if tau.is_finite() {
+                (-dt / tau).exp()
+            } else {
+                1.0
+            }
+        })
     }
 
     /// Propagates the covariance over `dt` with `F` held constant: `Phi = I + F dt + (F dt)^2/2`,
     /// `Q` from the noise densities mapped through the body-to-NED rotation.
+    ///
+    /// The bias rows of `F` are zero, so `Phi = [[A, B], [0, I]]` with `A` the 9 x 9 navigation
+    /// block and `B` its 9 x 6 coupling to the biases. The product is formed in these blocks
+    /// (`T = Phi P` for the navigation rows only, then `T Phi^T`), about half the work of the dense
+    /// 15 x 15 products; the result is the same matrix.
     pub fn predict(
         &mut self,
         f: &CoreMatrix,
@@ -174,56 +186,83 @@ impl ErrorFilter {
         q: &ProcessNoise,
         dt: f64,
     ) {
+        const NAV: usize = 9;
+        const BIAS: usize = CORE - NAV;
+        const _: () = assert!(BG == NAV, "the biases follow the navigation states");
         let fdt = f * dt;
-        let phi = CoreMatrix::identity() + fdt + 0.5 * fdt * fdt;
-        let mut qd = CoreMatrix::zeros();
-        let c = c_body_to_ned;
-        let qv = c * c.transpose() * (q.accel_noise * q.accel_noise * dt);
-        let qa = c * c.transpose() * (q.gyro_noise * q.gyro_noise * dt);
-        qd.fixed_view_mut::<3, 3>(VEL, VEL).copy_from(&qv);
-        qd.fixed_view_mut::<3, 3>(ATT, ATT).copy_from(&qa);
-        for i in 0..3 {
-            qd[(BG + i, BG + i)] = q.gyro_bias_walk * q.gyro_bias_walk * dt;
-            qd[(BA + i, BA + i)] = q.accel_bias_walk * q.accel_bias_walk * dt;
+        // Only the navigation rows of Phi differ from the identity.
+        let fdt_nav: SMatrix<f64, NAV, CORE> = fdt.fixed_view::<NAV, CORE>(0, 0).into_owned();
+        let mut phi_nav = fdt_nav + 0.5 * fdt_nav * fdt;
+        for i in 0..NAV {
+            phi_nav[(i, i)] += 1.0;
         }
-        let p_cc: CoreMatrix = self.p.fixed_view::<CORE, CORE>(0, 0).into_owned();
-        let p_cp: SMatrix<f64, CORE, PARAMS> =
-            self.p.fixed_view::<CORE, PARAMS>(0, CORE).into_owned();
-        let p_cc = phi * p_cc * phi.transpose() + qd;
-        let a = self.param_transition(dt);
-        let mut p_cp = phi * p_cp;
-        let mut p_pp: SMatrix<f64, PARAMS, PARAMS> =
-            self.p.fixed_view::<PARAMS, PARAMS>(CORE, CORE).into_owned();
-        for j in 0..PARAMS {
-            if a[j] < 1.0 {
-                p_cp.column_mut(j).scale_mut(a[j]);
-                for i in 0..PARAMS {
-                    p_pp[(i, j)] *= a[j];
-                    p_pp[(j, i)] *= a[j];
-                }
-                p_pp[(j, j)] += self.param_stationary_std[j].powi(2) * (1.0 - a[j] * a[j]);
+        // T = (Phi P) for the navigation rows, every column (core and parameter states); the
+        // bias rows of Phi P are those of P.
+        let t: SMatrix<f64, NAV, N> = phi_nav * self.p.fixed_view::<CORE, N>(0, 0);
+        let t_bias: SMatrix<f64, NAV, BIAS> = t.fixed_view::<NAV, BIAS>(0, NAV).into_owned();
+        let mut p_nn: SMatrix<f64, NAV, NAV> =
+            t.fixed_view::<NAV, CORE>(0, 0) * phi_nav.transpose();
+        let c = c_body_to_ned;
+        let cct = c * c.transpose();
+        let qv = cct * (q.accel_noise * q.accel_noise * dt);
+        let qa = cct * (q.gyro_noise * q.gyro_noise * dt);
+        for i in 0..3 {
+            for j in 0..3 {
+                p_nn[(VEL + i, VEL + j)] += qv[(i, j)];
+                p_nn[(ATT + i, ATT + j)] += qa[(i, j)];
             }
         }
-        self.p.fixed_view_mut::<CORE, CORE>(0, 0).copy_from(&p_cc);
-        self.p
-            .fixed_view_mut::<CORE, PARAMS>(0, CORE)
-            .copy_from(&p_cp);
-        self.p
-            .fixed_view_mut::<PARAMS, CORE>(CORE, 0)
-            .copy_from(&p_cp.transpose());
-        self.p
-            .fixed_view_mut::<PARAMS, PARAMS>(CORE, CORE)
-            .copy_from(&p_pp);
-        self.symmetrise();
+        let a_par = self.param_transition(dt);
+        // The only block not symmetric by construction (the covariance was symmetric before).
+        let p_nn = 0.5 * (p_nn + p_nn.transpose());
+        let p = &mut self.p;
+        p.fixed_view_mut::<NAV, NAV>(0, 0).copy_from(&p_nn);
+        // Phi P Phi^T: navigation x bias = T's bias columns; bias x bias unchanged.
+        p.fixed_view_mut::<NAV, BIAS>(0, NAV).copy_from(&t_bias);
+        p.fixed_view_mut::<BIAS, NAV>(NAV, 0)
+            .copy_from(&t_bias.transpose());
+        for i in 0..3 {
+            p[(BG + i, BG + i)] += q.gyro_bias_walk * q.gyro_bias_walk * dt;
+            p[(BA + i, BA + i)] += q.accel_bias_walk * q.accel_bias_walk * dt;
+        }
+        // Core x parameter: Phi P_cp (navigation rows from T, bias rows unchanged).
+        let t_par: SMatrix<f64, NAV, PARAMS> = t.fixed_view::<NAV, PARAMS>(0, CORE).into_owned();
+        p.fixed_view_mut::<NAV, PARAMS>(0, CORE).copy_from(&t_par);
+        p.fixed_view_mut::<PARAMS, NAV>(CORE, 0)
+            .copy_from(&t_par.transpose());
+        // Gauss-Markov parameter states: P_cp A, A P_pp A + their driving noise.
+        for j in 0..PARAMS {
+            if a_par[j] < 1.0 {
+                let col = CORE + j;
+                for i in 0..N {
+                    if i != col {
+                        p[(i, col)] *= a_par[j];
+                        p[(col, i)] *= a_par[j];
+                    }
+                }
+                p[(col, col)] = p[(col, col)] * a_par[j] * a_par[j]
+                    + self.param_stationary_std[j].powi(2) * (1.0 - a_par[j] * a_par[j]);
+            }
+        }
     }
 
+    /// Makes the covariance exactly symmetric (in place).
     fn symmetrise(&mut self) {
-        self.p = 0.5 * (self.p + self.p.transpose());
+        let p = &mut self.p;
+        for j in 0..N {
+            for i in (j + 1)..N {
+                let v = 0.5 * (p[(i, j)] + p[(j, i)]);
+                p[(i, j)] = v;
+                p[(j, i)] = v;
+            }
+        }
     }
 
     /// Linear update for `y = h(x_est) - z = H dx + noise` with noise covariance `r`, gated at
     /// `gate` (chi-square value of the NIS). Returns the error-state estimate to apply (zero when
-    /// rejected) and the report. Joseph form.
+    /// rejected) and the report. Joseph form `(I - K H) P (I - K H)^T + K R K^T`, evaluated
+    /// expanded as `P - K U^T - U K^T + K S K^T` with `U = P H^T`, `S = H U + R`: the same matrix
+    /// for any gain, in O(N^2 M) rather than O(N^3).
     pub fn update<const M: usize>(
         &mut self,
         y: &SVector<f64, M>,
@@ -231,7 +270,8 @@ impl ErrorFilter {
         r: &SMatrix<f64, M, M>,
         gate: f64,
     ) -> Result<(StateVector, UpdateReport<M>), FilterError> {
-        let s = h * self.p * h.transpose() + r;
+        let u = self.p * h.transpose();
+        let s = h * u + r;
         let s_inv = s.try_inverse().ok_or(FilterError::SingularInnovation)?;
         let nis = (y.transpose() * s_inv * y)[(0, 0)];
         let outcome = super::gate::nis(nis, gate);
@@ -244,10 +284,10 @@ impl ErrorFilter {
         if !report.fused {
             return Ok((StateVector::zeros(), report));
         }
-        let k = self.p * h.transpose() * s_inv;
+        let k = u * s_inv;
         let dx = k * y;
-        let ikh = Covariance::identity() - k * h;
-        self.p = ikh * self.p * ikh.transpose() + k * r * k.transpose();
+        let ku = k * u.transpose();
+        self.p += k * (s * k.transpose()) - ku - ku.transpose();
         self.symmetrise();
         for i in 0..N {
             let v = self.p[(i, i)];
@@ -279,5 +319,93 @@ mod tests {
             .update(&SVector::<f64, 1>::new(100.0), &h, &r, 10.83)
             .expect("update");
         assert!(!rep.fused && dx == StateVector::zeros());
+    }
+
+    /// A symmetric positive definite covariance with correlations everywhere.
+    fn dense_covariance() -> Covariance {
+        let mut x = 0.37_f64;
+        let m = Covariance::from_fn(|_, _| {
+            x = (x * 3.7 + 0.13).fract();
+            x - 0.5
+        });
+        m * m.transpose() + Covariance::identity() * 0.1
+    }
+
+    fn max_relative_difference(a: &Covariance, b: &Covariance) -> f64 {
+        (a - b).abs().max() / b.abs().max()
+    }
+
+    #[test]
+    fn block_propagation_equals_the_dense_product() {
+        let inputs = DynamicsInputs {
+            c_body_to_ned: *nalgebra::Rotation3::from_euler_angles(0.1, -0.2, 2.0).matrix(),
+            specific_force_ned: Vector3::new(0.3, -0.2, -9.81),
+            velocity_ned: Vector3::new(2.0, 0.5, 0.1),
+            latitude_rad: 0.6,
+            height_m: -40.0,
+        };
+        let f = dynamics_matrix(&inputs);
+        let q = ProcessNoise {
+            gyro_noise: 1e-5,
+            accel_noise: 1e-4,
+            gyro_bias_walk: 1e-8,
+            accel_bias_walk: 1e-7,
+        };
+        let dt = 0.05;
+        let mut filter = ErrorFilter::new(&StateVector::from_element(1.0));
+        filter.p = dense_covariance();
+        filter.set_gauss_markov(USBL, 60.0, 0.5);
+        filter.set_gauss_markov(USBL + 1, 30.0, 0.2);
+        let before = filter.p;
+        filter.predict(&f, &inputs.c_body_to_ned, &q, dt);
+        // The dense reference: P_cc <- Phi P_cc Phi^T + Q, P_cp <- Phi P_cp A, P_pp <- A P_pp A + Q_p.
+        let fdt = f * dt;
+        let phi = CoreMatrix::identity() + fdt + 0.5 * fdt * fdt;
+        let mut big_phi = Covariance::identity();
+        big_phi.fixed_view_mut::<CORE, CORE>(0, 0).copy_from(&phi);
+        let a = filter.param_transition(dt);
+        for j in 0..PARAMS {
+            big_phi[(CORE + j, CORE + j)] = a[j];
+        }
+        let mut qd = Covariance::zeros();
+        let c = inputs.c_body_to_ned;
+        qd.fixed_view_mut::<3, 3>(VEL, VEL)
+            .copy_from(&(c * c.transpose() * (q.accel_noise * q.accel_noise * dt)));
+        qd.fixed_view_mut::<3, 3>(ATT, ATT)
+            .copy_from(&(c * c.transpose() * (q.gyro_noise * q.gyro_noise * dt)));
+        for i in 0..3 {
+            qd[(BG + i, BG + i)] = q.gyro_bias_walk * q.gyro_bias_walk * dt;
+            qd[(BA + i, BA + i)] = q.accel_bias_walk * q.accel_bias_walk * dt;
+        }
+        for j in 0..PARAMS {
+            qd[(CORE + j, CORE + j)] = filter.param_stationary_std[j].powi(2) * (1.0 - a[j] * a[j]);
+        }
+        let reference = big_phi * before * big_phi.transpose() + qd;
+        let d = max_relative_difference(&filter.p, &reference);
+        assert!(d < 1e-13, "relative difference {d:e}");
+    }
+
+    #[test]
+    fn expanded_joseph_update_equals_the_product_form() {
+        let mut filter = ErrorFilter::new(&StateVector::from_element(1.0));
+        filter.p = dense_covariance();
+        let before = filter.p;
+        let mut h = SMatrix::<f64, 3, N>::zeros();
+        for i in 0..3 {
+            h[(i, VEL + i)] = 1.0;
+            h[(i, DVL_SCALE)] = 0.3 * (i as f64 + 1.0);
+            h[(i, ATT + (i + 1) % 3)] = -0.5;
+        }
+        let r = SMatrix::<f64, 3, 3>::from_diagonal(&Vector3::new(0.01, 0.02, 0.03));
+        let y = Vector3::new(0.1, -0.05, 0.02);
+        let (dx, rep) = filter.update(&y, &h, &r, 1e9).expect("update");
+        assert!(rep.fused);
+        let s = h * before * h.transpose() + r;
+        let k = before * h.transpose() * s.try_inverse().expect("S invertible");
+        let ikh = Covariance::identity() - k * h;
+        let reference = ikh * before * ikh.transpose() + k * r * k.transpose();
+        let d = max_relative_difference(&filter.p, &reference);
+        assert!(d < 1e-12, "relative difference {d:e}");
+        assert!((dx - k * y).abs().max() < 1e-12);
     }
 }

@@ -67,8 +67,8 @@ pub fn run_log(
         .read_header()
         .with_context(|| format!("reading {}", log.display()))?;
     loop {
-        let raw = match reader.next_message() {
-            Ok(Some(raw)) => raw,
+        let decoded = match reader.next_decoded() {
+            Ok(Some(d)) => d,
             Ok(None) => {
                 replay.finish(out)?;
                 return Ok((header, None));
@@ -79,7 +79,7 @@ pub fn run_log(
             }
             Err(e) => return Err(e).with_context(|| format!("reading {}", log.display())),
         };
-        match raw.decode_any() {
+        match decoded {
             Ok(m) => replay.process(&m, out)?,
             Err(_) => replay.counts.malformed += 1,
         }
