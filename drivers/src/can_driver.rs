@@ -350,7 +350,9 @@ pub fn run_with_source(
             None => timeouts += 1,
         }
     }
-    eprintln!(
+    tracing::info!(
+        frames = depth.counters.frames,
+        published = depth.counters.published,
         "{}: stopping; {} frames, {} depth messages published, {} unknown identifiers, {} invalid",
         cfg.name,
         depth.counters.frames,
@@ -457,17 +459,18 @@ pub fn main() -> std::process::ExitCode {
     use clap::Parser;
     use std::process::ExitCode;
     let args = CanDriverArgs::parse();
+    auvnav_shm_schema::logging::init();
     let (cfg, mut depth) = match load(&args.config) {
         Ok(x) => x,
         Err(e) => {
-            eprintln!("auvnav-can: {e}");
+            tracing::error!("auvnav-can: {e}");
             return ExitCode::from(2);
         }
     };
     if args.check_config {
         match toml::to_string_pretty(&cfg) {
             Ok(s) => print!("{s}"),
-            Err(e) => eprintln!("auvnav-can: {e}"),
+            Err(e) => tracing::error!("auvnav-can: {e}"),
         }
         return ExitCode::SUCCESS;
     }
@@ -475,16 +478,16 @@ pub fn main() -> std::process::ExitCode {
         let text = match std::fs::read_to_string(path) {
             Ok(t) => t,
             Err(e) => {
-                eprintln!("auvnav-can: reading {path}: {e}");
+                tracing::error!("auvnav-can: reading {path}: {e}");
                 return ExitCode::from(2);
             }
         };
         let (frames, bad) = parse_candump(&text);
         if bad > 0 {
-            eprintln!("auvnav-can: {path}: {bad} lines are not candump frames (skipped)");
+            tracing::warn!("auvnav-can: {path}: {bad} lines are not candump frames (skipped)");
         }
         if !(args.speed.is_finite() && (0.01..=10_000.0).contains(&args.speed)) {
-            eprintln!("auvnav-can: --speed {}: expected 0.01..=10000", args.speed);
+            tracing::error!("auvnav-can: --speed {}: expected 0.01..=10000", args.speed);
             return ExitCode::from(2);
         }
         let mut source = PacedFrames::new(frames, args.speed);
@@ -497,7 +500,7 @@ pub fn main() -> std::process::ExitCode {
         match SocketCanSource::open(&cfg.interface, Duration::from_secs_f64(cfg.read_timeout_s)) {
             Ok(mut source) => run_with_source(&cfg, &mut depth, &mut source, false),
             Err(e) => {
-                eprintln!("auvnav-can: {e}");
+                tracing::error!("auvnav-can: {e}");
                 return ExitCode::from(3);
             }
         }
@@ -505,7 +508,7 @@ pub fn main() -> std::process::ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("auvnav-can: {e}");
+            tracing::error!("auvnav-can: {e}");
             ExitCode::from(1)
         }
     }

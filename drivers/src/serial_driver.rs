@@ -402,7 +402,7 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
     let mut next_health = 0u64;
     let mut last_open_error = String::new();
     let mut buf = vec![0u8; 64 * 1024];
-    eprintln!(
+    tracing::info!(
         "{name}: {} on {} at {} baud, publishing on {}/{}{} (mounting rpy {:?} deg, lever arm {:?} m)",
         cfg.protocol.name(),
         cfg.serial.port,
@@ -458,7 +458,7 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
                 Ok(p) => {
                     if ever_open {
                         health.reconnects += 1;
-                        eprintln!("{name}: {} reopened", cfg.serial.port);
+                        tracing::info!("{name}: {} reopened", cfg.serial.port);
                     }
                     ever_open = true;
                     port = Some(p);
@@ -471,9 +471,10 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
                     health.open_failures += 1;
                     let msg = e.to_string();
                     if msg != last_open_error {
-                        eprintln!(
+                        tracing::warn!(
                             "{name}: cannot open {}: {msg}; retrying with back-off up to {} s",
-                            cfg.serial.port, t.reconnect_max_s
+                            cfg.serial.port,
+                            t.reconnect_max_s
                         );
                         last_open_error = msg;
                     }
@@ -486,7 +487,7 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
         };
         match p.read(&mut buf) {
             Ok(0) => {
-                eprintln!("{name}: {} hung up", cfg.serial.port);
+                tracing::warn!("{name}: {} hung up", cfg.serial.port);
                 port = None;
                 state = ProcessState::Reconnecting;
                 next_attempt = monotonic_ns();
@@ -495,7 +496,7 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
                 let host_ns = monotonic_ns();
                 last_bytes = host_ns;
                 if silent {
-                    eprintln!("{name}: data again on {}", cfg.serial.port);
+                    tracing::info!("{name}: data again on {}", cfg.serial.port);
                     silent = false;
                 }
                 if let Some(rp) = raw_pub.as_mut() {
@@ -532,21 +533,25 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
                     silent = true;
                     health.timeouts += 1;
                     state = ProcessState::Reconnecting;
-                    eprintln!(
+                    tracing::warn!(
                         "{name}: no data on {} for {} s",
-                        cfg.serial.port, t.silence_timeout_s
+                        cfg.serial.port,
+                        t.silence_timeout_s
                     );
                 }
             }
             Err(e) => {
-                eprintln!("{name}: {} lost: {e}", cfg.serial.port);
+                tracing::warn!(device = %cfg.serial.port, error = %e, "{name}: {} lost: {e}", cfg.serial.port);
                 port = None;
                 state = ProcessState::Reconnecting;
                 next_attempt = monotonic_ns() + (backoff_s * 1e9) as u64;
             }
         }
     }
-    eprintln!(
+    tracing::info!(
+        published = health.published,
+        checksum_errors = decoder.stats().checksum_errors,
+        reconnects = health.reconnects,
         "{name}: stopping; {} messages published, {} checksum errors, {} reconnects",
         health.published,
         decoder.stats().checksum_errors,
@@ -572,24 +577,25 @@ pub struct SerialDriverArgs {
 pub fn main_for(class: DeviceClass) -> std::process::ExitCode {
     use clap::Parser;
     let args = SerialDriverArgs::parse();
+    auvnav_shm_schema::logging::init();
     let cfg = match SerialDriverConfig::load(&args.config, class) {
         Ok(c) => c,
         Err(e) => {
-            eprintln!("auvnav-{}: {e}", class.name());
+            tracing::error!("auvnav-{}: {e}", class.name());
             return std::process::ExitCode::from(2);
         }
     };
     if args.check_config {
         match toml::to_string_pretty(&cfg) {
             Ok(s) => print!("{s}"),
-            Err(e) => eprintln!("auvnav-{}: {e}", class.name()),
+            Err(e) => tracing::error!("auvnav-{}: {e}", class.name()),
         }
         return std::process::ExitCode::SUCCESS;
     }
     match run(&cfg) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("auvnav-{}: {e}", class.name());
+            tracing::error!("auvnav-{}: {e}", class.name());
             std::process::ExitCode::from(1)
         }
     }

@@ -52,7 +52,7 @@ impl Watch {
     }
     fn seen(&mut self, now: u64) {
         if self.lost {
-            eprintln!("auvnavd: {} back", self.name);
+            tracing::info!(sensor = self.name, "auvnavd: {} back", self.name);
             self.lost = false;
         }
         self.last_ns = now;
@@ -62,7 +62,8 @@ impl Watch {
         if self.deadline_ns > 0 && !self.lost && now.saturating_sub(self.last_ns) > self.deadline_ns
         {
             self.lost = true;
-            eprintln!(
+            tracing::warn!(
+                sensor = self.name,
                 "auvnavd: {} lost (nothing for {:.2} s)",
                 self.name,
                 self.deadline_ns as f64 * 1e-9
@@ -93,6 +94,7 @@ struct Outputs {
     solution: BusPublisher<NavSolutionV1>,
     diagnostics: BusPublisher<AidDiagnosticsV1>,
     late_aids: BusPublisher<LateAidV1>,
+    late_aids_applied: u64,
     nav_csv: Option<Csv>,
     diag_csv: Option<Csv>,
     decimation: u64,
@@ -125,6 +127,19 @@ impl Outputs {
                 }
             }
             SessionOutput::LateAid(r) => {
+                self.late_aids_applied += 1;
+                if self.late_aids_applied <= 10 {
+                    tracing::warn!(
+                        aid_topic = r.aid_topic,
+                        aid_sequence = r.aid_sequence,
+                        aid_host_time_ns = r.aid_host_time_ns,
+                        imu_sequence = r.imu_sequence,
+                        "auvnavd: an aid message came after the IMU had passed its time + aid delay; \
+                         applied before the next IMU sample and recorded on {} (further ones are \
+                         counted, not logged)",
+                        topic::NAV_LATE_AIDS
+                    );
+                }
                 // Recorded, so that a replay applies the aid where this daemon did.
                 if self.late_aids.publish(*r).is_err() {
                     self.errors += 1;
@@ -200,6 +215,7 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
         late_aids: bus
             .publisher::<LateAidV1>(topic::NAV_LATE_AIDS, qos::NAVIGATION)
             .map_err(e)?,
+        late_aids_applied: 0,
         nav_csv: Csv::create(&cfg.output.nav_csv, csv::NAV_HEADER)?,
         diag_csv: Csv::create(&cfg.output.diagnostics_csv, csv::DIAGNOSTICS_HEADER)?,
         decimation: u64::from(cfg.output.solution_decimation.max(1)),
@@ -244,9 +260,11 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
         Vec::new(),
     );
     let mut state = ProcessState::Starting;
-    eprintln!(
+    tracing::info!(
         "auvnavd: running under {}/ (aid delay {} s, solution every {} IMU samples)",
-        cfg.prefix, cfg.aid_delay_s, cfg.output.solution_decimation
+        cfg.prefix,
+        cfg.aid_delay_s,
+        cfg.output.solution_decimation
     );
     let publish_health = |hp: &mut BusPublisher<ProcessHealthV1>,
                           out: &Outputs,
@@ -368,7 +386,7 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
         missed_deadlines,
         ProcessState::Stopping,
     );
-    eprintln!(
+    tracing::info!(
         "auvnavd: stopping; {} solutions ({} published), {} late aid messages, {} lost on the bus, {} missed deadlines; USBL fixes: {}; magnetometer: {}",
         out.solutions,
         out.published,
@@ -428,36 +446,37 @@ fn load(path: &str) -> Result<DaemonConfig, String> {
 fn main() -> ExitCode {
     use clap::Parser;
     let args = Args::parse();
+    auvnav_shm_schema::logging::init();
     if let Some(path) = &args.check_config {
         return match load(path) {
             Ok(cfg) => {
                 match toml::to_string_pretty(&cfg) {
                     Ok(s) => print!("{s}"),
-                    Err(x) => eprintln!("auvnavd: {x}"),
+                    Err(x) => tracing::error!("auvnavd: {x}"),
                 }
                 ExitCode::SUCCESS
             }
             Err(x) => {
-                eprintln!("auvnavd: {x}");
+                tracing::error!("auvnavd: {x}");
                 ExitCode::from(2)
             }
         };
     }
     let Some(path) = &args.config else {
-        eprintln!("auvnavd: --config FILE is required (or --check-config FILE)");
+        tracing::error!("auvnavd: --config FILE is required (or --check-config FILE)");
         return ExitCode::from(2);
     };
     let cfg = match load(path) {
         Ok(c) => c,
         Err(x) => {
-            eprintln!("auvnavd: {x}");
+            tracing::error!("auvnavd: {x}");
             return ExitCode::from(2);
         }
     };
     match run(&cfg) {
         Ok(()) => ExitCode::SUCCESS,
         Err(x) => {
-            eprintln!("auvnavd: {x}");
+            tracing::error!("auvnavd: {x}");
             ExitCode::from(1)
         }
     }

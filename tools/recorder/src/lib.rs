@@ -172,6 +172,7 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
     let Some(out) = &a.out else {
         bail!("--out FILE is required");
     };
+    auvnav_shm_schema::logging::init();
     if !(a.flush_s.is_finite() && (0.05..=60.0).contains(&a.flush_s)) {
         bail!("--flush-s {}: expected 0.05..=60 s", a.flush_s);
     }
@@ -228,7 +229,7 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
         ..Default::default()
     };
     let mut counts = vec![0u64; channels.len()];
-    eprintln!(
+    tracing::info!(
         "auvnav record: {} topics under {}/ -> {}",
         channels.len(),
         a.prefix,
@@ -290,7 +291,7 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
         }
         Some(e) => {
             // Whatever was flushed stays readable; the unfinished tail is not indexed.
-            eprintln!(
+            tracing::error!(
                 "auvnav record: {e}; stopped. The log is readable up to its last flush (use \
                  `auvnav record --recover {}` for an indexed copy).",
                 out.display()
@@ -309,7 +310,9 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
         .filter(|(_, t)| t.gaps > 0)
         .map(|(name, t)| format!("{name} {}", t.gaps))
         .collect();
-    eprintln!(
+    tracing::info!(
+        messages = summary.messages,
+        lost,
         "auvnav record: stopping; {} messages in {:.1} s, {lost} lost on the bus{}",
         summary.messages,
         summary.seconds,
