@@ -46,6 +46,7 @@ fn replay(path: &Path) -> anyhow::Result<ReplayReport> {
         min_distance: 100.0,
         usbl: None,
         json: false,
+        compare_recorded: false,
     })
 }
 

@@ -196,7 +196,13 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
             p @ (auvnav_drivers::device::Protocol::Xsens
             | auvnav_drivers::device::Protocol::Kvh1750),
         ) => p,
-        _ => anyhow::bail!("--imu {:?}: expected xsens or kvh1750", a.imu),
+        _ => {
+            return Err(crate::Failure::Usage(format!(
+                "--imu {:?}: expected xsens or kvh1750",
+                a.imu
+            ))
+            .into());
+        }
     };
     let r = crate::live::run_live(
         &a.scenario,
@@ -242,7 +248,10 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
         }
     }
     if !r.replay_identical || !r.clean_stop {
-        anyhow::bail!("the live run did not reproduce or did not stop cleanly (see above)");
+        return Err(crate::Failure::CheckFailed(
+            "the live run did not reproduce or did not stop cleanly (see above)".into(),
+        )
+        .into());
     }
     Ok(())
 }

@@ -15,3 +15,34 @@ pub mod process;
 pub mod replay;
 pub mod study;
 pub mod usbl;
+
+/// Why `auvnav` failed, for its exit status (docs/operations.md): 0 success, 1 a runtime failure
+/// (I/O, a device, the bus), 2 a usage or configuration error (clap's own errors are 2 as well),
+/// 3 a check that ran and failed (a replay that does not reproduce, a demo that did not).
+#[derive(Debug, thiserror::Error)]
+pub enum Failure {
+    #[error("{0}")]
+    Usage(String),
+    #[error("{0}")]
+    CheckFailed(String),
+}
+
+/// The exit status for an error: the first [`Failure`] in its chain, a configuration file that
+/// does not parse (2), otherwise a runtime failure (1).
+pub fn exit_status(e: &anyhow::Error) -> u8 {
+    for cause in e.chain() {
+        match cause.downcast_ref::<Failure>() {
+            Some(Failure::Usage(_)) => return 2,
+            Some(Failure::CheckFailed(_)) => return 3,
+            None => {}
+        }
+        if cause.downcast_ref::<toml::de::Error>().is_some()
+            || cause
+                .downcast_ref::<auvnav_core::config::ConfigError>()
+                .is_some()
+        {
+            return 2;
+        }
+    }
+    1
+}

@@ -467,6 +467,18 @@ fn run_replay(a: &auvnav_tools::replay::ReplayArgs) -> anyhow::Result<()> {
     } else {
         auvnav_tools::replay::print_report(&report);
     }
+    if let Some(c) = report
+        .recorded_comparison
+        .as_ref()
+        .filter(|c| !c.identical())
+    {
+        return Err(auvnav_tools::Failure::CheckFailed(format!(
+            "the replay does not reproduce the recorded solutions ({} compared, {} differ, {} \
+             without a replayed solution)",
+            c.compared, c.differing, c.unmatched_recorded
+        ))
+        .into());
+    }
     Ok(())
 }
 
@@ -676,7 +688,7 @@ fn main() -> std::process::ExitCode {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            std::process::ExitCode::FAILURE
+            std::process::ExitCode::from(auvnav_tools::exit_status(&e))
         }
     }
 }

@@ -133,6 +133,7 @@ pub fn replay(hours: f64, repeat: usize, json: bool) -> anyhow::Result<()> {
             min_distance: 100.0,
             usbl: None,
             json: false,
+            compare_recorded: false,
         };
         let mut runs = Vec::new();
         let mut log_seconds = 0.0;

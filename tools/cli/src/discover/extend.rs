@@ -262,6 +262,7 @@ fn navigation_of(
         min_distance: 100.0,
         usbl: None,
         json: true,
+        compare_recorded: false,
     };
     let (base, source) = replay::replay_config(&args)?;
     let with = |e: &Effects| -> ReplayConfig {

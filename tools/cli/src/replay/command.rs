@@ -27,6 +27,11 @@ pub struct ReplayArgs {
     /// simulated voyage.
     #[arg(long, value_enum)]
     pub usbl: Option<auvnav_core::aid::usbl::Coupling>,
+    /// Compare the solutions with those the log recorded on `nav/solution` (the daemon's live
+    /// output in a recording): report the first that differs, exit with status 3 unless every
+    /// recorded solution is reproduced.
+    #[arg(long)]
+    pub compare_recorded: bool,
     /// Print the result as JSON.
     #[arg(long)]
     pub json: bool,
@@ -52,6 +57,8 @@ pub struct ReplayReport {
     pub final_parameters: Option<FinalParameters>,
     /// Why the log ended early, when it did (for example a truncated file).
     pub log_error: Option<String>,
+    /// With `--compare-recorded`: the replay against the recorded solutions.
+    pub recorded_comparison: Option<RecordedComparison>,
 }
 
 /// Reads `log` and feeds every message to `replay`. A truncated or damaged tail ends the replay
@@ -173,6 +180,9 @@ pub fn run(a: &ReplayArgs) -> anyhow::Result<ReplayReport> {
     }
     let decimate = a.decimate.max(1);
     let mut replay = Replay::new(&cfg, a.min_distance);
+    if a.compare_recorded {
+        replay.compare_with_recorded();
+    }
     let start = std::time::Instant::now();
     let mut solutions = 0u64;
     let mut log_error = None;
@@ -267,6 +277,7 @@ pub fn run(a: &ReplayArgs) -> anyhow::Result<ReplayReport> {
         navigator: replay.nav_counters(),
         final_parameters: replay.navigator().map(FinalParameters::of),
         log_error,
+        recorded_comparison: replay.recorded_comparison().cloned(),
     })
 }
 
@@ -365,5 +376,17 @@ pub fn print_report(r: &ReplayReport) {
     }
     if let Some(e) = &r.log_error {
         println!("  the log ended early: {e}");
+    }
+    if let Some(c) = &r.recorded_comparison {
+        println!(
+            "  against the recorded solutions: {} compared, {} differ, {} without a replayed solution{}",
+            c.compared,
+            c.differing,
+            c.unmatched_recorded,
+            match &c.first_difference {
+                Some((t, what)) => format!("; first at t = {:.6} s: {what}", *t as f64 * 1e-9),
+                None => String::new(),
+            }
+        );
     }
 }

@@ -122,6 +122,75 @@ impl FinalParameters {
     }
 }
 
+/// The replay's solutions against the solutions a log recorded (the daemon's live output, on
+/// `nav/solution`): matched by time stamp, compared byte for byte but for the sequence number
+/// (the bus numbers what it carries).
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct RecordedComparison {
+    /// Recorded solutions compared with the replay's solution of the same time.
+    pub compared: u64,
+    /// Of those, how many differ.
+    pub differing: u64,
+    /// Recorded solutions for which the replay produced none at that time.
+    pub unmatched_recorded: u64,
+    /// The first recorded solution that differs or has no match: its time stamp (ns) and what.
+    pub first_difference: Option<(u64, String)>,
+    #[serde(skip)]
+    queue: std::collections::VecDeque<NavSolutionV1>,
+}
+
+impl RecordedComparison {
+    /// True when every recorded solution was reproduced.
+    pub fn identical(&self) -> bool {
+        self.compared > 0 && self.differing == 0 && self.unmatched_recorded == 0
+    }
+
+    fn note(&mut self, t_ns: u64, what: String) {
+        self.first_difference.get_or_insert((t_ns, what));
+    }
+
+    fn check(&mut self, sol: &NavSolutionV1) {
+        while let Some(r) = self.queue.front().copied() {
+            if r.host_time_ns > sol.host_time_ns {
+                break;
+            }
+            self.queue.pop_front();
+            if r.host_time_ns < sol.host_time_ns {
+                self.unmatched_recorded += 1;
+                self.note(r.host_time_ns, "no replayed solution at this time".into());
+                continue;
+            }
+            self.compared += 1;
+            let (mut a, mut b) = (r, *sol);
+            a.sequence = 0;
+            b.sequence = 0;
+            if bytemuck::bytes_of(&a) != bytemuck::bytes_of(&b) {
+                self.differing += 1;
+                let geo = |x: &NavSolutionV1| auvnav_core::earth::Geodetic {
+                    latitude_rad: x.latitude_rad,
+                    longitude_rad: x.longitude_rad,
+                    height_m: x.height_m,
+                };
+                let d = auvnav_core::earth::ned_offset(&geo(&a), &geo(&b)).norm();
+                self.note(
+                    r.host_time_ns,
+                    format!(
+                        "differs (positions {d:.3e} m apart, modes {} / {})",
+                        a.mode, b.mode
+                    ),
+                );
+            }
+        }
+    }
+
+    fn finish(&mut self) {
+        while let Some(r) = self.queue.pop_front() {
+            self.unmatched_recorded += 1;
+            self.note(r.host_time_ns, "no replayed solution at this time".into());
+        }
+    }
+}
+
 /// The replay state machine, fed one message at a time.
 pub struct Replay {
     session: Session,
@@ -133,6 +202,7 @@ pub struct Replay {
     pub counts: ReplayCounts,
     first_time_ns: Option<u64>,
     last_time_ns: u64,
+    recorded: Option<RecordedComparison>,
 }
 
 impl Replay {
@@ -147,7 +217,18 @@ impl Replay {
             counts: ReplayCounts::default(),
             first_time_ns: None,
             last_time_ns: 0,
+            recorded: None,
         }
+    }
+
+    /// Compares the solutions with those the log recorded (see [`RecordedComparison`]).
+    pub fn compare_with_recorded(&mut self) {
+        self.recorded = Some(RecordedComparison::default());
+    }
+
+    /// The comparison with the recorded solutions, when asked for.
+    pub fn recorded_comparison(&self) -> Option<&RecordedComparison> {
+        self.recorded.as_ref()
     }
 
     pub fn navigator(&self) -> Option<&Navigator> {
@@ -159,11 +240,15 @@ impl Replay {
         prev: &'o mut Option<NavSolutionV1>,
         pending: &'o mut Option<TruthStateV1>,
         tracker: &'o mut AccuracyTracker,
+        recorded: &'o mut Option<RecordedComparison>,
         out: &'o mut dyn FnMut(Output) -> anyhow::Result<()>,
     ) -> impl FnMut(SessionOutput) -> anyhow::Result<()> + 'o {
         move |o| match o {
             SessionOutput::Solution(sol) => {
                 out(Output::Solution(sol))?;
+                if let Some(r) = recorded.as_mut() {
+                    r.check(sol);
+                }
                 if let (Some(t), Some(p)) = (*pending, *prev)
                     && sol.host_time_ns >= t.host_time_ns
                 {
@@ -191,6 +276,11 @@ impl Replay {
             LogMessage::LateAid(r) => {
                 self.counts.late_aid_records += 1;
                 self.order.apply_late_record(r);
+            }
+            LogMessage::NavSolution(s) if self.recorded.is_some() => {
+                if let Some(r) = self.recorded.as_mut() {
+                    r.queue.push_back(*s);
+                }
             }
             m if self.order.push(m) => {
                 while let Some(m) = self.order.pop_ready() {
@@ -222,6 +312,7 @@ impl Replay {
             &mut self.prev_solution,
             &mut self.pending_truth,
             &mut self.tracker,
+            &mut self.recorded,
             out,
         );
         match m {
@@ -240,6 +331,7 @@ impl Replay {
                         &mut self.prev_solution,
                         &mut self.pending_truth,
                         &mut self.tracker,
+                        &mut self.recorded,
                         out,
                     );
                     self.session
@@ -279,10 +371,14 @@ impl Replay {
             &mut self.prev_solution,
             &mut self.pending_truth,
             &mut self.tracker,
+            &mut self.recorded,
             out,
         );
         self.session.finish(&mut fwd)?;
         drop(fwd);
+        if let Some(r) = self.recorded.as_mut() {
+            r.finish();
+        }
         self.note_order();
         Ok(())
     }
