@@ -149,6 +149,12 @@ impl RecordedComparison {
         self.first_difference.get_or_insert((t_ns, what));
     }
 
+    /// A recorded solution the replay has no solution for.
+    fn unmatched(&mut self, r: &NavSolutionV1) {
+        self.unmatched_recorded += 1;
+        self.note(r.host_time_ns, "no replayed solution at this time".into());
+    }
+
     fn check(&mut self, sol: &NavSolutionV1) {
         while let Some(r) = self.queue.front().copied() {
             if r.host_time_ns > sol.host_time_ns {
@@ -156,8 +162,7 @@ impl RecordedComparison {
             }
             self.queue.pop_front();
             if r.host_time_ns < sol.host_time_ns {
-                self.unmatched_recorded += 1;
-                self.note(r.host_time_ns, "no replayed solution at this time".into());
+                self.unmatched(&r);
                 continue;
             }
             self.compared += 1;
@@ -185,8 +190,7 @@ impl RecordedComparison {
 
     fn finish(&mut self) {
         while let Some(r) = self.queue.pop_front() {
-            self.unmatched_recorded += 1;
-            self.note(r.host_time_ns, "no replayed solution at this time".into());
+            self.unmatched(&r);
         }
     }
 }
