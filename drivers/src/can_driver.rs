@@ -374,6 +374,7 @@ pub fn run_with_source(
 #[derive(Debug, clap::Parser)]
 #[command(
     name = "auvnav-can",
+    version = auvnav_version::LONG,
     about = "CAN sensor driver: SocketCAN + DBC to shared memory"
 )]
 pub struct CanDriverArgs {

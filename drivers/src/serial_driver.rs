@@ -561,8 +561,9 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
     Ok(())
 }
 
-/// Command line of the serial drivers.
+/// Command line of the serial drivers (named for each device class by [`serial_driver_command`]).
 #[derive(Debug, clap::Parser)]
+#[command(version = auvnav_version::LONG)]
 pub struct SerialDriverArgs {
     /// The driver's TOML configuration (see docs/drivers.md).
     #[arg(long)]
@@ -572,11 +573,38 @@ pub struct SerialDriverArgs {
     pub check_config: bool,
 }
 
+/// The command line of the serial driver for `class`: `auvnav-dvl`, `auvnav-imu` or `auvnav-usbl`.
+pub fn serial_driver_command(class: DeviceClass) -> clap::Command {
+    use clap::CommandFactory;
+    let (name, about) = match class {
+        DeviceClass::Dvl => (
+            "auvnav-dvl",
+            "DVL serial driver: Teledyne PD0 or Water Linked DVL frames to shared memory",
+        ),
+        DeviceClass::Imu => (
+            "auvnav-imu",
+            "IMU serial driver: KVH 1750 or Xsens MTData2 packets to shared memory",
+        ),
+        DeviceClass::Usbl => (
+            "auvnav-usbl",
+            "USBL serial driver: Blueprint SeaTrac fixes to shared memory",
+        ),
+    };
+    SerialDriverArgs::command()
+        .name(name)
+        .bin_name(name)
+        .about(about)
+}
+
 /// `main` of `auvnav-dvl`, `auvnav-imu` and `auvnav-usbl`: exit 0 after a clean stop, 2 for a
 /// configuration error, 1 for a shared-memory failure.
 pub fn main_for(class: DeviceClass) -> std::process::ExitCode {
-    use clap::Parser;
-    let args = SerialDriverArgs::parse();
+    use clap::FromArgMatches;
+    let args = match SerialDriverArgs::from_arg_matches(&serial_driver_command(class).get_matches())
+    {
+        Ok(a) => a,
+        Err(e) => e.exit(),
+    };
     auvnav_shm_schema::logging::init();
     let cfg = match SerialDriverConfig::load(&args.config, class) {
         Ok(c) => c,

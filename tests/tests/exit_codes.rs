@@ -83,6 +83,21 @@ fn auvnav_exit_status_names_the_failure_class() {
     let (code, err) = status(&["replay", missing.to_str().expect("utf-8")]);
     assert_eq!(code, Some(1), "{err}");
     assert!(err.contains("missing.mcap"), "{err}");
+    assert_eq!(
+        err.matches("No such file or directory").count(),
+        1,
+        "the OS message once: {err}"
+    );
+    // Usage: the recorder refuses to replace a file, which stays as it was.
+    let existing = dir.path().join("existing.mcap");
+    std::fs::write(&existing, b"keep me").expect("file");
+    let e = existing.to_str().expect("utf-8");
+    let (code, err) = status(&["record", "--out", e, "--seconds", "0.1"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("--force"), "{err}");
+    let (code, err) = status(&["record", "--recover", e, "--out", e]);
+    assert_eq!(code, Some(2), "{err}");
+    assert_eq!(std::fs::read(&existing).expect("file"), b"keep me");
     // Configuration: a value out of range.
     let good = dir.path().join("good.mcap");
     log_with_recorded_solutions(&good, false);
@@ -107,6 +122,30 @@ fn auvnav_exit_status_names_the_failure_class() {
     let c = &v["recorded_comparison"];
     assert_eq!(c["differing"], 1, "{c}");
     assert!(c["compared"].as_u64().expect("compared") > 1000, "{c}");
+}
+
+#[test]
+fn every_binary_reports_its_version_and_commit() {
+    for b in [
+        "auvnav",
+        "auvnavd",
+        "auvnav-dvl",
+        "auvnav-imu",
+        "auvnav-usbl",
+        "auvnav-can",
+    ] {
+        let o = Command::new(binary(b))
+            .arg("--version")
+            .output()
+            .expect("binary");
+        assert!(o.status.success(), "{b}");
+        let out = String::from_utf8_lossy(&o.stdout);
+        assert_eq!(
+            out.trim(),
+            format!("{b} {}", auvnav_version::LONG),
+            "{b} --version"
+        );
+    }
 }
 
 #[test]

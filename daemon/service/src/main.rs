@@ -23,7 +23,7 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 #[derive(clap::Parser)]
-#[command(name = "auvnavd", about = "auvnav fusion daemon", version)]
+#[command(name = "auvnavd", about = "auvnav fusion daemon", version = auvnav_version::LONG)]
 struct Args {
     /// The daemon's TOML configuration.
     #[arg(long)]

@@ -327,8 +327,7 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
     if let Some(dir) = &a.link_dir {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
-    let mut reader =
-        LogReader::open(&a.log).with_context(|| format!("opening {}", a.log.display()))?;
+    let mut reader = LogReader::open(&a.log)?;
     // Pairs are created one at a time (serialport's pair() is not thread-safe).
     for d in &mut devices {
         let path = d.plug()?;

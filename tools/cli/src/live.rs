@@ -269,6 +269,8 @@ pub fn run_live(
         &dir,
         Command::new(&me)
             .arg("record")
+            // The demo's folder is its own: a second run with the same --out replaces it.
+            .arg("--force")
             .arg("--out")
             .arg(&record)
             .args(["--prefix", &prefix])

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 #[derive(Parser)]
 #[command(
     name = "auvnav",
-    version,
+    version = auvnav_version::LONG,
     about = "AUV navigation: simulator, logs, replay and offline tools"
 )]
 struct Cli {

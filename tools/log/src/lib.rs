@@ -54,8 +54,10 @@ pub const CHUNK_SIZE: u64 = 1 << 20;
 
 #[derive(Debug, thiserror::Error)]
 pub enum LogError {
-    #[error("{path}: {source}")]
+    /// The OS error is the source (printed once, after "opening x" / "reading x" / "creating x").
+    #[error("{op} {}", path.display())]
     Io {
+        op: &'static str,
         path: PathBuf,
         source: std::io::Error,
     },
@@ -161,6 +163,7 @@ impl LogWriter<BufWriter<File>> {
     /// Creates (truncates) `path` and writes the header.
     pub fn create(path: &Path, header: &LogHeader) -> Result<Self, LogError> {
         let file = File::create(path).map_err(|source| LogError::Io {
+            op: "creating",
             path: path.to_path_buf(),
             source,
         })?;
@@ -497,6 +500,7 @@ pub type Decoded = Result<LogMessage, LogError>;
 impl LogReader<std::io::BufReader<File>> {
     pub fn open(path: &Path) -> Result<Self, LogError> {
         let file = File::open(path).map_err(|source| LogError::Io {
+            op: "opening",
             path: path.to_path_buf(),
             source,
         })?;
@@ -620,6 +624,7 @@ impl<R: Read> LogReader<R> {
                     Err(source) => {
                         self.done = true;
                         return Err(LogError::Io {
+                            op: "reading",
                             path: self.path.clone(),
                             source,
                         });

@@ -46,9 +46,55 @@ pub struct RecordArgs {
     /// FILE.recovered.mcap), then exit.
     #[arg(long, value_name = "FILE")]
     pub recover: Option<PathBuf>,
+    /// Replace --out if it exists (without it the recorder refuses, exit status 2).
+    #[arg(long)]
+    pub force: bool,
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
+}
+
+/// The recorder would replace an existing file (no `--force`): a usage error, exit status 2.
+#[derive(Debug, thiserror::Error)]
+#[error("{} exists; give another --out or --force to replace it", .0.display())]
+pub struct WouldOverwrite(pub PathBuf);
+
+fn refuse_overwrite(out: &Path, force: bool) -> Result<(), WouldOverwrite> {
+    if !force && std::fs::symlink_metadata(out).is_ok() {
+        return Err(WouldOverwrite(out.to_path_buf()));
+    }
+    Ok(())
+}
+
+/// Header notes that tie the log's monotonic time stamps to UTC: `clock.utc` (RFC 3339, µs) and
+/// `clock.monotonic_ns` read at the same instant (the middle of two monotonic reads around the
+/// UTC read; `clock.anchor_uncertainty_ns` is half their distance). A message stamped `t` was
+/// taken at `utc + (t - monotonic_ns)`, to the accuracy of the host's clock discipline.
+pub fn utc_anchor_notes() -> BTreeMap<String, String> {
+    use nix::time::{ClockId, clock_gettime};
+    let before = auvnav_shm_schema::clock::monotonic_ns();
+    let utc = clock_gettime(ClockId::CLOCK_REALTIME);
+    let after = auvnav_shm_schema::clock::monotonic_ns();
+    let mut notes = BTreeMap::new();
+    let Ok(utc) = utc else {
+        return notes;
+    };
+    let Some(t) = chrono::DateTime::from_timestamp(utc.tv_sec(), utc.tv_nsec() as u32) else {
+        return notes;
+    };
+    notes.insert(
+        "clock.utc".into(),
+        t.to_rfc3339_opts(chrono::SecondsFormat::Micros, true),
+    );
+    notes.insert(
+        "clock.monotonic_ns".into(),
+        (before + after.saturating_sub(before) / 2).to_string(),
+    );
+    notes.insert(
+        "clock.anchor_uncertainty_ns".into(),
+        (after.saturating_sub(before) / 2).max(1).to_string(),
+    );
+    notes
 }
 
 /// Per-topic counts of a recording.
@@ -125,8 +171,7 @@ fn with_causes(e: &dyn std::error::Error) -> String {
 
 /// Rewrites the readable part of `path` as a complete log at `out`; returns the messages kept.
 pub fn recover(path: &Path, out: &Path) -> anyhow::Result<(u64, Option<String>)> {
-    let mut reader =
-        LogReader::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let mut reader = LogReader::open(path)?;
     let header = reader
         .read_header()
         .with_context(|| format!("reading the header of {}", path.display()))?;
@@ -159,6 +204,7 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
             .out
             .clone()
             .unwrap_or_else(|| src.with_extension("recovered.mcap"));
+        refuse_overwrite(&out, a.force)?;
         let (kept, stopped) = recover(src, &out)?;
         let summary = RecordSummary {
             out: out.display().to_string(),
@@ -182,7 +228,10 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
         }
         None => String::new(),
     };
+    refuse_overwrite(out, a.force)?;
     let mut header = LogHeader::new("auvnav record", &config);
+    header.producer_version = auvnav_version::LONG.to_string();
+    header.notes.extend(utc_anchor_notes());
     header
         .notes
         .insert("record.prefix".into(), a.prefix.clone());
@@ -206,8 +255,7 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
     for r in &a.raw {
         channels.push(channel::<RawBytesV1>(&bus, &topic::raw(r), qos::RAW)?);
     }
-    let mut log =
-        LogWriter::create(out, &header).with_context(|| format!("creating {}", out.display()))?;
+    let mut log = LogWriter::create(out, &header)?;
     // A second handle syncs the file's data to the disk after each flush, on its own thread: a
     // sync can take hundreds of milliseconds on a busy disk, while the bus buffers hold a few
     // hundred milliseconds of a fast topic. The latest request is enough (a bounded channel of
@@ -348,5 +396,39 @@ fn print(json: bool, s: &RecordSummary) {
         if let Some(e) = &s.error {
             println!("  stopped: {e}");
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn utc_anchor_is_a_utc_time_and_a_monotonic_time_read_together() {
+        let before = auvnav_shm_schema::clock::monotonic_ns();
+        let notes = utc_anchor_notes();
+        let after = auvnav_shm_schema::clock::monotonic_ns();
+        let utc = chrono::DateTime::parse_from_rfc3339(&notes["clock.utc"]).expect("RFC 3339");
+        assert_eq!(utc.offset().local_minus_utc(), 0);
+        assert!(utc.timestamp() > 1_700_000_000, "{utc}");
+        let mono: u64 = notes["clock.monotonic_ns"].parse().expect("integer");
+        assert!((before..=after).contains(&mono));
+        let half: u64 = notes["clock.anchor_uncertainty_ns"]
+            .parse()
+            .expect("integer");
+        assert!(half >= 1 && half <= after - before);
+    }
+
+    #[test]
+    fn an_existing_file_is_kept_unless_forced() {
+        let dir = std::env::temp_dir().join(format!("auvnav-overwrite-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let f = dir.join("x.mcap");
+        assert!(refuse_overwrite(&f, false).is_ok());
+        std::fs::write(&f, b"x").expect("write");
+        let e = refuse_overwrite(&f, false).expect_err("exists");
+        assert!(e.to_string().contains("--force"), "{e}");
+        assert!(refuse_overwrite(&f, true).is_ok());
+        std::fs::remove_dir_all(&dir).expect("cleanup");
     }
 }

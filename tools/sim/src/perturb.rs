@@ -142,7 +142,7 @@ fn at_time(epochs: &[DvlEpoch], t: f64, max_gap: f64) -> Option<(Vector3<f64>, V
 }
 
 fn read_all(input: &Path) -> anyhow::Result<(auvnav_log::LogHeader, Vec<RawLogMessage>)> {
-    let mut r = LogReader::open(input).with_context(|| format!("opening {}", input.display()))?;
+    let mut r = LogReader::open(input)?;
     let header = r
         .read_header()
         .with_context(|| format!("reading the header of {}", input.display()))?;

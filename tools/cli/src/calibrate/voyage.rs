@@ -128,8 +128,7 @@ impl Voyage {
         cfg: &SessionConfig,
     ) -> anyhow::Result<Voyage> {
         let name = spec.name();
-        let mut reader = LogReader::open(&spec.path)
-            .with_context(|| format!("voyage {name}: opening {}", spec.path.display()))?;
+        let mut reader = LogReader::open(&spec.path).with_context(|| format!("voyage {name}"))?;
         reader
             .read_header()
             .with_context(|| format!("voyage {name}: reading the log header"))?;

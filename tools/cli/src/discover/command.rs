@@ -353,7 +353,7 @@ pub fn read_logs(paths: &[PathBuf]) -> anyhow::Result<(Vec<Channel>, Reference, 
     let mut c = Collector::new();
     let mut undecodable = 0;
     for p in paths {
-        let mut reader = LogReader::open(p).with_context(|| format!("opening {}", p.display()))?;
+        let mut reader = LogReader::open(p)?;
         while let Some(raw) = reader
             .next_message()
             .with_context(|| format!("reading {}", p.display()))?

@@ -133,8 +133,8 @@ pub fn replay_config(a: &ReplayArgs) -> anyhow::Result<(ReplayConfig, String)> {
         match cfg.navigation.usbl.as_mut() {
             Some(u) => u.coupling = coupling,
             None => {
-                let header = LogReader::open(&a.log)
-                    .and_then(|mut r| r.read_header())
+                let header = LogReader::open(&a.log)?
+                    .read_header()
                     .with_context(|| format!("reading {}", a.log.display()))?;
                 let station =
                     auvnav_sim::StationGeometry::from_notes(&header.notes).with_context(|| {
@@ -160,8 +160,8 @@ fn base_replay_config(a: &ReplayArgs) -> anyhow::Result<(ReplayConfig, String)> 
         return Ok((load_config(p)?, p.display().to_string()));
     }
     // A recording carries the daemon's configuration: replay with it, as the daemon ran.
-    let header = LogReader::open(&a.log)
-        .and_then(|mut r| r.read_header())
+    let header = LogReader::open(&a.log)?
+        .read_header()
         .with_context(|| format!("reading {}", a.log.display()))?;
     if header.producer == "auvnav record" && !header.config.trim().is_empty() {
         return Ok((

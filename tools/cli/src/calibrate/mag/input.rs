@@ -32,8 +32,7 @@ pub struct Recording {
 
 /// Reads the magnetometer channel of an auvnav log.
 pub fn read_log(path: &Path) -> anyhow::Result<Recording> {
-    let mut reader =
-        LogReader::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let mut reader = LogReader::open(path)?;
     reader
         .read_header()
         .with_context(|| format!("{}: reading the log header", path.display()))?;
