@@ -50,15 +50,15 @@ fn tight_coupling_is_immune_to_an_array_orientation_error_that_biases_the_loose_
     let loose = monte_carlo(Coupling::Loose, UsblFilter::Aukf, 0.0, 1.5, 7001);
     let tight = monte_carlo(Coupling::Tight, UsblFilter::Aukf, 0.0, 1.5, 7001);
     assert!(
-        loose.horizontal_rms_m >= 3.0 * tight.horizontal_rms_m,
+        loose.horizontal_error_rms_m >= 3.0 * tight.horizontal_error_rms_m,
         "loose {:.2} m, tight {:.2} m",
-        loose.horizontal_rms_m,
-        tight.horizontal_rms_m
+        loose.horizontal_error_rms_m,
+        tight.horizontal_error_rms_m
     );
     assert!(
-        tight.horizontal_rms_m <= 0.5,
+        tight.horizontal_error_rms_m <= 0.5,
         "tight under the orientation error: {:.2} m",
-        tight.horizontal_rms_m
+        tight.horizontal_error_rms_m
     );
     assert_eq!(tight.divergent_runs, 0);
 }
@@ -75,9 +75,9 @@ fn adaptive_filters_reject_every_multipath_outlier_and_never_diverge() {
         assert_eq!(r.accepted_outliers, 0, "{filter:?}");
         assert_eq!(r.divergent_runs, 0, "{filter:?}");
         assert!(
-            r.horizontal_rms_m <= 0.5,
+            r.horizontal_error_rms_m <= 0.5,
             "{filter:?}: {:.2} m",
-            r.horizontal_rms_m
+            r.horizontal_error_rms_m
         );
         // The gate rejects outliers, not the measurements around them (99.9 % gates).
         assert!(
@@ -94,7 +94,11 @@ fn fixes_delivered_late_are_evaluated_at_their_time_of_validity() {
     // 2 s from reception to delivery: the vehicle moves 2–3 m meanwhile. Evaluated against the
     // pose at the time of validity, the fixes are as good as prompt ones.
     let r = monte_carlo_with_latency(Coupling::Tight, UsblFilter::Aukf, 0.05, 0.0, 7401, 2.0);
-    assert!(r.horizontal_rms_m <= 0.5, "{:.2} m", r.horizontal_rms_m);
+    assert!(
+        r.horizontal_error_rms_m <= 0.5,
+        "{:.2} m",
+        r.horizontal_error_rms_m
+    );
     assert_eq!(r.accepted_outliers, 0);
     assert!(
         (r.rejected_clean as f64) < 0.02 * r.fixes as f64,
@@ -107,7 +111,11 @@ fn fixes_delivered_late_are_evaluated_at_their_time_of_validity() {
 #[test]
 fn loose_coupling_with_a_surveyed_array_tracks_the_fix() {
     let r = monte_carlo(Coupling::Loose, UsblFilter::Ukf, 0.0, 0.0, 7201);
-    assert!(r.horizontal_rms_m <= 0.3, "{:.2} m", r.horizontal_rms_m);
+    assert!(
+        r.horizontal_error_rms_m <= 0.3,
+        "{:.2} m",
+        r.horizontal_error_rms_m
+    );
     assert!(r.vertical_rms_m <= 0.1, "{:.2} m", r.vertical_rms_m);
 }
 

@@ -16,6 +16,11 @@ pub const LONG: &str = concat!(
     ")"
 );
 
+/// Version of the JSON documents the tools print (`--json`) and write (`report.json`): every
+/// document carries it as `format_version`. Raised when a field is renamed or removed or changes
+/// its meaning or unit; new fields do not raise it.
+pub const JSON_FORMAT_VERSION: u32 = 1;
+
 #[cfg(test)]
 mod tests {
     #[test]

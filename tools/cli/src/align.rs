@@ -179,7 +179,7 @@ pub fn run_measured(a: &AlignMeasuredArgs) -> anyhow::Result<Vec<MeasuredRow>> {
         }
     }
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&rows)?);
+        crate::json::print(&rows)?;
     } else {
         println!("segment  offset  model  heading error at 100 / 200 / 400 s (deg)");
         for r in &rows {
@@ -237,7 +237,7 @@ pub struct AlignReport {
     pub mount: String,
     pub seed: u64,
     pub models: Vec<ModelReport>,
-    pub wall_seconds: f64,
+    pub wall_s: f64,
 }
 
 fn scenario_name(s: &str) -> anyhow::Result<&'static str> {
@@ -477,7 +477,7 @@ pub fn run(a: &AlignArgs) -> anyhow::Result<AlignReport> {
         mount: a.mount.clone(),
         seed: a.seed,
         models: reports,
-        wall_seconds: start.elapsed().as_secs_f64(),
+        wall_s: start.elapsed().as_secs_f64(),
     })
 }
 
@@ -504,5 +504,5 @@ pub fn print(r: &AlignReport) {
             m.not_converged
         );
     }
-    println!("  {:.1} s wall", r.wall_seconds);
+    println!("  {:.1} s wall", r.wall_s);
 }

@@ -24,6 +24,8 @@ pub struct DecodeArgs {
 
 #[derive(Debug, Serialize)]
 struct Summary<'a> {
+    /// The JSON vocabulary's version (docs/json.md); only the summary line carries it.
+    format_version: u32,
     summary: &'a DecoderStats,
     file: String,
     protocol: &'static str,
@@ -43,6 +45,7 @@ pub fn run(a: &DecodeArgs) -> anyhow::Result<DecoderStats> {
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
     let summary = Summary {
+        format_version: auvnav_version::JSON_FORMAT_VERSION,
         summary: &stats,
         file: a.file.display().to_string(),
         protocol: a.protocol.name(),

@@ -50,7 +50,7 @@ pub struct DemoResult {
     pub simulated: SimSummary,
     pub accuracy: Accuracy,
     pub counters: NavCounters,
-    pub wall_seconds: f64,
+    pub wall_s: f64,
 }
 
 /// Runs a simulated voyage through the navigator (the same [`Replay`] as `auvnav replay`, fed
@@ -130,10 +130,10 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
         simulated,
         accuracy,
         counters,
-        wall_seconds: start.elapsed().as_secs_f64(),
+        wall_s: start.elapsed().as_secs_f64(),
     };
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&result)?);
+        crate::json::print(&result)?;
     } else {
         let acc = &result.accuracy;
         println!(
@@ -162,7 +162,7 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
             result.counters.dvl_rejected,
             result.counters.depth_fused,
             result.counters.depth_rejected,
-            result.wall_seconds
+            result.wall_s
         );
         if has_usbl {
             println!(
@@ -213,12 +213,12 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
         a.out.as_deref(),
     )?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&r)?);
+        crate::json::print(&r)?;
     } else {
         let acc = &r.accuracy;
         println!(
             "auvnav demo: scenario {} (seed {}), {:.0} s simulated at {}x, {:.0} m travelled",
-            r.scenario, r.seed, r.simulated_seconds, r.speed, acc.distance_travelled_m
+            r.scenario, r.seed, r.simulated_s, r.speed, acc.distance_travelled_m
         );
         println!(
             "  processes: emulated PD0 DVL, {} IMU, SeaTrac USBL on pseudo-terminals; \
@@ -240,7 +240,7 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
         println!(
             "  clean stop of every process: {}; {:.1} s wall",
             if r.clean_stop { "yes" } else { "NO" },
-            r.wall_seconds
+            r.wall_s
         );
         println!("  log: {}  live solution: {}", r.record, r.live_nav_csv);
         for (name, line) in &r.process_reports {

@@ -212,6 +212,8 @@ impl Device {
 /// Line printed for each terminal (and again after a replug).
 #[derive(Serialize)]
 struct TerminalLine<'a> {
+    /// The JSON vocabulary's version (docs/json.md).
+    format_version: u32,
     event: &'a str,
     device: &'a str,
     protocol: &'a str,
@@ -334,6 +336,7 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
         say(
             a.json,
             &TerminalLine {
+                format_version: auvnav_version::JSON_FORMAT_VERSION,
                 event: "terminal",
                 device: d.class.name(),
                 protocol: d.protocol.name(),
@@ -372,6 +375,7 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
             say(
                 a.json,
                 &TerminalLine {
+                    format_version: auvnav_version::JSON_FORMAT_VERSION,
                     event: "unplugged",
                     device: d.class.name(),
                     protocol: d.protocol.name(),
@@ -385,6 +389,7 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
             say(
                 a.json,
                 &TerminalLine {
+                    format_version: auvnav_version::JSON_FORMAT_VERSION,
                     event: "replugged",
                     device: d.class.name(),
                     protocol: d.protocol.name(),
@@ -448,7 +453,7 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
     if a.json {
         println!(
             "{}",
-            serde_json::json!({ "event": "summary", "devices": summaries })
+            serde_json::json!({ "format_version": auvnav_version::JSON_FORMAT_VERSION, "event": "summary", "devices": summaries })
         );
     } else {
         for s in &summaries {

@@ -26,7 +26,7 @@ use std::time::{Duration, Instant};
 pub struct LiveResult {
     pub scenario: String,
     pub seed: u64,
-    pub simulated_seconds: f64,
+    pub simulated_s: f64,
     pub speed: f64,
     /// The emulated IMU's protocol (`xsens` also sends the magnetic field).
     pub imu: String,
@@ -39,7 +39,7 @@ pub struct LiveResult {
     pub replay_identical: bool,
     /// Every process stopped cleanly (exit status 0 after SIGTERM).
     pub clean_stop: bool,
-    pub wall_seconds: f64,
+    pub wall_s: f64,
     /// Per-process last lines of standard error (their summaries).
     pub process_reports: Vec<(String, String)>,
 }
@@ -364,7 +364,7 @@ pub fn run_live(
     Ok(LiveResult {
         scenario: cfg.scenario.name.clone(),
         seed,
-        simulated_seconds: seconds,
+        simulated_s: seconds,
         speed,
         imu: imu.name().to_string(),
         directory: dir.display().to_string(),
@@ -374,7 +374,7 @@ pub fn run_live(
         accuracy,
         replay_identical,
         clean_stop: clean,
-        wall_seconds: start.elapsed().as_secs_f64(),
+        wall_s: start.elapsed().as_secs_f64(),
         process_reports,
     })
 }

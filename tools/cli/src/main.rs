@@ -122,17 +122,13 @@ fn run_perturb(a: &PerturbArgs) -> anyhow::Result<()> {
     let p = sim::perturb::Perturbation::parse(&settings, a.seed)?;
     let counts = sim::perturb::perturb_log(&a.log, &a.out, &p)?;
     if a.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&serde_json::json!({
-                "version": 1,
-                "input": a.log,
-                "output": a.out,
-                "effects": p.describe(),
-                "seed": a.seed,
-                "counts": counts,
-            }))?
-        );
+        auvnav_tools::json::print(&serde_json::json!({
+            "input": a.log,
+            "output": a.out,
+            "effects": p.describe(),
+            "seed": a.seed,
+            "counts": counts,
+        }))?;
     } else {
         eprintln!(
             "{}: {} applied to {} messages ({} IMU, {} DVL, {} depth changed; {} DVL without a neighbour at t - offset marked invalid)",
@@ -158,7 +154,7 @@ fn run_calibrate_mag(a: &auvnav_tools::calibrate::mag::CalibrateMagArgs) -> anyh
         report::write_report_dir(d, &r, &r.samples)?;
     }
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&r)?);
+        auvnav_tools::json::print(&r)?;
     } else {
         print!("{}", report::text(&r));
     }
@@ -168,7 +164,7 @@ fn run_calibrate_mag(a: &auvnav_tools::calibrate::mag::CalibrateMagArgs) -> anyh
 fn run_calibrate_dvl(a: &auvnav_tools::calibrate::CalibrateDvlArgs) -> anyhow::Result<()> {
     let r = auvnav_tools::calibrate::calibrate_dvl(a)?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&r)?);
+        auvnav_tools::json::print(&r)?;
     } else {
         print!("{}", auvnav_tools::calibrate::report::text(&r));
     }
@@ -381,7 +377,7 @@ fn run_campaign(a: &SimArgs, name: &str) -> anyhow::Result<()> {
         summaries.push(s);
     }
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&summaries)?);
+        auvnav_tools::json::print(&serde_json::json!({ "voyages": summaries }))?;
     }
     Ok(())
 }
@@ -439,7 +435,7 @@ fn run_sim(a: SimArgs) -> anyhow::Result<()> {
     let summary = sim::simulate_to_log(&cfg, out)
         .with_context(|| format!("simulating into {}", out.display()))?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&summary)?);
+        auvnav_tools::json::print(&summary)?;
     } else {
         eprintln!(
             "{}: {} s of scenario {} (seed {}): {} IMU, {} DVL ({} with bottom lock), {} USBL ({} outliers), {} depth, {} truth; {:.0} m travelled",
@@ -463,7 +459,7 @@ fn run_sim(a: SimArgs) -> anyhow::Result<()> {
 fn run_replay(a: &auvnav_tools::replay::ReplayArgs) -> anyhow::Result<()> {
     let report = auvnav_tools::replay::run(a)?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        auvnav_tools::json::print(&report)?;
     } else {
         auvnav_tools::replay::print_report(&report);
     }
@@ -485,7 +481,7 @@ fn run_replay(a: &auvnav_tools::replay::ReplayArgs) -> anyhow::Result<()> {
 fn run_import_pd0(a: &auvnav_tools::import::Pd0Args) -> anyhow::Result<()> {
     let s = auvnav_tools::import::pd0(a)?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&s)?);
+        auvnav_tools::json::print(&s)?;
     } else {
         eprintln!(
             "{}: {} ensembles ({} coordinates, {:.0} s): {} with a bottom-track velocity, {} reference records from {} GGA fixes and {} VTG ({:?} velocity); {} without a fix, {} with a bad time, {} decoder errors",
@@ -509,7 +505,7 @@ fn run_import_pd0(a: &auvnav_tools::import::Pd0Args) -> anyhow::Result<()> {
 fn run_import_mag_csv(a: &auvnav_tools::import::MagCsvArgs) -> anyhow::Result<()> {
     let s = auvnav_tools::import::mag_csv(a)?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&s)?);
+        auvnav_tools::json::print(&s)?;
     } else {
         eprintln!(
             "{}: {} magnetometer readings ({:.0} s), {} with an accelerometer reading; field {}, accelerometer {}; {} rows skipped, {} out of order",
@@ -529,7 +525,7 @@ fn run_import_mag_csv(a: &auvnav_tools::import::MagCsvArgs) -> anyhow::Result<()
 fn run_import_ugps(a: &auvnav_tools::import::UgpsArgs) -> anyhow::Result<()> {
     let s = auvnav_tools::import::ugps(a)?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&s)?);
+        auvnav_tools::json::print(&s)?;
     } else {
         eprintln!(
             "{}: {} acoustic updates ({:.0} s) from {} rows, {} with a position fix; valid ranges per receiver {:?}; {} repeated rows and {} malformed left out",
@@ -549,7 +545,7 @@ fn run_import_ugps(a: &auvnav_tools::import::UgpsArgs) -> anyhow::Result<()> {
 fn run_import_snapir(a: &auvnav_tools::import::SnapirArgs) -> anyhow::Result<()> {
     let s = auvnav_tools::import::snapir(a)?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&s)?);
+        auvnav_tools::json::print(&s)?;
     } else {
         eprintln!(
             "{}: segment {} ({:.0} s, {} messages): {} IMU, {} DVL, {} reference rows; skipped {} malformed, {} out of order",
@@ -589,7 +585,7 @@ fn main() -> std::process::ExitCode {
         Command::AlignMeasured(a) => auvnav_tools::align::run_measured(&a).map(|_| ()),
         Command::Align(a) => auvnav_tools::align::run(&a).and_then(|r| {
             if a.json {
-                println!("{}", serde_json::to_string_pretty(&r)?);
+                auvnav_tools::json::print(&r)?;
             } else {
                 auvnav_tools::align::print(&r);
             }
@@ -597,7 +593,7 @@ fn main() -> std::process::ExitCode {
         }),
         Command::Usbl(a) if a.table => auvnav_tools::usbl::run_table(&a).and_then(|r| {
             if a.json {
-                println!("{}", serde_json::to_string_pretty(&r)?);
+                auvnav_tools::json::print(&r)?;
             } else {
                 auvnav_tools::usbl::print_table(&r);
             }
@@ -605,7 +601,7 @@ fn main() -> std::process::ExitCode {
         }),
         Command::Usbl(a) => auvnav_tools::usbl::run(&a).and_then(|r| {
             if a.json {
-                println!("{}", serde_json::to_string_pretty(&r)?);
+                auvnav_tools::json::print(&r)?;
             } else {
                 auvnav_tools::usbl::print(&r);
             }

@@ -67,7 +67,7 @@ pub struct NeesReport {
     pub scenario: String,
     pub runs: usize,
     pub epochs: usize,
-    pub seconds_per_run: f64,
+    pub wall_s_per_run: f64,
     /// Two-sided 95 % bounds of the run-averaged NEES (3 degrees of freedom per run).
     pub lower_bound: f64,
     pub upper_bound: f64,
@@ -272,7 +272,7 @@ pub fn nees_monte_carlo_with(
         scenario: scenario.name.clone(),
         runs: a.runs,
         epochs: series.len(),
-        seconds_per_run: seconds,
+        wall_s_per_run: seconds,
         lower_bound: lower,
         upper_bound: upper,
         position: block(1),
@@ -298,13 +298,13 @@ pub fn run_nees(a: &NeesArgs) -> anyhow::Result<()> {
         std::fs::write(path, text)?;
     }
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&r)?);
+        crate::json::print(&r)?;
     } else {
         println!(
             "NEES Monte Carlo: scenario {}, {} runs of {:.0} s, {} epochs; 95 % bounds of the run-averaged NEES [{:.3}, {:.3}] ({:.1} s wall)",
             r.scenario,
             r.runs,
-            r.seconds_per_run,
+            r.wall_s_per_run,
             r.epochs,
             r.lower_bound,
             r.upper_bound,

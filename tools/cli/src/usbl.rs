@@ -81,12 +81,12 @@ pub struct UsblArgs {
 #[derive(Debug, Clone, Serialize)]
 pub struct RunResult {
     pub seed: u64,
-    pub horizontal_rms_m: f64,
-    pub horizontal_max_m: f64,
+    pub horizontal_error_rms_m: f64,
+    pub horizontal_error_max_m: f64,
     pub vertical_rms_m: f64,
     pub vertical_max_m: f64,
     pub velocity_rms_m_s: f64,
-    pub final_horizontal_m: f64,
+    pub horizontal_error_final_m: f64,
     pub fixes: u64,
     pub fused: u64,
     pub rejected: u64,
@@ -107,14 +107,14 @@ pub struct UsblReport {
     pub array_yaw_error_deg: f64,
     pub runs: usize,
     pub seed: u64,
-    pub seconds_per_run: f64,
+    pub wall_s_per_run: f64,
     /// Statistics start this long after the start (s).
     pub settle_s: f64,
-    pub horizontal_rms_m: f64,
+    pub horizontal_error_rms_m: f64,
     /// The largest horizontal error of any run at any time.
-    pub horizontal_max_m: f64,
+    pub horizontal_error_max_m: f64,
     /// The worst run's horizontal RMS.
-    pub worst_run_horizontal_rms_m: f64,
+    pub worst_run_horizontal_error_rms_m: f64,
     pub vertical_rms_m: f64,
     pub vertical_max_m: f64,
     pub velocity_rms_m_s: f64,
@@ -237,12 +237,12 @@ fn run_one(
     let mut true_ranges: std::collections::VecDeque<(u64, f64)> = Default::default();
     let mut r = RunResult {
         seed,
-        horizontal_rms_m: 0.0,
-        horizontal_max_m: 0.0,
+        horizontal_error_rms_m: 0.0,
+        horizontal_error_max_m: 0.0,
         vertical_rms_m: 0.0,
         vertical_max_m: 0.0,
         velocity_rms_m_s: 0.0,
-        final_horizontal_m: 0.0,
+        horizontal_error_final_m: 0.0,
         fixes: 0,
         fused: 0,
         rejected: 0,
@@ -306,9 +306,9 @@ fn run_one(
                 sv += dp.z * dp.z;
                 svel += dv.norm_squared();
                 n += 1;
-                r.horizontal_max_m = r.horizontal_max_m.max(h);
+                r.horizontal_error_max_m = r.horizontal_error_max_m.max(h);
                 r.vertical_max_m = r.vertical_max_m.max(dp.z.abs());
-                r.final_horizontal_m = h;
+                r.horizontal_error_final_m = h;
             }
             LogMessage::Usbl(x) if session.started() => {
                 let mut x = *x;
@@ -352,7 +352,7 @@ fn run_one(
     r.rejected = c.usbl_rejected + c.usbl_invalid + c.usbl_failed;
     r.reopened = c.usbl_reopened;
     let nf = n.max(1) as f64;
-    r.horizontal_rms_m = (sh / nf).sqrt();
+    r.horizontal_error_rms_m = (sh / nf).sqrt();
     r.vertical_rms_m = (sv / nf).sqrt();
     r.velocity_rms_m_s = (svel / nf).sqrt();
     Ok(r)
@@ -411,17 +411,17 @@ pub fn run(a: &UsblArgs) -> anyhow::Result<UsblReport> {
         array_yaw_error_deg: a.array_yaw_error,
         runs: a.runs,
         seed: a.seed,
-        seconds_per_run: seconds,
+        wall_s_per_run: seconds,
         settle_s: a.settle_s,
-        horizontal_rms_m: pooled(|r| r.horizontal_rms_m),
-        horizontal_max_m: max(|r| r.horizontal_max_m),
-        worst_run_horizontal_rms_m: max(|r| r.horizontal_rms_m),
+        horizontal_error_rms_m: pooled(|r| r.horizontal_error_rms_m),
+        horizontal_error_max_m: max(|r| r.horizontal_error_max_m),
+        worst_run_horizontal_error_rms_m: max(|r| r.horizontal_error_rms_m),
         vertical_rms_m: pooled(|r| r.vertical_rms_m),
         vertical_max_m: max(|r| r.vertical_max_m),
         velocity_rms_m_s: pooled(|r| r.velocity_rms_m_s),
         divergent_runs: per_run
             .iter()
-            .filter(|r| r.horizontal_max_m > a.divergence_m)
+            .filter(|r| r.horizontal_error_max_m > a.divergence_m)
             .count(),
         divergence_m: a.divergence_m,
         fixes: sum(|r| r.fixes),
@@ -482,9 +482,9 @@ pub fn print_table(reports: &[UsblReport]) {
             "| {case} | {} | {} | {:.3} | {:.2} | {:.3} | {:.3} | {:.4} | {}/{} | {}/{} | {} | {:.0} |",
             name(&r.coupling),
             name(&r.filter),
-            r.horizontal_rms_m,
-            r.horizontal_max_m,
-            r.worst_run_horizontal_rms_m,
+            r.horizontal_error_rms_m,
+            r.horizontal_error_max_m,
+            r.worst_run_horizontal_error_rms_m,
             r.vertical_rms_m,
             r.velocity_rms_m_s,
             r.divergent_runs,
@@ -505,16 +505,16 @@ pub fn print(r: &UsblReport) {
         name(&r.filter),
         r.scenario,
         r.runs,
-        r.seconds_per_run,
+        r.wall_s_per_run,
         r.seed,
         r.outlier_fraction * 100.0,
         r.array_yaw_error_deg
     );
     println!(
         "  horizontal position error RMS {:.3} m (worst run {:.3} m), max {:.2} m; vertical RMS {:.3} m, max {:.2} m; velocity RMS {:.4} m/s",
-        r.horizontal_rms_m,
-        r.worst_run_horizontal_rms_m,
-        r.horizontal_max_m,
+        r.horizontal_error_rms_m,
+        r.worst_run_horizontal_error_rms_m,
+        r.horizontal_error_max_m,
         r.vertical_rms_m,
         r.vertical_max_m,
         r.velocity_rms_m_s

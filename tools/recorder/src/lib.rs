@@ -382,7 +382,18 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
 
 fn print(json: bool, s: &RecordSummary) {
     if json {
-        println!("{}", serde_json::to_string_pretty(s).unwrap_or_default());
+        // The JSON vocabulary's version first (docs/json.md), as every auvnav document has it.
+        #[derive(Serialize)]
+        struct Versioned<'a> {
+            format_version: u32,
+            #[serde(flatten)]
+            summary: &'a RecordSummary,
+        }
+        let doc = Versioned {
+            format_version: auvnav_version::JSON_FORMAT_VERSION,
+            summary: s,
+        };
+        println!("{}", serde_json::to_string_pretty(&doc).unwrap_or_default());
     } else {
         println!(
             "auvnav record: {} messages in {:.1} s to {} ({} flushes)",

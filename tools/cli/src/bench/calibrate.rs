@@ -13,7 +13,7 @@ pub struct CalibrateBench {
     pub full_replays: usize,
     pub surrogate_jacobians: usize,
     /// Fit and re-score (s): what the targets compare.
-    pub fit_seconds: f64,
+    pub fit_wall_s: f64,
     pub full_replays_per_second: f64,
     pub threads: usize,
     pub mount_yaw_deg: f64,
@@ -29,7 +29,7 @@ pub struct CalibrateBenchReport {
     pub campaign: String,
     pub seed: u64,
     pub voyages: usize,
-    pub log_seconds: f64,
+    pub log_duration_s: f64,
     pub hidden_mount_yaw_deg: f64,
     pub hidden_scale_factor: f64,
     pub methods: Vec<CalibrateBench>,
@@ -52,10 +52,10 @@ pub fn calibrate(seed: u64, methods: &[Method], json: bool) -> anyhow::Result<()
             ],
         )?;
         let mut specs = Vec::new();
-        let mut log_seconds = 0.0;
+        let mut log_duration_s = 0.0;
         for (i, cfg) in configs.iter().enumerate() {
             let path = dir.join(format!("voyage_{}.mcap", i + 1));
-            log_seconds += sim::simulate_to_log(cfg, &path)?.duration_s;
+            log_duration_s += sim::simulate_to_log(cfg, &path)?.duration_s;
             specs.push(VoyageSpec {
                 path,
                 window_s: None,
@@ -79,7 +79,7 @@ pub fn calibrate(seed: u64, methods: &[Method], json: bool) -> anyhow::Result<()
                 method,
                 full_replays: r.evaluations.full_replays_fit,
                 surrogate_jacobians: r.evaluations.surrogate_jacobians,
-                fit_seconds: r.evaluations.fit_seconds,
+                fit_wall_s: r.evaluations.fit_wall_s,
                 full_replays_per_second: r.evaluations.full_replays_per_second,
                 threads: r.evaluations.threads,
                 mount_yaw_deg: value("dvl.mount_yaw"),
@@ -88,7 +88,7 @@ pub fn calibrate(seed: u64, methods: &[Method], json: bool) -> anyhow::Result<()
                 objective_after: r.objective.after,
             });
         }
-        let time = |m: Method| out.iter().find(|b| b.method == m).map(|b| b.fit_seconds);
+        let time = |m: Method| out.iter().find(|b| b.method == m).map(|b| b.fit_wall_s);
         let seed_over_fast = match (time(Method::Seed), time(Method::Fast)) {
             (Some(s), Some(f)) => s / f,
             _ => f64::NAN,
@@ -98,7 +98,7 @@ pub fn calibrate(seed: u64, methods: &[Method], json: bool) -> anyhow::Result<()
             campaign: "scal".into(),
             seed,
             voyages: specs.len(),
-            log_seconds,
+            log_duration_s,
             hidden_mount_yaw_deg: yaw,
             hidden_scale_factor: scale,
             methods: out,
@@ -108,18 +108,18 @@ pub fn calibrate(seed: u64, methods: &[Method], json: bool) -> anyhow::Result<()
     let _ = std::fs::remove_dir_all(&dir);
     let r = result?;
     if json {
-        println!("{}", serde_json::to_string_pretty(&r)?);
+        crate::json::print(&r)?;
     } else {
         println!(
             "S-CAL campaign (seed {}): {} voyages, {:.0} s of log; hidden yaw {} deg, scale {}",
-            r.seed, r.voyages, r.log_seconds, r.hidden_mount_yaw_deg, r.hidden_scale_factor
+            r.seed, r.voyages, r.log_duration_s, r.hidden_mount_yaw_deg, r.hidden_scale_factor
         );
         for b in &r.methods {
             println!(
                 "{:<10} {:>4} full replays in {:>7.1} s ({:.2}/s, {} threads): yaw {:.4} deg, scale {:.5}, objective {:.6} -> {:.6}",
                 format!("{:?}", b.method),
                 b.full_replays,
-                b.fit_seconds,
+                b.fit_wall_s,
                 b.full_replays_per_second,
                 b.threads,
                 b.mount_yaw_deg,

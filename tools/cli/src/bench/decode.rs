@@ -189,12 +189,7 @@ pub fn decode(repeat: usize, pty_seconds: f64, json: bool) -> anyhow::Result<()>
         }
     }
     if json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(
-                &serde_json::json!({ "throughput": results, "pty_latency": latency })
-            )?
-        );
+        crate::json::print(&serde_json::json!({ "throughput": results, "pty_latency": latency }))?;
     } else {
         for l in &latency {
             println!(

@@ -26,7 +26,6 @@ struct PerEffect {
 
 #[derive(Debug, Serialize)]
 struct Summary {
-    version: u32,
     hidden_trials: usize,
     correct: usize,
     correct_rate: f64,
@@ -36,7 +35,7 @@ struct Summary {
     null_false_discoveries: usize,
     null_false_discovery_rate: f64,
     per_effect: Vec<PerEffect>,
-    median_trial_wall_seconds: f64,
+    median_trial_wall_s: f64,
     /// Trials with two effects hidden at once.
     pair_trials: usize,
     pairs_correct: usize,
@@ -48,7 +47,7 @@ struct Summary {
     floor: Vec<FloorRow>,
     /// Discovery on the measured data sets (import in memory and discovery, per item).
     measured: Vec<MeasuredTiming>,
-    wall_seconds: f64,
+    wall_s: f64,
     threads: usize,
     trials: Vec<Trial>,
     pairs: Vec<SetTrial>,
@@ -70,9 +69,9 @@ struct FloorRow {
 pub struct MeasuredTiming {
     data_set: String,
     items: usize,
-    median_seconds: f64,
-    max_seconds: f64,
-    total_seconds: f64,
+    median_wall_s: f64,
+    max_wall_s: f64,
+    total_wall_s: f64,
     /// Effects found per item (names).
     found: Vec<Vec<String>>,
 }
@@ -108,9 +107,9 @@ fn measured_timings(data: &std::path::Path) -> anyhow::Result<Vec<MeasuredTiming
         MeasuredTiming {
             data_set: name.into(),
             items: t.len(),
-            median_seconds: t.get(t.len() / 2).copied().unwrap_or(0.0),
-            max_seconds: t.last().copied().unwrap_or(0.0),
-            total_seconds: t.iter().sum(),
+            median_wall_s: t.get(t.len() / 2).copied().unwrap_or(0.0),
+            max_wall_s: t.last().copied().unwrap_or(0.0),
+            total_wall_s: t.iter().sum(),
             found: items.into_iter().map(|x| x.1).collect(),
         }
     };
@@ -275,7 +274,6 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
     let correct = with.iter().filter(|t| t.correct).count();
     let null_fd = without.iter().filter(|t| t.false_discovery).count();
     let s = Summary {
-        version: 1,
         hidden_trials: with.len(),
         correct,
         correct_rate: correct as f64 / with.len().max(1) as f64,
@@ -284,7 +282,7 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
         null_false_discoveries: null_fd,
         null_false_discovery_rate: null_fd as f64 / without.len().max(1) as f64,
         per_effect: per.into_values().collect(),
-        median_trial_wall_seconds: walls.get(walls.len() / 2).copied().unwrap_or(0.0),
+        median_trial_wall_s: walls.get(walls.len() / 2).copied().unwrap_or(0.0),
         pair_trials: pairs.len(),
         pairs_correct: pairs.iter().filter(|t| t.correct).count(),
         pairs_correct_rate: pairs.iter().filter(|t| t.correct).count() as f64
@@ -292,13 +290,13 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
         pairs_false_discoveries: pairs.iter().filter(|t| t.false_discovery).count(),
         floor,
         measured,
-        wall_seconds: start.elapsed().as_secs_f64(),
+        wall_s: start.elapsed().as_secs_f64(),
         threads,
         trials,
         pairs: pairs.to_vec(),
     };
     if json {
-        println!("{}", serde_json::to_string_pretty(&s)?);
+        crate::json::print(&s)?;
         return Ok(());
     }
     println!(
@@ -366,12 +364,12 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
     for m in &s.measured {
         println!(
             "measured {}: median {:.2} s, max {:.2} s, total {:.2} s over {} item(s) (import in memory + discovery)",
-            m.data_set, m.median_seconds, m.max_seconds, m.total_seconds, m.items
+            m.data_set, m.median_wall_s, m.max_wall_s, m.total_wall_s, m.items
         );
     }
     println!(
         "median {:.2} s per trial (simulation + discovery), {:.1} s wall on {} threads",
-        s.median_trial_wall_seconds, s.wall_seconds, s.threads
+        s.median_trial_wall_s, s.wall_s, s.threads
     );
     Ok(())
 }

@@ -158,7 +158,7 @@ pub fn pty_latency(rate_hz: f64, seconds: f64) -> anyhow::Result<PtyLatency> {
 #[derive(Debug, Clone, Serialize)]
 pub struct E2eLatency {
     pub imu_rate_hz: f64,
-    pub seconds: f64,
+    pub duration_s: f64,
     pub imu_frames_written: u64,
     pub solutions_received: u64,
     /// IMU frame written to its pseudo-terminal → navigation solution received by a subscriber
@@ -389,7 +389,7 @@ pub fn e2e(rate_hz: f64, seconds: f64) -> anyhow::Result<E2eLatency> {
     };
     Ok(E2eLatency {
         imu_rate_hz: rate_hz,
-        seconds,
+        duration_s: seconds,
         imu_frames_written: n,
         solutions_received: sols.len() as u64,
         frame_to_solution_us: percentiles(total),
@@ -408,7 +408,7 @@ pub fn e2e_bench(seconds: f64, json: bool) -> anyhow::Result<()> {
         results.push(e2e(rate, seconds)?);
     }
     if json {
-        println!("{}", serde_json::to_string_pretty(&results)?);
+        crate::json::print(&results)?;
     } else {
         for r in &results {
             println!(

@@ -13,7 +13,7 @@ struct Row {
     coverage: &'static str,
     method: MagMethod,
     model: String,
-    median_wall_seconds: f64,
+    median_wall_s: f64,
     hard_iron_error_ut: f64,
     heading_error_rms_deg: Option<f64>,
 }
@@ -71,22 +71,18 @@ pub fn mag(samples_n: usize, repeat: usize, json: bool) -> anyhow::Result<()> {
                 coverage: name,
                 method,
                 model,
-                median_wall_seconds: times[times.len() / 2],
+                median_wall_s: times[times.len() / 2],
                 hard_iron_error_ut: hard,
                 heading_error_rms_deg: heading,
             });
         }
     }
     if json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&serde_json::json!({
-                "version": 1,
-                "samples": samples_n,
-                "repeat": repeat,
-                "rows": rows,
-            }))?
-        );
+        crate::json::print(&serde_json::json!({
+            "samples": samples_n,
+            "repeat": repeat,
+            "rows": rows,
+        }))?;
     } else {
         println!(
             "{:<10} {:<10} {:<10} {:>12} {:>14} {:>12}",
@@ -98,7 +94,7 @@ pub fn mag(samples_n: usize, repeat: usize, json: bool) -> anyhow::Result<()> {
                 r.coverage,
                 format!("{:?}", r.method),
                 r.model,
-                r.median_wall_seconds * 1e3,
+                r.median_wall_s * 1e3,
                 r.hard_iron_error_ut,
                 r.heading_error_rms_deg
                     .map_or("-".into(), |h| format!("{h:.3}"))

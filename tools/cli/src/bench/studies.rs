@@ -8,9 +8,9 @@ use super::*;
 pub struct AlignBench {
     pub model: u8,
     pub runs: usize,
-    pub seconds_simulated_per_run: f64,
+    pub simulated_s_per_run: f64,
     pub threads: usize,
-    pub wall_seconds: f64,
+    pub wall_s: f64,
 }
 
 /// `auvnav bench align`: the seed's Monte Carlo (turning, 30° heading error, random mounting),
@@ -35,18 +35,18 @@ pub fn align(runs: usize, json: bool) -> anyhow::Result<()> {
         out.push(AlignBench {
             model,
             runs,
-            seconds_simulated_per_run: 1200.0,
+            simulated_s_per_run: 1200.0,
             threads,
-            wall_seconds: r.wall_seconds,
+            wall_s: r.wall_s,
         });
     }
     if json {
-        println!("{}", serde_json::to_string_pretty(&out)?);
+        crate::json::print(&out)?;
     } else {
         for b in &out {
             println!(
                 "align model {}: {} runs x {:.0} s in {:.1} s on {} threads",
-                b.model, b.runs, b.seconds_simulated_per_run, b.wall_seconds, b.threads
+                b.model, b.runs, b.simulated_s_per_run, b.wall_s, b.threads
             );
         }
     }
@@ -151,7 +151,7 @@ pub fn usbl(seconds: f64, json: bool) -> anyhow::Result<()> {
         }
     }
     if json {
-        println!("{}", serde_json::to_string_pretty(&out)?);
+        crate::json::print(&out)?;
     } else {
         for b in &out {
             println!(

@@ -15,7 +15,7 @@ pub struct SimBench {
     pub file_bytes: u64,
     pub runs_wall_s: Vec<f64>,
     pub median_wall_s: f64,
-    pub simulated_seconds_per_wall_second: f64,
+    pub real_time_factor: f64,
 }
 
 /// Simulates `hours` of the docking scenario (200 Hz IMU, 5 Hz DVL, 1 Hz USBL, 1 Hz depth, plus
@@ -58,10 +58,10 @@ pub fn sim(hours: f64, repeat: usize, json: bool) -> anyhow::Result<()> {
         file_bytes,
         runs_wall_s: runs,
         median_wall_s: median,
-        simulated_seconds_per_wall_second: hours * 3600.0 / median,
+        real_time_factor: hours * 3600.0 / median,
     };
     if json {
-        println!("{}", serde_json::to_string_pretty(&out)?);
+        crate::json::print(&out)?;
     } else {
         println!(
             "sim: {} h in {:.3} s (median of {}), {} messages, {} bytes",
@@ -136,12 +136,12 @@ pub fn replay(hours: f64, repeat: usize, json: bool) -> anyhow::Result<()> {
             compare_recorded: false,
         };
         let mut runs = Vec::new();
-        let mut log_seconds = 0.0;
+        let mut log_duration_s = 0.0;
         for _ in 0..repeat.max(1) {
             let t = std::time::Instant::now();
             let r = crate::replay::run(&args)?;
             runs.push(t.elapsed().as_secs_f64());
-            log_seconds = r.log_seconds;
+            log_duration_s = r.log_duration_s;
         }
         let (messages, _) = sim::simulate_to_vec(&cfg)?;
         let mut core_runs = Vec::new();
@@ -158,7 +158,7 @@ pub fn replay(hours: f64, repeat: usize, json: bool) -> anyhow::Result<()> {
         let r = &cfg.scenario.rates;
         let (m, cm) = (median(&runs), median(&core_runs));
         Ok(ReplayBench {
-            log_hours: log_seconds / 3600.0,
+            log_hours: log_duration_s / 3600.0,
             imu_hz: r.imu_hz,
             dvl_hz: r.dvl_hz,
             depth_hz: r.depth_hz,
@@ -166,16 +166,16 @@ pub fn replay(hours: f64, repeat: usize, json: bool) -> anyhow::Result<()> {
             imu_samples: summary.imu,
             runs_wall_s: runs,
             median_wall_s: m,
-            real_time_factor: log_seconds / m,
+            real_time_factor: log_duration_s / m,
             core_runs_wall_s: core_runs,
             core_median_wall_s: cm,
-            core_real_time_factor: log_seconds / cm,
+            core_real_time_factor: log_duration_s / cm,
         })
     })();
     let _ = std::fs::remove_dir_all(&dir);
     let out = result?;
     if json {
-        println!("{}", serde_json::to_string_pretty(&out)?);
+        crate::json::print(&out)?;
     } else {
         println!(
             "replay: {:.2} h of {} Hz IMU / {} Hz DVL / {} Hz depth in {:.3} s from the log (real-time factor {:.0}), {:.3} s from memory ({:.0}); median of {}",
@@ -235,7 +235,7 @@ pub fn accuracy(scenario_name: &str, seeds: u64, json: bool) -> anyhow::Result<(
     out.median_error_per_distance_cep50_percent = median(&out.error_per_distance_cep50_percent);
     out.median_final_error_m = median(&out.final_error_m);
     if json {
-        println!("{}", serde_json::to_string_pretty(&out)?);
+        crate::json::print(&out)?;
     } else {
         println!(
             "accuracy: scenario {} ({:.0} m), {} seeds: error/distance CEP50 median {:.4} % (max {:.4} %), final error median {:.2} m",

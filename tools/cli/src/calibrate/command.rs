@@ -284,7 +284,7 @@ pub fn calibrate_dvl(args: &CalibrateDvlArgs) -> anyhow::Result<CalibrationRepor
         &mut progress,
     )?;
     let after = problem.evaluate(&result.x, record_all)?;
-    let fit_seconds = fit_started.elapsed().as_secs_f64();
+    let fit_wall_s = fit_started.elapsed().as_secs_f64();
     if args.method != Method::Fast {
         let a = fast::analyse(&problem, &params, &after.runs, &result.x)?;
         result.std = a.std;
@@ -368,8 +368,8 @@ pub fn calibrate_dvl(args: &CalibrateDvlArgs) -> anyhow::Result<CalibrationRepor
         two_point_cmp,
         holdout,
         full_replays_fit: replays_for_fit,
-        fit_seconds,
-        wall_seconds: started.elapsed().as_secs_f64(),
+        fit_wall_s,
+        wall_s: started.elapsed().as_secs_f64(),
         threads,
     });
     if let Some(path) = &args.write_config {

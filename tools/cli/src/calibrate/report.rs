@@ -15,9 +15,6 @@ use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::Path;
 
-/// Version of the JSON layout.
-pub const REPORT_VERSION: u32 = 1;
-
 #[derive(Debug, Clone, Serialize)]
 pub struct ParameterRow {
     /// The simulator's effect name (a lever-arm component as `dvl.lever_arm.x`).
@@ -94,18 +91,17 @@ pub struct Evaluations {
     /// Full replays of every voyage (one candidate each) for the fit and its re-score.
     pub full_replays_fit: usize,
     /// Wall time of the fit and its re-score (s): what `bench calibrate` compares.
-    pub fit_seconds: f64,
+    pub fit_wall_s: f64,
     /// Sensitivity sets computed from a replay's DVL epochs (fast): surrogate, not scored.
     pub surrogate_jacobians: usize,
     /// Wall time of the whole command: loading, baseline, fit, comparison, hold-out (s).
-    pub wall_seconds: f64,
+    pub wall_s: f64,
     pub full_replays_per_second: f64,
     pub threads: usize,
 }
 
 #[derive(Debug, Clone, Serialize)]
 pub struct CalibrationReport {
-    pub version: u32,
     pub method: Method,
     pub fixes: FixSource,
     pub threshold_m: f64,
@@ -163,8 +159,8 @@ pub struct Inputs<'a> {
     pub two_point_cmp: Option<([f64; 8], f64)>,
     pub holdout: Vec<HoldoutRow>,
     pub full_replays_fit: usize,
-    pub fit_seconds: f64,
-    pub wall_seconds: f64,
+    pub fit_wall_s: f64,
+    pub wall_s: f64,
     pub threads: usize,
 }
 
@@ -330,7 +326,6 @@ pub fn build(i: Inputs) -> CalibrationReport {
         notes.push("fewer than 3 voyages: no hold-out evaluation, the objective is scored on the voyages the fit used".into());
     }
     CalibrationReport {
-        version: REPORT_VERSION,
         method: i.args.method,
         fixes: i.args.fixes,
         threshold_m: i.args.threshold,
@@ -354,10 +349,10 @@ pub fn build(i: Inputs) -> CalibrationReport {
         holdout,
         evaluations: Evaluations {
             full_replays_fit: i.full_replays_fit,
-            fit_seconds: i.fit_seconds,
+            fit_wall_s: i.fit_wall_s,
             surrogate_jacobians: r.surrogate_evaluations,
-            wall_seconds: i.wall_seconds,
-            full_replays_per_second: i.full_replays_fit as f64 / i.fit_seconds.max(1e-9),
+            wall_s: i.wall_s,
+            full_replays_per_second: i.full_replays_fit as f64 / i.fit_wall_s.max(1e-9),
             threads: i.threads,
         },
         history: r.history.clone(),
@@ -433,10 +428,10 @@ pub fn text(r: &CalibrationReport) -> String {
         s,
         "fit: {} full replays in {:.1} s ({:.2}/s on {} threads); whole run {:.1} s",
         r.evaluations.full_replays_fit,
-        r.evaluations.fit_seconds,
+        r.evaluations.fit_wall_s,
         r.evaluations.full_replays_per_second,
         r.evaluations.threads,
-        r.evaluations.wall_seconds
+        r.evaluations.wall_s
     );
     for n in &r.notes {
         let _ = writeln!(s, "note: {n}");
@@ -508,7 +503,7 @@ pub fn write_report_dir(
     result: &MethodResult,
 ) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    write_atomically(&dir.join("report.json"), &serde_json::to_string_pretty(r)?)?;
+    write_atomically(&dir.join("report.json"), &crate::json::to_string_pretty(r)?)?;
     write_atomically(&dir.join("calibration.toml"), &config_toml(r)?)?;
     let mut figures = Vec::new();
     for (k, v) in voyages.iter().enumerate() {
@@ -688,9 +683,9 @@ pub fn write_report_dir(
         md,
         "\nFit: {} full replays in {:.1} s on {} threads (whole run {:.1} s).\n",
         r.evaluations.full_replays_fit,
-        r.evaluations.fit_seconds,
+        r.evaluations.fit_wall_s,
         r.evaluations.threads,
-        r.evaluations.wall_seconds
+        r.evaluations.wall_s
     );
     for n in &r.notes {
         let _ = writeln!(md, "- {n}");

@@ -155,10 +155,9 @@ pub struct ResidualSeries {
     pub selected: Vec<f64>,
 }
 
-/// The report (`--json`, version 1).
+/// The report (`--json` and `report.json`; `format_version` in docs/json.md).
 #[derive(Debug, Clone, Serialize)]
 pub struct DiscoverReport {
-    pub version: u32,
     pub inputs: Vec<String>,
     pub reference: String,
     pub channels: Vec<ChannelReport>,
@@ -175,7 +174,7 @@ pub struct DiscoverReport {
     pub navigation: Vec<super::extend::NavigationGain>,
     /// What could not be analysed, and why.
     pub notes: Vec<String>,
-    pub wall_seconds: f64,
+    pub wall_s: f64,
     /// The nominal effects.
     #[serde(skip)]
     pub nominal_model: Effects,
@@ -403,7 +402,6 @@ pub fn discover(
 ) -> DiscoverReport {
     let start = std::time::Instant::now();
     let mut r = DiscoverReport {
-        version: 1,
         inputs: Vec::new(),
         reference: String::new(),
         channels: Vec::new(),
@@ -415,7 +413,7 @@ pub fn discover(
         noise: Vec::new(),
         navigation: Vec::new(),
         notes: Vec::new(),
-        wall_seconds: 0.0,
+        wall_s: 0.0,
         nominal_model: nominal.clone(),
         model: nominal.clone(),
         held_out_model: nominal.clone(),
@@ -755,7 +753,7 @@ pub fn discover(
             allan,
         });
     }
-    r.wall_seconds = start.elapsed().as_secs_f64();
+    r.wall_s = start.elapsed().as_secs_f64();
     r
 }
 
@@ -973,7 +971,7 @@ pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
     if !a.no_navigation {
         let start = std::time::Instant::now();
         super::extend::navigation_gain(&a.logs, &mut r);
-        r.wall_seconds += start.elapsed().as_secs_f64();
+        r.wall_s += start.elapsed().as_secs_f64();
     }
     if let Some(p) = &a.write_effects {
         write_atomically(p, &super::extend::effect_set_toml(&r))?;
@@ -985,7 +983,7 @@ pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
         super::report::write_report_dir(dir, &r)?;
     }
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&r)?);
+        crate::json::print(&r)?;
     } else {
         print_text(&r);
     }
@@ -1085,5 +1083,5 @@ fn print_text(r: &DiscoverReport) {
     for n in &r.notes {
         println!("  note: {n}");
     }
-    println!("  {:.2} s", r.wall_seconds);
+    println!("  {:.2} s", r.wall_s);
 }

@@ -171,7 +171,7 @@ fn markdown(r: &DiscoverReport, figures: &[(ChannelKind, Vec<String>)]) -> Strin
         "Inputs: {}  \nReference: {}  \nWall time: {:.2} s\n",
         r.inputs.join(", "),
         r.reference,
-        r.wall_seconds
+        r.wall_s
     );
     let _ = writeln!(m, "## Effects found\n");
     if r.effects.is_empty() {
@@ -330,7 +330,7 @@ fn markdown(r: &DiscoverReport, figures: &[(ChannelKind, Vec<String>)]) -> Strin
 /// Writes the report directory.
 pub fn write_report_dir(dir: &Path, r: &DiscoverReport) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    write_atomically(&dir.join("report.json"), &serde_json::to_string_pretty(r)?)?;
+    write_atomically(&dir.join("report.json"), &crate::json::to_string_pretty(r)?)?;
     write_atomically(&dir.join("effects.toml"), &extend::effect_set_toml(r))?;
     write_atomically(&dir.join("navigation.toml"), &extend::navigator_toml(r)?)?;
     let mut figures = Vec::new();

@@ -47,8 +47,8 @@ pub struct ReplayReport {
     /// Present when the log has a truth channel.
     pub accuracy: Option<Accuracy>,
     pub samples_processed: u64,
-    pub log_seconds: f64,
-    pub wall_seconds: f64,
+    pub log_duration_s: f64,
+    pub wall_s: f64,
     pub real_time_factor: f64,
     pub counts: ReplayCounts,
     pub navigator: NavCounters,
@@ -263,16 +263,20 @@ pub fn run(a: &ReplayArgs) -> anyhow::Result<ReplayReport> {
             a.log.display()
         );
     }
-    let log_seconds = replay.duration_s();
+    let log_duration_s = replay.duration_s();
     Ok(ReplayReport {
         log: a.log.display().to_string(),
         configuration: config_source,
         initial_state: replay.initial().cloned(),
         accuracy: replay.accuracy(),
         samples_processed: replay.counts.imu,
-        log_seconds,
-        wall_seconds: wall,
-        real_time_factor: if wall > 0.0 { log_seconds / wall } else { 0.0 },
+        log_duration_s,
+        wall_s: wall,
+        real_time_factor: if wall > 0.0 {
+            log_duration_s / wall
+        } else {
+            0.0
+        },
         counts: replay.counts,
         navigator: replay.nav_counters(),
         final_parameters: replay.navigator().map(FinalParameters::of),
@@ -318,8 +322,8 @@ pub fn print_report(r: &ReplayReport) {
     println!(
         "  {} IMU samples, {:.0} s of log in {:.3} s (real-time factor {:.0}); fused {} DVL ({} rejected, {} invalid), {} depth ({} rejected), {} GNSS ({} rejected)",
         r.samples_processed,
-        r.log_seconds,
-        r.wall_seconds,
+        r.log_duration_s,
+        r.wall_s,
         r.real_time_factor,
         n.dvl_fused,
         n.dvl_rejected,

@@ -108,10 +108,9 @@ pub struct HeadingCheck {
     pub samples: usize,
 }
 
-/// The report (`--json`, version 1).
+/// The report (`--json` and `report.json`; `format_version` in docs/json.md).
 #[derive(Debug, Clone, Serialize)]
 pub struct MagReport {
-    pub version: u32,
     pub inputs: Vec<String>,
     pub unit: String,
     pub samples_fit: usize,
@@ -133,7 +132,7 @@ pub struct MagReport {
     pub spreads: SpreadTable,
     pub heading: Option<HeadingCheck>,
     pub thresholds: Thresholds,
-    pub wall_seconds: f64,
+    pub wall_s: f64,
     /// "calibrated", "constrained", "disturbed" or "undetermined".
     pub status: &'static str,
     pub verdict: Vec<String>,
@@ -449,7 +448,6 @@ pub fn calibrate_mag(a: &CalibrateMagArgs) -> anyhow::Result<MagReport> {
         );
     }
     Ok(MagReport {
-        version: 1,
         inputs: a.inputs.iter().map(|p| p.display().to_string()).collect(),
         unit: units.join("; "),
         samples_fit: fit_set.len(),
@@ -470,7 +468,7 @@ pub fn calibrate_mag(a: &CalibrateMagArgs) -> anyhow::Result<MagReport> {
         spreads,
         heading,
         thresholds: limits,
-        wall_seconds: wall,
+        wall_s: wall,
         status,
         verdict,
         calibration: c,

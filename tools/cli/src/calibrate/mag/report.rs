@@ -84,7 +84,7 @@ pub fn text(r: &MagReport) -> String {
             h.before_rms_deg, h.after_rms_deg, h.samples
         );
     }
-    let _ = writeln!(s, "wall time {:.3} s", r.wall_seconds);
+    let _ = writeln!(s, "wall time {:.3} s", r.wall_s);
     for v in &r.verdict {
         let _ = writeln!(s, "verdict: {v}");
     }
@@ -144,7 +144,7 @@ fn thin(samples: &[MagSample], max: usize) -> impl Iterator<Item = &MagSample> {
 /// norm_histogram.svg.
 pub fn write_report_dir(dir: &Path, r: &MagReport, samples: &[MagSample]) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    write_atomically(&dir.join("report.json"), &serde_json::to_string_pretty(r)?)?;
+    write_atomically(&dir.join("report.json"), &crate::json::to_string_pretty(r)?)?;
     write_atomically(&dir.join("calibration.toml"), &config_toml(r)?)?;
     let c = &r.calibration;
     let radius = r.reference.intensity_ut;
