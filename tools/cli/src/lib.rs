@@ -8,6 +8,7 @@ pub mod demo;
 pub mod discover;
 pub mod emulate;
 pub mod import;
+pub mod info;
 pub mod json;
 pub mod live;
 pub mod montecarlo;

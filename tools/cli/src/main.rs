@@ -23,6 +23,8 @@ enum Command {
     Sim(SimArgs),
     /// Simulate a voyage, run it through the navigation core and print the accuracy.
     Demo(auvnav_tools::demo::DemoArgs),
+    /// What a log holds: header, channels with counts and rates, duration, configuration.
+    Info(auvnav_tools::info::InfoArgs),
     /// Run a log through the navigation core; with a truth channel, report the accuracy.
     Replay(auvnav_tools::replay::ReplayArgs),
     /// Decode a captured device byte stream (one JSON object per frame with --json).
@@ -578,6 +580,7 @@ fn main() -> std::process::ExitCode {
         Command::Sim(a) => run_sim(a),
         Command::Demo(a) => auvnav_tools::demo::run(&a),
         Command::Replay(a) => run_replay(&a),
+        Command::Info(a) => auvnav_tools::info::run(&a).map(|_| ()),
         Command::Decode(a) => auvnav_tools::decode::run(&a).map(|_| ()),
         Command::Discover(a) => auvnav_tools::discover::command::run(&a).map(|_| ()),
         Command::Emulate(a) => auvnav_tools::emulate::run(&a).map(|_| ()),

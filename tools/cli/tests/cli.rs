@@ -429,3 +429,65 @@ fn replay_fuses_usbl_with_the_station_of_a_simulated_log_when_asked() {
     assert!(stderr(&o).contains("no station survey"), "{}", stderr(&o));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn info_lists_channels_counts_and_duration_of_a_log_and_of_a_cut_log() {
+    let dir = temp_dir("info");
+    let log = dir.join("s.mcap");
+    let o = auvnav(&[
+        "sim",
+        "--scenario",
+        "straight",
+        "--duration",
+        "300",
+        "--out",
+        log.to_str().expect("utf-8"),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let sim: serde_json::Value = serde_json::from_slice(&o.stdout).expect("sim json");
+    let o = auvnav(&["info", log.to_str().expect("utf-8"), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("info json");
+    assert_eq!(v["format_version"], 1, "{v}");
+    assert_eq!(v["log_format_version"], 1, "{v}");
+    assert_eq!(v["producer"], "auvnav sim");
+    assert!(
+        v["start_utc"].is_null(),
+        "a simulated log has no UTC anchor"
+    );
+    assert!(
+        (v["duration_s"].as_f64().expect("duration") - 300.0).abs() < 0.01,
+        "{v}"
+    );
+    let channels = v["channels"].as_array().expect("channels");
+    let count = |topic: &str| {
+        channels
+            .iter()
+            .find(|c| c["topic"] == topic)
+            .map(|c| c["messages"].clone())
+            .unwrap_or_default()
+    };
+    assert_eq!(count("imu"), sim["imu"], "{v}");
+    assert_eq!(count("dvl"), sim["dvl"], "{v}");
+    let imu = channels
+        .iter()
+        .find(|c| c["topic"] == "imu")
+        .expect("imu channel");
+    assert!(
+        (imu["rate_hz"].as_f64().expect("rate") - 200.0).abs() < 0.1,
+        "{imu}"
+    );
+    assert!(v["stopped"].is_null());
+    // A log cut in the middle (a killed writer): read to the cut, and said so.
+    let bytes = std::fs::read(&log).expect("log");
+    let cut = dir.join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() * 3 / 4]).expect("cut");
+    let o = auvnav(&["info", cut.to_str().expect("utf-8"), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("info json");
+    assert!(v["stopped"].is_string(), "{v}");
+    let m = v["messages"].as_u64().expect("messages");
+    assert!(m > 0 && m < sim["imu"].as_u64().expect("imu"), "{v}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
