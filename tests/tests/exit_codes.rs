@@ -78,6 +78,22 @@ fn auvnav_exit_status_names_the_failure_class() {
     // Usage: an unknown option (clap), a bad value.
     assert_eq!(status(&["replay", "--no-such-option"]).0, Some(2));
     assert_eq!(status(&["demo", "--imu", "gyrocompass"]).0, Some(2));
+    // Values checked by clap's value parsers, before anything runs: an effect not in the
+    // vocabulary, one with the wrong number of values, a malformed bound.
+    let (code, err) = status(&[
+        "perturb",
+        "x.mcap",
+        "--out",
+        "y.mcap",
+        "--effect",
+        "dvl.scale_factr=1",
+    ]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("dvl.scale_factr"), "{err}");
+    let (code, err) = status(&["sim", "--effect", "dvl.lever_arm=1,2", "--out", "y.mcap"]);
+    assert_eq!(code, Some(2), "{err}");
+    let (code, err) = status(&["calibrate", "dvl", "x.mcap", "--bound", "dvl.mount_yaw=5"]);
+    assert_eq!(code, Some(2), "{err}");
     // Runtime: the log does not exist.
     let missing = dir.path().join("missing.mcap");
     let (code, err) = status(&["replay", missing.to_str().expect("utf-8")]);

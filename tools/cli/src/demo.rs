@@ -32,7 +32,7 @@ pub struct DemoArgs {
     pub seed: u64,
     /// The emulated IMU's protocol (processes only): `xsens` (an MTi sending its magnetic field
     /// too, which the daemon fuses as a heading aid) or `kvh1750`.
-    #[arg(long, default_value = "xsens")]
+    #[arg(long, default_value = "xsens", value_parser = ["xsens", "kvh1750"])]
     pub imu: String,
     /// Write the logs and solutions here (processes: voyage.mcap, record.mcap, live_nav.csv,
     /// replay_nav.csv and each process's log; in process: sim.mcap and nav.csv).

@@ -28,13 +28,13 @@ pub struct EmulateArgs {
     /// The log to play (MCAP, as written by `auvnav sim` or the recorder).
     pub log: PathBuf,
     /// Emulate the DVL in this protocol (pd0 or wldvl).
-    #[arg(long)]
+    #[arg(long, value_parser = ["pd0", "wldvl"])]
     pub dvl: Option<String>,
     /// Emulate the IMU in this protocol (kvh1750 or xsens).
-    #[arg(long)]
+    #[arg(long, value_parser = ["kvh1750", "xsens"])]
     pub imu: Option<String>,
     /// Emulate the USBL in this protocol (seatrac).
-    #[arg(long)]
+    #[arg(long, value_parser = ["seatrac"])]
     pub usbl: Option<String>,
     /// Play this many times faster than real time (0.01..1000).
     #[arg(long, default_value_t = 1.0)]
@@ -58,11 +58,11 @@ pub struct EmulateArgs {
     #[arg(long, default_value_t = 0.0)]
     pub garbage: f64,
     /// DEVICE,AT,FOR: the device goes silent at AT s for FOR s (repeatable).
-    #[arg(long, value_name = "DEVICE,AT,FOR")]
+    #[arg(long, value_name = "DEVICE,AT,FOR", value_parser = window_spec)]
     pub pause: Vec<String>,
     /// DEVICE,AT,FOR: the device's pseudo-terminal is closed at AT s and a new one appears FOR s
     /// later (repeatable; needs --link-dir).
-    #[arg(long, value_name = "DEVICE,AT,FOR")]
+    #[arg(long, value_name = "DEVICE,AT,FOR", value_parser = window_spec)]
     pub unplug: Vec<String>,
     /// Seed of the fault injection.
     #[arg(long, default_value_t = 1)]
@@ -109,6 +109,16 @@ impl Window {
     fn contains(&self, t: f64) -> bool {
         t >= self.at_s && t < self.at_s + self.for_s
     }
+}
+
+/// clap value parser of `--pause` and `--unplug`.
+fn window_spec(s: &str) -> Result<String, String> {
+    // The messages start "--OPTION SPEC: "; clap names the option and the value itself.
+    parse_window(s, "").map(|_| s.to_string()).map_err(|e| {
+        let m = e.to_string();
+        m.split_once(": ")
+            .map_or(m.clone(), |(_, rest)| rest.to_string())
+    })
 }
 
 fn parse_window(spec: &str, option: &str) -> anyhow::Result<(DeviceClass, Window)> {

@@ -1,5 +1,6 @@
 pub mod accuracy;
 pub mod align;
+pub mod args;
 pub mod bench;
 pub mod calibrate;
 pub mod csv;

@@ -95,6 +95,7 @@ struct PerturbArgs {
     #[arg(
         long = "effect",
         value_name = "NAME=VALUE",
+        value_parser = auvnav_tools::args::effect_setting,
         required_unless_present = "effects_from"
     )]
     effects: Vec<String>,
@@ -319,7 +320,7 @@ struct SimArgs {
     #[arg(long)]
     out: Option<PathBuf>,
     /// Switch an effect on: NAME=VALUE or NAME=V1,V2,V3 (repeatable; see --list-effects).
-    #[arg(long = "effect", value_name = "NAME=VALUE")]
+    #[arg(long = "effect", value_name = "NAME=VALUE", value_parser = auvnav_tools::args::effect_setting)]
     effects: Vec<String>,
     /// Effects from a file: the `[effects]` table of an effect set (`auvnav discover
     /// --write-effects`, a report directory's `effects.toml`) or of a scenario file; applied on

@@ -64,7 +64,7 @@ pub struct UsblArgs {
     pub divergence_m: f64,
     /// Override a `[navigation.usbl]` setting, e.g. `--set range_difference_error_std_m=0.005`
     /// (repeatable; TOML values).
-    #[arg(long = "set", value_name = "KEY=VALUE")]
+    #[arg(long = "set", value_name = "KEY=VALUE", value_parser = crate::args::key_value)]
     pub settings: Vec<String>,
     /// Worker threads (default: the available cores).
     #[arg(long)]

@@ -62,10 +62,10 @@ pub struct CalibrateDvlArgs {
     #[arg(long, value_delimiter = ',')]
     pub params: Vec<String>,
     /// Bounds of a parameter: NAME=MIN,MAX (repeatable).
-    #[arg(long = "bound")]
+    #[arg(long = "bound", value_name = "NAME=MIN,MAX", value_parser = crate::args::name_and_two_numbers)]
     pub bounds: Vec<String>,
     /// Prior of a parameter: NAME=MEAN,STD (repeatable).
-    #[arg(long = "prior")]
+    #[arg(long = "prior", value_name = "NAME=MEAN,STD", value_parser = crate::args::name_and_two_numbers)]
     pub priors: Vec<String>,
     /// TOML file with one table per parameter: estimate, min, max, prior, prior_std.
     #[arg(long)]

@@ -18,11 +18,11 @@ pub struct DiscoverArgs {
     #[arg(required = true)]
     pub logs: Vec<PathBuf>,
     /// The reference motion: `truth` (the simulated truth topic).
-    #[arg(long, default_value = "truth")]
+    #[arg(long, default_value = "truth", value_parser = ["truth"])]
     pub reference: String,
     /// The nominal model's effects, NAME=VALUE (repeatable; default: every effect off, the
     /// simulator's defaults).
-    #[arg(long = "effect", value_name = "NAME=VALUE")]
+    #[arg(long = "effect", value_name = "NAME=VALUE", value_parser = crate::args::effect_setting)]
     pub effects: Vec<String>,
     /// Start from the effects a previous `auvnav discover --json` report found (what the data
     /// already contain), or from an effect set file (`.toml`, e.g. `--write-effects`), so that

@@ -166,7 +166,7 @@ pub struct CsvColumnArgs {
     #[arg(long, value_delimiter = ',')]
     pub accel_columns: Option<Vec<String>>,
     /// CSV: the field unit (T, uT, nT, gauss); default: decided from the readings' magnitude.
-    #[arg(long)]
+    #[arg(long, ignore_case = true, value_parser = ["T", "uT", "nT", "gauss"])]
     pub mag_unit: Option<String>,
 }
 
