@@ -22,16 +22,7 @@ use std::io::Write;
 use std::process::ExitCode;
 use std::time::Duration;
 
-#[derive(clap::Parser)]
-#[command(name = "auvnavd", about = "auvnav fusion daemon", version = auvnav_version::LONG)]
-struct Args {
-    /// The daemon's TOML configuration.
-    #[arg(long)]
-    config: Option<String>,
-    /// Check the configuration, print it with defaults filled in, and exit.
-    #[arg(long, value_name = "FILE")]
-    check_config: Option<String>,
-}
+use auvnavd::Args;
 
 /// A watched sensor: last arrival and whether it is reported lost.
 struct Watch {

@@ -61,6 +61,20 @@ enum Command {
         #[command(subcommand)]
         what: MonteCarloWhat,
     },
+    /// Shell completions for auvnav (standard output), or for every auvnav program (--out DIR).
+    Completions {
+        /// The shell.
+        shell: clap_complete::Shell,
+        /// Write one file per program (auvnav, auvnavd, auvnav-dvl, -imu, -usbl, -can) here.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Manual pages (roff) of every auvnav program and auvnav's subcommands, into a folder.
+    Man {
+        /// The folder (created if missing); install into e.g. /usr/local/share/man/man1.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Throughput benchmarks, printed as JSON with --json.
     Bench {
         #[command(subcommand)]
@@ -582,6 +596,8 @@ fn main() -> std::process::ExitCode {
         Command::Demo(a) => auvnav_tools::demo::run(&a),
         Command::Replay(a) => run_replay(&a),
         Command::Info(a) => auvnav_tools::info::run(&a).map(|_| ()),
+        Command::Completions { shell, out } => completions(shell, out.as_deref()),
+        Command::Man { out } => man_pages(&out),
         Command::Decode(a) => auvnav_tools::decode::run(&a).map(|_| ()),
         Command::Discover(a) => auvnav_tools::discover::command::run(&a).map(|_| ()),
         Command::Emulate(a) => auvnav_tools::emulate::run(&a).map(|_| ()),
@@ -691,4 +707,54 @@ fn main() -> std::process::ExitCode {
             std::process::ExitCode::from(auvnav_tools::exit_status(&e))
         }
     }
+}
+
+/// The command lines of every auvnav program, for completions and manual pages.
+fn programs() -> Vec<clap::Command> {
+    use auvnav_drivers::device::DeviceClass;
+    use auvnav_drivers::serial_driver::serial_driver_command;
+    use clap::CommandFactory;
+    vec![
+        Cli::command(),
+        auvnavd::Args::command(),
+        serial_driver_command(DeviceClass::Dvl),
+        serial_driver_command(DeviceClass::Imu),
+        serial_driver_command(DeviceClass::Usbl),
+        auvnav_drivers::can_driver::CanDriverArgs::command(),
+    ]
+}
+
+fn completions(shell: clap_complete::Shell, out: Option<&std::path::Path>) -> anyhow::Result<()> {
+    use clap::CommandFactory;
+    let Some(dir) = out else {
+        clap_complete::generate(shell, &mut Cli::command(), "auvnav", &mut std::io::stdout());
+        return Ok(());
+    };
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    for mut cmd in programs() {
+        let name = cmd.get_name().to_string();
+        let path = clap_complete::generate_to(shell, &mut cmd, &name, dir)
+            .with_context(|| format!("writing the {shell} completions of {name}"))?;
+        println!("{}", path.display());
+    }
+    Ok(())
+}
+
+fn man_pages(dir: &std::path::Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    for cmd in programs() {
+        let name = cmd.get_name().to_string();
+        clap_mangen::generate_to(cmd, dir).with_context(|| {
+            format!("writing the manual pages of {name} into {}", dir.display())
+        })?;
+    }
+    let mut pages: Vec<_> = std::fs::read_dir(dir)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "1"))
+        .collect();
+    pages.sort();
+    for p in pages {
+        println!("{}", p.display());
+    }
+    Ok(())
 }

@@ -491,3 +491,46 @@ fn info_lists_channels_counts_and_duration_of_a_log_and_of_a_cut_log() {
     assert!(m > 0 && m < sim["imu"].as_u64().expect("imu"), "{v}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn manual_pages_and_completions_cover_every_program() {
+    let dir = temp_dir("man");
+    let o = auvnav(&["man", "--out", dir.to_str().expect("utf-8")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for page in [
+        "auvnav.1",
+        "auvnav-replay.1",
+        "auvnav-calibrate-dvl.1",
+        "auvnavd.1",
+        "auvnav-dvl.1",
+        "auvnav-imu.1",
+        "auvnav-usbl.1",
+        "auvnav-can.1",
+    ] {
+        let text = std::fs::read_to_string(dir.join(page)).unwrap_or_default();
+        assert!(text.starts_with(".ie"), "{page}: {:.80}", text);
+        assert!(text.contains(".SH NAME"), "{page}");
+    }
+    let comp = dir.join("completions");
+    let o = auvnav(&[
+        "completions",
+        "bash",
+        "--out",
+        comp.to_str().expect("utf-8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for program in ["auvnav", "auvnavd", "auvnav-dvl", "auvnav-can"] {
+        let script = comp.join(format!("{program}.bash"));
+        // bash accepts the script and registers the completion.
+        let st = Command::new("bash")
+            .arg("-c")
+            .arg(format!(
+                "source '{}' && complete -p {program}",
+                script.display()
+            ))
+            .output()
+            .expect("bash");
+        assert!(st.status.success(), "{program}: {}", stderr(&st));
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
