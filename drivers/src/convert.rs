@@ -124,50 +124,43 @@ pub fn kvh_sample(s: &KvhSample, cfg: &KvhConfig, host_time_ns: u64, sequence: u
     }
 }
 
-/// Days from 1970-01-01 to a proleptic Gregorian date (H. Hinnant's `days_from_civil`).
-pub fn days_from_civil(year: i64, month: u32, day: u32) -> i64 {
-    let y = if month <= 2 { year - 1 } else { year };
-    let era = y.div_euclid(400);
-    let yoe = y - era * 400;
-    let m = i64::from(month);
-    let doy = (153 * (if m > 2 { m - 3 } else { m + 9 }) + 2) / 5 + i64::from(day) - 1;
-    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-    era * 146_097 + doe - 719_468
-}
-
-/// The inverse of [`days_from_civil`]: (year, month, day).
-pub fn civil_from_days(days: i64) -> (i64, u32, u32) {
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = (doy - (153 * mp + 2) / 5 + 1) as u32;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
-    let year = yoe + era * 400 + i64::from(month <= 2);
-    (year, month, day)
+/// The epoch of PD0 times: 2000-01-01 00:00 (PD0's two-digit years count from 2000).
+fn pd0_epoch() -> chrono::NaiveDateTime {
+    chrono::NaiveDate::from_ymd_opt(2000, 1, 1)
+        .and_then(|d| d.and_hms_opt(0, 0, 0))
+        .unwrap_or_default()
 }
 
 /// PD0's real-time clock (two-digit year from 2000, month, day, hour, minute, second,
-/// hundredths) as nanoseconds since 2000-01-01 00:00; `None` for an impossible date.
+/// hundredths) as nanoseconds since 2000-01-01 00:00; `None` for an impossible date or time
+/// (31 February, 29 February outside leap years, hour 24, ...), decided by the calendar of
+/// `chrono`.
 pub fn pd0_rtc_ns(rtc: &[u8; 7]) -> Option<u64> {
     let [yy, mo, dd, hh, mi, ss, cs] = *rtc;
-    if !(1..=12).contains(&mo)
-        || !(1..=31).contains(&dd)
-        || hh > 23
-        || mi > 59
-        || ss > 59
-        || cs > 99
-    {
+    if cs > 99 {
         return None;
     }
-    let days = days_from_civil(2000 + i64::from(yy), u32::from(mo), u32::from(dd))
-        - days_from_civil(2000, 1, 1);
-    let s = ((days * 24 + i64::from(hh)) * 60 + i64::from(mi)) * 60 + i64::from(ss);
-    u64::try_from(s)
-        .ok()
-        .map(|s| s * 1_000_000_000 + u64::from(cs) * 10_000_000)
+    let t = chrono::NaiveDate::from_ymd_opt(2000 + i32::from(yy), u32::from(mo), u32::from(dd))?
+        .and_hms_opt(u32::from(hh), u32::from(mi), u32::from(ss))?;
+    let s = u64::try_from((t - pd0_epoch()).num_seconds()).ok()?;
+    Some(s * 1_000_000_000 + u64::from(cs) * 10_000_000)
+}
+
+/// PD0's real-time clock for a time in ns since 2000-01-01 (the inverse of [`pd0_rtc_ns`] to the
+/// hundredth; the year wraps after 2099 as the device's two digits do).
+pub fn pd0_rtc(ns: u64) -> [u8; 7] {
+    use chrono::{Datelike, Timelike};
+    let total_cs = ns / 10_000_000;
+    let t = pd0_epoch() + chrono::TimeDelta::seconds((total_cs / 100) as i64);
+    [
+        (t.year() - 2000).rem_euclid(100) as u8,
+        t.month() as u8,
+        t.day() as u8,
+        t.hour() as u8,
+        t.minute() as u8,
+        t.second() as u8,
+        (total_cs % 100) as u8,
+    ]
 }
 
 /// An RDI PD0 ensemble as a DVL message, or `None` when it has no bottom-track block.
@@ -418,6 +411,31 @@ pub fn seatrac_fix(f: &AcoFix, host_time_ns: u64, latency_s: f64, sequence: u64)
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn pd0_clock_dates_follow_the_calendar() {
+        // 2000-01-01 00:00:00.00 is the epoch; 2024-02-29 exists, 2023-02-29 and 31 February not.
+        assert_eq!(pd0_rtc_ns(&[0, 1, 1, 0, 0, 0, 0]), Some(0));
+        assert_eq!(
+            pd0_rtc_ns(&[0, 1, 2, 0, 0, 1, 50]),
+            Some(86_401_500_000_000)
+        );
+        assert!(pd0_rtc_ns(&[24, 2, 29, 12, 0, 0, 0]).is_some());
+        assert_eq!(pd0_rtc_ns(&[23, 2, 29, 12, 0, 0, 0]), None);
+        assert_eq!(pd0_rtc_ns(&[23, 2, 31, 12, 0, 0, 0]), None);
+        assert_eq!(pd0_rtc_ns(&[23, 4, 31, 12, 0, 0, 0]), None);
+        assert_eq!(pd0_rtc_ns(&[23, 4, 30, 24, 0, 0, 0]), None);
+        assert_eq!(pd0_rtc_ns(&[23, 4, 30, 23, 59, 59, 100]), None);
+        for ns in [
+            0,
+            86_401_500_000_000,
+            762_000_123_450_000_000,
+            3_155_759_999_990_000_000,
+        ] {
+            assert_eq!(pd0_rtc_ns(&pd0_rtc(ns)), Some(ns - ns % 10_000_000), "{ns}");
+        }
+    }
+
     use super::*;
 
     #[test]

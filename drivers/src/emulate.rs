@@ -3,7 +3,7 @@
 //! pseudo-terminals; decoding the bytes with the driver's conversion gives the message back up to
 //! the protocol's resolution (PD0 1 mm/s, SeaTrac 0.1 m and 0.1°, KVH and Xsens f32).
 
-use crate::convert::{KvhConfig, STANDARD_GRAVITY, civil_from_days, days_from_civil};
+use crate::convert::{KvhConfig, STANDARD_GRAVITY};
 use crate::kvh::{self, KvhSample};
 use crate::pd0::{self, BottomTrack, CoordinateSystem, Ensemble, FixedLeader, VariableLeader};
 use crate::seatrac::{self, AcoFix, FixRange, FixUsbl};
@@ -28,24 +28,7 @@ fn dvl_device_time_ns(m: &DvlVelocityV1) -> u64 {
     }
 }
 
-/// PD0's real-time clock for a time in ns since 2000-01-01.
-pub fn pd0_rtc(ns: u64) -> [u8; 7] {
-    let total_cs = ns / 10_000_000;
-    let cs = (total_cs % 100) as u8;
-    let s = total_cs / 100;
-    let days = (s / 86_400) as i64;
-    let sod = s % 86_400;
-    let (y, mo, d) = civil_from_days(days + days_from_civil(2000, 1, 1));
-    [
-        (y - 2000).rem_euclid(100) as u8,
-        mo as u8,
-        d as u8,
-        (sod / 3600) as u8,
-        (sod / 60 % 60) as u8,
-        (sod % 60) as u8,
-        cs,
-    ]
-}
+pub use crate::convert::pd0_rtc;
 
 /// A DVL message as a PD0 ensemble (fixed leader, variable leader, bottom track) of an
 /// instrument-coordinate 4-beam DVL. Invalid velocity is written as PD0's -32768.

@@ -15,20 +15,11 @@ pub const HEADER_B: [u8; 4] = [0xfe, 0x81, 0xff, 0x56];
 pub const LEN_A: usize = 36;
 pub const LEN_B: usize = 40;
 
-/// CRC-32/MPEG-2: polynomial 0x04C11DB7, initial 0xFFFFFFFF, no reflection, no final xor.
+/// CRC-32/MPEG-2: polynomial 0x04C11DB7, initial 0xFFFFFFFF, no reflection, no final xor (the
+/// `crc` crate's catalogue entry, table-driven).
 pub fn crc32_mpeg2(bytes: &[u8]) -> u32 {
-    let mut crc = 0xffff_ffffu32;
-    for &b in bytes {
-        crc ^= u32::from(b) << 24;
-        for _ in 0..8 {
-            crc = if crc & 0x8000_0000 != 0 {
-                (crc << 1) ^ 0x04c1_1db7
-            } else {
-                crc << 1
-            };
-        }
-    }
-    crc
+    const CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_MPEG_2);
+    CRC.checksum(bytes)
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize)]

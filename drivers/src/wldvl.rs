@@ -13,20 +13,10 @@ use serde::Serialize;
 /// Longest line accepted; a longer run without a newline is discarded and counted.
 pub const MAX_LINE: usize = 512;
 
-/// CRC-8, polynomial 0x07, initial value 0 (CRC-8/SMBUS).
+/// CRC-8, polynomial 0x07, initial value 0 (CRC-8/SMBUS, the `crc` crate's catalogue entry).
 pub fn crc8(bytes: &[u8]) -> u8 {
-    let mut crc = 0u8;
-    for &b in bytes {
-        crc ^= b;
-        for _ in 0..8 {
-            crc = if crc & 0x80 != 0 {
-                (crc << 1) ^ 0x07
-            } else {
-                crc << 1
-            };
-        }
-    }
-    crc
+    const CRC: crc::Crc<u8> = crc::Crc::<u8>::new(&crc::CRC_8_SMBUS);
+    CRC.checksum(bytes)
 }
 
 /// `wrz`: velocity report.

@@ -344,31 +344,13 @@ impl Geocentric {
 /// The decimal year of a calendar date (UTC): year + (day of year − 1 + fraction of day) / days
 /// in the year. `None` for an impossible date.
 pub fn decimal_year(year: i32, month: u32, day: u32, seconds_of_day: f64) -> Option<f64> {
-    let leap = (year % 4 == 0 && year % 100 != 0) || year % 400 == 0;
-    let days_in = [
-        31,
-        if leap { 29 } else { 28 },
-        31,
-        30,
-        31,
-        30,
-        31,
-        31,
-        30,
-        31,
-        30,
-        31,
-    ];
-    if !(1..=12).contains(&month)
-        || day == 0
-        || day > days_in[month as usize - 1]
-        || !(0.0..86_400.0 + 1.0).contains(&seconds_of_day)
-    {
+    use chrono::Datelike;
+    let date = chrono::NaiveDate::from_ymd_opt(year, month, day)?;
+    if !(0.0..86_400.0 + 1.0).contains(&seconds_of_day) {
         return None;
     }
-    let before: u32 = days_in[..month as usize - 1].iter().sum();
-    let total = if leap { 366.0 } else { 365.0 };
-    Some(year as f64 + (f64::from(before + day - 1) + seconds_of_day / 86_400.0) / total)
+    let days_in_year = if date.leap_year() { 366.0 } else { 365.0 };
+    Some(year as f64 + (f64::from(date.ordinal0()) + seconds_of_day / 86_400.0) / days_in_year)
 }
 
 #[cfg(test)]

@@ -431,9 +431,11 @@ pub fn run(a: &AlignArgs) -> anyhow::Result<AlignReport> {
     let scenario = Scenario::load(scenario_name(&a.scenario)?)?;
     let mount = parse_mount(&a.mount)?;
     let threads = a.threads.unwrap_or_else(crate::parallel::default_threads);
-    let runs: Vec<Vec<RunResult>> = crate::parallel::map_runs(a.runs, threads, |k| {
-        run_one(a, &scenario, &models, mount, a.seed.wrapping_add(k as u64))
-    })?;
+    let bar = crate::progress::Progress::new(!a.json).runs("alignment Monte Carlo", a.runs);
+    let runs: Vec<Vec<RunResult>> =
+        crate::parallel::map_runs_with_progress(a.runs, threads, &bar, |k| {
+            run_one(a, &scenario, &models, mount, a.seed.wrapping_add(k as u64))
+        })?;
     let mut reports = Vec::new();
     for (mi, model) in models.iter().enumerate() {
         let per = |axis: usize| -> Vec<(f64, f64)> {

@@ -15,6 +15,7 @@ pub mod live;
 pub mod montecarlo;
 pub mod parallel;
 pub mod process;
+pub mod progress;
 pub mod replay;
 pub mod study;
 pub mod usbl;

@@ -1,9 +1,5 @@
-//! Independent Monte Carlo runs spread over worker threads. Each run depends only on its index,
-//! so the results do not depend on the number of threads.
-
-use anyhow::Context;
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicUsize, Ordering};
+//! Independent Monte Carlo runs spread over worker threads (rayon). Each run depends only on its
+//! index, so the results do not depend on the number of threads.
 
 /// The default number of workers: the available cores.
 pub fn default_threads() -> usize {
@@ -17,31 +13,58 @@ where
     T: Send,
     F: Fn(usize) -> anyhow::Result<T> + Sync,
 {
-    let next = AtomicUsize::new(0);
-    let results: Vec<Mutex<Option<anyhow::Result<T>>>> =
-        (0..runs).map(|_| Mutex::new(None)).collect();
-    std::thread::scope(|s| {
-        for _ in 0..threads.clamp(1, 64) {
-            s.spawn(|| {
-                loop {
-                    let k = next.fetch_add(1, Ordering::Relaxed);
-                    if k >= runs {
-                        break;
-                    }
-                    let r = f(k);
-                    if let Ok(mut slot) = results[k].lock() {
-                        *slot = Some(r);
-                    }
-                }
-            });
-        }
+    map_runs_with_progress(runs, threads, &indicatif::ProgressBar::hidden(), f)
+}
+
+/// [`map_runs`], advancing `bar` by one as each run finishes.
+pub fn map_runs_with_progress<T, F>(
+    runs: usize,
+    threads: usize,
+    bar: &indicatif::ProgressBar,
+    f: F,
+) -> anyhow::Result<Vec<T>>
+where
+    T: Send,
+    F: Fn(usize) -> anyhow::Result<T> + Sync,
+{
+    use rayon::prelude::*;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.clamp(1, 64))
+        .build()?;
+    let results: Vec<anyhow::Result<T>> = pool.install(|| {
+        (0..runs)
+            .into_par_iter()
+            .map(|k| {
+                let r = f(k);
+                bar.inc(1);
+                r
+            })
+            .collect()
     });
-    results
-        .into_iter()
-        .map(|slot| {
-            slot.into_inner()
-                .map_err(|_| anyhow::anyhow!("a worker panicked"))?
-                .context("a run was not done")?
-        })
-        .collect()
+    bar.finish();
+    results.into_iter().collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn results_come_in_index_order_whatever_the_threads() {
+        for threads in [1, 2, 7] {
+            let r = map_runs(100, threads, |k| Ok(k * k)).expect("runs");
+            assert_eq!(r, (0..100).map(|k| k * k).collect::<Vec<_>>());
+        }
+    }
+
+    #[test]
+    fn the_first_error_by_index_is_returned() {
+        let r = map_runs(50, 3, |k| {
+            if k == 30 || k == 10 {
+                anyhow::bail!("run {k}")
+            }
+            Ok(k)
+        });
+        assert_eq!(r.expect_err("fails").to_string(), "run 10");
+    }
 }

@@ -392,7 +392,8 @@ pub fn run(a: &UsblArgs) -> anyhow::Result<UsblReport> {
         )
     })?;
     let threads = a.threads.unwrap_or_else(crate::parallel::default_threads);
-    let per_run = crate::parallel::map_runs(a.runs, threads, |k| {
+    let bar = crate::progress::Progress::new(!a.json).runs("USBL Monte Carlo", a.runs);
+    let per_run = crate::parallel::map_runs_with_progress(a.runs, threads, &bar, |k| {
         run_one(a, &scenario, &station, a.seed.wrapping_add(k as u64))
     })?;
     let pooled = |f: fn(&RunResult) -> f64| {

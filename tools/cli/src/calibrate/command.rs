@@ -12,7 +12,6 @@ use super::{Evaluation, MethodResult, Problem};
 use anyhow::{Context, bail};
 use auvnav_core::session::SessionConfig;
 use clap::{Args, ValueEnum};
-use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -124,45 +123,7 @@ impl CalibrateDvlArgs {
     }
 }
 
-/// A progress bar on standard error, shown only on a terminal and without --json.
-pub struct Progress {
-    enabled: bool,
-    last: Option<Instant>,
-}
-
-impl Progress {
-    pub fn new(enabled: bool) -> Progress {
-        Progress {
-            enabled: enabled && std::io::stderr().is_terminal(),
-            last: None,
-        }
-    }
-
-    pub fn update(&mut self, label: &str, done: usize, total: usize) {
-        if !self.enabled {
-            return;
-        }
-        let now = Instant::now();
-        if done < total
-            && self
-                .last
-                .is_some_and(|t| now - t < std::time::Duration::from_millis(200))
-        {
-            return;
-        }
-        self.last = Some(now);
-        let total = total.max(1);
-        let filled = (30 * done.min(total)) / total;
-        eprint!(
-            "\r{label:<28} [{}{}] {done}/{total}   ",
-            "#".repeat(filled),
-            " ".repeat(30 - filled)
-        );
-        if done >= total {
-            eprintln!();
-        }
-    }
-}
+pub use crate::progress::Progress;
 
 fn load_session_config(path: Option<&PathBuf>) -> anyhow::Result<SessionConfig> {
     match path {

@@ -305,18 +305,11 @@ pub fn swarm(
     let fitness = |x: &[f64; 13]| fitness_with_units(samples, &units, field_ut, &decode(x));
     // The particles of one iteration are evaluated in parallel (each fitness depends only on its
     // particle), so the result does not depend on the number of threads.
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let evaluate = |pos: &[[f64; 13]], f: &mut [f64]| {
-        let chunk = pos.len().div_ceil(threads).max(1);
-        std::thread::scope(|scope| {
-            for (p, out) in pos.chunks(chunk).zip(f.chunks_mut(chunk)) {
-                scope.spawn(|| {
-                    for (x, y) in p.iter().zip(out.iter_mut()) {
-                        *y = fitness(x);
-                    }
-                });
-            }
-        });
+        use rayon::prelude::*;
+        pos.par_iter()
+            .zip(f.par_iter_mut())
+            .for_each(|(x, y)| *y = fitness(x));
     };
     let mut rng = Rng::new(settings.seed, "calibrate.mag.swarm");
     let n = settings.particles.max(2);

@@ -4,7 +4,6 @@
 
 use super::fit::MagSample;
 use anyhow::{Context, bail};
-use auvnav_drivers::convert;
 use auvnav_log::{LogMessage, LogReader};
 use auvnav_shm_schema::{ImuSampleV1, MagnetometerV1};
 use nalgebra::Vector3;
@@ -190,47 +189,72 @@ impl CsvColumnArgs {
     }
 }
 
-/// Seconds since the Unix epoch of an ISO-8601 UTC time "YYYY-MM-DDTHH:MM:SS[.fff][Z]".
+/// Seconds since the Unix epoch of an ISO-8601 time: RFC 3339 with any offset, or a UTC time
+/// "YYYY-MM-DD[T ]HH:MM[:SS[.fff]][Z]"; `None` for an impossible date or time (chrono's calendar).
 fn iso_seconds(s: &str) -> Option<f64> {
-    let s = s.trim().trim_end_matches('Z');
-    let (date, time) = s.split_once(['T', ' '])?;
-    let mut d = date.split('-');
-    let y: i64 = d.next()?.parse().ok()?;
-    let mo: u32 = d.next()?.parse().ok()?;
-    let da: u32 = d.next()?.parse().ok()?;
-    let mut t = time.split(':');
-    let (h, mi): (f64, f64) = (t.next()?.parse().ok()?, t.next()?.parse().ok()?);
-    let sec: f64 = t.next().unwrap_or("0").parse().ok()?;
-    if !(1..=12).contains(&mo) || !(1..=31).contains(&da) {
-        return None;
-    }
-    let days = convert::days_from_civil(y, mo, da);
-    Some(days as f64 * 86_400.0 + h * 3600.0 + mi * 60.0 + sec)
+    let s = s.trim();
+    let utc = match chrono::DateTime::parse_from_rfc3339(s) {
+        Ok(t) => t.to_utc(),
+        Err(_) => {
+            let bare = s.trim_end_matches('Z');
+            [
+                "%Y-%m-%dT%H:%M:%S%.f",
+                "%Y-%m-%d %H:%M:%S%.f",
+                "%Y-%m-%dT%H:%M",
+                "%Y-%m-%d %H:%M",
+            ]
+            .iter()
+            .find_map(|f| chrono::NaiveDateTime::parse_from_str(bare, f).ok())?
+            .and_utc()
+        }
+    };
+    Some(utc.timestamp() as f64 + f64::from(utc.timestamp_subsec_nanos()) * 1e-9)
 }
 
 /// The decimal year of a time in seconds since the Unix epoch (UTC, leap seconds ignored).
 fn decimal_year_from_unix(seconds: f64) -> Option<f64> {
+    use chrono::Datelike;
     if !seconds.is_finite() {
         return None;
     }
-    let days = (seconds / 86_400.0).floor();
-    let (y, m, d) = convert::civil_from_days(days as i64);
-    auvnav_core::wmm::decimal_year(i32::try_from(y).ok()?, m, d, seconds - days * 86_400.0)
+    let whole = seconds.floor();
+    let day_start = (whole / 86_400.0).floor() * 86_400.0;
+    let date = chrono::DateTime::from_timestamp(day_start as i64, 0)?.date_naive();
+    auvnav_core::wmm::decimal_year(date.year(), date.month(), date.day(), seconds - day_start)
 }
 
 /// Reads magnetometer (and accelerometer) columns of a CSV file. Lines starting with `#` are
 /// comments; the first other line names the columns.
 pub fn read_csv(path: &Path, cols: &CsvColumns) -> anyhow::Result<Recording> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let mut lines = text
-        .lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim_start().starts_with('#') && !l.trim().is_empty());
-    let Some((_, header)) = lines.next() else {
-        bail!("{}: no header line", path.display());
+    // The `csv` crate: quoted fields, CRLF line ends; `#` lines are comments, rows may have
+    // fewer or more fields than the header (counted as skipped when a needed one is missing).
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .comment(Some(b'#'))
+        .flexible(true)
+        .trim(csv::Trim::All)
+        .from_path(path)
+        .with_context(|| format!("opening {}", path.display()))?;
+    let mut lines = reader.records().filter_map(|r| match r {
+        // Line index from 0, as the time of a row when there is no time column.
+        Ok(rec) if !(rec.len() == 1 && rec[0].is_empty()) => {
+            let line = rec
+                .position()
+                .map_or(0, |p| p.line().saturating_sub(1) as usize);
+            Some((line, Some(rec)))
+        }
+        Ok(_) => None,
+        // A row that is not UTF-8 is skipped and counted.
+        Err(e) => Some((e.position().map_or(0, |p| p.line() as usize), None)),
+    });
+    let header = loop {
+        match lines.next() {
+            Some((_, Some(h))) => break h,
+            Some((_, None)) => continue,
+            None => bail!("{}: no header line", path.display()),
+        }
     };
-    let names: Vec<String> = header.split(',').map(|s| s.trim().to_string()).collect();
+    let names: Vec<String> = header.iter().map(str::to_string).collect();
     let find = |want: &str| -> anyhow::Result<usize> {
         names.iter().position(|n| n == want).with_context(|| {
             format!(
@@ -273,8 +297,11 @@ pub fn read_csv(path: &Path, cols: &CsvColumns) -> anyhow::Result<Recording> {
     };
     let mut out = Recording::default();
     let mut raw = Vec::new();
-    for (i, line) in lines {
-        let f: Vec<&str> = line.split(',').map(str::trim).collect();
+    for (i, record) in lines {
+        let Some(f) = record else {
+            out.skipped += 1;
+            continue;
+        };
         let num = |k: usize| f.get(k).and_then(|v| v.parse::<f64>().ok());
         let m = [num(mag[0]), num(mag[1]), num(mag[2])];
         let (Some(x), Some(y), Some(z)) = (m[0], m[1], m[2]) else {
@@ -361,11 +388,41 @@ mod tests {
     use super::*;
 
     #[test]
+    fn csv_with_quotes_crlf_comments_and_bad_rows() {
+        let dir = std::env::temp_dir().join(format!("auvnav-magcsv-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let p = dir.join("m.csv");
+        let mut bytes =
+            b"# exported by a logger\r\n\"time s\",\"mag x, uT\",mag_y,mag_z\r\n".to_vec();
+        bytes.extend_from_slice(b"0.0,20.5,1.0,-40.0\r\n\r\n0.1,\"21.0\",1.5,-39.5\r\n");
+        bytes.extend_from_slice(b"0.2,abc,1.5,-39.5\r\n0.3,\xff,1,2\r\n0.4,22.0,2.0\r\n");
+        std::fs::write(&p, &bytes).expect("write");
+        let cols = CsvColumns {
+            time: None,
+            mag: None,
+            accel: None,
+            mag_unit: None,
+        };
+        let r = read_csv(&p, &cols).expect("read");
+        assert_eq!(r.samples.len(), 2, "two good rows");
+        assert_eq!(r.skipped, 3, "not a number, not UTF-8, a missing field");
+        std::fs::remove_dir_all(&dir).expect("cleanup");
+    }
+
+    #[test]
     fn iso_times() {
         assert_eq!(iso_seconds("1970-01-01T00:00:00"), Some(0.0));
         assert_eq!(iso_seconds("2012-06-12T12:00:02.5"), Some(1_339_502_402.5));
         assert_eq!(iso_seconds("2012-13-12T12:00:00"), None);
         assert_eq!(iso_seconds("yesterday"), None);
+        assert_eq!(iso_seconds("2023-02-31T00:00:00"), None, "31 February");
+        assert_eq!(iso_seconds("2023-02-28T24:00:00"), None, "hour 24");
+        assert_eq!(iso_seconds("2024-02-29T00:00:00Z"), Some(1_709_164_800.0));
+        assert_eq!(
+            iso_seconds("2024-02-29T02:00:00+02:00"),
+            Some(1_709_164_800.0)
+        );
+        assert_eq!(iso_seconds("2024-02-29 00:00"), Some(1_709_164_800.0));
         let y = decimal_year_from_unix(1_339_502_400.0).expect("date");
         let want = auvnav_core::wmm::decimal_year(2012, 6, 12, 43_200.0).expect("date");
         assert!((y - want).abs() < 1e-12);
