@@ -75,6 +75,26 @@ struct Span {
     last_ns: u64,
 }
 
+impl Span {
+    /// A channel with no message counted yet, its span starting at `t_ns`.
+    fn new(topic: &str, schema: &str, t_ns: u64) -> Span {
+        Span {
+            info: ChannelSummary {
+                topic: topic.to_string(),
+                schema: schema.to_string(),
+                messages: 0,
+                undecodable: 0,
+                first_s: 0.0,
+                last_s: 0.0,
+                rate_hz: 0.0,
+                metadata: BTreeMap::new(),
+            },
+            first_ns: t_ns,
+            last_ns: t_ns,
+        }
+    }
+}
+
 /// Reads `path` through and summarises it.
 pub fn info(path: &Path, with_config: bool) -> anyhow::Result<LogInfo> {
     let file_bytes = std::fs::metadata(path)
@@ -103,20 +123,9 @@ pub fn info(path: &Path, with_config: bool) -> anyhow::Result<LogInfo> {
         first = Some(first.map_or(m.log_time_ns, |f| f.min(m.log_time_ns)));
         last = last.max(m.log_time_ns);
         let undecodable = u64::from(m.decode_any().is_err());
-        let span = spans.entry(m.topic.to_string()).or_insert_with(|| Span {
-            info: ChannelSummary {
-                topic: m.topic.to_string(),
-                schema: m.schema_name.to_string(),
-                messages: 0,
-                undecodable: 0,
-                first_s: 0.0,
-                last_s: 0.0,
-                rate_hz: 0.0,
-                metadata: BTreeMap::new(),
-            },
-            first_ns: m.log_time_ns,
-            last_ns: m.log_time_ns,
-        });
+        let span = spans
+            .entry(m.topic.to_string())
+            .or_insert_with(|| Span::new(&m.topic, &m.schema_name, m.log_time_ns));
         span.info.messages += 1;
         span.info.undecodable += undecodable;
         span.first_ns = span.first_ns.min(m.log_time_ns);
@@ -124,20 +133,9 @@ pub fn info(path: &Path, with_config: bool) -> anyhow::Result<LogInfo> {
     }
     // Declared channels without messages are listed too.
     for c in reader.channels() {
-        let span = spans.entry(c.topic.to_string()).or_insert_with(|| Span {
-            info: ChannelSummary {
-                topic: c.topic.to_string(),
-                schema: c.schema_name.to_string(),
-                messages: 0,
-                undecodable: 0,
-                first_s: 0.0,
-                last_s: 0.0,
-                rate_hz: 0.0,
-                metadata: BTreeMap::new(),
-            },
-            first_ns: 0,
-            last_ns: 0,
-        });
+        let span = spans
+            .entry(c.topic.to_string())
+            .or_insert_with(|| Span::new(&c.topic, &c.schema_name, 0));
         span.info.metadata = c.metadata.clone();
     }
     let t0 = first.unwrap_or(0);
