@@ -34,13 +34,14 @@ fn main() {
         )
         .map(PathBuf::from)
         .unwrap_or_else(|| git_dir.clone());
-        if let Some(branch) = git(&dir, &["symbolic-ref", "-q", "HEAD"]) {
-            println!("cargo::rerun-if-changed={}", common.join(branch).display());
+        // Only paths that exist: cargo reruns the script on every build for a missing one. A
+        // branch is a loose ref file, or a line of packed-refs (after `git gc`).
+        let branch = git(&dir, &["symbolic-ref", "-q", "HEAD"]).map(|b| common.join(b));
+        for path in branch.into_iter().chain([common.join("packed-refs")]) {
+            if path.exists() {
+                println!("cargo::rerun-if-changed={}", path.display());
+            }
         }
-        println!(
-            "cargo::rerun-if-changed={}",
-            common.join("packed-refs").display()
-        );
     }
     println!("cargo::rustc-env=AUVNAV_COMMIT={commit}");
 }
