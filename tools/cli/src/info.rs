@@ -41,7 +41,8 @@ pub struct ChannelSummary {
 pub struct LogInfo {
     pub log: String,
     pub file_bytes: u64,
-    pub format_version: u32,
+    /// The log's format version (the document's own `format_version` is the JSON vocabulary's).
+    pub log_format_version: u32,
     pub min_reader_version: u32,
     pub producer: String,
     pub producer_version: String,
@@ -157,7 +158,7 @@ pub fn info(path: &Path, with_config: bool) -> anyhow::Result<LogInfo> {
     Ok(LogInfo {
         log: path.display().to_string(),
         file_bytes,
-        format_version: header.format_version,
+        log_format_version: header.format_version,
         min_reader_version: header.min_reader_version,
         producer: header.producer.clone(),
         producer_version: header.producer_version.clone(),
@@ -177,15 +178,7 @@ pub fn info(path: &Path, with_config: bool) -> anyhow::Result<LogInfo> {
 pub fn run(a: &InfoArgs) -> anyhow::Result<LogInfo> {
     let i = info(&a.log, a.config)?;
     if a.json {
-        // The document's own `format_version` is the JSON vocabulary's; the log's is
-        // `log_format_version`.
-        let mut v = serde_json::to_value(&i)?;
-        if let Some(o) = v.as_object_mut()
-            && let Some(f) = o.remove("format_version")
-        {
-            o.insert("log_format_version".into(), f);
-        }
-        crate::json::print(&v)?;
+        crate::json::print(&i)?;
     } else {
         print(&i);
     }
@@ -196,7 +189,7 @@ fn print(i: &LogInfo) {
     println!("{} ({} bytes)", i.log, i.file_bytes);
     println!(
         "  written by {} {} (log format {}, readers from {})",
-        i.producer, i.producer_version, i.format_version, i.min_reader_version
+        i.producer, i.producer_version, i.log_format_version, i.min_reader_version
     );
     match &i.start_utc {
         Some(t) => println!("  starts {t} (UTC, from the header's clock anchor)"),

@@ -40,13 +40,10 @@ pub fn exit_status(e: &anyhow::Error) -> u8 {
             Some(Failure::CheckFailed(_)) => return 3,
             None => {}
         }
-        if cause
-            .downcast_ref::<auvnav_recorder::WouldOverwrite>()
-            .is_some()
-        {
-            return 2;
-        }
         if cause.downcast_ref::<toml::de::Error>().is_some()
+            || cause
+                .downcast_ref::<auvnav_recorder::WouldOverwrite>()
+                .is_some()
             || cause
                 .downcast_ref::<auvnav_core::config::ConfigError>()
                 .is_some()

@@ -65,7 +65,6 @@ impl Progress {
         if let Some(b) = self.bar.take() {
             b.abandon();
         }
-        self.label = label.to_string();
         new_bar(label, total as u64)
     }
 }
