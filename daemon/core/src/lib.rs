@@ -7,7 +7,7 @@
 //! (how a run starts and the order in which messages meet the navigator), [`feed`] (the one
 //! message → session path), [`config`] (the configuration types and their validation), [`csv`]
 //! (solution and diagnostics files).
-#![forbid(unsafe_code)]
+#![deny(unsafe_code)]
 
 pub mod aid;
 pub mod align;

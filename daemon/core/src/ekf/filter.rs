@@ -126,6 +126,25 @@ pub fn dynamics_matrix(d: &DynamicsInputs) -> CoreMatrix {
     f
 }
 
+/// One column of a product: `sum_k a[k] b(k)` for the `K` columns `a[k]` of a matrix, summed
+/// in ascending `k` from `a[0] b(0)`, the order of nalgebra's matrix product (so the same bits),
+/// with the column kept in registers rather than stored back after each `k`.
+#[inline(always)]
+fn column_product<const R: usize, const K: usize>(
+    a: &[[f64; R]; K],
+    b: impl Fn(usize) -> f64,
+) -> [f64; R] {
+    let b0 = b(0);
+    let mut acc: [f64; R] = a[0].map(|x| x * b0);
+    for (k, col) in a.iter().enumerate().skip(1) {
+        let bk = b(k);
+        for (acc, x) in acc.iter_mut().zip(col) {
+            *acc += x * bk;
+        }
+    }
+    acc
+}
+
 /// Process noise densities.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ProcessNoise {
@@ -179,6 +198,10 @@ impl ErrorFilter {
     /// block and `B` its 9 x 6 coupling to the biases. The product is formed in these blocks
     /// (`T = Phi P` for the navigation rows only, then `T Phi^T`), about half the work of the dense
     /// 15 x 15 products; the result is the same matrix.
+    ///
+    /// On x86-64 processors with AVX2 the same code runs compiled for AVX2 (chosen at run time):
+    /// four-wide instead of two-wide arithmetic, the same operations in the same order, so the
+    /// same bits (no fused multiply-add: Rust never contracts a product and a sum into one).
     pub fn predict(
         &mut self,
         f: &CoreMatrix,
@@ -186,50 +209,107 @@ impl ErrorFilter {
         q: &ProcessNoise,
         dt: f64,
     ) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // The one unsafe block of the navigation core.
+            #[allow(unsafe_code)]
+            // SAFETY: the processor has AVX2 (checked just above).
+            unsafe {
+                self.predict_avx2(f, c_body_to_ned, q, dt)
+            };
+            return;
+        }
+        self.predict_portable(f, c_body_to_ned, q, dt);
+    }
+
+    /// [`ErrorFilter::predict`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn predict_avx2(
+        &mut self,
+        f: &CoreMatrix,
+        c_body_to_ned: &nalgebra::Matrix3<f64>,
+        q: &ProcessNoise,
+        dt: f64,
+    ) {
+        self.predict_portable(f, c_body_to_ned, q, dt);
+    }
+
+    /// [`ErrorFilter::predict`] for any processor (inlined into the AVX2 version).
+    #[inline(always)]
+    fn predict_portable(
+        &mut self,
+        f: &CoreMatrix,
+        c_body_to_ned: &nalgebra::Matrix3<f64>,
+        q: &ProcessNoise,
+        dt: f64,
+    ) {
         const NAV: usize = 9;
-        const BIAS: usize = CORE - NAV;
         const _: () = assert!(BG == NAV, "the biases follow the navigation states");
-        let fdt = f * dt;
-        // Only the navigation rows of Phi differ from the identity.
-        let fdt_nav: SMatrix<f64, NAV, CORE> = fdt.fixed_view::<NAV, CORE>(0, 0).into_owned();
-        let mut phi_nav = fdt_nav + 0.5 * fdt_nav * fdt;
-        for i in 0..NAV {
-            phi_nav[(i, i)] += 1.0;
+        // Only the navigation rows of Phi differ from the identity; as the bias rows of F are
+        // zero, the navigation rows of (F dt)^2 are (F dt)_nn (F dt)_nav.
+        let fdt_nav: SMatrix<f64, NAV, CORE> = f.fixed_view::<NAV, CORE>(0, 0) * dt;
+        let half_fdt_nn: SMatrix<f64, NAV, NAV> = 0.5 * fdt_nav.fixed_view::<NAV, NAV>(0, 0);
+        let half_fdt_nn = &half_fdt_nn.data.0;
+        let mut phi: [[f64; NAV]; CORE] = fdt_nav.data.0;
+        for (j, phi_col) in phi.iter_mut().enumerate() {
+            let sq = column_product(half_fdt_nn, |k| fdt_nav.data.0[j][k]);
+            for (x, s) in phi_col.iter_mut().zip(sq) {
+                *x += s;
+            }
+        }
+        for (i, col) in phi.iter_mut().enumerate().take(NAV) {
+            col[i] += 1.0;
         }
         // T = (Phi P) for the navigation rows, every column (core and parameter states); the
-        // bias rows of Phi P are those of P.
-        let t: SMatrix<f64, NAV, N> = phi_nav * self.p.fixed_view::<CORE, N>(0, 0);
-        let t_bias: SMatrix<f64, NAV, BIAS> = t.fixed_view::<NAV, BIAS>(0, NAV).into_owned();
-        let mut p_nn: SMatrix<f64, NAV, NAV> =
-            t.fixed_view::<NAV, CORE>(0, 0) * phi_nav.transpose();
+        // bias rows of Phi P are those of P. A parameter state switched off (or never correlated
+        // with the core) has a zero column in P_cp, and so in T: not multiplied. Columns of the
+        // arrays are columns of the matrices (nalgebra's storage is column-major).
+        let p = &self.p.data.0;
+        let mut t = [[0.0; NAV]; N];
+        for (j, t_col) in t.iter_mut().enumerate() {
+            let p_col = &p[j];
+            if j < CORE || p_col[..CORE].iter().any(|v| *v != 0.0) {
+                *t_col = column_product(&phi, |k| p_col[k]);
+            }
+        }
+        // Phi P Phi^T, navigation block: T_core Phi_nav^T, plus the noise; the only block not
+        // symmetric by construction (the covariance was symmetric before).
+        let t_core: &[[f64; NAV]; CORE] = t[..CORE].try_into().expect("CORE columns");
+        let mut p_nn = [[0.0; NAV]; NAV];
+        for (j, col) in p_nn.iter_mut().enumerate() {
+            *col = column_product(t_core, |k| phi[k][j]);
+        }
         let c = c_body_to_ned;
         let cct = c * c.transpose();
         let qv = cct * (q.accel_noise * q.accel_noise * dt);
         let qa = cct * (q.gyro_noise * q.gyro_noise * dt);
         for i in 0..3 {
             for j in 0..3 {
-                p_nn[(VEL + i, VEL + j)] += qv[(i, j)];
-                p_nn[(ATT + i, ATT + j)] += qa[(i, j)];
+                p_nn[VEL + j][VEL + i] += qv[(i, j)];
+                p_nn[ATT + j][ATT + i] += qa[(i, j)];
             }
         }
         let a_par = self.param_transition(dt);
-        // The only block not symmetric by construction (the covariance was symmetric before).
-        let p_nn = 0.5 * (p_nn + p_nn.transpose());
+        let p = &mut self.p.data.0;
+        for j in 0..NAV {
+            for i in 0..NAV {
+                p[j][i] = 0.5 * (p_nn[j][i] + p_nn[i][j]);
+            }
+        }
+        // Navigation x bias and navigation x parameter: T's columns (bias and parameter rows
+        // of Phi are those of the identity); bias x bias and parameter blocks unchanged.
+        for (j, t_col) in t.iter().enumerate().skip(NAV) {
+            for (i, v) in t_col.iter().enumerate() {
+                p[j][i] = *v;
+                p[i][j] = *v;
+            }
+        }
         let p = &mut self.p;
-        p.fixed_view_mut::<NAV, NAV>(0, 0).copy_from(&p_nn);
-        // Phi P Phi^T: navigation x bias = T's bias columns; bias x bias unchanged.
-        p.fixed_view_mut::<NAV, BIAS>(0, NAV).copy_from(&t_bias);
-        p.fixed_view_mut::<BIAS, NAV>(NAV, 0)
-            .copy_from(&t_bias.transpose());
         for i in 0..3 {
             p[(BG + i, BG + i)] += q.gyro_bias_walk * q.gyro_bias_walk * dt;
             p[(BA + i, BA + i)] += q.accel_bias_walk * q.accel_bias_walk * dt;
         }
-        // Core x parameter: Phi P_cp (navigation rows from T, bias rows unchanged).
-        let t_par: SMatrix<f64, NAV, PARAMS> = t.fixed_view::<NAV, PARAMS>(0, CORE).into_owned();
-        p.fixed_view_mut::<NAV, PARAMS>(0, CORE).copy_from(&t_par);
-        p.fixed_view_mut::<PARAMS, NAV>(CORE, 0)
-            .copy_from(&t_par.transpose());
         // Gauss-Markov parameter states: P_cp A, A P_pp A + their driving noise.
         for j in 0..PARAMS {
             if a_par[j] < 1.0 {
@@ -333,6 +413,87 @@ mod tests {
 
     fn max_relative_difference(a: &Covariance, b: &Covariance) -> f64 {
         (a - b).abs().max() / b.abs().max()
+    }
+
+    fn propagation_inputs() -> (DynamicsInputs, ProcessNoise) {
+        let inputs = DynamicsInputs {
+            c_body_to_ned: *nalgebra::Rotation3::from_euler_angles(0.1, -0.2, 2.0).matrix(),
+            specific_force_ned: Vector3::new(0.3, -0.2, -9.81),
+            velocity_ned: Vector3::new(2.0, 0.5, 0.1),
+            latitude_rad: 0.6,
+            height_m: -40.0,
+        };
+        let q = ProcessNoise {
+            gyro_noise: 1e-5,
+            accel_noise: 1e-4,
+            gyro_bias_walk: 1e-8,
+            accel_bias_walk: 1e-7,
+        };
+        (inputs, q)
+    }
+
+    /// A dense covariance with the DVL lever-arm states switched off (zero rows and columns).
+    fn covariance_with_states_off() -> Covariance {
+        let mut p = dense_covariance();
+        for i in DVL_LEVER..DVL_LEVER + 3 {
+            p.row_mut(i).fill(0.0);
+            p.column_mut(i).fill(0.0);
+        }
+        p
+    }
+
+    #[test]
+    fn states_switched_off_stay_off_and_the_rest_matches_the_dense_product() {
+        let (inputs, q) = propagation_inputs();
+        let f = dynamics_matrix(&inputs);
+        let dt = 0.05;
+        let mut filter = ErrorFilter::new(&StateVector::from_element(1.0));
+        filter.p = covariance_with_states_off();
+        let before = filter.p;
+        filter.predict(&f, &inputs.c_body_to_ned, &q, dt);
+        for i in DVL_LEVER..DVL_LEVER + 3 {
+            assert!(filter.p.row(i).iter().all(|v| *v == 0.0));
+            assert!(filter.p.column(i).iter().all(|v| *v == 0.0));
+        }
+        let fdt = f * dt;
+        let phi = CoreMatrix::identity() + fdt + 0.5 * fdt * fdt;
+        let mut big_phi = Covariance::identity();
+        big_phi.fixed_view_mut::<CORE, CORE>(0, 0).copy_from(&phi);
+        let reference = big_phi * before * big_phi.transpose();
+        // Q only touches the core diagonal blocks: compare the core x parameter block.
+        let d = (filter.p.fixed_view::<CORE, PARAMS>(0, CORE)
+            - reference.fixed_view::<CORE, PARAMS>(0, CORE))
+        .abs()
+        .max()
+            / reference.abs().max();
+        assert!(d < 1e-13, "relative difference {d:e}");
+    }
+
+    #[test]
+    fn the_avx2_propagation_gives_the_same_bits_as_the_portable_one() {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            let (inputs, q) = propagation_inputs();
+            let f = dynamics_matrix(&inputs);
+            for p in [dense_covariance(), covariance_with_states_off()] {
+                let mut a = ErrorFilter::new(&StateVector::from_element(1.0));
+                a.p = p;
+                a.set_gauss_markov(USBL, 60.0, 0.5);
+                let mut b = a.clone();
+                for _ in 0..100 {
+                    a.predict_portable(&f, &inputs.c_body_to_ned, &q, 0.05);
+                    #[allow(unsafe_code)]
+                    // SAFETY: the processor has AVX2 (checked above).
+                    unsafe {
+                        b.predict_avx2(&f, &inputs.c_body_to_ned, &q, 0.05)
+                    };
+                }
+                let bits = |m: &Covariance| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&a.p), bits(&b.p));
+            }
+            return;
+        }
+        eprintln!("no AVX2 on this processor: only the portable propagation exists here");
     }
 
     #[test]
