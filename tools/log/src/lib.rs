@@ -29,7 +29,7 @@ use auvnav_shm_schema::{
     AcousticRangesV1, AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1,
     MagnetometerV1, Message, NavSolutionV1, ProcessHealthV1, TruthStateV1, UsblFixV1,
 };
-use mcap::records::{MessageHeader, Metadata, Record};
+use mcap::records::{MessageHeader, Metadata, Record, op};
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
@@ -494,7 +494,7 @@ pub struct LogReader<R: Read> {
     done: bool,
 }
 
-/// What [`LogReader::next_decoded`] read: a message, or one whose bytes do not match its schema.
+/// What [`LogReader::next_decoded_with`] read: a message, or one whose bytes do not match its schema.
 pub type Decoded = Result<LogMessage, LogError>;
 
 impl LogReader<std::io::BufReader<File>> {
@@ -508,6 +508,24 @@ impl LogReader<std::io::BufReader<File>> {
         r.path = path.to_path_buf();
         Ok(r)
     }
+}
+
+/// The fixed part of an MCAP message record: channel id (u16), sequence (u32), log time and
+/// publish time (u64 each), little-endian; the message bytes follow.
+const MESSAGE_HEADER_LEN: usize = 2 + 4 + 8 + 8;
+
+/// The header and the message bytes of a message record's body (at least
+/// [`MESSAGE_HEADER_LEN`] bytes long).
+fn message_in_place(body: &[u8]) -> (MessageHeader, &[u8]) {
+    let (head, data) = body.split_at(MESSAGE_HEADER_LEN);
+    let u64_at = |i: usize| u64::from_le_bytes(head[i..i + 8].try_into().expect("8 bytes"));
+    let header = MessageHeader {
+        channel_id: u16::from_le_bytes([head[0], head[1]]),
+        sequence: u32::from_le_bytes(head[2..6].try_into().expect("4 bytes")),
+        log_time: u64_at(6),
+        publish_time: u64_at(14),
+    };
+    (header, data)
 }
 
 impl<R: Read> LogReader<R> {
@@ -562,10 +580,15 @@ impl<R: Read> LogReader<R> {
         })
     }
 
-    /// The next message decoded in place (no allocation per message): the fast path of replay.
-    /// The inner error is a message whose bytes do not match its schema (the reader goes on).
-    pub fn next_decoded(&mut self) -> Result<Option<Decoded>, LogError> {
-        self.next_with(|ch, kind, _, data| decode_bytes(kind, &ch.topic, data))
+    /// The next message decoded in place (no allocation per message) and handed to `f` where it
+    /// was decoded, not moved out of the reader first (a `LogMessage` is 256 bytes): the fast
+    /// path of replay. `f`'s result, or `None` at the end. A [`Decoded`] error is a message whose
+    /// bytes do not match its schema (the reader goes on).
+    pub fn next_decoded_with<T>(
+        &mut self,
+        mut f: impl FnMut(&Decoded) -> T,
+    ) -> Result<Option<T>, LogError> {
+        self.next_with(|ch, kind, _, data| f(&decode_bytes(kind, &ch.topic, data)))
     }
 
     /// The next message through `f`, records of other kinds handled on the way; `None` at the
@@ -592,18 +615,32 @@ impl<R: Read> LogReader<R> {
                     return Err(e.into());
                 }
                 Some(Ok(LinearReadEvent::ReadRequest(n))) => Err(n),
+                // Indexes, statistics and the summary section say nothing the linear read
+                // needs: not parsed.
+                Some(Ok(LinearReadEvent::Record { opcode, .. }))
+                    if !matches!(
+                        opcode,
+                        op::SCHEMA | op::CHANNEL | op::MESSAGE | op::METADATA
+                    ) =>
+                {
+                    continue;
+                }
+                // Messages are read in place, their fixed header by hand (the generic parser
+                // costs more than the rest of the decoding).
+                Some(Ok(LinearReadEvent::Record {
+                    data,
+                    opcode: op::MESSAGE,
+                })) if data.len() >= MESSAGE_HEADER_LEN => {
+                    let (header, data) = message_in_place(data);
+                    let id = header.channel_id;
+                    let Some(Some((ch, kind))) = self.channels.get(usize::from(id)) else {
+                        return Err(LogError::UnknownChannel(id));
+                    };
+                    return Ok(Some(f(ch, *kind, &header, data)));
+                }
+                // A message record too short for its header: the parser says what is wrong.
                 Some(Ok(LinearReadEvent::Record { data, opcode })) => {
-                    match mcap::parse_record(opcode, data)? {
-                        // Messages are read in place.
-                        Record::Message { header, data } => {
-                            let id = header.channel_id;
-                            let Some(Some((ch, kind))) = self.channels.get(usize::from(id)) else {
-                                return Err(LogError::UnknownChannel(id));
-                            };
-                            return Ok(Some(f(ch, *kind, &header, &data)));
-                        }
-                        other => Ok(other.into_owned()),
-                    }
+                    Ok(mcap::parse_record(opcode, data)?.into_owned())
                 }
             };
             let need = match event {
@@ -710,6 +747,33 @@ where
 mod tests {
     use super::*;
     use std::io::Cursor;
+
+    #[test]
+    fn a_message_header_read_in_place_equals_the_parsers() {
+        let mut body = Vec::new();
+        body.extend_from_slice(&0x0102u16.to_le_bytes());
+        body.extend_from_slice(&0x0304_0506u32.to_le_bytes());
+        body.extend_from_slice(&0x1112_1314_1516_1718u64.to_le_bytes());
+        body.extend_from_slice(&0x2122_2324_2526_2728u64.to_le_bytes());
+        body.extend_from_slice(b"payload");
+        let (header, data) = message_in_place(&body);
+        match mcap::parse_record(op::MESSAGE, &body) {
+            Ok(Record::Message { header: h, data: d }) => {
+                assert_eq!(
+                    (h.channel_id, h.sequence, h.log_time, h.publish_time),
+                    (
+                        header.channel_id,
+                        header.sequence,
+                        header.log_time,
+                        header.publish_time
+                    )
+                );
+                assert_eq!(&*d, data);
+                assert_eq!(data, b"payload");
+            }
+            other => panic!("the parser read {other:?}"),
+        }
+    }
 
     fn sample_log() -> Vec<u8> {
         let header = LogHeader::new("test", "seed = 1\n");

@@ -74,8 +74,15 @@ pub fn run_log(
         .read_header()
         .with_context(|| format!("reading {}", log.display()))?;
     loop {
-        let decoded = match reader.next_decoded() {
-            Ok(Some(d)) => d,
+        let processed = reader.next_decoded_with(|decoded| match decoded {
+            Ok(m) => replay.process(m, out),
+            Err(_) => {
+                replay.counts.malformed += 1;
+                Ok(())
+            }
+        });
+        match processed {
+            Ok(Some(r)) => r?,
             Ok(None) => {
                 replay.finish(out)?;
                 return Ok((header, None));
@@ -85,10 +92,6 @@ pub fn run_log(
                 return Ok((header, Some(e.to_string())));
             }
             Err(e) => return Err(e).with_context(|| format!("reading {}", log.display())),
-        };
-        match decoded {
-            Ok(m) => replay.process(&m, out)?,
-            Err(_) => replay.counts.malformed += 1,
         }
     }
 }
