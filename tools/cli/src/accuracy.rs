@@ -34,6 +34,50 @@ pub struct Accuracy {
 /// An angle wrapped to -pi..pi (rad).
 pub use auvnav_core::earth::wrap_pi as wrap;
 
+/// What the accuracy figures read of a solution: its time, position and heading (a replay keeps
+/// the last one of these, not the whole 248-byte solution, for the comparison with the truth).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolutionPoint {
+    pub host_time_ns: u64,
+    pub position: Geodetic,
+    pub heading_rad: f64,
+}
+
+impl SolutionPoint {
+    pub fn of(s: &NavSolutionV1) -> SolutionPoint {
+        SolutionPoint {
+            host_time_ns: s.host_time_ns,
+            position: Geodetic {
+                latitude_rad: s.latitude_rad,
+                longitude_rad: s.longitude_rad,
+                height_m: s.height_m,
+            },
+            heading_rad: s.euler_rad[2],
+        }
+    }
+
+    /// The point at `t_ns` between `a` and `b`, by the rule of [`crate::replay::interpolate`]
+    /// (position and heading linear in time).
+    pub fn interpolate(a: &SolutionPoint, b: &SolutionPoint, t_ns: u64) -> SolutionPoint {
+        let span = b.host_time_ns.saturating_sub(a.host_time_ns);
+        if span == 0 {
+            return *b;
+        }
+        let w = t_ns.saturating_sub(a.host_time_ns) as f64 / span as f64;
+        let lerp = |x: f64, y: f64| x + (y - x) * w;
+        let (pa, pb) = (&a.position, &b.position);
+        SolutionPoint {
+            host_time_ns: t_ns,
+            position: Geodetic {
+                latitude_rad: lerp(pa.latitude_rad, pb.latitude_rad),
+                longitude_rad: lerp(pa.longitude_rad, pb.longitude_rad),
+                height_m: lerp(pa.height_m, pb.height_m),
+            },
+            heading_rad: a.heading_rad + wrap(b.heading_rad - a.heading_rad) * w,
+        }
+    }
+}
+
 impl AccuracyTracker {
     pub fn new(min_distance_m: f64) -> Self {
         AccuracyTracker {
@@ -44,6 +88,11 @@ impl AccuracyTracker {
 
     /// Adds one epoch; `nav` and `truth` must refer to the same time.
     pub fn add(&mut self, nav: &NavSolutionV1, truth: &TruthStateV1) {
+        self.add_point(&SolutionPoint::of(nav), truth);
+    }
+
+    /// [`AccuracyTracker::add`] for the part of a solution the figures read.
+    pub fn add_point(&mut self, nav: &SolutionPoint, truth: &TruthStateV1) {
         let t = Geodetic {
             latitude_rad: truth.latitude_rad,
             longitude_rad: truth.longitude_rad,
@@ -53,18 +102,13 @@ impl AccuracyTracker {
             self.distance_m += earth::ned_offset(&prev, &t).xy().norm();
         }
         self.last_truth = Some(t);
-        let n = Geodetic {
-            latitude_rad: nav.latitude_rad,
-            longitude_rad: nav.longitude_rad,
-            height_m: nav.height_m,
-        };
-        let e = earth::ned_offset(&t, &n).xy().norm();
+        let e = earth::ned_offset(&t, &nav.position).xy().norm();
         self.errors.push(e);
         if self.distance_m > self.min_distance_m {
             self.relative_sq.push((e / self.distance_m).powi(2));
         }
         self.heading_sq
-            .push(wrap(nav.euler_rad[2] - truth.euler_rad[2]).powi(2));
+            .push(wrap(nav.heading_rad - truth.euler_rad[2]).powi(2));
     }
 
     pub fn result(&self) -> Accuracy {

@@ -17,7 +17,7 @@ mod command;
 pub mod order;
 pub use command::*;
 
-use crate::accuracy::{Accuracy, AccuracyTracker};
+use crate::accuracy::{Accuracy, AccuracyTracker, SolutionPoint};
 use anyhow::{Context, bail};
 use auvnav_core::feed::SensorMessage;
 use auvnav_core::navigator::{NavCounters, Navigator};
@@ -201,7 +201,7 @@ pub struct Replay {
     order: order::FeedOrder,
     tracker: AccuracyTracker,
     has_truth: bool,
-    prev_solution: Option<NavSolutionV1>,
+    prev_solution: Option<SolutionPoint>,
     pending_truth: Option<TruthStateV1>,
     pub counts: ReplayCounts,
     first_time_ns: Option<u64>,
@@ -241,7 +241,7 @@ impl Replay {
 
     /// Passes the session's outputs on, following the solutions for the truth comparison.
     fn forward<'o>(
-        prev: &'o mut Option<NavSolutionV1>,
+        prev: &'o mut Option<SolutionPoint>,
         pending: &'o mut Option<TruthStateV1>,
         tracker: &'o mut AccuracyTracker,
         recorded: &'o mut Option<RecordedComparison>,
@@ -253,13 +253,14 @@ impl Replay {
                 if let Some(r) = recorded.as_mut() {
                     r.check(sol);
                 }
-                if let (Some(t), Some(p)) = (*pending, *prev)
+                let point = SolutionPoint::of(sol);
+                if let (Some(t), Some(p)) = (pending.as_ref(), prev.as_ref())
                     && sol.host_time_ns >= t.host_time_ns
                 {
-                    tracker.add(&interpolate(&p, sol, t.host_time_ns), &t);
+                    tracker.add_point(&SolutionPoint::interpolate(p, &point, t.host_time_ns), t);
                     *pending = None;
                 }
-                *prev = Some(*sol);
+                *prev = Some(point);
                 Ok(())
             }
             SessionOutput::Diagnostics(d) => out(Output::Diagnostics(d)),
@@ -288,7 +289,7 @@ impl Replay {
             }
             m if self.order.push(m) => {
                 while let Some(m) = self.order.pop_ready() {
-                    self.feed(&m, out)?;
+                    self.feed(m, out)?;
                 }
             }
             _ => self.counts.unused += 1,
@@ -309,19 +310,15 @@ impl Replay {
     /// Feeds one message in time-stamp order.
     fn feed(
         &mut self,
-        m: &LogMessage,
+        m: order::Held,
         out: &mut dyn FnMut(Output) -> anyhow::Result<()>,
     ) -> anyhow::Result<()> {
-        let mut fwd = Self::forward(
-            &mut self.prev_solution,
-            &mut self.pending_truth,
-            &mut self.tracker,
-            &mut self.recorded,
-            out,
-        );
-        match m {
-            LogMessage::Truth(t) => {
-                drop(fwd);
+        let m = match m {
+            order::Held::Imu(x) => return self.feed_sensor(&SensorMessage::Imu(x), out),
+            order::Held::Other(m) => m,
+        };
+        match *m {
+            LogMessage::Truth(ref t) => {
                 self.counts.truth += 1;
                 self.has_truth = true;
                 out(Output::Truth(t))?;
@@ -343,23 +340,38 @@ impl Replay {
                 }
                 self.compare(t);
             }
-            other => match other.sensor() {
-                Some(x) => {
-                    *match x {
-                        SensorMessage::Imu(_) => &mut self.counts.imu,
-                        SensorMessage::Dvl(_) => &mut self.counts.dvl,
-                        SensorMessage::Depth(_) => &mut self.counts.depth,
-                        SensorMessage::Gnss(_) => &mut self.counts.gnss,
-                        SensorMessage::Usbl(_) => &mut self.counts.usbl,
-                        SensorMessage::Magnetometer(_) => &mut self.counts.magnetometer,
-                    } += 1;
-                    self.session.feed(&x, &mut fwd)?;
-                    drop(fwd);
-                    self.note_time(x.host_time_ns());
-                }
+            ref other => match other.sensor() {
+                Some(x) => self.feed_sensor(&x, out)?,
                 None => self.counts.unused += 1,
             },
         }
+        Ok(())
+    }
+
+    /// Feeds one sensor message to the session.
+    fn feed_sensor(
+        &mut self,
+        x: &SensorMessage,
+        out: &mut dyn FnMut(Output) -> anyhow::Result<()>,
+    ) -> anyhow::Result<()> {
+        *match x {
+            SensorMessage::Imu(_) => &mut self.counts.imu,
+            SensorMessage::Dvl(_) => &mut self.counts.dvl,
+            SensorMessage::Depth(_) => &mut self.counts.depth,
+            SensorMessage::Gnss(_) => &mut self.counts.gnss,
+            SensorMessage::Usbl(_) => &mut self.counts.usbl,
+            SensorMessage::Magnetometer(_) => &mut self.counts.magnetometer,
+        } += 1;
+        let mut fwd = Self::forward(
+            &mut self.prev_solution,
+            &mut self.pending_truth,
+            &mut self.tracker,
+            &mut self.recorded,
+            out,
+        );
+        self.session.feed(x, &mut fwd)?;
+        drop(fwd);
+        self.note_time(x.host_time_ns());
         Ok(())
     }
 
@@ -369,7 +381,7 @@ impl Replay {
         out: &mut dyn FnMut(Output) -> anyhow::Result<()>,
     ) -> anyhow::Result<()> {
         while let Some(m) = self.order.pop_any() {
-            self.feed(&m, out)?;
+            self.feed(m, out)?;
         }
         let mut fwd = Self::forward(
             &mut self.prev_solution,
@@ -397,7 +409,7 @@ impl Replay {
             return;
         };
         if prev.host_time_ns == t.host_time_ns {
-            self.tracker.add(&prev, t);
+            self.tracker.add_point(&prev, t);
         } else if prev.host_time_ns > t.host_time_ns {
             self.counts.truth_late += 1;
         } else {

@@ -17,7 +17,7 @@
 //! solution from that sample on.
 
 use auvnav_log::LogMessage;
-use auvnav_shm_schema::LateAidV1;
+use auvnav_shm_schema::{ImuSampleV1, LateAidV1};
 use std::collections::VecDeque;
 
 /// How far behind the newest time stamp a message may be written and still be put in its place
@@ -42,10 +42,35 @@ fn key_of(m: &LogMessage, index: u64) -> Option<Key> {
     Some((t, class, index))
 }
 
+/// A message held in the window. IMU samples, nearly all of the stream, are held as they are
+/// (88 bytes); the others (a few a second) in a box, so that a `LogMessage` (256 bytes) is not
+/// copied in and out of the window for each sample.
+#[derive(Debug, Clone)]
+pub enum Held {
+    Imu(ImuSampleV1),
+    Other(Box<LogMessage>),
+}
+
+impl Held {
+    fn new(m: &LogMessage) -> Held {
+        match m {
+            LogMessage::Imu(x) => Held::Imu(*x),
+            other => Held::Other(Box::new(*other)),
+        }
+    }
+
+    fn names(&self, r: &LateAidV1) -> bool {
+        match self {
+            Held::Imu(_) => false,
+            Held::Other(m) => names(r, m),
+        }
+    }
+}
+
 /// Messages held for the window, sorted by [`Key`].
 #[derive(Default)]
 pub struct FeedOrder {
-    held: VecDeque<(Key, LogMessage)>,
+    held: VecDeque<(Key, Held)>,
     /// Late-aid records whose aid has not been written yet.
     waiting: Vec<LateAidV1>,
     written: u64,
@@ -83,7 +108,7 @@ impl FeedOrder {
             self.late_records_applied += 1;
             key.0 = key.0.max(r.host_time_ns);
         }
-        self.insert(key, *m);
+        self.insert(key, Held::new(m));
         // Records that met no aid within the window.
         let newest = self.newest_ns;
         let before = self.waiting.len();
@@ -93,13 +118,17 @@ impl FeedOrder {
         true
     }
 
-    fn insert(&mut self, key: Key, m: LogMessage) {
+    fn insert(&mut self, key: Key, m: Held) {
         // Nearly always at the end: search from the back.
         let mut i = self.held.len();
         while i > 0 && self.held[i - 1].0 > key {
             i -= 1;
         }
-        self.held.insert(i, (key, m));
+        if i == self.held.len() {
+            self.held.push_back((key, m));
+        } else {
+            self.held.insert(i, (key, m));
+        }
     }
 
     /// Moves the held aid a [`LateAidV1`] record names to just before the IMU sample it names.
@@ -107,7 +136,7 @@ impl FeedOrder {
         let found = self
             .held
             .iter()
-            .position(|(k, m)| k.1 == CLASS_AID && names(r, m));
+            .position(|(k, m)| k.1 == CLASS_AID && m.names(r));
         match found.and_then(|i| self.held.remove(i)) {
             Some(((t, class, index), m)) => {
                 self.late_records_applied += 1;
@@ -119,7 +148,7 @@ impl FeedOrder {
     }
 
     /// The next message whose place is settled (the window has passed it).
-    pub fn pop_ready(&mut self) -> Option<LogMessage> {
+    pub fn pop_ready(&mut self) -> Option<Held> {
         let (k, _) = self.held.front()?;
         if k.0.saturating_add(REORDER_WINDOW_NS) >= self.newest_ns {
             return None;
@@ -129,7 +158,7 @@ impl FeedOrder {
 
     /// The next held message, window or not (at the end of the input; records still waiting
     /// for their aid are then counted as unmatched).
-    pub fn pop_any(&mut self) -> Option<LogMessage> {
+    pub fn pop_any(&mut self) -> Option<Held> {
         self.late_records_unmatched += self.waiting.len() as u64;
         self.waiting.clear();
         self.held.pop_front().map(|(_, m)| m)
@@ -164,11 +193,13 @@ mod tests {
             ..Default::default()
         })
     }
-    fn stamp(m: &LogMessage) -> (u64, bool) {
+    fn stamp(m: &Held) -> (u64, bool) {
         match m {
-            LogMessage::Imu(x) => (x.host_time_ns, true),
-            LogMessage::Dvl(x) => (x.host_time_ns, false),
-            _ => (0, false),
+            Held::Imu(x) => (x.host_time_ns, true),
+            Held::Other(m) => match **m {
+                LogMessage::Dvl(x) => (x.host_time_ns, false),
+                _ => (0, false),
+            },
         }
     }
     fn drain(o: &mut FeedOrder) -> Vec<(u64, bool)> {
