@@ -92,6 +92,9 @@ pub struct ReplayBench {
     pub core_runs_wall_s: Vec<f64>,
     pub core_median_wall_s: f64,
     pub core_real_time_factor: f64,
+    /// Reading and decoding every message of the log file, nothing else (the read stage).
+    pub read_runs_wall_s: Vec<f64>,
+    pub read_median_wall_s: f64,
 }
 
 pub(crate) fn median(v: &[f64]) -> f64 {
@@ -155,6 +158,20 @@ pub fn replay(hours: f64, repeat: usize, json: bool) -> anyhow::Result<()> {
             std::hint::black_box(replay.accuracy());
             core_runs.push(t.elapsed().as_secs_f64());
         }
+        let mut read_runs = Vec::new();
+        for _ in 0..repeat.max(1) {
+            let t = std::time::Instant::now();
+            let mut reader = auvnav_log::LogReader::open(&path)?;
+            let mut decoded = 0u64;
+            while reader
+                .next_decoded_with(|d| std::hint::black_box(d).is_ok())?
+                .is_some()
+            {
+                decoded += 1;
+            }
+            std::hint::black_box(decoded);
+            read_runs.push(t.elapsed().as_secs_f64());
+        }
         let r = &cfg.scenario.rates;
         let (m, cm) = (median(&runs), median(&core_runs));
         Ok(ReplayBench {
@@ -170,6 +187,8 @@ pub fn replay(hours: f64, repeat: usize, json: bool) -> anyhow::Result<()> {
             core_runs_wall_s: core_runs,
             core_median_wall_s: cm,
             core_real_time_factor: log_duration_s / cm,
+            read_median_wall_s: median(&read_runs),
+            read_runs_wall_s: read_runs,
         })
     })();
     let _ = std::fs::remove_dir_all(&dir);
@@ -178,7 +197,7 @@ pub fn replay(hours: f64, repeat: usize, json: bool) -> anyhow::Result<()> {
         crate::json::print(&out)?;
     } else {
         println!(
-            "replay: {:.2} h of {} Hz IMU / {} Hz DVL / {} Hz depth in {:.3} s from the log (real-time factor {:.0}), {:.3} s from memory ({:.0}); median of {}",
+            "replay: {:.2} h of {} Hz IMU / {} Hz DVL / {} Hz depth in {:.3} s from the log (real-time factor {:.0}), {:.3} s from memory ({:.0}), {:.3} s to read and decode the log alone; median of {}",
             out.log_hours,
             out.imu_hz,
             out.dvl_hz,
@@ -187,6 +206,7 @@ pub fn replay(hours: f64, repeat: usize, json: bool) -> anyhow::Result<()> {
             out.real_time_factor,
             out.core_median_wall_s,
             out.core_real_time_factor,
+            out.read_median_wall_s,
             out.runs_wall_s.len()
         );
     }
