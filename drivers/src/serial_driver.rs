@@ -7,6 +7,7 @@
 use crate::clock::monotonic_ns;
 use crate::device::{DeviceClass, DeviceDecoder, Output, Protocol, ProtocolSettings};
 use auvnav_shm_schema::bus::{Bus, BusError, BusPublisher};
+use auvnav_shm_schema::stage_times::StageTimes;
 use auvnav_shm_schema::{
     DvlVelocityV1, ImuSampleV1, MagnetometerV1, ProcessHealthV1, ProcessState, RAW_CHUNK,
     RawBytesV1, UsblFixV1, qos, topic,
@@ -118,6 +119,10 @@ pub struct SerialDriverConfig {
     pub timing: TimingConfig,
     #[serde(default)]
     pub mounting: MountingConfig,
+    /// Write the host time of each message's read, decode and publish to this CSV file (ns,
+    /// `read_ns,decoded_ns,published_ns`), for latency breakdowns; empty for none (default).
+    #[serde(default)]
+    pub stage_times_csv: String,
 }
 
 fn default_prefix() -> String {
@@ -362,6 +367,8 @@ impl DataPublisher {
 pub enum DriverError {
     #[error("shared memory: {0}")]
     Bus(#[from] BusError),
+    #[error("{0}")]
+    Output(String),
 }
 
 /// Health counters and state, published as [`ProcessHealthV1`].
@@ -402,6 +409,9 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
     let mut next_health = 0u64;
     let mut last_open_error = String::new();
     let mut buf = vec![0u8; 64 * 1024];
+    let mut stage_times =
+        StageTimes::create(&cfg.stage_times_csv, "read_ns,decoded_ns,published_ns")
+            .map_err(|e| DriverError::Output(format!("creating {}: {e}", cfg.stage_times_csv)))?;
     tracing::info!(
         "{name}: {} on {} at {} baud, publishing on {}/{}{} (mounting rpy {:?} deg, lever arm {:?} m)",
         cfg.protocol.name(),
@@ -514,9 +524,13 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
                 }
                 decoder.push(&buf[..n]);
                 while let Some(out) = decoder.next_output(host_ns) {
+                    let decoded_ns = stage_times.as_ref().map(|_| monotonic_ns());
                     match data.publish(out) {
                         Ok(true) => health.published += 1,
                         Ok(false) | Err(_) => health.publish_errors += 1,
+                    }
+                    if let (Some(s), Some(decoded_ns)) = (stage_times.as_mut(), decoded_ns) {
+                        s.row(&[host_ns, decoded_ns, monotonic_ns()]);
                     }
                 }
                 state = ProcessState::Running;

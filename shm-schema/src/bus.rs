@@ -153,6 +153,10 @@ impl Bus {
     /// A subscriber of `T` on `topic`. It is connected once created; call
     /// [`BusSubscriber::receive`] regularly (also when not notified) so that its side of the
     /// connection is established before the first publish.
+    ///
+    /// A subscriber has no listener of its own: a process that sleeps until data arrives makes
+    /// one with [`Bus::listener`] (one per topic it waits on, and only those). Every listener of a
+    /// topic costs each publish of it a notification (a system call), read or not.
     pub fn subscriber<T: Message>(
         &self,
         topic: &str,
@@ -164,11 +168,9 @@ impl Bus {
             .subscriber_builder()
             .create()
             .map_err(|e| err(format!("subscriber on {full:?}"), e))?;
-        let listener = self.listener(topic)?;
         let _ = subscriber.receive();
         Ok(BusSubscriber {
             subscriber,
-            listener,
             next_sequence: Vec::new(),
             gaps: 0,
             service: full,
@@ -219,7 +221,6 @@ impl<T: Message + Sequenced> BusPublisher<T> {
 /// Receives `T`, counting sequence gaps.
 pub struct BusSubscriber<T: Message> {
     subscriber: iceoryx2::port::subscriber::Subscriber<ipc::Service, T, ()>,
-    listener: iceoryx2::port::listener::Listener<ipc::Service>,
     /// The next sequence number expected from each publisher (a topic can have several: the
     /// health topic has one per process).
     next_sequence: Vec<(iceoryx2::identifiers::UniquePublisherId, u64)>,
@@ -251,26 +252,24 @@ impl<T: Message + Sequenced> BusSubscriber<T> {
         }))
     }
 
-    /// Sleeps until a publisher notifies or `timeout` passes; returns the notifications seen. A
-    /// signal (a child process exiting, a SIGINT handled elsewhere) ends the wait early, as a
-    /// wake-up with no notification.
-    pub fn wait(&self, timeout: Duration) -> Result<u64, BusError> {
-        use iceoryx2::port::listener::ListenerWaitError;
-        match self.listener.timed_wait(|_| {}, timeout) {
-            Ok(n) => Ok(n),
-            Err(ListenerWaitError::InterruptSignal) => Ok(0),
-            Err(e) => Err(err(format!("wait on {:?}", self.service), e)),
-        }
-    }
-
-    /// The listener, to attach to a WaitSet.
-    pub fn listener(&self) -> &iceoryx2::port::listener::Listener<ipc::Service> {
-        &self.listener
-    }
-
     /// Messages missed so far according to the sequence numbers (count). A publisher restart
     /// (sequence back to 0) is not a gap.
     pub fn gaps(&self) -> u64 {
         self.gaps
+    }
+}
+
+/// Sleeps until a publisher notifies `listener` or `timeout` passes; returns the notifications
+/// seen. A signal (a child process exiting, a SIGINT handled elsewhere) ends the wait early, as a
+/// wake-up with no notification.
+pub fn wait(
+    listener: &iceoryx2::port::listener::Listener<ipc::Service>,
+    timeout: Duration,
+) -> Result<u64, BusError> {
+    use iceoryx2::port::listener::ListenerWaitError;
+    match listener.timed_wait(|_| {}, timeout) {
+        Ok(n) => Ok(n),
+        Err(ListenerWaitError::InterruptSignal) => Ok(0),
+        Err(e) => Err(err(format!("wait on {:?}", listener.name()), e)),
     }
 }

@@ -27,6 +27,7 @@ pub mod bus;
 pub mod clock;
 pub mod logging;
 pub mod qos;
+pub mod stage_times;
 pub mod topic;
 
 pub use bytemuck::{Pod, Zeroable};

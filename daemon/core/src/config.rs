@@ -343,6 +343,11 @@ pub struct OutputConfig {
     pub nav_csv: String,
     /// Write every aid diagnostic to this CSV file; empty for none (default).
     pub diagnostics_csv: String,
+    /// Write, per navigation solution, the host times of its stages to this CSV file (ns,
+    /// `imu_host_time_ns,woke_ns,received_ns,computed_ns,published_ns`: the IMU driver's read
+    /// time stamp, the daemon's wake-up, the sensor topics drained, the solution computed, the
+    /// solution published), for latency breakdowns; empty for none (default).
+    pub stage_times_csv: String,
 }
 
 impl Default for OutputConfig {
@@ -351,6 +356,7 @@ impl Default for OutputConfig {
             solution_decimation: 1,
             nav_csv: String::new(),
             diagnostics_csv: String::new(),
+            stage_times_csv: String::new(),
         }
     }
 }

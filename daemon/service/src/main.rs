@@ -12,6 +12,7 @@ use auvnav_core::feed::SensorMessage;
 use auvnav_core::session::{Session, SessionOutput};
 use auvnav_shm_schema::bus::{Bus, BusError, BusPublisher, BusSubscriber};
 use auvnav_shm_schema::clock::monotonic_ns;
+use auvnav_shm_schema::stage_times::StageTimes;
 use auvnav_shm_schema::{
     AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1, MagnetometerV1,
     NavSolutionV1, ProcessHealthV1, ProcessState, UsblFixV1, qos, topic,
@@ -88,6 +89,10 @@ struct Outputs {
     late_aids_applied: u64,
     nav_csv: Option<Csv>,
     diag_csv: Option<Csv>,
+    stage_times: Option<StageTimes>,
+    /// Host times of this wake-up and of the sensor topics drained (for the stage times).
+    woke_ns: u64,
+    received_ns: u64,
     decimation: u64,
     solutions: u64,
     published: u64,
@@ -102,9 +107,19 @@ impl Outputs {
                     csv::write_nav_row(&mut c.w, s)?;
                 }
                 if self.solutions.is_multiple_of(self.decimation) {
+                    let computed_ns = self.stage_times.as_ref().map(|_| monotonic_ns());
                     match self.solution.publish(*s) {
                         Ok(_) => self.published += 1,
                         Err(_) => self.errors += 1,
+                    }
+                    if let (Some(t), Some(computed_ns)) = (self.stage_times.as_mut(), computed_ns) {
+                        t.row(&[
+                            s.host_time_ns,
+                            self.woke_ns,
+                            self.received_ns,
+                            computed_ns,
+                            monotonic_ns(),
+                        ]);
                     }
                 }
                 self.solutions += 1;
@@ -147,6 +162,9 @@ impl Outputs {
         if let Some(c) = self.diag_csv.as_mut() {
             c.w.flush()?;
         }
+        if let Some(t) = self.stage_times.as_mut() {
+            t.flush();
+        }
         Ok(())
     }
 }
@@ -184,18 +202,19 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
     let mut magnetometer = bus
         .subscriber::<MagnetometerV1>(topic::MAGNETOMETER, qos::SENSOR)
         .map_err(e)?;
-    let listeners = [
+    const TOPICS: [&str; 6] = [
         topic::IMU,
         topic::DVL,
         topic::DEPTH,
         topic::GNSS,
         topic::USBL,
         topic::MAGNETOMETER,
-    ]
-    .iter()
-    .map(|t| bus.listener(t))
-    .collect::<Result<Vec<_>, _>>()
-    .map_err(e)?;
+    ];
+    let listeners = TOPICS
+        .iter()
+        .map(|t| bus.listener(t))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(e)?;
     let mut out = Outputs {
         solution: bus
             .publisher::<NavSolutionV1>(topic::NAV_SOLUTION, qos::NAVIGATION)
@@ -209,6 +228,13 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
         late_aids_applied: 0,
         nav_csv: Csv::create(&cfg.output.nav_csv, csv::NAV_HEADER)?,
         diag_csv: Csv::create(&cfg.output.diagnostics_csv, csv::DIAGNOSTICS_HEADER)?,
+        stage_times: StageTimes::create(
+            &cfg.output.stage_times_csv,
+            "imu_host_time_ns,woke_ns,received_ns,computed_ns,published_ns",
+        )
+        .map_err(|x| format!("creating {}: {x}", cfg.output.stage_times_csv))?,
+        woke_ns: 0,
+        received_ns: 0,
         decimation: u64::from(cfg.output.solution_decimation.max(1)),
         solutions: 0,
         published: 0,
@@ -220,7 +246,7 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
     let waitset = WaitSetBuilder::new()
         .create::<ipc::Service>()
         .map_err(|x| format!("creating the WaitSet: {x:?}"))?;
-    let _guards = listeners
+    let guards = listeners
         .iter()
         .map(|l| waitset.attach_notification(l))
         .collect::<Result<Vec<_>, _>>()
@@ -288,16 +314,25 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
         hp.publish(m).map(|_| ())
     };
     let result = loop {
-        let r = waitset.wait_and_process_once(|_| CallbackProgression::Continue);
+        // Which topics notified: only their listeners are read (one system call each, plus
+        // the one that finds them empty), not all six on every wake-up.
+        let mut notified = [false; TOPICS.len()];
+        let r = waitset.wait_and_process_once(|id| {
+            for (n, g) in notified.iter_mut().zip(&guards) {
+                *n |= id.has_event_from(g);
+            }
+            CallbackProgression::Continue
+        });
         match r {
             Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => break Ok(()),
             Ok(_) => {}
             Err(x) => break Err(format!("waiting: {x:?}")),
         }
-        for l in &listeners {
+        let now = monotonic_ns();
+        out.woke_ns = now;
+        for (l, _) in listeners.iter().zip(notified).filter(|(_, n)| *n) {
             let _ = l.try_wait(|_| {});
         }
-        let now = monotonic_ns();
         // Aids first, so that IMU samples arriving in the same wake-up find them queued.
         let step = (|| -> Result<(), BusError> {
             drain(&mut dvl, &mut dvls)?;
@@ -310,6 +345,9 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
         })();
         if let Err(x) = step {
             break Err(x.to_string());
+        }
+        if out.stage_times.is_some() {
+            out.received_ns = monotonic_ns();
         }
         for (w, n) in watches.iter_mut().zip([
             imus.len(),

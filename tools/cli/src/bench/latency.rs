@@ -83,10 +83,11 @@ pub fn pty_latency(rate_hz: f64, seconds: f64) -> anyhow::Result<PtyLatency> {
         std::thread::spawn(move || -> anyhow::Result<Vec<(u64, u64, u64)>> {
             let bus = Bus::new(&format!("{tag}sub"), &tag)?;
             let mut sub = bus.subscriber::<ImuSampleV1>(topic::IMU, qos::SENSOR)?;
+            let wake = bus.listener(topic::IMU)?;
             ready.store(true, Ordering::SeqCst);
             let mut got = Vec::new();
             while !done.load(Ordering::SeqCst) {
-                sub.wait(Duration::from_millis(20))?;
+                auvnav_shm_schema::bus::wait(&wake, Duration::from_millis(20))?;
                 while let Some(m) = sub.receive()? {
                     got.push((m.device_time_ns / 1000, m.host_time_ns, monotonic_ns()));
                 }
@@ -167,11 +168,138 @@ pub struct E2eLatency {
     /// IPC only: the IMU driver's read time stamp → the IMU message received by a subscriber in
     /// another process (µs): decode, publish and the shared-memory hop with event wake-up.
     pub driver_to_subscriber_us: Percentiles,
+    /// Where the time goes, per solution (µs): the stages of `frame_to_solution_us`, from the
+    /// stage times the IMU driver and the daemon write (their `stage_times_csv`). Percentiles of
+    /// stages do not add up to the total's (only the per-solution values do).
+    pub stages_us: Vec<StageLatency>,
+    /// Solutions whose every stage time was found (the IMU driver's and the daemon's rows
+    /// joined on the read time stamp); the stage percentiles are over these.
+    pub solutions_with_stages: u64,
     /// CPU use of the daemon and of the recorder over the run (% of one core).
     pub daemon_cpu_percent: f64,
     pub recorder_cpu_percent: f64,
     pub dvl_frames_written: u64,
     pub usbl_frames_written: u64,
+}
+
+/// One stage of the chain and its latency over the run.
+#[derive(Debug, Clone, Serialize)]
+pub struct StageLatency {
+    pub stage: &'static str,
+    pub what: &'static str,
+    #[serde(flatten)]
+    pub us: Percentiles,
+}
+
+/// A row of the IMU driver's stage times (host clock, ns).
+#[derive(Debug, Clone, Copy, serde::Deserialize)]
+struct DriverStages {
+    read_ns: u64,
+    decoded_ns: u64,
+    published_ns: u64,
+}
+
+/// A row of the daemon's stage times (host clock, ns).
+#[derive(Debug, Clone, Copy, serde::Deserialize)]
+struct DaemonStages {
+    imu_host_time_ns: u64,
+    woke_ns: u64,
+    received_ns: u64,
+    computed_ns: u64,
+    published_ns: u64,
+}
+
+fn read_stage_rows<T: serde::de::DeserializeOwned>(
+    path: &std::path::Path,
+) -> anyhow::Result<Vec<T>> {
+    let mut r =
+        csv::Reader::from_path(path).with_context(|| format!("reading {}", path.display()))?;
+    r.deserialize()
+        .collect::<Result<Vec<T>, _>>()
+        .with_context(|| format!("reading {}", path.display()))
+}
+
+/// The stages of each solution: frame written (`written`, by frame index = solution sequence)
+/// → driver read → decoded → published → daemon woke → topics drained → solution published →
+/// received by the subscriber (`sols`: sequence, driver read stamp, receive time).
+fn stage_latencies(
+    written: &[u64],
+    sols: &[(u64, u64, u64)],
+    driver: &[DriverStages],
+    daemon: &[DaemonStages],
+) -> (Vec<StageLatency>, u64) {
+    let driver: std::collections::HashMap<u64, DriverStages> =
+        driver.iter().map(|r| (r.read_ns, *r)).collect();
+    let daemon: std::collections::HashMap<u64, DaemonStages> =
+        daemon.iter().map(|r| (r.imu_host_time_ns, *r)).collect();
+    const STAGES: [(&str, &str); 8] = [
+        (
+            "pty",
+            "frame written to the pseudo-terminal → the driver's read returned",
+        ),
+        ("decode", "driver: read returned → message decoded"),
+        (
+            "publish",
+            "driver: decoded → published and listeners notified",
+        ),
+        (
+            "wake_up",
+            "driver published → the daemon's wait returned (negative: the daemon was already awake)",
+        ),
+        (
+            "drain",
+            "daemon: wait returned → every sensor topic drained",
+        ),
+        (
+            "navigate",
+            "daemon: topics drained → solution computed (strapdown, filter)",
+        ),
+        (
+            "publish_solution",
+            "daemon: solution computed → published and listeners notified",
+        ),
+        (
+            "solution_hop",
+            "daemon published → solution received by a subscriber in another process",
+        ),
+    ];
+    let mut values: Vec<Vec<f64>> = vec![Vec::new(); STAGES.len()];
+    let mut joined = 0;
+    let us = |a: u64, b: u64| (b as f64 - a as f64) * 1e-3;
+    for &(seq, read, recv) in sols {
+        let (Some(&w), Some(d), Some(m)) = (
+            written.get(seq as usize),
+            driver.get(&read),
+            daemon.get(&read),
+        ) else {
+            continue;
+        };
+        let times = [
+            w,
+            read,
+            d.decoded_ns,
+            d.published_ns,
+            m.woke_ns,
+            m.received_ns,
+            m.computed_ns,
+            m.published_ns,
+            recv,
+        ];
+        for (k, v) in values.iter_mut().enumerate() {
+            v.push(us(times[k], times[k + 1]));
+        }
+        joined += 1;
+    }
+    let stages = STAGES
+        .iter()
+        .zip(values)
+        .map(|(&(stage, what), v)| StageLatency {
+            stage,
+            what,
+            us: percentiles(v),
+        })
+        .collect();
+    (stages, joined)
 }
 
 /// CPU time (s) a process has used so far (`/proc/PID/stat` utime + stime).
@@ -207,6 +335,7 @@ pub fn e2e(rate_hz: f64, seconds: f64) -> anyhow::Result<E2eLatency> {
     let tag = format!("benche2e{}r{}", std::process::id(), rate_hz as u64);
     let dir = std::env::temp_dir().join(&tag);
     std::fs::create_dir_all(&dir)?;
+    let imu_stages = dir.join("imu-stages.csv");
     // Pseudo-terminals, one at a time.
     let mut ports = Vec::new();
     for _ in 0..3 {
@@ -219,10 +348,15 @@ pub fn e2e(rate_hz: f64, seconds: f64) -> anyhow::Result<E2eLatency> {
                       port: &str|
      -> anyhow::Result<std::path::PathBuf> {
         let p = dir.join(format!("{class}.toml"));
+        let stages = if class == "imu" {
+            imu_stages.display().to_string()
+        } else {
+            String::new()
+        };
         std::fs::write(
             &p,
             format!(
-                "prefix = \"{tag}\"\nprotocol = \"{protocol}\"\n[serial]\nport = \"{port}\"\nbaud = 921600\n\
+                "prefix = \"{tag}\"\nprotocol = \"{protocol}\"\nstage_times_csv = \"{stages}\"\n[serial]\nport = \"{port}\"\nbaud = 921600\n\
                  [settings.kvh]\nincrements = false\ndegrees = false\nrate_hz = {rate_hz}\ntemperature_centi = false\n"
             ),
         )?;
@@ -232,8 +366,13 @@ pub fn e2e(rate_hz: f64, seconds: f64) -> anyhow::Result<E2eLatency> {
     let dvl_cfg = driver_cfg("dvl", "wldvl", &ports[1].2)?;
     let usbl_cfg = driver_cfg("usbl", "seatrac", &ports[2].2)?;
     let daemon_cfg = dir.join("auvnavd.toml");
+    let daemon_stages = dir.join("auvnavd-stages.csv");
     let daemon = auvnav_core::config::DaemonConfig {
         prefix: tag.clone(),
+        output: auvnav_core::config::OutputConfig {
+            stage_times_csv: daemon_stages.display().to_string(),
+            ..Default::default()
+        },
         navigation: auvnav_core::config::NavConfig {
             imu_dt_from_device_time: true,
             ..Default::default()
@@ -250,19 +389,20 @@ pub fn e2e(rate_hz: f64, seconds: f64) -> anyhow::Result<E2eLatency> {
     std::fs::write(&daemon_cfg, daemon.to_toml()?)?;
     let done = std::sync::Arc::new(AtomicBool::new(false));
     let ready = std::sync::Arc::new(AtomicBool::new(false));
-    type Seen = (Vec<(u64, u64)>, Vec<(u64, u64)>);
+    type Seen = (Vec<(u64, u64, u64)>, Vec<(u64, u64)>);
     let watcher = {
         let (done, ready, tag) = (done.clone(), ready.clone(), tag.clone());
         std::thread::spawn(move || -> anyhow::Result<Seen> {
             let bus = Bus::new(&format!("{tag}sub"), &tag)?;
             let mut sol = bus.subscriber::<NavSolutionV1>(topic::NAV_SOLUTION, qos::NAVIGATION)?;
+            let wake = bus.listener(topic::NAV_SOLUTION)?;
             let mut imu = bus.subscriber::<ImuSampleV1>(topic::IMU, qos::SENSOR)?;
             ready.store(true, Ordering::SeqCst);
             let (mut sols, mut imus) = (Vec::new(), Vec::new());
             while !done.load(Ordering::SeqCst) {
-                sol.wait(Duration::from_millis(20))?;
+                auvnav_shm_schema::bus::wait(&wake, Duration::from_millis(20))?;
                 while let Some(m) = sol.receive()? {
-                    sols.push((m.sequence, monotonic_ns()));
+                    sols.push((m.sequence, m.host_time_ns, monotonic_ns()));
                 }
                 while let Some(m) = imu.receive()? {
                     imus.push((m.host_time_ns, monotonic_ns()));
@@ -369,11 +509,17 @@ pub fn e2e(rate_hz: f64, seconds: f64) -> anyhow::Result<E2eLatency> {
         let _ = p.0.set_timeout(Duration::from_millis(1));
     }
     drop(ports);
+    let (stages, solutions_with_stages) = stage_latencies(
+        &written,
+        &sols,
+        &read_stage_rows(&imu_stages)?,
+        &read_stage_rows(&daemon_stages)?,
+    );
     let _ = std::fs::remove_dir_all(&dir);
     // Bus sequence k = the k-th solution = IMU frame k (the first frame starts the session).
     let total: Vec<f64> = sols
         .iter()
-        .filter_map(|(seq, recv)| {
+        .filter_map(|(seq, _, recv)| {
             written
                 .get(*seq as usize)
                 .map(|w| recv.saturating_sub(*w) as f64 * 1e-3)
@@ -394,6 +540,8 @@ pub fn e2e(rate_hz: f64, seconds: f64) -> anyhow::Result<E2eLatency> {
         solutions_received: sols.len() as u64,
         frame_to_solution_us: percentiles(total),
         driver_to_subscriber_us: percentiles(hop),
+        stages_us: stages,
+        solutions_with_stages,
         daemon_cpu_percent: cpu(cpu0.0, cpu1.0),
         recorder_cpu_percent: cpu(cpu0.1, cpu1.1),
         dvl_frames_written: dvl_n,
@@ -424,6 +572,12 @@ pub fn e2e_bench(seconds: f64, json: bool) -> anyhow::Result<()> {
                 r.daemon_cpu_percent,
                 r.recorder_cpu_percent
             );
+            for s in &r.stages_us {
+                println!(
+                    "  {:<16} p50 {:>6.1} us  p99 {:>7.1} us  max {:>7.0} us  ({})",
+                    s.stage, s.us.p50, s.us.p99, s.us.max, s.what
+                );
+            }
         }
     }
     Ok(())
