@@ -88,14 +88,44 @@ struct Table<const N: usize> {
     counts: FileCounts,
 }
 
+/// A reader of a CSV file as the import tools want it: fields trimmed, rows of any length
+/// accepted (a row of the wrong length is the caller's to count, not a fatal error).
+fn csv_reader(path: &Path) -> anyhow::Result<csv::Reader<std::fs::File>> {
+    csv::ReaderBuilder::new()
+        .flexible(true)
+        .trim(csv::Trim::All)
+        .from_path(path)
+        .with_context(|| format!("reading {}", path.display()))
+}
+
+/// The next record of `reader`: `Ok(None)` at the end, `Ok(Some(Err(())))` for a row the CSV
+/// reader rejects (invalid UTF-8), an error for an I/O failure.
+fn next_record(
+    reader: &mut csv::Reader<std::fs::File>,
+    record: &mut csv::StringRecord,
+    path: &Path,
+) -> anyhow::Result<Option<Result<(), ()>>> {
+    match reader.read_record(record) {
+        Ok(true) => Ok(Some(Ok(()))),
+        Ok(false) => Ok(None),
+        Err(e) if matches!(e.kind(), csv::ErrorKind::Io(_)) => {
+            Err(e).with_context(|| format!("reading {}", path.display()))
+        }
+        Err(_) => Ok(Some(Err(()))),
+    }
+}
+
 fn read_table<const N: usize>(path: &Path, header: &str) -> anyhow::Result<Table<N>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let mut lines = text.lines();
-    let first = lines.next().unwrap_or_default().trim();
-    if first != header {
+    let mut reader = csv_reader(path)?;
+    let found = reader
+        .headers()
+        .with_context(|| format!("reading the header of {}", path.display()))?
+        .iter()
+        .collect::<Vec<_>>()
+        .join(",");
+    if found != header {
         bail!(
-            "{}: header is {first:?}, expected {header:?}",
+            "{}: header is {found:?}, expected {header:?}",
             path.display()
         );
     }
@@ -103,22 +133,27 @@ fn read_table<const N: usize>(path: &Path, header: &str) -> anyhow::Result<Table
         rows: Vec::new(),
         counts: FileCounts::default(),
     };
-    for line in lines {
-        if line.trim().is_empty() {
+    let mut record = csv::StringRecord::new();
+    while let Some(read) = next_record(&mut reader, &mut record, path)? {
+        // A line of blanks only (a trailing line with spaces) is no row.
+        if read.is_ok() && record.iter().all(str::is_empty) {
             continue;
         }
         t.counts.rows += 1;
         let mut row = [0.0; N];
-        let mut n = 0;
-        let mut ok = true;
-        for field in line.split(',') {
-            match field.trim().parse::<f64>() {
-                Ok(v) if v.is_finite() && n < N => row[n] = v,
-                _ => ok = false,
-            }
-            n += 1;
-        }
-        if !ok || n != N {
+        let ok = read.is_ok()
+            && record.len() == N
+            && record
+                .iter()
+                .zip(row.iter_mut())
+                .all(|(field, v)| match field.parse::<f64>() {
+                    Ok(x) if x.is_finite() => {
+                        *v = x;
+                        true
+                    }
+                    _ => false,
+                });
+        if !ok {
             t.counts.malformed += 1;
             continue;
         }
@@ -806,6 +841,54 @@ mod pd0_tests {
     }
 }
 
+#[cfg(test)]
+mod table_tests {
+    use super::*;
+
+    fn file(name: &str, text: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("import-table-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("directory");
+        let p = dir.join(name);
+        std::fs::write(&p, text).expect("write");
+        p
+    }
+
+    #[test]
+    fn bad_rows_are_counted_by_kind_and_the_good_ones_kept() {
+        let p = file(
+            "t.csv",
+            "time_s,a,b\r\n0.0,1,2\r\n0.1, 3 ,4\r\n0.2,5\r\n0.3,nan,1\r\n0.4,x,1\r\n   \r\n\
+             0.1,9,9\r\n0.5,6,7,8\r\n0.6,6,7\r\n",
+        );
+        let t = read_table::<3>(&p, "time_s,a,b").expect("table");
+        assert_eq!(
+            t.rows,
+            vec![[0.0, 1.0, 2.0], [0.1, 3.0, 4.0], [0.6, 6.0, 7.0]]
+        );
+        assert_eq!(t.counts.rows, 8);
+        // Too few fields, NaN, text, too many fields.
+        assert_eq!(t.counts.malformed, 4);
+        assert_eq!(t.counts.out_of_order, 1);
+    }
+
+    #[test]
+    fn a_wrong_header_or_no_usable_row_is_an_error_naming_the_file() {
+        let p = file("h.csv", "time,a,b\n0,1,2\n");
+        let e = read_table::<3>(&p, "time_s,a,b").err().expect("error");
+        assert!(
+            e.to_string().contains("h.csv") && e.to_string().contains("header"),
+            "{e}"
+        );
+        let p = file("empty.csv", "time_s,a,b\nx,y,z\n");
+        let e = read_table::<3>(&p, "time_s,a,b").err().expect("error");
+        assert!(e.to_string().contains("no usable rows"), "{e}");
+        let missing = std::env::temp_dir()
+            .join("no-such-dir-import")
+            .join("m.csv");
+        assert!(read_table::<3>(&missing, "time_s,a,b").is_err());
+    }
+}
+
 /// Command-line arguments of `auvnav import mag-csv`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct MagCsvArgs {
@@ -1047,17 +1130,18 @@ pub fn ugps_messages(
 ) -> anyhow::Result<(Vec<(&'static str, LogMessage)>, UgpsSummary)> {
     use auvnav_shm_schema::AcousticRangesV1;
     let file = ugps_acoustic_file(input)?;
-    let text =
-        std::fs::read_to_string(&file).with_context(|| format!("reading {}", file.display()))?;
-    let mut lines = text.lines().filter(|l| !l.trim().is_empty());
-    let Some(header) = lines.next() else {
+    let mut reader = csv_reader(&file)?;
+    let names = reader
+        .headers()
+        .with_context(|| format!("reading the header of {}", file.display()))?
+        .clone();
+    if names.iter().all(str::is_empty) {
         bail!("{}: empty file", file.display());
-    };
-    let names: Vec<&str> = header.split(',').map(str::trim).collect();
+    }
     let col = |n: &str| -> anyhow::Result<usize> {
         names
             .iter()
-            .position(|x| *x == n)
+            .position(|x| x == n)
             .with_context(|| format!("{}: no column {n:?}", file.display()))
     };
     let t_col = col("timestamp")?;
@@ -1082,11 +1166,18 @@ pub fn ugps_messages(
     let mut t0: Option<f64> = None;
     let mut last_t = f64::NEG_INFINITY;
     let mut last_key: Option<[u64; 8]> = None;
-    for line in lines {
+    let mut f = csv::StringRecord::new();
+    while let Some(read) = next_record(&mut reader, &mut f, &file)? {
+        if read.is_ok() && f.iter().all(str::is_empty) {
+            continue;
+        }
         s.rows += 1;
-        let f: Vec<&str> = line.split(',').map(str::trim).collect();
+        if read.is_err() {
+            s.malformed += 1;
+            continue;
+        }
         let num = |k: usize| f.get(k).and_then(|v| v.parse::<f64>().ok());
-        let flag = |k: usize| match f.get(k).copied() {
+        let flag = |k: usize| match f.get(k) {
             Some("True") | Some("true") | Some("1") => Some(true),
             Some("False") | Some("false") | Some("0") => Some(false),
             _ => None,

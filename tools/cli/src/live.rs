@@ -44,36 +44,56 @@ pub struct LiveResult {
     pub process_reports: Vec<(String, String)>,
 }
 
-/// Parses the solution CSV written by the daemon or the replay.
+/// Parses the solution CSV written by the daemon or the replay (`auvnav_core::csv::NAV_HEADER`).
 pub fn read_nav_csv(path: &Path) -> anyhow::Result<Vec<NavSolutionV1>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    type Row = (
+        u64,
+        u64,
+        f64,
+        f64,
+        f64,
+        f64,
+        f64,
+        f64,
+        f64,
+        f64,
+        f64,
+        f64,
+        f64,
+        f64,
+        u32,
+        u32,
+    );
+    let mut reader =
+        csv::Reader::from_path(path).with_context(|| format!("reading {}", path.display()))?;
+    let header = reader
+        .headers()
+        .with_context(|| format!("reading the header of {}", path.display()))?
+        .iter()
+        .collect::<Vec<_>>()
+        .join(",");
+    if header != auvnav_core::csv::NAV_HEADER {
+        bail!(
+            "{}: not a solution CSV (header {header:?}, expected {:?})",
+            path.display(),
+            auvnav_core::csv::NAV_HEADER
+        );
+    }
     let mut out = Vec::new();
-    for (i, line) in text.lines().enumerate().skip(1) {
-        let f: Vec<&str> = line.split(',').collect();
-        if f.len() != 16 {
-            bail!(
-                "{}:{}: {} fields, expected 16",
-                path.display(),
-                i + 1,
-                f.len()
-            );
-        }
-        let n = |k: usize| -> anyhow::Result<f64> {
-            f[k].parse()
-                .with_context(|| format!("{}:{}: field {k}", path.display(), i + 1))
-        };
+    for row in reader.deserialize::<Row>() {
+        let (t, seq, lat, lon, h, vn, ve, vd, r, p, y, sn, se, sd, mode, health) =
+            row.with_context(|| format!("reading {}", path.display()))?;
         out.push(NavSolutionV1 {
-            host_time_ns: f[0].parse()?,
-            sequence: f[1].parse()?,
-            latitude_rad: n(2)?,
-            longitude_rad: n(3)?,
-            height_m: n(4)?,
-            velocity_ned_m_s: [n(5)?, n(6)?, n(7)?],
-            euler_rad: [n(8)?, n(9)?, n(10)?],
-            position_std_ned_m: [n(11)?, n(12)?, n(13)?],
-            mode: f[14].parse()?,
-            sensor_health: f[15].parse()?,
+            host_time_ns: t,
+            sequence: seq,
+            latitude_rad: lat,
+            longitude_rad: lon,
+            height_m: h,
+            velocity_ned_m_s: [vn, ve, vd],
+            euler_rad: [r, p, y],
+            position_std_ned_m: [sn, se, sd],
+            mode,
+            sensor_health: health,
             ..Default::default()
         });
     }
@@ -377,4 +397,51 @@ pub fn run_live(
         wall_s: start.elapsed().as_secs_f64(),
         process_reports,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_solution_csv_reads_back_what_was_written_and_a_foreign_file_is_refused() {
+        let dir = std::env::temp_dir().join(format!("nav-csv-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("directory");
+        let path = dir.join("nav.csv");
+        let s = NavSolutionV1 {
+            host_time_ns: 123_456_789,
+            sequence: 7,
+            latitude_rad: 0.5,
+            longitude_rad: -2.0,
+            height_m: -30.25,
+            velocity_ned_m_s: [1.0, -0.5, 0.125],
+            euler_rad: [0.01, -0.02, 3.0],
+            position_std_ned_m: [0.1, 0.2, 0.3],
+            mode: 2,
+            sensor_health: 11,
+            ..Default::default()
+        };
+        let mut text = Vec::new();
+        use std::io::Write;
+        writeln!(text, "{}", auvnav_core::csv::NAV_HEADER).expect("header");
+        auvnav_core::csv::write_nav_row(&mut text, &s).expect("row");
+        std::fs::write(&path, &text).expect("write");
+        let back = read_nav_csv(&path).expect("read");
+        assert_eq!(back.len(), 1);
+        let b = &back[0];
+        assert_eq!(
+            (b.host_time_ns, b.sequence, b.mode, b.sensor_health),
+            (123_456_789, 7, 2, 11)
+        );
+        assert_eq!(b.velocity_ned_m_s, s.velocity_ned_m_s);
+        assert!((b.latitude_rad - s.latitude_rad).abs() < 1e-12);
+        std::fs::write(&path, "a,b\n1,2\n").expect("write");
+        let e = read_nav_csv(&path).expect_err("refused");
+        assert!(e.to_string().contains("not a solution CSV"), "{e}");
+        let mut short = text.clone();
+        short.extend_from_slice(b"1,2,3\n");
+        std::fs::write(&path, &short).expect("write");
+        assert!(read_nav_csv(&path).is_err());
+        std::fs::remove_dir_all(&dir).expect("cleanup");
+    }
 }
