@@ -212,6 +212,18 @@ impl<T: Message + Sequenced> BusPublisher<T> {
         Ok(sequence)
     }
 
+    /// Sends `msg` as it is, its sequence number kept, and notifies: for a bridge carrying
+    /// another host's messages, whose numbers are their original publisher's.
+    pub fn forward(&mut self, msg: T) -> Result<(), BusError> {
+        self.publisher
+            .send_copy(msg)
+            .map_err(|e| err(format!("send on {:?}", self.service), e))?;
+        self.notifier
+            .notify()
+            .map_err(|e| err(format!("notify on {:?}", self.service), e))?;
+        Ok(())
+    }
+
     /// The number of messages published so far.
     pub fn published(&self) -> u64 {
         self.sequence

@@ -14,10 +14,12 @@
 
 use std::fmt;
 use tracing::{Event, Level, Subscriber};
-use tracing_subscriber::EnvFilter;
 use tracing_subscriber::fmt::format::{FormatEvent, FormatFields, Writer};
 use tracing_subscriber::fmt::{FmtContext, FormattedFields};
+use tracing_subscriber::layer::SubscriberExt;
 use tracing_subscriber::registry::LookupSpan;
+use tracing_subscriber::util::SubscriberInitExt;
+use tracing_subscriber::{EnvFilter, Layer, Registry};
 
 /// The syslog priority journald reads from a `<N>` line prefix.
 fn syslog_priority(level: &Level) -> u8 {
@@ -66,23 +68,37 @@ where
 /// Installs the subscriber for a process (call once, first thing in `main`). A second call, or a
 /// subscriber already installed (tests), is ignored.
 pub fn init() {
+    init_with(None);
+}
+
+/// A layer given to [`init_with`]: it sees every event of every level, before `RUST_LOG`'s filter
+/// (which applies to the printed lines only), and should filter for itself.
+pub type ExtraLayer = Box<dyn Layer<Registry> + Send + Sync + 'static>;
+
+/// [`init`] with one more layer beside the printed lines: a process counting a library's
+/// reports (the live view counts the WebSocket server's slow-client reports), say.
+pub fn init_with(extra: Option<ExtraLayer>) {
     use iceoryx2::prelude::{LogLevel, set_log_level_from_env_or};
     set_log_level_from_env_or(LogLevel::Warn);
     let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
     let journal = std::env::var_os("JOURNAL_STREAM").is_some();
-    let builder = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr);
-    let _ = if journal {
-        builder
+    let lines: ExtraLayer = if journal {
+        tracing_subscriber::fmt::layer()
+            .with_writer(std::io::stderr)
             .with_ansi(false)
             .event_format(JournalFormat)
-            .try_init()
+            .with_filter(filter)
+            .boxed()
     } else {
-        builder
+        tracing_subscriber::fmt::layer()
+            .with_writer(std::io::stderr)
             .with_ansi(false)
             .with_target(false)
             .with_timer(tracing_subscriber::fmt::time::SystemTime)
-            .try_init()
+            .with_filter(filter)
+            .boxed()
     };
+    let mut layers = vec![lines];
+    layers.extend(extra);
+    let _ = tracing_subscriber::registry().with(layers).try_init();
 }

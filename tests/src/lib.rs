@@ -49,6 +49,8 @@ pub mod processes {
                 "auvnav-tools",
                 "-p",
                 "auvnavd",
+                "-p",
+                "auvnav-bridge",
             ]);
             if dir.file_name().is_some_and(|n| n == "release") {
                 cmd.arg("--release");

@@ -38,6 +38,10 @@ pub struct DemoArgs {
     /// replay_nav.csv and each process's log; in process: sim.mcap and nav.csv).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Also run the live view (`auvnav-live`, processes only) on this address, e.g.
+    /// `127.0.0.1:8765`: open it in Foxglove with `deploy/foxglove-layout.json`.
+    #[arg(long, value_name = "ADDRESS:PORT")]
+    pub live_view: Option<std::net::SocketAddr>,
     /// Print the result as JSON.
     #[arg(long)]
     pub json: bool,
@@ -211,6 +215,7 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
         a.seconds.unwrap_or(120.0),
         a.speed,
         a.out.as_deref(),
+        a.live_view,
     )?;
     if a.json {
         crate::json::print(&r)?;
@@ -222,8 +227,12 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
         );
         println!(
             "  processes: emulated PD0 DVL, {} IMU, SeaTrac USBL on pseudo-terminals; \
-             auvnav-dvl, -imu, -usbl, -can (depth); auvnavd; auvnav record",
-            r.imu
+             auvnav-dvl, -imu, -usbl, -can (depth); auvnavd; auvnav record{}",
+            r.imu,
+            r.live_view
+                .as_ref()
+                .map(|a| format!("; live view on ws://{a}"))
+                .unwrap_or_default()
         );
         println!(
             "  live solution: {} rows; horizontal error final {:.2} m, max {:.2} m, CEP50 {:.2} m; heading RMS {:.3} deg",

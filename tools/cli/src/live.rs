@@ -33,6 +33,8 @@ pub struct LiveResult {
     pub directory: String,
     pub record: String,
     pub live_nav_csv: String,
+    /// The live view's address (`--live-view`), when it ran.
+    pub live_view: Option<String>,
     pub solutions: u64,
     pub accuracy: Accuracy,
     /// `auvnav replay DIR/record.mcap --out DIR/replay_nav.csv` gave a byte-identical file.
@@ -163,6 +165,7 @@ pub fn run_live(
     seconds: f64,
     speed: f64,
     out: Option<&Path>,
+    live_view: Option<std::net::SocketAddr>,
 ) -> anyhow::Result<LiveResult> {
     if !(speed.is_finite() && (0.1..=20.0).contains(&speed)) {
         bail!("--speed {speed}: expected 0.1..=20");
@@ -302,6 +305,27 @@ pub fn run_live(
         &dir,
         Command::new(daemon).arg("--config").arg(&daemon_cfg),
     )?;
+    let mut live_p = match live_view {
+        Some(addr) => {
+            let cfg = dir.join("live.toml");
+            std::fs::write(
+                &cfg,
+                format!(
+                    "prefix = \"{prefix}\"\nlisten_address = \"{}\"\nport = {}\nhealth_period_s = 0.5\n",
+                    addr.ip(),
+                    addr.port()
+                ),
+            )?;
+            Some(ChildProcess::spawn_logged(
+                "auvnav-live",
+                &dir,
+                Command::new(sibling("auvnav-live")?)
+                    .arg("--config")
+                    .arg(&cfg),
+            )?)
+        }
+        None => None,
+    };
     let mut drivers = vec![
         ChildProcess::spawn_logged(
             "auvnav-dvl",
@@ -361,8 +385,15 @@ pub fn run_live(
     clean &= daemon_p.stop(Duration::from_secs(10));
     std::thread::sleep(Duration::from_millis(200));
     clean &= recorder.stop(Duration::from_secs(10));
+    if let Some(p) = live_p.as_mut() {
+        clean &= p.stop(Duration::from_secs(10));
+    }
     let mut process_reports: Vec<(String, String)> = Vec::new();
-    for p in drivers.iter().chain([&daemon_p, &recorder, &emulator]) {
+    for p in drivers
+        .iter()
+        .chain([&daemon_p, &recorder, &emulator])
+        .chain(live_p.as_ref())
+    {
         process_reports.push((p.name.clone(), p.last_log_line()));
     }
 
@@ -390,6 +421,7 @@ pub fn run_live(
         directory: dir.display().to_string(),
         record: record.display().to_string(),
         live_nav_csv: live_csv.display().to_string(),
+        live_view: live_view.map(|a| a.to_string()),
         solutions: nav.len() as u64,
         accuracy,
         replay_identical,

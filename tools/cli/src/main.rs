@@ -229,6 +229,15 @@ enum BenchWhat {
         #[arg(long)]
         json: bool,
     },
+    /// Latency and throughput of two `auvnav-bridge` processes over loopback Zenoh (IMU
+    /// samples at 200 Hz and 1 kHz, vehicle bus → topside bus).
+    Bridge {
+        /// Seconds per rate.
+        #[arg(long, default_value_t = 10.0)]
+        seconds: f64,
+        #[arg(long)]
+        json: bool,
+    },
     /// Cost of one USBL update (loose/tight × ukf/akf/aukf) on the docking scenario.
     Usbl {
         /// Seconds of the docking scenario (one fix per second).
@@ -683,6 +692,7 @@ fn main() -> std::process::ExitCode {
             BenchWhat::Align { runs, json } => auvnav_tools::bench::align(runs, json),
             BenchWhat::Usbl { seconds, json } => auvnav_tools::bench::usbl(seconds, json),
             BenchWhat::E2e { seconds, json } => auvnav_tools::bench::e2e_bench(seconds, json),
+            BenchWhat::Bridge { seconds, json } => auvnav_tools::bench::bridge_bench(seconds, json),
             BenchWhat::Decode {
                 repeat,
                 pty_seconds,

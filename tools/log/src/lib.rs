@@ -397,7 +397,7 @@ impl MessageKind {
 
 /// `T` from a message's bytes (CDR encapsulation header, then the struct), checking both; the
 /// bytes are read in place (no allocation).
-fn decode_pod<T: Message>(topic: &str, data: &[u8]) -> Result<T, LogError> {
+pub fn decode_pod<T: Message>(topic: &str, data: &[u8]) -> Result<T, LogError> {
     let bad = |reason: String| LogError::BadMessage {
         topic: topic.to_string(),
         reason,

@@ -180,6 +180,23 @@ pub struct E2eLatency {
     pub recorder_cpu_percent: f64,
     pub dvl_frames_written: u64,
     pub usbl_frames_written: u64,
+    /// The live view's load when it ran beside the chain (`auvnav bench bridge`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub live_view: Option<LiveViewLoad>,
+}
+
+/// The live view (`auvnav-live`, no rate limit) with one WebSocket client subscribed to every
+/// channel, beside the on-board chain.
+#[derive(Debug, Clone, Serialize)]
+pub struct LiveViewLoad {
+    /// Channels the client subscribed to.
+    pub channels: usize,
+    /// Messages the client received during the run.
+    pub messages_received: u64,
+    /// Solutions among them.
+    pub solutions_received: u64,
+    /// CPU of the live view process over the run (% of one core).
+    pub live_view_cpu_percent: f64,
 }
 
 /// One stage of the chain and its latency over the run.
@@ -322,7 +339,7 @@ pub(crate) fn cpu_seconds(pid: u32) -> Option<f64> {
 /// Runs the chain with real processes — `auvnav-imu`, `auvnav-dvl` (Water Linked, 5 Hz),
 /// `auvnav-usbl` (SeaTrac, 1 Hz), `auvnavd` and `auvnav record` — on pseudo-terminals written by
 /// this process, and times each IMU frame to its navigation solution.
-pub fn e2e(rate_hz: f64, seconds: f64) -> anyhow::Result<E2eLatency> {
+pub fn e2e(rate_hz: f64, seconds: f64, live_view: bool) -> anyhow::Result<E2eLatency> {
     use auvnav_drivers::clock::monotonic_ns;
     use auvnav_drivers::emulate as enc;
     use auvnav_shm_schema::bus::Bus;
@@ -440,9 +457,33 @@ pub fn e2e(rate_hz: f64, seconds: f64) -> anyhow::Result<E2eLatency> {
         spawn("auvnav-dvl", &["--config".as_ref(), dvl_cfg.as_os_str()])?,
         spawn("auvnav-usbl", &["--config".as_ref(), usbl_cfg.as_os_str()])?,
     ];
+    let live_done = std::sync::Arc::new(AtomicBool::new(false));
+    let mut live = if live_view {
+        let port = std::net::TcpListener::bind("127.0.0.1:0")?
+            .local_addr()?
+            .port()
+            .to_string();
+        let process = spawn(
+            "auvnav-live",
+            &[
+                "--prefix".as_ref(),
+                tag.as_ref(),
+                "--port".as_ref(),
+                port.as_ref(),
+            ],
+        )?;
+        Some((
+            process,
+            live_view_client(format!("127.0.0.1:{port}"), live_done.clone()),
+        ))
+    } else {
+        None
+    };
     std::thread::sleep(Duration::from_millis(1500));
     let (recorder_pid, daemon_pid) = (children[0].pid(), children[1].pid());
+    let live_pid = live.as_ref().map(|(p, _)| p.pid());
     let cpu0 = (cpu_seconds(daemon_pid), cpu_seconds(recorder_pid));
+    let live_cpu0 = live_pid.and_then(cpu_seconds);
     let n = (rate_hz * seconds).round() as u64;
     let mut written = vec![0u64; n as usize];
     let (mut dvl_n, mut usbl_n) = (0u64, 0u64);
@@ -497,7 +538,19 @@ pub fn e2e(rate_hz: f64, seconds: f64) -> anyhow::Result<E2eLatency> {
     }
     let wall = start.elapsed().as_secs_f64();
     let cpu1 = (cpu_seconds(daemon_pid), cpu_seconds(recorder_pid));
+    let live_cpu1 = live_pid.and_then(cpu_seconds);
     std::thread::sleep(Duration::from_millis(300));
+    live_done.store(true, Ordering::SeqCst);
+    let live_load = match live.as_mut() {
+        Some((process, client)) => {
+            let counts = std::mem::replace(client, std::thread::spawn(|| Ok((0, 0, 0))))
+                .join()
+                .map_err(|_| anyhow::anyhow!("live view client thread panicked"))??;
+            process.stop(Duration::from_secs(10));
+            Some(counts)
+        }
+        None => None,
+    };
     for c in children.iter_mut().rev() {
         c.stop(Duration::from_secs(10));
     }
@@ -546,6 +599,40 @@ pub fn e2e(rate_hz: f64, seconds: f64) -> anyhow::Result<E2eLatency> {
         recorder_cpu_percent: cpu(cpu0.1, cpu1.1),
         dvl_frames_written: dvl_n,
         usbl_frames_written: usbl_n,
+        live_view: live_load.map(|(channels, messages, solutions)| LiveViewLoad {
+            channels,
+            messages_received: messages,
+            solutions_received: solutions,
+            live_view_cpu_percent: cpu(live_cpu0, live_cpu1),
+        }),
+    })
+}
+
+/// A WebSocket client of the live view on its own thread: subscribes to every channel and
+/// counts what arrives until `done`; returns (channels, messages, solutions).
+fn live_view_client(
+    addr: String,
+    done: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> std::thread::JoinHandle<anyhow::Result<(usize, u64, u64)>> {
+    use auvnav_bridge::live_client::LiveClient;
+    use auvnav_shm_schema::topic;
+    use std::sync::atomic::Ordering;
+    use std::time::Duration;
+    std::thread::spawn(move || {
+        let mut c = LiveClient::connect_retrying(&addr, Duration::from_secs(20))?;
+        c.wait_for_channels(&[topic::NAV_SOLUTION, topic::IMU], Duration::from_secs(10))?;
+        let topics: Vec<String> = c.channels.keys().cloned().collect();
+        c.subscribe(&topics.iter().map(String::as_str).collect::<Vec<_>>())?;
+        c.set_read_timeout(Duration::from_millis(100))?;
+        let (mut messages, mut solutions) = (0u64, 0u64);
+        while !done.load(Ordering::SeqCst) {
+            if let Some(m) = c.read()? {
+                messages += 1;
+                solutions += u64::from(m.topic == topic::NAV_SOLUTION);
+            }
+        }
+        c.close();
+        Ok((topics.len(), messages, solutions))
     })
 }
 
@@ -553,7 +640,7 @@ pub fn e2e(rate_hz: f64, seconds: f64) -> anyhow::Result<E2eLatency> {
 pub fn e2e_bench(seconds: f64, json: bool) -> anyhow::Result<()> {
     let mut results = Vec::new();
     for rate in [200.0, 1000.0] {
-        results.push(e2e(rate, seconds)?);
+        results.push(e2e(rate, seconds, false)?);
     }
     if json {
         crate::json::print(&results)?;

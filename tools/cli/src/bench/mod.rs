@@ -1,10 +1,11 @@
 //! `auvnav bench`: throughput, latency and cost figures, one module per kind
-//! ([`throughput`], [`decode`], [`latency`], [`studies`], [`calibrate`]).
+//! ([`throughput`], [`decode`], [`latency`], [`bridge`], [`studies`], [`calibrate`]).
 
 use anyhow::Context;
 use auvnav_sim::{self as sim, SimConfig, scenario::Scenario};
 use serde::Serialize;
 
+mod bridge;
 mod calibrate;
 mod decode;
 mod discover;
@@ -13,6 +14,7 @@ mod mag;
 mod studies;
 mod throughput;
 
+pub use bridge::*;
 pub use calibrate::*;
 pub use decode::*;
 pub use discover::*;
