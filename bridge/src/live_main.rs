@@ -229,7 +229,14 @@ fn health(
 fn main() -> ExitCode {
     let args = Args::parse();
     let slow = SlowClientReports::default();
-    auvnav_shm_schema::logging::init_with(Some(Box::new(slow.clone())));
+    {
+        use tracing_subscriber::Layer;
+        let foxglove_info = tracing_subscriber::filter::Targets::new()
+            .with_target("foxglove", tracing::Level::INFO);
+        auvnav_shm_schema::logging::init_with(Some(
+            slow.clone().with_filter(foxglove_info).boxed(),
+        ));
+    }
     let loaded = match args.check_config.as_ref().or(args.config.as_ref()) {
         Some(path) => LiveConfig::load(path),
         None => Ok(LiveConfig::default()),

@@ -149,6 +149,8 @@ fn every_binary_reports_its_version_and_commit() {
         "auvnav-imu",
         "auvnav-usbl",
         "auvnav-can",
+        "auvnav-bridge",
+        "auvnav-live",
     ] {
         let o = Command::new(binary(b))
             .arg("--version")

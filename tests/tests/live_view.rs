@@ -213,3 +213,110 @@ fn the_live_view_refuses_a_bad_configuration_and_prints_a_good_one() {
         "{printed}"
     );
 }
+
+#[test]
+fn a_client_that_does_not_keep_up_is_counted_and_the_others_still_receive() {
+    use auvnav_shm_schema::bus::Bus;
+    use auvnav_shm_schema::{ImuSampleV1, ProcessHealthV1, qos};
+    use auvnav_tests::processes::{Proc, unique};
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
+    let dir = TempDir::new("liveslow");
+    let prefix = unique("lvslow");
+    let port = free_port();
+    let cfg = dir.path().join("live.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "prefix = \"{prefix}\"\nname = \"liveslow\"\nport = {port}\nbacklog = 16\nhealth_period_s = 0.2\n"
+        ),
+    )
+    .expect("config");
+    let bus = Bus::new(&unique("lvslowpub"), &prefix).expect("bus");
+    let mut imu = bus
+        .publisher::<ImuSampleV1>(topic::IMU, qos::SENSOR)
+        .expect("publisher");
+    let mut health = bus
+        .subscriber::<ProcessHealthV1>(topic::HEALTH, qos::HEALTH)
+        .expect("subscriber");
+    let mut live = Proc::spawn_logged(
+        "auvnav-live",
+        dir.path(),
+        Command::new(binary("auvnav-live"))
+            .arg("--config")
+            .arg(&cfg),
+    )
+    .expect("auvnav-live");
+    let addr = format!("127.0.0.1:{port}");
+
+    // A client that reads everything, on its own thread.
+    let received = Arc::new(AtomicU64::new(0));
+    let done = Arc::new(AtomicBool::new(false));
+    let reader = {
+        let (received, done, addr) = (received.clone(), done.clone(), addr.clone());
+        let mut c = LiveClient::connect_retrying(&addr, Duration::from_secs(20)).expect("client");
+        c.wait_for_channels(&[topic::IMU], Duration::from_secs(10))
+            .expect("channels");
+        c.subscribe(&[topic::IMU]).expect("subscribe");
+        c.set_read_timeout(Duration::from_millis(100))
+            .expect("timeout");
+        std::thread::spawn(move || {
+            while !done.load(Ordering::SeqCst) {
+                if let Ok(Some(_)) = c.read() {
+                    received.fetch_add(1, Ordering::SeqCst);
+                }
+            }
+        })
+    };
+    // A client that subscribes and never reads.
+    let mut stalled = LiveClient::connect(&addr, Duration::from_secs(5)).expect("client");
+    stalled
+        .wait_for_channels(&[topic::IMU], Duration::from_secs(10))
+        .expect("channels");
+    stalled.subscribe(&[topic::IMU]).expect("subscribe");
+
+    // 40 MB of IMU samples at about 40 kHz: far more than the stalled client's socket buffers
+    // and backlog hold.
+    let before = received.load(Ordering::SeqCst);
+    for burst in 0..300u64 {
+        for k in 0..500u64 {
+            imu.publish(ImuSampleV1 {
+                host_time_ns: (burst * 500 + k) * 25_000,
+                ..Default::default()
+            })
+            .expect("publish");
+        }
+        std::thread::sleep(Duration::from_millis(12));
+    }
+    std::thread::sleep(Duration::from_millis(800));
+    let fast = received.load(Ordering::SeqCst) - before;
+    let mut reported = 0;
+    while let Some(h) = health.receive().expect("health") {
+        if h.name() == "liveslow" {
+            reported = reported.max(h.drops);
+        }
+    }
+    done.store(true, Ordering::SeqCst);
+    reader.join().expect("reader");
+    drop(stalled);
+    assert!(
+        reported >= 1,
+        "the stalled client was not reported: {}",
+        live.last_log_line()
+    );
+    // The reading client kept receiving while the other stalled (the server thins a client only
+    // when its own outbox is full).
+    assert!(fast > 10_000, "the reading client got {fast} of 150000");
+    assert!(
+        live.stop(Duration::from_secs(10)),
+        "{}",
+        live.last_log_line()
+    );
+    assert!(
+        live.last_log_line()
+            .contains("reports of a client not keeping up"),
+        "{}",
+        live.last_log_line()
+    );
+}
