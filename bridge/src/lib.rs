@@ -300,6 +300,43 @@ impl<T: Message + Sequenced> ExportPort for BusSubscriber<T> {
     }
 }
 
+/// A listener on a topic's event service (`Bus::listener`).
+pub type TopicListener = iceoryx2::port::listener::Listener<iceoryx2::prelude::ipc::Service>;
+
+/// The loop of the bridge and the live view: calls `step` with the monotonic time each time one
+/// of `listeners` is notified or `tick` has passed, until SIGTERM or SIGINT (`Ok`) or until `step`
+/// fails (its error).
+pub fn wake_loop(
+    listeners: &[TopicListener],
+    tick: std::time::Duration,
+    mut step: impl FnMut(u64) -> Result<(), String>,
+) -> Result<(), String> {
+    use iceoryx2::prelude::{CallbackProgression, WaitSetBuilder, ipc};
+    use iceoryx2::waitset::WaitSetRunResult;
+    let waitset = WaitSetBuilder::new()
+        .create::<ipc::Service>()
+        .map_err(|x| format!("creating the WaitSet: {x:?}"))?;
+    let _guards = listeners
+        .iter()
+        .map(|l| waitset.attach_notification(l))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|x| format!("attaching a listener: {x:?}"))?;
+    let _tick = waitset
+        .attach_interval(tick)
+        .map_err(|x| format!("attaching the tick: {x:?}"))?;
+    loop {
+        match waitset.wait_and_process_once(|_| CallbackProgression::Continue) {
+            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => return Ok(()),
+            Ok(_) => {}
+            Err(x) => return Err(format!("waiting: {x:?}")),
+        }
+        for l in listeners {
+            let _ = l.try_wait(|_| {});
+        }
+        step(auvnav_shm_schema::clock::monotonic_ns())?;
+    }
+}
+
 /// Why an imported sample was dropped.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Rejected {

@@ -8,8 +8,6 @@ use auvnav_shm_schema::clock::monotonic_ns;
 use auvnav_shm_schema::{NavSolutionV1, ProcessHealthV1, ProcessState, qos, topic};
 use clap::Parser;
 use foxglove::{ChannelBuilder, Context, PartialMetadata, RawChannel, Schema, WebSocketServer};
-use iceoryx2::prelude::*;
-use iceoryx2::waitset::WaitSetRunResult;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::time::Duration;
@@ -113,31 +111,11 @@ fn run(cfg: &LiveConfig, slow: &SlowClientReports) -> Result<(), String> {
     let mut health_pub = bus
         .publisher::<ProcessHealthV1>(topic::HEALTH, qos::HEALTH)
         .map_err(e)?;
-    let waitset = WaitSetBuilder::new()
-        .create::<ipc::Service>()
-        .map_err(|x| format!("creating the WaitSet: {x:?}"))?;
-    let _guards = listeners
-        .iter()
-        .map(|l| waitset.attach_notification(l))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|x| format!("attaching a listener: {x:?}"))?;
-    let _tick = waitset
-        .attach_interval(Duration::from_millis(100))
-        .map_err(|x| format!("attaching the tick: {x:?}"))?;
     let health_ns = (cfg.health_period_s * 1e9) as u64;
     let mut next_health = 0;
     let mut warned = 0u32;
     let mut solutions_mapped = 0u64;
-    let result = loop {
-        match waitset.wait_and_process_once(|_| CallbackProgression::Continue) {
-            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => break Ok(()),
-            Ok(_) => {}
-            Err(x) => break Err(format!("waiting: {x:?}")),
-        }
-        for l in &listeners {
-            let _ = l.try_wait(|_| {});
-        }
-        let now = monotonic_ns();
+    let result = auvnav_bridge::wake_loop(&listeners, Duration::from_millis(100), |now| {
         for s in &mut served {
             loop {
                 let (host_ns, bytes) = match s.port.next_bytes() {
@@ -174,12 +152,11 @@ fn run(cfg: &LiveConfig, slow: &SlowClientReports) -> Result<(), String> {
         }
         if now >= next_health {
             let m = health(cfg, &served, slow, ProcessState::Running);
-            if let Err(x) = health_pub.publish(m) {
-                break Err(x.to_string());
-            }
+            health_pub.publish(m).map_err(|x| x.to_string())?;
             next_health = now + health_ns;
         }
-    };
+        Ok(())
+    });
     let _ = health_pub.publish(health(cfg, &served, slow, ProcessState::Stopping));
     let clients = server.client_count();
     server.stop().wait_blocking();

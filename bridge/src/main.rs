@@ -8,8 +8,6 @@ use auvnav_shm_schema::bus::{Bus, BusError};
 use auvnav_shm_schema::clock::monotonic_ns;
 use auvnav_shm_schema::{ProcessHealthV1, ProcessState, qos, topic};
 use clap::Parser;
-use iceoryx2::prelude::*;
-use iceoryx2::waitset::WaitSetRunResult;
 use std::collections::HashMap;
 use std::process::ExitCode;
 use std::time::Duration;
@@ -146,32 +144,12 @@ fn run(cfg: &BridgeConfig) -> Result<(), String> {
     let mut health_pub = bus
         .publisher::<ProcessHealthV1>(topic::HEALTH, qos::HEALTH)
         .map_err(e)?;
-    let waitset = WaitSetBuilder::new()
-        .create::<ipc::Service>()
-        .map_err(|x| format!("creating the WaitSet: {x:?}"))?;
-    let _guards = listeners
-        .iter()
-        .map(|l| waitset.attach_notification(l))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|x| format!("attaching a listener: {x:?}"))?;
     // Imports arrive on Zenoh's threads: collected every millisecond.
     let tick = if imports.is_empty() { 50 } else { 1 };
-    let _tick = waitset
-        .attach_interval(Duration::from_millis(tick))
-        .map_err(|x| format!("attaching the tick: {x:?}"))?;
     let health_ns = (cfg.health_period_s * 1e9) as u64;
     let mut next_health = 0;
     let mut warned = 0u32;
-    let result = loop {
-        match waitset.wait_and_process_once(|_| CallbackProgression::Continue) {
-            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => break Ok(()),
-            Ok(_) => {}
-            Err(x) => break Err(format!("waiting: {x:?}")),
-        }
-        for l in &listeners {
-            let _ = l.try_wait(|_| {});
-        }
-        let now = monotonic_ns();
+    let result = auvnav_bridge::wake_loop(&listeners, Duration::from_millis(tick), |now| {
         for ex in &mut exports {
             loop {
                 let bytes = match ex.port.next_bytes() {
@@ -249,12 +227,11 @@ fn run(cfg: &BridgeConfig) -> Result<(), String> {
         }
         if now >= next_health {
             let m = health(cfg, &exports, &imports, ProcessState::Running);
-            if let Err(x) = health_pub.publish(m) {
-                break Err(x.to_string());
-            }
+            health_pub.publish(m).map_err(|x| x.to_string())?;
             next_health = now + health_ns;
         }
-    };
+        Ok(())
+    });
     let _ = health_pub.publish(health(cfg, &exports, &imports, ProcessState::Stopping));
     for ex in &exports {
         tracing::info!(
