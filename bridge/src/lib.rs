@@ -326,7 +326,10 @@ pub fn wake_loop(
         .map_err(|x| format!("attaching the tick: {x:?}"))?;
     loop {
         match waitset.wait_and_process_once(|_| CallbackProgression::Continue) {
-            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => return Ok(()),
+            Ok(WaitSetRunResult::TerminationRequest) => return Ok(()),
+            // Another signal (SIGCONT after a stop, a debugger's) interrupted the wait: a
+            // termination request is reported by the next wait.
+            Ok(WaitSetRunResult::Interrupt) => continue,
             Ok(_) => {}
             Err(x) => return Err(format!("waiting: {x:?}")),
         }

@@ -62,11 +62,12 @@ impl Bus {
         &self.prefix
     }
 
-    /// True once SIGTERM or SIGINT was received (reported once per signal).
+    /// True once SIGTERM or SIGINT was received (reported once per signal). Other signals
+    /// (SIGCONT after a stop, a debugger's) interrupt a wait without being a request to stop.
     pub fn termination_requested(&self) -> bool {
         matches!(
             self.node.wait(Duration::ZERO),
-            Err(NodeWaitFailure::TerminationRequest | NodeWaitFailure::Interrupt)
+            Err(NodeWaitFailure::TerminationRequest)
         )
     }
 

@@ -440,6 +440,14 @@ pub enum NavMode {
     Navigating = 2,
     /// Aligned, but an aiding source it relies on is lost: pure inertial or partly aided.
     Degraded = 3,
+    /// The filter refused a state or covariance that was not finite or not a covariance: this
+    /// solution is the last sound state coasted to now, and the filter restarts from it with its
+    /// covariance grown (do not use the solution to steer by; the next ones say how good they are).
+    Invalid = 4,
+    /// The horizontal position standard deviation exceeds the configured limit
+    /// (`navigation.position_unknown_std_m`): after a restart without a usable checkpoint, a long
+    /// IMU gap or a reinitialisation, until a position aid (USBL, GNSS) fixes it.
+    PositionUnknown = 5,
 }
 
 impl TryFrom<u32> for NavMode {
@@ -450,6 +458,8 @@ impl TryFrom<u32> for NavMode {
             1 => Ok(NavMode::Aligning),
             2 => Ok(NavMode::Navigating),
             3 => Ok(NavMode::Degraded),
+            4 => Ok(NavMode::Invalid),
+            5 => Ok(NavMode::PositionUnknown),
             other => Err(other),
         }
     }
@@ -487,7 +497,7 @@ message! {
         pub gyro_bias_rad_s: [f64; 3],
         /// Estimated accelerometer bias (m/s^2, body FRD).
         pub accel_bias_m_s2: [f64; 3],
-        /// Mode (NavMode: 0 initialising, 1 aligning, 2 navigating, 3 degraded).
+        /// Mode (NavMode: 0 initialising, 1 aligning, 2 navigating, 3 degraded, 4 invalid (reinitialising), 5 position unknown).
         pub mode: u32,
         /// Sensor health bit flags (NavSolutionV1::HEALTH_*): set = the sensor delivers and is fused.
         pub sensor_health: u32,

@@ -61,6 +61,26 @@ pub struct NavConfig {
     /// the read-time jitter of a live serial line, and keeps the integration right when a log is
     /// played faster than real time. Default false (host time, as recorded logs are stamped).
     pub imu_dt_from_device_time: bool,
+    /// With `imu_dt_from_device_time`, a device-time step longer than the host-time step plus
+    /// this is a clock jump: the host-time step is integrated instead, and the sample counted
+    /// (s, 0.001..10). Default 0.1.
+    pub imu_clock_tolerance_s: f64,
+    /// Largest plausible angular rate per axis (deg/s, 1..10000): a sample beyond it is not
+    /// integrated (counted invalid). Default 2000 (above every navigation IMU's range).
+    pub imu_max_rate_deg_s: f64,
+    /// Largest plausible specific force per axis (m/s², 1..2000): a sample beyond it is not
+    /// integrated (counted invalid). Default 300 (about 30 g).
+    pub imu_max_specific_force_m_s2: f64,
+    /// Over an IMU gap (and after a restart or a reinitialisation) the motion nobody measured is
+    /// taken as an acceleration of this one-sigma held over the gap: it grows the velocity and
+    /// position variances (m/s², 0..50). Default 0.2.
+    pub imu_gap_accel_std_m_s2: f64,
+    /// ... and a rotation rate of this one-sigma, which grows the attitude variances (deg/s,
+    /// 0..100). Default 1.
+    pub imu_gap_rate_std_deg_s: f64,
+    /// The solution's mode is "position unknown" while its horizontal position standard
+    /// deviation exceeds this (m, 1..1e7). Default 1000.
+    pub position_unknown_std_m: f64,
     /// DVL time offset: the velocity stamped at t is the vehicle's at t - offset (s). Default 0.
     pub dvl_time_offset_s: f64,
     /// Estimate the DVL mounting angles (parameter states). Default false.
@@ -134,6 +154,12 @@ impl Default for NavConfig {
             dvl_timeout_s: 5.0,
             imu_max_gap_intervals: 10.0,
             imu_dt_from_device_time: false,
+            imu_clock_tolerance_s: 0.1,
+            imu_max_rate_deg_s: 2000.0,
+            imu_max_specific_force_m_s2: 300.0,
+            imu_gap_accel_std_m_s2: 0.2,
+            imu_gap_rate_std_deg_s: 1.0,
+            position_unknown_std_m: 1000.0,
             dvl_time_offset_s: 0.0,
             estimate_dvl_mounting: false,
             initial_dvl_mounting_std_deg: 1.0,
@@ -389,6 +415,40 @@ impl Default for Deadlines {
     }
 }
 
+/// Checkpoints (`[checkpoint]`): the daemon writes its navigation state to a file, atomically, and
+/// after a crash or a restart continues from it instead of the configured start.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CheckpointConfig {
+    /// The checkpoint file (its folder must exist); empty for none (default). The unit in
+    /// `deploy/` uses `/var/lib/auvnav/auvnavd.checkpoint.json`.
+    pub path: String,
+    /// Time between checkpoints (s, 0.1..3600). Default 2.
+    pub interval_s: f64,
+    /// One-sigma speed at which the vehicle may have moved while the daemon was down: the
+    /// position standard deviation grows by this times the time elapsed, the velocity's by this
+    /// (m/s, 0..50). Default 2.5.
+    pub drift_m_s: f64,
+    /// A checkpoint older than this (wall clock), unreadable, or not sound is not used: the
+    /// daemon starts from `[initial]`/`[alignment]` with its position flagged unknown (s,
+    /// 1..1e6). Default 3600.
+    pub max_age_s: f64,
+    /// The position standard deviation of such a start (m, 1..1e7). Default 10000.
+    pub unknown_position_std_m: f64,
+}
+
+impl Default for CheckpointConfig {
+    fn default() -> Self {
+        CheckpointConfig {
+            path: String::new(),
+            interval_s: 2.0,
+            drift_m_s: 2.5,
+            max_age_s: 3600.0,
+            unknown_position_std_m: 10_000.0,
+        }
+    }
+}
+
 /// `auvnavd`'s configuration file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -416,6 +476,8 @@ pub struct DaemonConfig {
     pub output: OutputConfig,
     #[serde(default)]
     pub deadlines: Deadlines,
+    #[serde(default)]
+    pub checkpoint: CheckpointConfig,
 }
 
 fn default_name() -> String {
@@ -445,12 +507,232 @@ impl Problems {
             self.0.push(format!("{key} = {v}: expected {lo}..={hi}"));
         }
     }
+
+    /// A process or service name part: 1..=64 ASCII letters, digits, `_`, `-`, `.`, `/`.
+    fn name(&mut self, key: &str, v: &str) {
+        let ok = (1..=64).contains(&v.len())
+            && v.chars()
+                .all(|c| c.is_ascii_alphanumeric() || "_-./".contains(c));
+        if !ok {
+            self.0.push(format!(
+                "{key} = {v:?}: expected 1 to 64 ASCII letters, digits, '_', '-', '.', '/'"
+            ));
+        }
+    }
+
+    fn array(&mut self, key: &str, v: &[f64], lo: f64, hi: f64) {
+        for (i, x) in v.iter().enumerate() {
+            self.range(&format!("{key}[{i}]"), *x, lo, hi);
+        }
+    }
+
+    /// A geodetic position: latitude within ±89.9° (the navigation frame is singular at the
+    /// poles), longitude within ±180°, height −12 000..10 000 m.
+    fn position(&mut self, table: &str, lat: f64, lon: f64, h: f64) {
+        self.range(&format!("{table}.latitude_deg"), lat, -89.9, 89.9);
+        self.range(&format!("{table}.longitude_deg"), lon, -180.0, 180.0);
+        self.range(&format!("{table}.height_m"), h, -12000.0, 10000.0);
+    }
+}
+
+/// What is wrong with `path` as a file a program will create or replace (`None`: nothing, or the
+/// path is empty): its folder must exist and it must not be a folder itself.
+pub fn output_path_problem(path: &str) -> Option<String> {
+    if path.is_empty() {
+        return None;
+    }
+    let p = std::path::Path::new(path);
+    if p.is_dir() {
+        return Some("is a folder, expected a file".into());
+    }
+    let parent = match p.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => std::path::Path::new("."),
+    };
+    (!parent.is_dir()).then(|| format!("the folder {} does not exist", parent.display()))
 }
 
 impl NavConfig {
     /// Every value of `[navigation]` that makes no sense, as `navigation.key …`.
     pub fn problems(&self) -> Vec<String> {
-        let mut out = Vec::new();
+        let mut p = Problems(Vec::new());
+        for (key, v, lo, hi) in [
+            (
+                "gyro_angle_random_walk_deg_sqrt_h",
+                self.gyro_angle_random_walk_deg_sqrt_h,
+                0.0,
+                10.0,
+            ),
+            (
+                "accel_velocity_random_walk_m_s_sqrt_h",
+                self.accel_velocity_random_walk_m_s_sqrt_h,
+                0.0,
+                10.0,
+            ),
+            (
+                "gyro_bias_walk_deg_h_sqrt_h",
+                self.gyro_bias_walk_deg_h_sqrt_h,
+                0.0,
+                100.0,
+            ),
+            (
+                "accel_bias_walk_ug_sqrt_h",
+                self.accel_bias_walk_ug_sqrt_h,
+                0.0,
+                1e5,
+            ),
+            (
+                "initial_position_std_m",
+                self.initial_position_std_m,
+                1e-3,
+                1e7,
+            ),
+            (
+                "initial_velocity_std_m_s",
+                self.initial_velocity_std_m_s,
+                1e-4,
+                100.0,
+            ),
+            (
+                "initial_tilt_std_deg",
+                self.initial_tilt_std_deg,
+                1e-4,
+                90.0,
+            ),
+            (
+                "initial_heading_std_deg",
+                self.initial_heading_std_deg,
+                1e-4,
+                180.0,
+            ),
+            (
+                "initial_gyro_bias_std_deg_h",
+                self.initial_gyro_bias_std_deg_h,
+                0.0,
+                1e5,
+            ),
+            (
+                "initial_accel_bias_std_ug",
+                self.initial_accel_bias_std_ug,
+                0.0,
+                1e6,
+            ),
+            (
+                "dvl_velocity_std_m_s",
+                self.dvl_velocity_std_m_s,
+                1e-4,
+                10.0,
+            ),
+            ("dvl_scale_factor", self.dvl_scale_factor, 0.5, 2.0),
+            ("depth_std_m", self.depth_std_m, 1e-4, 100.0),
+            ("dvl_gate_chi2", self.dvl_gate_chi2, 0.1, 1e6),
+            ("depth_gate_chi2", self.depth_gate_chi2, 0.1, 1e6),
+            (
+                "covariance_interval_s",
+                self.covariance_interval_s,
+                1e-3,
+                1.0,
+            ),
+            ("dvl_timeout_s", self.dvl_timeout_s, 0.1, 3600.0),
+            (
+                "imu_max_gap_intervals",
+                self.imu_max_gap_intervals,
+                1.5,
+                1e6,
+            ),
+            (
+                "imu_clock_tolerance_s",
+                self.imu_clock_tolerance_s,
+                1e-3,
+                10.0,
+            ),
+            ("imu_max_rate_deg_s", self.imu_max_rate_deg_s, 1.0, 10000.0),
+            (
+                "imu_max_specific_force_m_s2",
+                self.imu_max_specific_force_m_s2,
+                1.0,
+                2000.0,
+            ),
+            (
+                "imu_gap_accel_std_m_s2",
+                self.imu_gap_accel_std_m_s2,
+                0.0,
+                50.0,
+            ),
+            (
+                "imu_gap_rate_std_deg_s",
+                self.imu_gap_rate_std_deg_s,
+                0.0,
+                100.0,
+            ),
+            (
+                "position_unknown_std_m",
+                self.position_unknown_std_m,
+                1.0,
+                1e7,
+            ),
+            ("dvl_time_offset_s", self.dvl_time_offset_s, -5.0, 5.0),
+            (
+                "initial_dvl_mounting_std_deg",
+                self.initial_dvl_mounting_std_deg,
+                1e-4,
+                180.0,
+            ),
+            (
+                "initial_dvl_scale_std",
+                self.initial_dvl_scale_std,
+                1e-6,
+                1.0,
+            ),
+            (
+                "initial_dvl_lever_arm_std_m",
+                self.initial_dvl_lever_arm_std_m,
+                1e-4,
+                50.0,
+            ),
+            (
+                "initial_dvl_time_offset_std_s",
+                self.initial_dvl_time_offset_std_s,
+                1e-5,
+                10.0,
+            ),
+            ("gnss_min_std_m", self.gnss_min_std_m, 1e-3, 1000.0),
+            ("gnss_gate_chi2", self.gnss_gate_chi2, 0.1, 1e6),
+            (
+                "zero_velocity_std_m_s",
+                self.zero_velocity_std_m_s,
+                1e-5,
+                10.0,
+            ),
+            (
+                "zero_velocity_gate_chi2",
+                self.zero_velocity_gate_chi2,
+                0.1,
+                1e6,
+            ),
+            ("dvl_reset_after_s", self.dvl_reset_after_s, 0.0, 3600.0),
+        ] {
+            p.range(&format!("navigation.{key}"), v, lo, hi);
+        }
+        p.array(
+            "navigation.dvl_mount_deg",
+            &self.dvl_mount_deg,
+            -180.0,
+            180.0,
+        );
+        p.array(
+            "navigation.dvl_lever_arm_m",
+            &self.dvl_lever_arm_m,
+            -50.0,
+            50.0,
+        );
+        p.array(
+            "navigation.gnss_lever_arm_m",
+            &self.gnss_lever_arm_m,
+            -50.0,
+            50.0,
+        );
+        let mut out = p.0;
         if let Some(d) = &self.dvl {
             let defaults = NavConfig::default();
             if self.dvl_mount_deg != defaults.dvl_mount_deg
@@ -468,12 +750,8 @@ impl NavConfig {
             let mut p = Problems(Vec::new());
             p.range("navigation.dvl.scale_factor", d.scale_factor, 0.5, 2.0);
             p.range("navigation.dvl.time_offset_s", d.time_offset_s, -5.0, 5.0);
-            for (i, a) in d.mount_deg.iter().enumerate() {
-                p.range(&format!("navigation.dvl.mount_deg[{i}]"), *a, -180.0, 180.0);
-            }
-            for (i, l) in d.lever_arm_m.iter().enumerate() {
-                p.range(&format!("navigation.dvl.lever_arm_m[{i}]"), *l, -50.0, 50.0);
-            }
+            p.array("navigation.dvl.mount_deg", &d.mount_deg, -180.0, 180.0);
+            p.array("navigation.dvl.lever_arm_m", &d.lever_arm_m, -50.0, 50.0);
             out.extend(p.0);
         }
         if let Some(u) = &self.usbl {
@@ -492,7 +770,15 @@ impl SessionConfig {
     pub fn problems(&self) -> Vec<String> {
         let mut p = Problems(self.navigation.problems());
         p.range("aid_delay_s", self.aid_delay_s, 0.0, 1.0);
+        if let Some(i) = &self.initial {
+            p.position("initial", i.latitude_deg, i.longitude_deg, i.height_m);
+            p.array("initial.velocity_ned_m_s", &i.velocity_ned_m_s, -50.0, 50.0);
+            p.range("initial.euler_deg[0]", i.euler_deg[0], -180.0, 180.0);
+            p.range("initial.euler_deg[1]", i.euler_deg[1], -90.0, 90.0);
+            p.range("initial.euler_deg[2]", i.euler_deg[2], -360.0, 360.0);
+        }
         if let Some(a) = &self.alignment {
+            p.position("alignment", a.latitude_deg, a.longitude_deg, a.height_m);
             p.range("alignment.coarse_s", a.coarse_s, 10.0, 3600.0);
             p.range(
                 "alignment.coarse_heading_std_deg",
@@ -512,7 +798,6 @@ impl SessionConfig {
                 0.001,
                 10.0,
             );
-            p.range("alignment.latitude_deg", a.latitude_deg, -89.0, 89.0);
             p.range("alignment.fine_model", f64::from(a.fine_model), 0.0, 3.0);
             if a.heading_source == HeadingSource::Magnetometer
                 && self.navigation.magnetometer.is_none()
@@ -551,6 +836,7 @@ impl Default for DaemonConfig {
             alignment: None,
             output: OutputConfig::default(),
             deadlines: Deadlines::default(),
+            checkpoint: CheckpointConfig::default(),
         }
     }
 }
@@ -589,6 +875,18 @@ impl DaemonConfig {
         ] {
             p.range(k, v, 0.0, 3600.0);
         }
+        let c = &self.checkpoint;
+        p.range("checkpoint.interval_s", c.interval_s, 0.1, 3600.0);
+        p.range("checkpoint.drift_m_s", c.drift_m_s, 0.0, 50.0);
+        p.range("checkpoint.max_age_s", c.max_age_s, 1.0, 1e6);
+        p.range(
+            "checkpoint.unknown_position_std_m",
+            c.unknown_position_std_m,
+            1.0,
+            1e7,
+        );
+        p.name("name", &self.name);
+        p.name("prefix", &self.prefix);
         if self.initial.is_none() && self.alignment.is_none() {
             p.0.push(
                 "give [initial] (a known state) or [alignment] (a known position; the daemon \
@@ -601,6 +899,24 @@ impl DaemonConfig {
         } else {
             Err(ConfigError(p.0))
         }
+    }
+
+    /// Problems of the files the daemon will write: each non-empty output path's folder must
+    /// exist and the path must not be a folder (checked at start and by `--check-config`, not by
+    /// the offline tools that read a configuration recorded elsewhere).
+    pub fn path_problems(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        for (key, path) in [
+            ("output.nav_csv", &self.output.nav_csv),
+            ("output.diagnostics_csv", &self.output.diagnostics_csv),
+            ("output.stage_times_csv", &self.output.stage_times_csv),
+            ("checkpoint.path", &self.checkpoint.path),
+        ] {
+            if let Some(p) = output_path_problem(path) {
+                out.push(format!("{key} = {path:?}: {p}"));
+            }
+        }
+        out
     }
 
     /// The session's part of the file.

@@ -9,13 +9,20 @@ use crate::strapdown::{ImuIncrement, NavState, Strapdown};
 use auvnav_shm_schema::{AidDiagnosticsV1, AidSource, ImuSampleV1};
 use nalgebra::{UnitQuaternion, Vector3};
 
-/// How IMU samples are integrated (see `NavConfig`): covariance propagation interval (s), the
-/// longest gap bridged (nominal intervals), and whether the device's time stamps give the interval.
+/// How IMU samples are checked and integrated (see `NavConfig`): covariance propagation interval
+/// (s), the gap threshold (nominal intervals), whether the device's time stamps give the interval
+/// and how far they may run ahead of the host's (s), the plausible range of a sample (rad/s,
+/// m/s²), and the unknown motion assumed over a gap (m/s², rad/s).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ImuTiming {
     pub covariance_interval_s: f64,
     pub imu_max_gap_intervals: f64,
     pub imu_dt_from_device_time: bool,
+    pub clock_tolerance_s: f64,
+    pub max_rate_rad_s: f64,
+    pub max_specific_force_m_s2: f64,
+    pub gap_accel_std_m_s2: f64,
+    pub gap_rate_std_rad_s: f64,
 }
 
 /// The inertial core of the navigator: the strapdown solution, the error filter, the IMU bias
@@ -43,8 +50,7 @@ pub struct NavCore {
     pending_f_ned: Vector3<f64>,
     diagnostics_sequence: u64,
     pub(crate) covariance_interval_s: f64,
-    imu_max_gap_intervals: f64,
-    imu_dt_from_device_time: bool,
+    timing: ImuTiming,
     /// IMU and lateness counters (the aids count the rest).
     pub counters: CoreCounters,
 }
@@ -56,7 +62,52 @@ pub struct CoreCounters {
     pub imu_out_of_order: u64,
     pub imu_invalid: u64,
     pub imu_gaps: u64,
+    /// Samples whose device-time step disagreed with the host's (a jump ahead or a stall): the
+    /// host's step was integrated instead.
+    pub imu_clock_jumps: u64,
     pub aid_late: u64,
+}
+
+/// Angular rate and specific force of a sample (increments divided by the interval), or `None`
+/// when it is flagged invalid, its interval is not in (0, 1) s, or a value is not finite or
+/// beyond `max_rate_rad_s` / `max_specific_force_m_s2` (per axis).
+pub fn plausible_rates(
+    m: &ImuSampleV1,
+    max_rate_rad_s: f64,
+    max_specific_force_m_s2: f64,
+) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    let valid = ImuSampleV1::STATUS_GYRO_VALID | ImuSampleV1::STATUS_ACCEL_VALID;
+    if m.status & valid != valid || !(m.interval_s > 0.0 && m.interval_s < 1.0) {
+        return None;
+    }
+    let (w, f) = (Vector3::from(m.angular), Vector3::from(m.specific));
+    let (w, f) = if m.status & ImuSampleV1::STATUS_INCREMENTS != 0 {
+        (w / m.interval_s, f / m.interval_s)
+    } else {
+        (w, f)
+    };
+    // `!(x <= max)` also refuses NaN.
+    let within = |v: &Vector3<f64>, max: f64| v.iter().all(|x| x.abs() <= max);
+    (within(&w, max_rate_rad_s) && within(&f, max_specific_force_m_s2)).then_some((w, f))
+}
+
+/// True when every element of `p` is finite, its variances are non-negative and every
+/// correlation is within ±1 (up to a relative rounding margin).
+pub fn covariance_is_sound(p: &ekf::Covariance) -> bool {
+    for i in 0..ekf::N {
+        let pii = p[(i, i)];
+        if !(pii.is_finite() && pii >= 0.0) {
+            return false;
+        }
+        for j in 0..i {
+            let pij = p[(i, j)];
+            let pjj = p[(j, j)];
+            if !pij.is_finite() || pij * pij > pii * pjj * (1.0 + 1e-6) + 1e-300 {
+                return false;
+            }
+        }
+    }
+    true
 }
 
 impl NavCore {
@@ -83,8 +134,7 @@ impl NavCore {
             pending_f_ned: Vector3::zeros(),
             diagnostics_sequence: 0,
             covariance_interval_s: timing.covariance_interval_s,
-            imu_max_gap_intervals: timing.imu_max_gap_intervals,
-            imu_dt_from_device_time: timing.imu_dt_from_device_time,
+            timing,
             counters: CoreCounters::default(),
         }
     }
@@ -94,35 +144,47 @@ impl NavCore {
         &self.sd.state
     }
 
-    /// Integrates one IMU sample; false when it was skipped (invalid, out of order; counted).
+    /// The sample's angular rate and specific force (rad/s, m/s², body), increments divided by
+    /// the interval; `None` when it is flagged invalid, its interval is not in (0, 1) s, or a value
+    /// is not finite or beyond the configured plausible range (a device cannot measure it).
+    pub fn plausible_rates(&self, m: &ImuSampleV1) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        plausible_rates(
+            m,
+            self.timing.max_rate_rad_s,
+            self.timing.max_specific_force_m_s2,
+        )
+    }
+
+    /// Integrates one IMU sample; false when it was skipped (invalid, implausible, out of order;
+    /// counted).
     pub(crate) fn integrate(&mut self, m: &ImuSampleV1) -> bool {
         let t_ns = m.host_time_ns;
-        let finite = m
-            .angular
-            .iter()
-            .chain(m.specific.iter())
-            .all(|x| x.is_finite());
-        let valid_bits = ImuSampleV1::STATUS_GYRO_VALID | ImuSampleV1::STATUS_ACCEL_VALID;
-        if !finite
-            || m.status & valid_bits != valid_bits
-            || !(m.interval_s > 0.0 && m.interval_s < 1.0)
-        {
+        let Some((w, f)) = self.plausible_rates(m) else {
             self.counters.imu_invalid += 1;
             return false;
-        }
+        };
         let state_ns = (self.sd.state.time_s * 1e9).round() as u64;
         let last = self.last_imu_ns.unwrap_or(state_ns);
         let device_ns =
             (m.status & ImuSampleV1::STATUS_DEVICE_TIME_VALID != 0).then_some(m.device_time_ns);
+        let host_dt = t_ns.saturating_sub(last) as f64 * 1e-9;
         // With device time, samples completed by one read (same host time) are still ordered
-        // and integrated over their own intervals.
+        // and integrated over their own intervals. A device step that runs ahead of the host's
+        // by more than the tolerance (a clock jump), or does not advance (a stall or a step
+        // back), is not believed: the host's step is integrated instead (counted).
         let device_dt = match (
-            self.imu_dt_from_device_time,
+            self.timing.imu_dt_from_device_time,
             device_ns,
             self.last_imu_device_ns,
         ) {
-            (true, Some(now), Some(prev)) if now > prev && now - prev < 1_000_000_000 => {
-                Some((now - prev) as f64 * 1e-9)
+            (true, Some(now), Some(prev)) => {
+                let d = now.wrapping_sub(prev) as i64 as f64 * 1e-9;
+                if d > 0.0 && d <= host_dt + self.timing.clock_tolerance_s {
+                    Some(d)
+                } else {
+                    self.counters.imu_clock_jumps += 1;
+                    None
+                }
             }
             _ => None,
         };
@@ -130,25 +192,16 @@ impl NavCore {
             self.counters.imu_out_of_order += 1;
             return false;
         }
-        let mut dt = device_dt.unwrap_or((t_ns - last) as f64 * 1e-9);
+        let dt = device_dt.unwrap_or(host_dt);
         self.last_imu_device_ns = device_ns;
-        if dt > self.imu_max_gap_intervals * m.interval_s {
+        let gap = dt > self.timing.imu_max_gap_intervals * m.interval_s;
+        if gap {
+            // The gap is integrated over its real length with this sample's rates; the motion
+            // nobody measured is added to the covariance below.
             self.counters.imu_gaps += 1;
-            // Bridge the gap with the sample's own rates over its nominal interval only; the
-            // missing time still passes (the state time follows the message time).
-            dt = dt.min(1.0);
         }
         self.last_imu_ns = Some(t_ns);
         self.counters.imu_samples += 1;
-        let increments = m.status & ImuSampleV1::STATUS_INCREMENTS != 0;
-        let (w, f) = if increments {
-            (
-                Vector3::from(m.angular) / m.interval_s,
-                Vector3::from(m.specific) / m.interval_s,
-            )
-        } else {
-            (Vector3::from(m.angular), Vector3::from(m.specific))
-        };
         let w = w - self.gyro_bias;
         let f = f - self.accel_bias;
         self.last_omega_ib = w;
@@ -161,7 +214,48 @@ impl NavCore {
         self.sd.state.time_s = t_ns as f64 * 1e-9;
         self.pending_f_ned += c_before * f * dt;
         self.pending_dt += dt;
+        if gap {
+            self.propagate_covariance();
+            self.grow_for_unobserved_motion(dt);
+        }
         true
+    }
+
+    /// Adds to the covariance what an interval of `dt` seconds without (trusted) IMU data
+    /// leaves unknown: an acceleration of `gap_accel_std_m_s2` and a rotation rate of
+    /// `gap_rate_std_rad_s` held over the interval (velocity `a dt`, position `a dt² / 2`,
+    /// attitude `w dt`, at most π).
+    pub(crate) fn grow_for_unobserved_motion(&mut self, dt: f64) {
+        let a = self.timing.gap_accel_std_m_s2;
+        let dv = a * dt;
+        let dp = 0.5 * a * dt * dt;
+        let da = (self.timing.gap_rate_std_rad_s * dt).min(std::f64::consts::PI);
+        for i in 0..3 {
+            self.kf.p[(ekf::POS + i, ekf::POS + i)] += dp * dp;
+            self.kf.p[(ekf::VEL + i, ekf::VEL + i)] += dv * dv;
+            self.kf.p[(ekf::ATT + i, ekf::ATT + i)] += da * da;
+        }
+    }
+
+    /// True when the state, the biases and the covariance are finite and the covariance looks
+    /// like one: non-negative variances and correlations within ±1 (every 2×2 principal minor
+    /// non-negative, with a relative margin for rounding).
+    pub fn is_sound(&self) -> bool {
+        let s = &self.sd.state;
+        let finite = [
+            s.time_s,
+            s.position.latitude_rad,
+            s.position.longitude_rad,
+            s.position.height_m,
+        ]
+        .iter()
+        .chain(s.velocity_ned.iter())
+        .chain(s.q_body_to_ned.coords.iter())
+        .chain(self.gyro_bias.iter())
+        .chain(self.accel_bias.iter())
+        .chain(self.markov_means.iter())
+        .all(|x| x.is_finite());
+        finite && covariance_is_sound(&self.kf.p)
     }
 
     /// Propagates the covariance over the pending interval (no-op when none is pending); the

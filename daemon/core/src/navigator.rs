@@ -36,10 +36,15 @@ pub struct NavCounters {
     pub imu_samples: u64,
     /// IMU samples with a non-increasing time stamp (skipped).
     pub imu_out_of_order: u64,
-    /// IMU samples with non-finite or invalid values (skipped).
+    /// IMU samples flagged invalid, or with values not finite or beyond the plausible range
+    /// (skipped).
     pub imu_invalid: u64,
-    /// IMU gaps longer than the allowed number of intervals (bridged with one long step).
+    /// IMU gaps longer than the allowed number of intervals (integrated over their length, the
+    /// covariance grown by the motion nobody measured).
     pub imu_gaps: u64,
+    /// IMU samples whose device-time step jumped ahead of the host's or stalled (integrated
+    /// over the host's step).
+    pub imu_clock_jumps: u64,
     pub dvl_fused: u64,
     pub dvl_rejected: u64,
     pub dvl_invalid: u64,
@@ -92,7 +97,10 @@ pub struct Navigator {
     magnetometer: Option<MagnetometerAid>,
     magnetometer_unconfigured: u64,
     dvl_timeout_s: f64,
+    position_unknown_std_m: f64,
     solution_sequence: u64,
+    /// The covariance changed (propagated or updated) since the last soundness check.
+    covariance_changed: bool,
 }
 
 impl Navigator {
@@ -142,6 +150,11 @@ impl Navigator {
             covariance_interval_s: cfg.covariance_interval_s,
             imu_max_gap_intervals: cfg.imu_max_gap_intervals,
             imu_dt_from_device_time: cfg.imu_dt_from_device_time,
+            clock_tolerance_s: cfg.imu_clock_tolerance_s,
+            max_rate_rad_s: cfg.imu_max_rate_deg_s * DEG,
+            max_specific_force_m_s2: cfg.imu_max_specific_force_m_s2,
+            gap_accel_std_m_s2: cfg.imu_gap_accel_std_m_s2,
+            gap_rate_std_rad_s: cfg.imu_gap_rate_std_deg_s * DEG,
         };
         let mut core = NavCore::new(initial, &p0, Self::process_noise(&cfg), timing);
         let usbl = UsblAid::new(cfg.usbl.as_ref(), &mut core.kf);
@@ -166,12 +179,16 @@ impl Navigator {
             magnetometer_unconfigured: 0,
             core,
             dvl_timeout_s: cfg.dvl_timeout_s,
+            position_unknown_std_m: cfg.position_unknown_std_m,
             solution_sequence: 0,
+            covariance_changed: true,
         }
     }
 
     /// Applies a fused aid's correction to the core and to the aids' parameter states.
     fn apply(&mut self, u: AidUpdate) -> AidDiagnosticsV1 {
+        // Even a rejected update may have propagated the covariance.
+        self.covariance_changed = true;
         if let Some(dx) = &u.correction {
             self.core.correct(dx);
             self.dvl.correct(dx);
@@ -212,6 +229,141 @@ impl Navigator {
             (m.status & ImuSampleV1::STATUS_DEVICE_TIME_VALID != 0).then_some(m.device_time_ns);
     }
 
+    /// True when the state and the covariance are finite and the covariance is one
+    /// ([`NavCore::is_sound`]).
+    pub fn is_sound(&self) -> bool {
+        self.core.is_sound()
+    }
+
+    /// False when `sol` (this navigator's latest solution) holds a value that is not finite, or
+    /// the state or covariance is not sound; the whole covariance is examined only when it changed
+    /// since the last call (at the propagation interval or after an aid), the solution always.
+    pub fn still_sound(&mut self, sol: &NavSolutionV1) -> bool {
+        let finite = [sol.latitude_rad, sol.longitude_rad, sol.height_m]
+            .iter()
+            .chain(&sol.velocity_ned_m_s)
+            .chain(&sol.quaternion_body_to_ned)
+            .chain(&sol.euler_rad)
+            .chain(&sol.position_std_ned_m)
+            .chain(&sol.velocity_std_ned_m_s)
+            .chain(&sol.attitude_std_rad)
+            .chain(&sol.gyro_bias_rad_s)
+            .chain(&sol.accel_bias_m_s2)
+            .all(|x| x.is_finite());
+        if !finite {
+            return false;
+        }
+        !std::mem::take(&mut self.covariance_changed) || self.core.is_sound()
+    }
+
+    /// Moves the navigator over `dt_s` seconds that it did not see (the time since the state it
+    /// was restored from, or a restart): the position coasts with the velocity, the covariance
+    /// grows by the unknown motion (as over an IMU gap), and the IMU sample `m` starts the
+    /// integration again.
+    pub fn coast(&mut self, dt_s: f64, m: &ImuSampleV1) {
+        let dt = dt_s.max(0.0);
+        let c = &mut self.core;
+        c.propagate_covariance();
+        if dt > 0.0 {
+            let s = &mut c.sd.state;
+            s.position = crate::earth::offset_position(&s.position, &(s.velocity_ned * dt));
+            c.grow_for_unobserved_motion(dt);
+        }
+        c.sd.state.time_s = m.host_time_ns as f64 * 1e-9;
+        self.covariance_changed = true;
+        self.start_at_imu(m);
+    }
+
+    /// Adds to the position (m²) and velocity ((m/s)²) variances: what the vehicle may have done
+    /// while nobody watched.
+    pub fn grow_variances(&mut self, position_m2: f64, velocity_m2_s2: f64) {
+        for i in 0..3 {
+            self.core.kf.p[(ekf::POS + i, ekf::POS + i)] += position_m2;
+            self.core.kf.p[(ekf::VEL + i, ekf::VEL + i)] += velocity_m2_s2;
+        }
+        self.covariance_changed = true;
+    }
+
+    #[doc(hidden)]
+    pub fn poison_covariance_for_tests(&mut self) {
+        self.core.kf.p[(ekf::POS, ekf::VEL)] = f64::NAN;
+        self.covariance_changed = true;
+    }
+
+    /// The sequence number of the last solution made.
+    pub fn last_sequence(&self) -> u64 {
+        self.solution_sequence
+    }
+
+    /// Numbers the next solutions after `last` (a navigator replacing another).
+    pub fn continue_numbering(&mut self, last: u64) {
+        self.solution_sequence = last;
+    }
+
+    /// What a restart needs to continue from this navigator ([`Checkpoint`]).
+    pub fn checkpoint(&self) -> Checkpoint {
+        let s = &self.core.sd.state;
+        let q = s.q_body_to_ned;
+        let d = &self.dvl.params;
+        Checkpoint {
+            format_version: 1,
+            time_s: s.time_s,
+            latitude_rad: s.position.latitude_rad,
+            longitude_rad: s.position.longitude_rad,
+            height_m: s.position.height_m,
+            velocity_ned_m_s: s.velocity_ned.into(),
+            quaternion_body_to_ned: [q.w, q.i, q.j, q.k],
+            gyro_bias_rad_s: self.core.gyro_bias.into(),
+            accel_bias_m_s2: self.core.accel_bias.into(),
+            covariance: self.core.kf.p.iter().copied().collect(),
+            dvl: crate::config::DvlInstallation {
+                mount_deg: d.mount_deg(),
+                scale_factor: d.scale,
+                lever_arm_m: d.lever_arm_m.into(),
+                time_offset_s: d.time_offset_s,
+                source: String::new(),
+            },
+        }
+    }
+
+    /// A navigator continuing from `cp` under `cfg` (the checkpoint's covariance, biases and DVL
+    /// installation; its time is the checkpoint's). `None` when the checkpoint is not sound.
+    pub fn from_checkpoint(cfg: NavConfig, cp: &Checkpoint) -> Option<Navigator> {
+        if cp.covariance.len() != ekf::N * ekf::N {
+            return None;
+        }
+        let q = nalgebra::Quaternion::new(
+            cp.quaternion_body_to_ned[0],
+            cp.quaternion_body_to_ned[1],
+            cp.quaternion_body_to_ned[2],
+            cp.quaternion_body_to_ned[3],
+        );
+        if !(q.norm() > 0.5 && q.norm() < 2.0) {
+            return None;
+        }
+        let state = NavState {
+            time_s: cp.time_s,
+            position: crate::earth::Geodetic {
+                latitude_rad: cp.latitude_rad,
+                longitude_rad: cp.longitude_rad,
+                height_m: cp.height_m,
+            },
+            velocity_ned: Vector3::from(cp.velocity_ned_m_s),
+            q_body_to_ned: nalgebra::UnitQuaternion::from_quaternion(q),
+        };
+        let mut cfg = cfg;
+        let mut d = cp.dvl.clone();
+        d.source = "restored from a checkpoint".into();
+        cfg.set_dvl_installation(d);
+        let mut nav = Navigator::new(cfg, state);
+        nav.core.kf.p = ekf::Covariance::from_iterator(cp.covariance.iter().copied());
+        nav.set_imu_biases(
+            Vector3::from(cp.gyro_bias_rad_s),
+            Vector3::from(cp.accel_bias_m_s2),
+        );
+        nav.is_sound().then_some(nav)
+    }
+
     /// Processes one IMU sample; returns the solution at its time, or `None` if it was skipped.
     pub fn on_imu(&mut self, m: &ImuSampleV1) -> Option<NavSolutionV1> {
         if !self.core.integrate(m) {
@@ -220,6 +372,7 @@ impl Navigator {
         self.usbl.after_imu(&self.core.sd.state);
         if self.core.pending_dt >= self.core.covariance_interval_s {
             self.core.propagate_covariance();
+            self.covariance_changed = true;
         }
         Some(self.solution(m.host_time_ns))
     }
@@ -291,6 +444,7 @@ impl Navigator {
             imu_out_of_order: c.imu_out_of_order,
             imu_invalid: c.imu_invalid,
             imu_gaps: c.imu_gaps,
+            imu_clock_jumps: c.imu_clock_jumps,
             dvl_fused: dvl.fused,
             dvl_rejected: dvl.rejected,
             dvl_invalid: dvl.invalid,
@@ -358,7 +512,11 @@ impl Navigator {
             attitude_std_rad: std(ekf::ATT),
             gyro_bias_rad_s: self.core.gyro_bias.into(),
             accel_bias_m_s2: self.core.accel_bias.into(),
-            mode: if dvl_ok {
+            mode: if p[(ekf::POS, ekf::POS)].max(p[(ekf::POS + 1, ekf::POS + 1)])
+                > self.position_unknown_std_m.powi(2)
+            {
+                NavMode::PositionUnknown
+            } else if dvl_ok {
                 NavMode::Navigating
             } else {
                 NavMode::Degraded
@@ -366,6 +524,27 @@ impl Navigator {
             sensor_health: health,
         }
     }
+}
+
+/// What the daemon writes to disk to continue after a restart: the navigation state, the IMU
+/// biases, the whole error covariance (column order) and the DVL installation in force.
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Checkpoint {
+    pub format_version: u32,
+    /// Time of validity (s, host monotonic clock of the process that wrote it).
+    pub time_s: f64,
+    pub latitude_rad: f64,
+    pub longitude_rad: f64,
+    pub height_m: f64,
+    pub velocity_ned_m_s: [f64; 3],
+    /// w, x, y, z.
+    pub quaternion_body_to_ned: [f64; 4],
+    pub gyro_bias_rad_s: [f64; 3],
+    pub accel_bias_m_s2: [f64; 3],
+    /// The error covariance, N × N in column order.
+    pub covariance: Vec<f64>,
+    pub dvl: crate::config::DvlInstallation,
 }
 
 /// The initial state from a geodetic position, NED velocity and Euler angles (in `strapdown`).

@@ -9,7 +9,7 @@ pub use crate::config::{AlignmentConfig, InitialState, SessionConfig};
 use crate::config::{HeadingSource, NavConfig};
 use crate::earth::Geodetic;
 use crate::feed::SensorMessage;
-use crate::navigator::Navigator;
+use crate::navigator::{Checkpoint, Navigator};
 use crate::strapdown::NavState;
 use auvnav_shm_schema::{
     AidDiagnosticsV1, DvlVelocityV1, ImuSampleV1, LateAidV1, NavMode, NavSolutionV1,
@@ -107,6 +107,16 @@ pub struct Session {
     align_magnetometer: Option<MagnetometerAid>,
     mag_sum_b0: Vector3<f64>,
     mag_count: usize,
+    /// The last navigator found sound (taken at most once per second of state time): where the
+    /// filter restarts when its state or covariance stops being sound.
+    last_sound: Option<Navigator>,
+    /// Times the filter refused its state or covariance and restarted from `last_sound`.
+    pub reinitialisations: u64,
+    /// A checkpoint to continue from at the first IMU sample (a restart), with the time elapsed
+    /// since it was written (s) and the speed the vehicle may have drifted at meanwhile (m/s).
+    resume: Option<(Checkpoint, f64, f64)>,
+    /// Restarts that continued from a checkpoint.
+    pub resumed: bool,
 }
 
 impl Session {
@@ -140,7 +150,36 @@ impl Session {
             },
             mag_sum_b0: Vector3::zeros(),
             mag_count: 0,
+            last_sound: None,
+            reinitialisations: 0,
+            resume: None,
+            resumed: false,
         }
+    }
+
+    /// Continues, at the first IMU sample, from `checkpoint` instead of the configured start: the
+    /// state coasts over the time since it was written plus `elapsed_s` (the wall-clock time the
+    /// process was down, measured by the caller), and the position and velocity variances grow
+    /// as if the vehicle had drifted at `drift_m_s` (one sigma) for that long.
+    pub fn resume_from(&mut self, checkpoint: Checkpoint, elapsed_s: f64, drift_m_s: f64) {
+        self.resume = Some((checkpoint, elapsed_s.max(0.0), drift_m_s.max(0.0)));
+    }
+
+    /// Makes the navigator's covariance not finite, as a numerical failure would: for tests of
+    /// what follows (the next IMU sample finds it and reinitialises).
+    #[doc(hidden)]
+    pub fn poison_covariance_for_tests(&mut self) {
+        if let Some(nav) = self.nav.as_mut() {
+            nav.poison_covariance_for_tests();
+        }
+    }
+
+    /// The navigator's checkpoint (`None` before navigation starts or while aligning).
+    pub fn checkpoint(&self) -> Option<Checkpoint> {
+        self.nav
+            .as_ref()
+            .filter(|_| self.aligned)
+            .map(Navigator::checkpoint)
     }
 
     /// The coarse attitude with its heading replaced by the magnetic one: the mean calibrated
@@ -284,6 +323,32 @@ impl Session {
             return self.coarse(x, out);
         }
         if self.nav.is_none()
+            && let Some((cp, elapsed_s, drift_m_s)) = self.resume.take()
+            && let Some(mut nav) = Navigator::from_checkpoint(self.cfg.clone(), &cp)
+        {
+            // A restart: the checkpoint's state, coasted to this sample over the time the
+            // process was down, with what the vehicle may have done meanwhile in the covariance.
+            nav.coast(elapsed_s, x);
+            let drift = drift_m_s * elapsed_s;
+            nav.grow_variances(drift * drift, drift_m_s * drift_m_s);
+            self.initial = Some(InitialReport {
+                source: "checkpoint of the previous run",
+                time_s: x.host_time_ns as f64 * 1e-9,
+                latitude_deg: cp.latitude_rad.to_degrees(),
+                longitude_deg: cp.longitude_rad.to_degrees(),
+                height_m: cp.height_m,
+                velocity_ned_m_s: cp.velocity_ned_m_s,
+                euler_deg: nav.state().euler().map(f64::to_degrees),
+            });
+            self.aligned = true;
+            self.fine = None;
+            self.aligner = None;
+            self.resumed = true;
+            let sol = nav.solution(x.host_time_ns);
+            self.nav = Some(nav);
+            return out(SessionOutput::Solution(&sol));
+        }
+        if self.nav.is_none()
             && let Some(i) = self.configured_initial.clone()
         {
             let state = i.state(x.host_time_ns as f64 * 1e-9);
@@ -298,6 +363,18 @@ impl Session {
             return Ok(());
         };
         if let Some(mut sol) = nav.on_imu(x) {
+            if !nav.still_sound(&sol) {
+                return self.reinitialise(x, out);
+            }
+            if self.aligned
+                && self
+                    .last_sound
+                    .as_ref()
+                    .is_none_or(|s| nav.state().time_s - s.state().time_s >= 1.0)
+                && nav.is_sound()
+            {
+                self.last_sound = Some(nav.clone());
+            }
             if !self.aligned {
                 // Fine alignment until the heading meets the convergence criterion.
                 let criterion = self
@@ -315,23 +392,47 @@ impl Session {
         Ok(())
     }
 
-    /// Rate and specific force of a sample (increments divided by the interval), or `None` for a
-    /// sample the alignment cannot use (flagged invalid, bad interval, not finite).
-    fn usable_rates(x: &ImuSampleV1) -> Option<(Vector3<f64>, Vector3<f64>)> {
-        let valid = ImuSampleV1::STATUS_GYRO_VALID | ImuSampleV1::STATUS_ACCEL_VALID;
-        if x.status & valid != valid || !(x.interval_s > 0.0 && x.interval_s < 1.0) {
-            return None;
-        }
-        let (w, f) = (Vector3::from(x.angular), Vector3::from(x.specific));
-        let (w, f) = if x.status & ImuSampleV1::STATUS_INCREMENTS != 0 {
-            (w / x.interval_s, f / x.interval_s)
-        } else {
-            (w, f)
+    /// The filter's state or covariance is not sound (not finite, not a covariance): it restarts
+    /// from the last sound navigator, coasted to this sample with its covariance grown over the
+    /// time since, and this sample's solution is published as invalid. Without a sound navigator
+    /// yet, the session starts over as at the beginning.
+    fn reinitialise<E>(
+        &mut self,
+        x: &ImuSampleV1,
+        out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
+    ) -> Result<(), E> {
+        self.reinitialisations += 1;
+        let broken = self.nav.take();
+        let Some(mut nav) = self.last_sound.clone() else {
+            // Nothing sound to go back to (the first solution was not): align or start again
+            // from the configuration, with the position flagged unknown.
+            self.cfg.initial_position_std_m = 10.0 * self.cfg.position_unknown_std_m;
+            self.aligned = self.alignment.is_none() || self.configured_initial.is_some();
+            self.aligner = None;
+            self.fine = None;
+            return Ok(());
         };
-        w.iter()
-            .chain(f.iter())
-            .all(|v| v.is_finite())
-            .then_some((w, f))
+        if let Some(b) = &broken {
+            // Its last solution (the one found unsound) was not published.
+            nav.continue_numbering(b.last_sequence().saturating_sub(1));
+        }
+        let dt = x.host_time_ns as f64 * 1e-9 - nav.state().time_s;
+        nav.coast(dt, x);
+        let mut sol = nav.solution(x.host_time_ns);
+        sol.mode = NavMode::Invalid as u32;
+        self.nav = Some(nav);
+        out(SessionOutput::Solution(&sol))
+    }
+
+    /// Rate and specific force of a sample (increments divided by the interval), or `None` for a
+    /// sample the alignment cannot use (flagged invalid, bad interval, not finite or beyond the
+    /// configured plausible range).
+    fn usable_rates(&self, x: &ImuSampleV1) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        crate::nav_core::plausible_rates(
+            x,
+            self.cfg.imu_max_rate_deg_s.to_radians(),
+            self.cfg.imu_max_specific_force_m_s2,
+        )
     }
 
     /// The coarse stage: feeds the aligner; at the end hands over to the navigation filter.
@@ -343,7 +444,7 @@ impl Session {
         let Some(a) = self.alignment.clone() else {
             return Ok(());
         };
-        let Some((w, f)) = Self::usable_rates(x) else {
+        let Some((w, f)) = self.usable_rates(x) else {
             self.before_start += 1;
             return Ok(());
         };
@@ -482,15 +583,15 @@ impl Session {
             .as_ref()
             .filter(|_| self.fine_hands_over)
             .map(|a| a.aligned_heading_std_deg.to_radians());
-        let Some(fine) = self.fine.as_mut() else {
-            return Ok(());
-        };
-        if x.host_time_ns <= self.fine_start_ns {
+        if self.fine.is_none() || x.host_time_ns <= self.fine_start_ns {
             // At or before the start state: nothing to integrate.
             return Ok(());
         }
-        let Some((w, f)) = Self::usable_rates(x) else {
+        let Some((w, f)) = self.usable_rates(x) else {
             self.before_start += 1;
+            return Ok(());
+        };
+        let Some(fine) = self.fine.as_mut() else {
             return Ok(());
         };
         fine.on_imu(&w, &f, x.interval_s);

@@ -11,3 +11,5 @@ pub struct Args {
     #[arg(long, value_name = "FILE")]
     pub check_config: Option<String>,
 }
+
+pub mod checkpoint;

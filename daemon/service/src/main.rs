@@ -23,7 +23,7 @@ use std::io::Write;
 use std::process::ExitCode;
 use std::time::Duration;
 
-use auvnavd::Args;
+use auvnavd::{Args, checkpoint};
 
 /// A watched sensor: last arrival and whether it is reported lost.
 struct Watch {
@@ -254,7 +254,32 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
     let _tick = waitset
         .attach_interval(Duration::from_millis(50))
         .map_err(|x| format!("attaching the tick: {x:?}"))?;
-    let mut session = Session::new(&cfg.session());
+    let mut session_cfg = cfg.session();
+    let resume = checkpoint::load(cfg);
+    if let checkpoint::Start::PositionUnknown(why) = &resume {
+        tracing::warn!(
+            "auvnavd: {why}: starting from the configured start with the position unknown \
+             (standard deviation {} m)",
+            cfg.checkpoint.unknown_position_std_m
+        );
+        session_cfg.navigation.initial_position_std_m = cfg.checkpoint.unknown_position_std_m;
+    }
+    let mut session = Session::new(&session_cfg);
+    if let checkpoint::Start::Resume(cp, elapsed_s) = resume {
+        tracing::warn!(
+            elapsed_s,
+            "auvnavd: continuing from the checkpoint {} written {:.1} s ago (covariance grown by \
+             a drift of {} m/s over that time)",
+            cfg.checkpoint.path,
+            elapsed_s,
+            cfg.checkpoint.drift_m_s
+        );
+        session.resume_from(*cp, elapsed_s, cfg.checkpoint.drift_m_s);
+    }
+    let mut checkpoints = checkpoint::Writer::start(cfg);
+    let checkpoint_ns = (cfg.checkpoint.interval_s * 1e9) as u64;
+    let mut next_checkpoint = 0u64;
+    let mut reported_reinitialisations = 0u64;
     let now = monotonic_ns();
     let d = &cfg.deadlines;
     let mut watches = [
@@ -292,20 +317,24 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
         let mut m = ProcessHealthV1 {
             host_time_ns: monotonic_ns(),
             frames: out.published,
-            timeouts: missed,
+            // Sensors that missed their deadline, and IMU gaps bridged.
+            timeouts: missed + session.navigator().map_or(0, |n| n.counters().imu_gaps),
             drops: gaps + session.late_aids + out.errors,
-            // Messages before the start, and sensor messages the navigator found malformed or
-            // out of range.
+            // Messages before the start, sensor messages the navigator found malformed or out of
+            // range, and IMU samples whose device clock jumped or stalled.
             invalid: session.before_start
                 + session.navigator().map_or(0, |n| {
                     let c = n.counters();
                     c.imu_invalid
+                        + c.imu_clock_jumps
                         + c.dvl_invalid
                         + c.depth_invalid
                         + c.gnss_invalid
                         + c.usbl_invalid
                         + c.magnetometer_invalid
                 }),
+            // For the daemon: times the filter refused its state and reinitialised.
+            resyncs: session.reinitialisations,
             pid: std::process::id(),
             state: state as u32,
             ..Default::default()
@@ -324,7 +353,10 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
             CallbackProgression::Continue
         });
         match r {
-            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => break Ok(()),
+            Ok(WaitSetRunResult::TerminationRequest) => break Ok(()),
+            // Another signal (SIGCONT after a stop, a debugger's) interrupted the wait: not a
+            // request to stop (SIGTERM/SIGINT are reported by the next wait).
+            Ok(WaitSetRunResult::Interrupt) => continue,
             Ok(_) => {}
             Err(x) => break Err(format!("waiting: {x:?}")),
         }
@@ -382,6 +414,22 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
         if session.started() {
             state = ProcessState::Running;
         }
+        if session.reinitialisations > reported_reinitialisations {
+            reported_reinitialisations = session.reinitialisations;
+            tracing::error!(
+                reinitialisations = session.reinitialisations,
+                "auvnavd: the filter's state or covariance was not finite or not a covariance; \
+                 restarted from the last sound state with its covariance grown (solution \
+                 published as invalid)"
+            );
+        }
+        if let Some(w) = checkpoints.as_mut()
+            && now >= next_checkpoint
+            && let Some(cp) = session.checkpoint()
+        {
+            w.submit(cp, &cfg.session());
+            next_checkpoint = now + checkpoint_ns;
+        }
         if now >= next_flush {
             if let Err(x) = out.flush() {
                 break Err(format!("flushing the CSV output: {x}"));
@@ -405,6 +453,12 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
         }
     };
     let _ = session.finish(&mut |o| out.on(o));
+    if let Some(w) = checkpoints.as_mut()
+        && let Some(cp) = session.checkpoint()
+    {
+        w.submit(cp, &cfg.session());
+    }
+    let checkpoint_errors = checkpoints.map_or(0, checkpoint::Writer::finish);
     let flushed = out.flush();
     let gaps = imu.gaps() + dvl.gaps() + depth.gaps() + gnss.gaps();
     let _ = publish_health(
@@ -416,17 +470,31 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
         ProcessState::Stopping,
     );
     tracing::info!(
-        "auvnavd: stopping; {} solutions ({} published), {} late aid messages, {} lost on the bus, {} missed deadlines; USBL fixes: {}; magnetometer: {}",
+        "auvnavd: stopping; {} solutions ({} published), {} late aid messages, {} lost on the bus, {} missed deadlines, {} filter reinitialisations, {} checkpoint write errors; IMU: {}; USBL fixes: {}; magnetometer: {}",
         out.solutions,
         out.published,
         session.late_aids,
         gaps,
         missed_deadlines,
+        session.reinitialisations,
+        checkpoint_errors,
+        imu_summary(&session),
         usbl_summary(&session),
         magnetometer_summary(&session)
     );
     result?;
     flushed.map_err(|x| format!("flushing the CSV output: {x}"))
+}
+
+/// What became of the IMU samples, for the stop message.
+fn imu_summary(session: &Session) -> String {
+    let Some(c) = session.navigator().map(|n| n.counters()) else {
+        return "no navigation yet".into();
+    };
+    format!(
+        "{} integrated, {} invalid or implausible, {} out of order, {} gaps bridged, {} device clock jumps",
+        c.imu_samples, c.imu_invalid, c.imu_out_of_order, c.imu_gaps, c.imu_clock_jumps
+    )
 }
 
 /// What became of the USBL fixes, for the stop message.
@@ -469,7 +537,13 @@ fn magnetometer_summary(session: &Session) -> String {
 /// Reads and validates the configuration file; errors name the file.
 fn load(path: &str) -> Result<DaemonConfig, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("reading {path}: {e}"))?;
-    DaemonConfig::from_toml(&text).map_err(|e| format!("{path}: {e}"))
+    let cfg = DaemonConfig::from_toml(&text).map_err(|e| format!("{path}: {e}"))?;
+    let problems = cfg.path_problems();
+    if problems.is_empty() {
+        Ok(cfg)
+    } else {
+        Err(format!("{path}: {}", problems.join("; ")))
+    }
 }
 
 fn main() -> ExitCode {

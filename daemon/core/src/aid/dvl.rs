@@ -199,6 +199,13 @@ impl DvlParameters {
             time_offset_s,
         }
     }
+
+    /// The mounting roll, pitch, yaw of the DVL frame w.r.t. the body (deg): the inverse of
+    /// [`DvlParameters::new`]'s.
+    pub fn mount_deg(&self) -> [f64; 3] {
+        let (r, p, y) = Rotation3::from_matrix_unchecked(self.c_dvl_to_body).euler_angles();
+        [r / DEG, p / DEG, y / DEG]
+    }
 }
 
 /// The DVL installation: mounting, scale factor, lever arm and time offset.
