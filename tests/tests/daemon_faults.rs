@@ -1,7 +1,8 @@
 //! Faults of the on-board chain, as real processes: a driver killed with SIGKILL is reported lost
 //! by the daemon, which keeps navigating (degraded) and fuses again when the driver is restarted;
-//! a killed daemon is replaced by a new one that starts cleanly while the drivers and the recorder
-//! keep running.
+//! SIGCONT (and a SIGSTOP/SIGCONT pair) stops none of the processes; a killed daemon is replaced by
+//! a new one that continues from the checkpoint (not from `[initial]`) with its covariance grown,
+//! while the drivers and the recorder keep running.
 
 use auvnav_log::{LogMessage, LogReader};
 use auvnav_shm_schema::bus::Bus;
@@ -10,6 +11,25 @@ use auvnav_tests::processes::{Proc, TempDir, binary, unique};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
+
+fn signal(p: &Proc, sig: &str) {
+    let ok = Command::new("kill")
+        .args([sig, &p.pid().to_string()])
+        .status()
+        .expect("kill");
+    assert!(ok.success(), "kill {sig} {}", p.pid());
+}
+
+/// Horizontal distance between two solutions (m).
+fn distance(a: &NavSolutionV1, b: &NavSolutionV1) -> f64 {
+    let g = |s: &NavSolutionV1| auvnav_core::earth::Geodetic {
+        latitude_rad: s.latitude_rad,
+        longitude_rad: s.longitude_rad,
+        height_m: s.height_m,
+    };
+    let e = auvnav_core::earth::ned_offset(&g(a), &g(b));
+    e.x.hypot(e.y)
+}
 
 fn driver_config(dir: &Path, prefix: &str, class: &str, protocol: &str) -> PathBuf {
     let p = dir.join(format!("{class}.toml"));
@@ -109,11 +129,13 @@ fn killed_driver_degrades_and_recovers_and_a_killed_daemon_is_replaced() {
         format!(
             "prefix = \"{prefix}\"\nhealth_period_s = 0.2\n[navigation]\nimu_dt_from_device_time = true\n\
              dvl_timeout_s = 1.0\n[initial]\nlatitude_deg = {:?}\nlongitude_deg = {:?}\nheight_m = {:?}\n\
-             velocity_ned_m_s = {:?}\neuler_deg = [{roll:?}, {pitch:?}, {yaw:?}]\n[deadlines]\ndvl_s = 0.5\n",
+             velocity_ned_m_s = {:?}\neuler_deg = [{roll:?}, {pitch:?}, {yaw:?}]\n[deadlines]\ndvl_s = 0.5\n\
+             [checkpoint]\npath = \"{}\"\ninterval_s = 0.5\n",
             t0.latitude_rad.to_degrees(),
             t0.longitude_rad.to_degrees(),
             t0.height_m,
-            t0.velocity_ned_m_s
+            t0.velocity_ned_m_s,
+            d.join("auvnavd.checkpoint.json").display()
         ),
     )
     .expect("daemon config");
@@ -226,16 +248,64 @@ fn killed_driver_degrades_and_recovers_and_a_killed_daemon_is_replaced() {
         Some(NavMode::Navigating),
         "not navigating again after the DVL driver came back"
     );
-    // 3. Kill the daemon; a new one starts cleanly while the drivers and the recorder run on.
+    // 3. SIGCONT alone, and a SIGSTOP/SIGCONT pair, stop nothing.
+    for p in [&daemon, &imu, &dvl2, &recorder] {
+        signal(p, "-CONT");
+    }
+    signal(&daemon, "-STOP");
+    std::thread::sleep(Duration::from_millis(200));
+    signal(&daemon, "-CONT");
+    let continued = Instant::now();
+    w.poll(&mut sol, &mut health, Duration::from_secs(1));
+    for p in [&mut daemon, &mut imu, &mut dvl2, &mut recorder] {
+        assert!(
+            matches!(p.child.try_wait(), Ok(None)),
+            "{} stopped after SIGCONT",
+            p.name
+        );
+    }
+    assert!(
+        w.solutions_since(continued).len() > 100,
+        "the daemon does not publish after SIGCONT"
+    );
+    // 4. Kill the daemon; a new one continues from the checkpoint while the drivers and the
+    // recorder run on.
+    let last_before = w.solutions.last().expect("solutions").1;
     daemon.kill();
     let daemon_killed = Instant::now();
     w.poll(&mut sol, &mut health, Duration::from_millis(500));
     let mut daemon2 = spawn(d, "auvnavd2", "auvnavd", &["--config", cfg]);
     let started = Instant::now();
     w.poll(&mut sol, &mut health, Duration::from_secs(2));
+    let resumed = w.solutions_since(started);
+    assert!(resumed.len() > 100, "the new daemon does not publish");
+    let first = resumed[0];
+    let sigma = first.position_std_ned_m[0].max(first.position_std_ned_m[1]);
+    // Down for about 0.5 s at a drift of 2.5 m/s (the default), plus up to 0.5 s since the
+    // checkpoint: the covariance grew by at least that.
     assert!(
-        w.solutions_since(started).len() > 100,
-        "the new daemon does not publish"
+        sigma >= 1.0,
+        "the restarted daemon publishes a sigma of {sigma:.2} m"
+    );
+    let moved = distance(first, &last_before);
+    assert!(
+        moved <= 3.0 * sigma,
+        "the restarted daemon starts {moved:.1} m from where the killed one was (sigma {sigma:.2} m)"
+    );
+    let initial = {
+        let mut s = *first;
+        s.latitude_rad = t0.latitude_rad;
+        s.longitude_rad = t0.longitude_rad;
+        s
+    };
+    assert!(
+        distance(first, &initial) > 10.0,
+        "the restarted daemon started from [initial]"
+    );
+    let log = std::fs::read_to_string(d.join("auvnavd2.err")).unwrap_or_default();
+    assert!(
+        log.contains("continuing from the checkpoint"),
+        "the restarted daemon does not say it continues from the checkpoint: {log}"
     );
     assert!(
         w.health_since(started, "auvnavd")
@@ -255,7 +325,7 @@ fn killed_driver_degrades_and_recovers_and_a_killed_daemon_is_replaced() {
         matches!(recorder.child.try_wait(), Ok(None)),
         "the recorder stopped"
     );
-    // 4. Clean stop of everything still running.
+    // 5. Clean stop of everything still running.
     let _ = emulator.terminate(Duration::from_secs(5));
     for p in [&mut dvl2, &mut imu, &mut daemon2, &mut recorder] {
         let status = p.terminate(Duration::from_secs(10));

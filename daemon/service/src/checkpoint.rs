@@ -179,3 +179,70 @@ fn write_loop(path: &Path, rx: Receiver<CheckpointFile>) -> u64 {
     }
     errors
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use auvnav_core::navigator::Navigator;
+
+    fn config(dir: &Path) -> DaemonConfig {
+        let mut cfg = DaemonConfig::from_toml(
+            "[initial]\nlatitude_deg = 31.0\nlongitude_deg = 120.0\nheight_m = -20.0\neuler_deg = [0.0, 0.0, 30.0]\n",
+        )
+        .expect("config");
+        cfg.checkpoint.path = dir.join("cp.json").display().to_string();
+        cfg
+    }
+
+    fn file(cfg: &DaemonConfig, written_unix_s: f64) -> CheckpointFile {
+        let s = cfg.initial.as_ref().expect("initial").state(1.0);
+        let nav = Navigator::new(cfg.navigation.clone(), s);
+        CheckpointFile {
+            format_version: 1,
+            written_unix_s,
+            initial: cfg.initial.clone(),
+            alignment: None,
+            navigation: nav.checkpoint(),
+        }
+    }
+
+    #[test]
+    fn which_start_a_checkpoint_gives() {
+        let dir = std::env::temp_dir().join(format!("auvnavd-cp-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let cfg = config(&dir);
+        let path = PathBuf::from(&cfg.checkpoint.path);
+        // None written yet: the configured start.
+        assert!(matches!(load(&cfg), Start::Configured));
+        // A fresh one of this mission, written atomically: continue from it (bit for bit).
+        let f = file(&cfg, unix_now_s() - 3.0);
+        write_atomically(&path, &f).expect("write");
+        match load(&cfg) {
+            Start::Resume(cp, age) => {
+                assert_eq!(*cp, f.navigation);
+                assert!((2.5..10.0).contains(&age), "age {age}");
+            }
+            other => panic!("{other:?}"),
+        }
+        // Too old: position unknown.
+        write_atomically(&path, &file(&cfg, unix_now_s() - 7200.0)).expect("write");
+        assert!(matches!(load(&cfg), Start::PositionUnknown(w) if w.contains("old")));
+        // Corrupt (cut short): position unknown.
+        let bytes = serde_json::to_vec(&file(&cfg, unix_now_s())).expect("json");
+        std::fs::write(&path, &bytes[..bytes.len() / 2]).expect("write");
+        assert!(matches!(load(&cfg), Start::PositionUnknown(w) if w.contains("corrupt")));
+        // Not sound (a NaN variance): position unknown.
+        let mut bad = file(&cfg, unix_now_s());
+        bad.navigation.covariance[0] = -1.0;
+        write_atomically(&path, &bad).expect("write");
+        assert!(matches!(load(&cfg), Start::PositionUnknown(w) if w.contains("not sound")));
+        // Another mission (the operator changed [initial]): the configured start.
+        let mut other = cfg.clone();
+        if let Some(i) = other.initial.as_mut() {
+            i.latitude_deg += 0.5;
+        }
+        write_atomically(&path, &file(&cfg, unix_now_s())).expect("write");
+        assert!(matches!(load(&other), Start::Configured));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
