@@ -74,6 +74,52 @@ pub struct KvhConfig {
     pub temperature_centi: bool,
 }
 
+/// A device's documented measurement range: a sample beyond it was not measured (a corrupted
+/// value that passed the checksum, or a saturated sensor) and is flagged invalid.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImuRange {
+    /// Largest angular rate per axis (rad/s).
+    pub max_rate_rad_s: f64,
+    /// Largest specific force per axis (m/s²).
+    pub max_specific_force_m_s2: f64,
+}
+
+/// KVH 1750/1775: ±490 °/s, accelerometers ±10 g (±30 g in the high-g option, taken here);
+/// 10 % beyond for a saturated reading.
+pub const KVH_RANGE: ImuRange = ImuRange {
+    max_rate_rad_s: 490.0 * 1.1 * std::f64::consts::PI / 180.0,
+    max_specific_force_m_s2: 30.0 * 1.1 * STANDARD_GRAVITY,
+};
+
+/// Xsens MTi: ±2000 °/s, accelerometers ±16 g (MTi-600: ±10 g; the larger range), 10 % beyond.
+pub const XSENS_RANGE: ImuRange = ImuRange {
+    max_rate_rad_s: 2000.0 * 1.1 * std::f64::consts::PI / 180.0,
+    max_specific_force_m_s2: 16.0 * 1.1 * STANDARD_GRAVITY,
+};
+
+impl ImuRange {
+    /// Clears the validity of the gyro or accelerometer triad of `m` when a value is beyond the
+    /// range (increments divided by the interval); false when it did.
+    pub fn check(&self, m: &mut ImuSampleV1) -> bool {
+        let per_s = if m.status & ImuSampleV1::STATUS_INCREMENTS != 0 {
+            1.0 / m.interval_s
+        } else {
+            1.0
+        };
+        let within = |v: &[f64; 3], max: f64| v.iter().all(|x| (x * per_s).abs() <= max);
+        let mut ok = true;
+        if !within(&m.angular, self.max_rate_rad_s) {
+            m.status &= !ImuSampleV1::STATUS_GYRO_VALID;
+            ok = false;
+        }
+        if !within(&m.specific, self.max_specific_force_m_s2) {
+            m.status &= !ImuSampleV1::STATUS_ACCEL_VALID;
+            ok = false;
+        }
+        ok
+    }
+}
+
 /// A KVH sample as an IMU message. Accelerometers report g (or g*s as increments); the axes are
 /// the unit's case frame, which the driver's mounting configuration relates to the body.
 pub fn kvh_sample(s: &KvhSample, cfg: &KvhConfig, host_time_ns: u64, sequence: u64) -> ImuSampleV1 {

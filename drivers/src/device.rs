@@ -147,6 +147,9 @@ pub struct DeviceCounters {
     pub other_frames: u64,
     /// Samples the device numbered but that never arrived (gaps in its own counter).
     pub device_gaps: u64,
+    /// Samples with a value outside the device's documented measurement range (published
+    /// flagged invalid, so that nothing integrates them).
+    pub out_of_range: u64,
 }
 
 /// The decoder and conversion of one device.
@@ -254,20 +257,25 @@ impl DeviceDecoder {
                 Inner::Kvh(d) => {
                     let sample = d.next_sample()?;
                     self.device_counter(u16::from(sample.sequence), 128);
-                    return Some(Output::Imu(convert::kvh_sample(
-                        &sample,
-                        &s.kvh,
-                        host_time_ns,
-                        0,
-                    )));
+                    let mut m = convert::kvh_sample(&sample, &s.kvh, host_time_ns, 0);
+                    if !convert::KVH_RANGE.check(&mut m) {
+                        self.counters.out_of_range += 1;
+                    }
+                    return Some(Output::Imu(m));
                 }
                 Inner::Xsens(d) => match d.next_message()? {
                     XbusMessage::MtData2(m) => {
                         if let Some(c) = m.packet_counter {
                             self.device_counter(c, 1 << 16);
                         }
-                        let imu = convert::xsens_sample(&m, s.xsens_rate_hz, host_time_ns, 0)
-                            .map(Output::Imu);
+                        let imu = convert::xsens_sample(&m, s.xsens_rate_hz, host_time_ns, 0).map(
+                            |mut i| {
+                                if !convert::XSENS_RANGE.check(&mut i) {
+                                    self.counters.out_of_range += 1;
+                                }
+                                Output::Imu(i)
+                            },
+                        );
                         let mag =
                             convert::xsens_magnetometer(&m, s.xsens_field_unit_ut, host_time_ns, 0)
                                 .map(Output::Magnetometer);

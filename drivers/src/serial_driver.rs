@@ -442,7 +442,7 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
             timeouts: h.timeouts,
             reconnects: h.reconnects,
             drops: c.device_gaps + h.publish_errors,
-            invalid: s.malformed,
+            invalid: s.malformed + c.out_of_range,
             pid: std::process::id(),
             state: state as u32,
             ..Default::default()
