@@ -134,7 +134,7 @@ fn absurd_valid_checksum_frames_never_give_a_nan_solution() {
             // Ten frames of 1e30.
             s.gyro = [1e30; 3];
             s.accel = [-1e30; 3];
-        } else if bits.next() % 8 == 0 {
+        } else if bits.next().is_multiple_of(8) {
             // Arbitrary bits in every field the CRC covers.
             for v in s.gyro.iter_mut().chain(s.accel.iter_mut()) {
                 *v = f32::from_bits(bits.next() as u32);
@@ -142,7 +142,7 @@ fn absurd_valid_checksum_frames_never_give_a_nan_solution() {
             s.status = bits.next() as u8;
             s.sequence = bits.next() as u8;
             s.temperature_raw = bits.next() as i16;
-            if bits.next() % 4 == 0 {
+            if bits.next().is_multiple_of(4) {
                 s.timestamp_us = Some(bits.next() as u32);
             }
         }
