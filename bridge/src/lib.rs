@@ -151,14 +151,22 @@ impl BridgeConfig {
                 self.zenoh.mode
             ));
         }
+        for (key, list) in [
+            ("zenoh.listen", &self.zenoh.listen),
+            ("zenoh.connect", &self.zenoh.connect),
+        ] {
+            for e in list.iter() {
+                check_endpoint(e).map_err(|why| format!("{key}: {e:?}: {why}"))?;
+            }
+        }
         if self.export.is_empty() && self.import.is_empty() {
             return Err("nothing to do: no [[export]] and no [[import]]".into());
         }
         for e in &self.export {
             check_key_prefix(&e.key_prefix)?;
-            if !(e.max_rate_hz.is_finite() && e.max_rate_hz >= 0.0) {
+            if !(e.max_rate_hz.is_finite() && (0.0..=100_000.0).contains(&e.max_rate_hz)) {
                 return Err(format!(
-                    "export {:?}: max_rate_hz = {}: expected >= 0 (0 = every message)",
+                    "export {:?}: max_rate_hz = {}: expected 0..=100000 (0 = every message)",
                     e.topics, e.max_rate_hz
                 ));
             }
@@ -189,6 +197,34 @@ impl BridgeConfig {
         }
         Ok(())
     }
+}
+
+/// A Zenoh endpoint as the bridge uses them: `tcp/HOST:PORT` or `udp/HOST:PORT` (an IP address
+/// or a host name, a port 0..=65535; `#`-options and `?`-metadata after it are left to Zenoh).
+fn check_endpoint(e: &str) -> Result<(), String> {
+    let core = e.split(['#', '?']).next().unwrap_or_default();
+    let Some((proto, addr)) = core.split_once('/') else {
+        return Err("expected PROTOCOL/HOST:PORT, e.g. tcp/127.0.0.1:7447".into());
+    };
+    if !["tcp", "udp", "tls", "quic"].contains(&proto) {
+        return Err(format!(
+            "protocol {proto:?}: expected tcp, udp, tls or quic"
+        ));
+    }
+    if addr.parse::<std::net::SocketAddr>().is_ok() {
+        return Ok(());
+    }
+    let Some((host, port)) = addr.rsplit_once(':') else {
+        return Err("expected HOST:PORT after the protocol".into());
+    };
+    let host_ok = !host.is_empty()
+        && host
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '.');
+    if !host_ok || port.parse::<u16>().is_err() {
+        return Err("expected an IP address or a host name, then :PORT (0..=65535)".into());
+    }
+    Ok(())
 }
 
 fn check_key_prefix(k: &str) -> Result<(), String> {

@@ -133,9 +133,9 @@ impl LiveConfig {
             }
         }
         for l in &self.rate_limit {
-            if !(l.max_rate_hz.is_finite() && l.max_rate_hz > 0.0) {
+            if !(l.max_rate_hz.is_finite() && l.max_rate_hz > 0.0 && l.max_rate_hz <= 100_000.0) {
                 return Err(format!(
-                    "rate_limit {:?}: max_rate_hz = {}: expected > 0",
+                    "rate_limit {:?}: max_rate_hz = {}: expected 0 < x <= 100000",
                     l.topics, l.max_rate_hz
                 ));
             }
@@ -336,7 +336,7 @@ mod tests {
             ("backlog = 2", "backlog"),
             (
                 "[[rate_limit]]\ntopics = \"imu\"\nmax_rate_hz = 0.0",
-                "expected > 0",
+                "expected 0 < x",
             ),
             ("commands = true", "unknown field"),
         ] {

@@ -437,6 +437,21 @@ pub fn load(path: &str) -> Result<(CanDriverConfig, CanDepth), CanDriverError> {
             cfg.read_timeout_s
         )));
     }
+    for (key, v, lo, hi) in [
+        (
+            "depth.pressure_scale_pa",
+            cfg.depth.pressure_scale_pa,
+            1e-6,
+            1e9,
+        ),
+        ("depth.atmospheric_pa", cfg.depth.atmospheric_pa, 0.0, 2e5),
+    ] {
+        if !(v.is_finite() && v >= lo && v <= hi) {
+            return Err(CanDriverError::Config(format!(
+                "{path}: {key} = {v}: expected {lo}..={hi}"
+            )));
+        }
+    }
     if !(0.05..=60.0).contains(&cfg.health_period_s) {
         return Err(CanDriverError::Config(format!(
             "{path}: health_period_s = {}: expected 0.05..=60 s",

@@ -265,6 +265,42 @@ impl SerialDriverConfig {
                 "0 < x <= 10000 Hz".into(),
             ));
         }
+        let m = &self.mounting;
+        for (key, v, lim) in [
+            ("mounting.rotation_rpy_deg", m.rotation_rpy_deg, 360.0),
+            ("mounting.lever_arm_m", m.lever_arm_m, 50.0),
+        ] {
+            if !v.iter().all(|x| x.abs() <= lim) {
+                return Err(range(
+                    key,
+                    format!("{v:?}"),
+                    format!("each component within ±{lim}"),
+                ));
+            }
+        }
+        if self.serial.port.is_empty() {
+            return Err(range("serial.port", "\"\"".into(), "a device path".into()));
+        }
+        if self.prefix.is_empty()
+            || !self
+                .prefix
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || "_-./".contains(c))
+        {
+            return Err(range(
+                "prefix",
+                format!("{:?}", self.prefix),
+                "ASCII letters, digits, '_', '-', '.', '/'".into(),
+            ));
+        }
+        if let Some(p) = auvnav_shm_schema::stage_times::output_path_problem(&self.stage_times_csv)
+        {
+            return Err(range(
+                "stage_times_csv",
+                format!("{:?}", self.stage_times_csv),
+                p,
+            ));
+        }
         if self
             .name
             .as_ref()

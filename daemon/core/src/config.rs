@@ -535,22 +535,7 @@ impl Problems {
     }
 }
 
-/// What is wrong with `path` as a file a program will create or replace (`None`: nothing, or the
-/// path is empty): its folder must exist and it must not be a folder itself.
-pub fn output_path_problem(path: &str) -> Option<String> {
-    if path.is_empty() {
-        return None;
-    }
-    let p = std::path::Path::new(path);
-    if p.is_dir() {
-        return Some("is a folder, expected a file".into());
-    }
-    let parent = match p.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => std::path::Path::new("."),
-    };
-    (!parent.is_dir()).then(|| format!("the folder {} does not exist", parent.display()))
-}
+pub use auvnav_shm_schema::stage_times::output_path_problem;
 
 impl NavConfig {
     /// Every value of `[navigation]` that makes no sense, as `navigation.key …`.

@@ -165,19 +165,38 @@ impl UsblConfig {
                 .all(|x| x.abs() <= 0.5 * self.baseline_m.max(0.0) + 10.0),
             "each component must be finite and within baseline/2 + 10 m",
         );
-        for (key, v) in [
-            ("range_std_m", self.range_std_m),
-            ("range_difference_std_m", self.range_difference_std_m),
-            ("angle_std_deg", self.angle_std_deg),
-            ("range_error_correlation_s", self.range_error_correlation_s),
+        need(
+            "array_yaw_deg",
+            self.array_yaw_deg.abs() <= 360.0,
+            "must be within ±360",
+        );
+        need(
+            "responder_lever_arm_m",
+            self.responder_lever_arm_m.iter().all(|x| x.abs() <= 50.0),
+            "each component must be finite and within ±50 m",
+        );
+        for (key, v, hi) in [
+            ("range_std_m", self.range_std_m, 1000.0),
+            ("range_difference_std_m", self.range_difference_std_m, 100.0),
+            ("angle_std_deg", self.angle_std_deg, 180.0),
+            (
+                "range_error_correlation_s",
+                self.range_error_correlation_s,
+                1e6,
+            ),
             (
                 "range_difference_error_correlation_s",
                 self.range_difference_error_correlation_s,
+                1e6,
             ),
-            ("gate_chi2", self.gate_chi2),
-            ("max_range_m", self.max_range_m),
+            ("gate_chi2", self.gate_chi2, 1e6),
+            ("max_range_m", self.max_range_m, 100_000.0),
         ] {
-            need(key, v > 0.0 && !v.is_nan(), "must be positive");
+            need(
+                key,
+                v > 0.0 && v <= hi,
+                &format!("must be positive, at most {hi}"),
+            );
         }
         need(
             "max_latency_s",
@@ -191,8 +210,18 @@ impl UsblConfig {
                 self.range_difference_error_std_m,
             ),
         ] {
-            need(key, v >= 0.0 && v.is_finite(), "must be zero or positive");
+            need(key, (0.0..=1000.0).contains(&v), "must be within 0..1000");
         }
+        need(
+            "unscented_beta",
+            (0.0..=10.0).contains(&self.unscented_beta),
+            "must be within 0..10 (2 for Gaussian errors)",
+        );
+        need(
+            "unscented_kappa",
+            (-100.0..=100.0).contains(&self.unscented_kappa),
+            "must be within -100..100",
+        );
         need(
             "fading",
             self.fading > 0.0 && self.fading < 1.0,
