@@ -69,6 +69,24 @@ impl Drop for StageTimes {
     }
 }
 
+/// What is wrong with `path` as a file a program will create or replace (`None`: nothing, or the
+/// path is empty, meaning no file): its folder must exist and it must not be a folder itself.
+/// Configuration checks use it so that `--check-config` refuses what would fail at start.
+pub fn output_path_problem(path: &str) -> Option<String> {
+    if path.is_empty() {
+        return None;
+    }
+    let p = std::path::Path::new(path);
+    if p.is_dir() {
+        return Some("is a folder, expected a file".into());
+    }
+    let parent = match p.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => std::path::Path::new("."),
+    };
+    (!parent.is_dir()).then(|| format!("the folder {} does not exist", parent.display()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -107,20 +125,3 @@ mod tests {
     }
 }
 
-/// What is wrong with `path` as a file a program will create or replace (`None`: nothing, or the
-/// path is empty, meaning no file): its folder must exist and it must not be a folder itself.
-/// Configuration checks use it so that `--check-config` refuses what would fail at start.
-pub fn output_path_problem(path: &str) -> Option<String> {
-    if path.is_empty() {
-        return None;
-    }
-    let p = std::path::Path::new(path);
-    if p.is_dir() {
-        return Some("is a folder, expected a file".into());
-    }
-    let parent = match p.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => std::path::Path::new("."),
-    };
-    (!parent.is_dir()).then(|| format!("the folder {} does not exist", parent.display()))
-}
