@@ -8,11 +8,14 @@ use auvnav_tests::processes::{TempDir, binary};
 use std::path::Path;
 use std::process::Command;
 
+/// The command-line arguments that check a configuration file.
+type CheckArgs = fn(&Path) -> Vec<String>;
+
 /// A program and how it checks a configuration file.
 struct Program {
     name: &'static str,
     bin: &'static str,
-    check: fn(&Path) -> Vec<String>,
+    check: CheckArgs,
     base: String,
 }
 
@@ -225,7 +228,7 @@ fn every_number_of_every_configuration_is_range_checked() {
 fn addresses_paths_and_names_are_checked() {
     let dir = TempDir::new("cfgother");
     let d = dir.path();
-    let cases: [(&str, &str, fn(&Path) -> Vec<String>, String, &str); 4] = [
+    let cases: [(&str, &str, CheckArgs, String, &str); 4] = [
         (
             "auvnavd",
             "empty prefix",
