@@ -60,6 +60,8 @@ pub struct LogInfo {
     pub notes: BTreeMap<String, String>,
     /// Why reading stopped before the end (a killed writer's log), if it did.
     pub stopped: Option<String>,
+    /// What was passed over as damaged (corrupt chunks and their time spans), if anything.
+    pub damaged: Option<auvnav_log::Corruption>,
 }
 
 /// The UTC time of log time `t_ns`, from the header's anchor notes.
@@ -171,6 +173,10 @@ pub fn info(path: &Path, with_config: bool) -> anyhow::Result<LogInfo> {
         config: with_config.then(|| header.config.clone()),
         notes: header.notes.clone(),
         stopped,
+        damaged: reader
+            .corruption()
+            .any()
+            .then(|| reader.corruption().clone()),
     })
 }
 
@@ -204,6 +210,9 @@ fn print(i: &LogInfo) {
             .map(|s| format!("; stopped early: {s}"))
             .unwrap_or_default()
     );
+    if let Some(d) = &i.damaged {
+        println!("  DAMAGED: {d}");
+    }
     println!(
         "  {:<20} {:<34} {:>9} {:>9} {:>10} {:>10} {:>11}",
         "topic", "schema", "messages", "rate Hz", "first s", "last s", "undecodable"

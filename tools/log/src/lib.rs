@@ -23,7 +23,9 @@
 //! Reading streams the file with bounded memory (records larger than [`RECORD_LENGTH_LIMIT`] are
 //! refused, chunk CRCs are checked before their messages are used), so a crafted file can neither
 //! exhaust memory nor yield corrupted messages. A file whose writer was killed is readable up to
-//! its last complete chunk; the reader then reports [`LogError::Truncated`].
+//! its last complete chunk; the reader then reports [`LogError::Truncated`]. A chunk that fails
+//! its CRC (or does not decompress) in the middle of a file is skipped, counted with its time
+//! span in [`Corruption`], and the reader goes on with the next chunk it can frame (`framing`).
 
 use auvnav_shm_schema::{
     AcousticRangesV1, AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1,
@@ -36,6 +38,9 @@ use std::fs::File;
 use std::io::{BufWriter, Read, Seek, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+
+mod framing;
+use framing::{Frame, Framer};
 
 /// Version of the log layout written by this program.
 pub const FORMAT_VERSION: u32 = 1;
@@ -479,9 +484,62 @@ pub struct ChannelInfo {
     pub metadata: BTreeMap<String, String>,
 }
 
+/// What a reader passed over because it was damaged.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct Corruption {
+    /// Chunks whose CRC failed or that did not decompress (their messages are lost).
+    pub chunks_skipped: u64,
+    /// Other records the parser refused.
+    pub records_skipped: u64,
+    /// Bytes passed over while looking for the next chunk after the framing was lost.
+    pub bytes_skipped: u64,
+    /// The message time spans (log time, ns) the skipped chunks said they held.
+    pub spans_ns: Vec<(u64, u64)>,
+    /// Messages on channels whose definition was in a lost chunk (skipped).
+    pub messages_on_lost_channels: u64,
+}
+
+impl Corruption {
+    /// True when anything was lost.
+    pub fn any(&self) -> bool {
+        self.chunks_skipped
+            + self.records_skipped
+            + self.bytes_skipped
+            + self.messages_on_lost_channels
+            > 0
+    }
+}
+
+impl std::fmt::Display for Corruption {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} corrupt chunks skipped, {} other records skipped, {} damaged bytes passed over, {} \
+             messages on lost channels",
+            self.chunks_skipped,
+            self.records_skipped,
+            self.bytes_skipped,
+            self.messages_on_lost_channels
+        )?;
+        for (a, b) in &self.spans_ns {
+            write!(
+                f,
+                "; lost {:.3}..{:.3} s",
+                *a as f64 * 1e-9,
+                *b as f64 * 1e-9
+            )?;
+        }
+        Ok(())
+    }
+}
+
 /// Streams the records of a log with bounded memory.
 pub struct LogReader<R: Read> {
-    source: R,
+    framer: Framer<R>,
+    started: bool,
+    /// The record being parsed: its length and whether it is a chunk.
+    current: Option<(usize, bool)>,
+    corruption: Corruption,
     /// The file read, for error messages (`<log>` for other sources).
     path: PathBuf,
     reader: LinearReader,
@@ -529,19 +587,86 @@ fn message_in_place(body: &[u8]) -> (MessageHeader, &[u8]) {
 }
 
 impl<R: Read> LogReader<R> {
+    /// A parser that takes records one at a time (the framer checks the leading magic).
+    fn parser() -> LinearReader {
+        LinearReader::new_with_options(
+            LinearReaderOptions::default()
+                .with_record_length_limit(RECORD_LENGTH_LIMIT)
+                .with_prevalidate_chunk_crcs(true)
+                .with_skip_start_magic(true),
+        )
+    }
+
     pub fn new(source: R) -> Self {
-        let options = LinearReaderOptions::default()
-            .with_record_length_limit(RECORD_LENGTH_LIMIT)
-            .with_prevalidate_chunk_crcs(true);
         LogReader {
-            source,
+            framer: Framer::new(source, RECORD_LENGTH_LIMIT),
+            started: false,
+            current: None,
+            corruption: Corruption::default(),
             path: PathBuf::from("<log>"),
-            reader: LinearReader::new_with_options(options),
+            reader: Self::parser(),
             schemas: HashMap::new(),
             channels: Vec::new(),
             header: None,
             stop_at_header: false,
             done: false,
+        }
+    }
+
+    /// What was passed over as damaged so far.
+    pub fn corruption(&self) -> &Corruption {
+        &self.corruption
+    }
+
+    /// The parser refused the record it was given: drop it (counted) and start a fresh parser
+    /// for the next one.
+    fn skip_current(&mut self) {
+        if let Some((len, chunk)) = self.current.take() {
+            if chunk {
+                self.corruption.chunks_skipped += 1;
+                if let Some(span) = self.framer.chunk_span() {
+                    self.corruption.spans_ns.push(span);
+                }
+            } else {
+                self.corruption.records_skipped += 1;
+            }
+            self.framer.skip_record(len);
+        }
+        self.reader = Self::parser();
+    }
+
+    /// Hands the next whole record to the parser; `Ok(false)` at the end of the file.
+    fn feed_parser(&mut self) -> Result<bool, LogError> {
+        let io = |path: &Path, source| LogError::Io {
+            op: "reading",
+            path: path.to_path_buf(),
+            source,
+        };
+        if let Some((len, _)) = self.current.take() {
+            self.framer.consume(len);
+        }
+        if !self.started {
+            self.started = true;
+            if !self.framer.start_magic().map_err(|e| io(&self.path, e))? {
+                return Err(mcap::McapError::BadMagic.into());
+            }
+        }
+        loop {
+            match self.framer.next().map_err(|e| io(&self.path, e))? {
+                Frame::Record { opcode, len, .. } => {
+                    let buf = self.reader.insert(len);
+                    buf.copy_from_slice(&self.framer.bytes()[..len]);
+                    self.reader.notify_read(len);
+                    self.current = Some((len, opcode == 0x06));
+                    return Ok(true);
+                }
+                Frame::EndMagic => return Ok(false),
+                Frame::Eof { .. } => return Err(LogError::Truncated),
+                Frame::Resynchronised { skipped, .. } => {
+                    self.corruption.bytes_skipped += skipped;
+                    self.reader = Self::parser();
+                }
+            }
         }
     }
 
@@ -606,6 +731,12 @@ impl<R: Read> LogReader<R> {
                     self.done = true;
                     return Ok(None);
                 }
+                // The record handed over is damaged (a chunk's CRC, its compression, a length):
+                // skip it and go on with the next.
+                Some(Err(_)) if self.current.is_some() => {
+                    self.skip_current();
+                    continue;
+                }
                 Some(Err(mcap::McapError::UnexpectedEof)) => {
                     self.done = true;
                     return Err(LogError::Truncated);
@@ -614,7 +745,7 @@ impl<R: Read> LogReader<R> {
                     self.done = true;
                     return Err(e.into());
                 }
-                Some(Ok(LinearReadEvent::ReadRequest(n))) => Err(n),
+                Some(Ok(LinearReadEvent::ReadRequest(_))) => Err(()),
                 // Indexes, statistics and the summary section say nothing the linear read
                 // needs: not parsed.
                 Some(Ok(LinearReadEvent::Record { opcode, .. }))
@@ -634,41 +765,46 @@ impl<R: Read> LogReader<R> {
                     let (header, data) = message_in_place(data);
                     let id = header.channel_id;
                     let Some(Some((ch, kind))) = self.channels.get(usize::from(id)) else {
+                        if self.corruption.any() {
+                            // Its channel was defined in a chunk that was lost.
+                            self.corruption.messages_on_lost_channels += 1;
+                            continue;
+                        }
                         return Err(LogError::UnknownChannel(id));
                     };
                     return Ok(Some(f(ch, *kind, &header, data)));
                 }
                 // A message record too short for its header: the parser says what is wrong.
                 Some(Ok(LinearReadEvent::Record { data, opcode })) => {
-                    Ok(mcap::parse_record(opcode, data)?.into_owned())
+                    match mcap::parse_record(opcode, data) {
+                        Ok(r) => Ok(r.into_owned()),
+                        Err(_) if self.current.is_some() => {
+                            self.skip_current();
+                            continue;
+                        }
+                        Err(e) => return Err(e.into()),
+                    }
                 }
             };
-            let need = match event {
+            match event {
                 Ok(record) => {
                     self.handle(record)?;
                     if self.stop_at_header && self.header.is_some() {
                         return Ok(None);
                     }
-                    continue;
                 }
-                Err(n) => n,
-            };
-            let buf = self.reader.insert(need);
-            let n = loop {
-                match self.source.read(buf) {
-                    Ok(n) => break n,
-                    Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-                    Err(source) => {
+                Err(()) => match self.feed_parser() {
+                    Ok(true) => {}
+                    Ok(false) => {
                         self.done = true;
-                        return Err(LogError::Io {
-                            op: "reading",
-                            path: self.path.clone(),
-                            source,
-                        });
+                        return Ok(None);
                     }
-                }
-            };
-            self.reader.notify_read(n);
+                    Err(e) => {
+                        self.done = true;
+                        return Err(e);
+                    }
+                },
+            }
         }
     }
 

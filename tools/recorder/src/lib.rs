@@ -9,7 +9,7 @@
 //! flushed before stays readable.
 
 use anyhow::{Context, bail};
-use auvnav_log::{LogError, LogHeader, LogReader, LogWriter, write_log_atomically};
+use auvnav_log::{Corruption, LogError, LogHeader, LogReader, LogWriter, write_log_atomically};
 use auvnav_shm_schema::bus::{Bus, BusSubscriber, Sequenced};
 use auvnav_shm_schema::{
     AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1, MagnetometerV1,
@@ -114,6 +114,9 @@ pub struct RecordSummary {
     pub topics: BTreeMap<String, TopicCount>,
     /// Why recording stopped early (a write error), if it did.
     pub error: Option<String>,
+    /// With `--recover`: what was damaged and lost (corrupt chunks, their time spans).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub damaged: Option<String>,
 }
 
 trait Drain {
@@ -170,7 +173,7 @@ fn with_causes(e: &dyn std::error::Error) -> String {
 }
 
 /// Rewrites the readable part of `path` as a complete log at `out`; returns the messages kept.
-pub fn recover(path: &Path, out: &Path) -> anyhow::Result<(u64, Option<String>)> {
+pub fn recover(path: &Path, out: &Path) -> anyhow::Result<(u64, Option<String>, Corruption)> {
     let mut reader = LogReader::open(path)?;
     let header = reader
         .read_header()
@@ -194,7 +197,7 @@ pub fn recover(path: &Path, out: &Path) -> anyhow::Result<(u64, Option<String>)>
         }
         Ok(())
     })?;
-    Ok((kept, stopped))
+    Ok((kept, stopped, reader.corruption().clone()))
 }
 
 /// Runs `auvnav record`.
@@ -205,14 +208,27 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
             .clone()
             .unwrap_or_else(|| src.with_extension("recovered.mcap"));
         refuse_overwrite(&out, a.force)?;
-        let (kept, stopped) = recover(src, &out)?;
+        let (kept, stopped, corruption) = recover(src, &out)?;
+        let damaged = corruption.any().then(|| corruption.to_string());
         let summary = RecordSummary {
             out: out.display().to_string(),
             messages: kept,
             error: stopped,
+            damaged: damaged.clone(),
             ..Default::default()
         };
         print(a.json, &summary);
+        if let Some(d) = damaged {
+            // Every intact chunk is in the recovered log; what the damaged ones held is gone.
+            bail!(
+                "{}: damaged, {kept} messages recovered into {}; lost: {d}",
+                src.display(),
+                summary.out
+            );
+        }
+        if kept == 0 {
+            bail!("{}: no message could be recovered", src.display());
+        }
         return Ok(summary);
     }
     let Some(out) = &a.out else {
@@ -406,6 +422,9 @@ fn print(json: bool, s: &RecordSummary) {
         }
         if let Some(e) = &s.error {
             println!("  stopped: {e}");
+        }
+        if let Some(d) = &s.damaged {
+            println!("  damaged: {d}");
         }
     }
 }

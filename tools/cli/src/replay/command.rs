@@ -81,19 +81,33 @@ pub fn run_log(
                 Ok(())
             }
         });
+        let damaged = |stopped: Option<String>| -> Option<String> {
+            let c = reader_corruption(&reader);
+            match (stopped, c) {
+                (s, None) => s,
+                (None, Some(c)) => Some(format!("damaged: {c}")),
+                (Some(s), Some(c)) => Some(format!("{s}; damaged: {c}")),
+            }
+        };
         match processed {
             Ok(Some(r)) => r?,
             Ok(None) => {
                 replay.finish(out)?;
-                return Ok((header, None));
+                return Ok((header, damaged(None)));
             }
             Err(e @ (LogError::Truncated | LogError::Mcap(_))) => {
                 replay.finish(out)?;
-                return Ok((header, Some(e.to_string())));
+                return Ok((header, damaged(Some(e.to_string()))));
             }
             Err(e) => return Err(e).with_context(|| format!("reading {}", log.display())),
         }
     }
+}
+
+/// What a reader passed over as damaged, when it did.
+fn reader_corruption<R: std::io::Read>(reader: &LogReader<R>) -> Option<String> {
+    let c = reader.corruption();
+    c.any().then(|| c.to_string())
 }
 
 /// `path` + `.partial`: where a file is written before it is renamed into place.
@@ -382,7 +396,7 @@ pub fn print_report(r: &ReplayReport) {
         );
     }
     if let Some(e) = &r.log_error {
-        println!("  the log ended early: {e}");
+        println!("  the log was not read whole: {e}");
     }
     if let Some(c) = &r.recorded_comparison {
         println!(
