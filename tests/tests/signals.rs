@@ -75,3 +75,84 @@ fn the_bridge_survives_sigcont() {
     .expect("spawn");
     survives_sigcont_and_stops_on_sigterm(p);
 }
+
+/// The daemon needs no network: run in a network namespace with no interface up (as the unit's
+/// `PrivateNetwork=yes` runs it), it navigates from IMU samples on the shared-memory bus.
+#[test]
+fn the_daemon_navigates_in_a_network_namespace_without_interfaces() {
+    use auvnav_shm_schema::bus::Bus;
+    use auvnav_shm_schema::{ImuSampleV1, NavSolutionV1, qos, topic};
+    let unshare = Command::new("unshare")
+        .args(["-n", "true"])
+        .status()
+        .is_ok_and(|s| s.success());
+    if !unshare {
+        assert!(
+            std::env::var("CI").is_err(),
+            "unshare -n is needed under CI (root, util-linux)"
+        );
+        eprintln!("skipped: `unshare -n` is not available here (needs root)");
+        return;
+    }
+    let dir = TempDir::new("netns");
+    let prefix = unique("netns");
+    let cfg = dir.path().join("auvnavd.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "prefix = \"{prefix}\"\n[initial]\nlatitude_deg = 45.0\nlongitude_deg = 10.0\nheight_m = 0.0\n\
+             euler_deg = [0.0, 0.0, 0.0]\n[checkpoint]\npath = \"{}\"\n",
+            dir.path().join("cp.json").display()
+        ),
+    )
+    .expect("config");
+    let bus = Bus::new(&unique("netnstest"), &prefix).expect("bus");
+    let mut imu = bus
+        .publisher::<ImuSampleV1>(topic::IMU, qos::SENSOR)
+        .expect("publisher");
+    let mut sol = bus
+        .subscriber::<NavSolutionV1>(topic::NAV_SOLUTION, qos::NAVIGATION)
+        .expect("subscriber");
+    let mut daemon = Proc::spawn(
+        "auvnavd",
+        Command::new("unshare")
+            .arg("-n")
+            .arg(binary("auvnavd"))
+            .arg("--config")
+            .arg(&cfg),
+    )
+    .expect("spawn");
+    std::thread::sleep(Duration::from_millis(500));
+    let ours = std::fs::read_link("/proc/self/ns/net").expect("our namespace");
+    let theirs = std::fs::read_link(format!("/proc/{}/ns/net", daemon.pid())).expect("its");
+    assert_ne!(
+        ours, theirs,
+        "the daemon runs in the host's network namespace"
+    );
+    let mut got = 0;
+    for k in 1..=300u64 {
+        let m = ImuSampleV1 {
+            host_time_ns: auvnav_shm_schema::clock::monotonic_ns(),
+            device_time_ns: k * 10_000_000,
+            angular: [1e-5, 0.0, 7.3e-5],
+            specific: [0.0, 0.0, -9.79],
+            interval_s: 0.01,
+            status: ImuSampleV1::STATUS_GYRO_VALID
+                | ImuSampleV1::STATUS_ACCEL_VALID
+                | ImuSampleV1::STATUS_DEVICE_TIME_VALID,
+            ..Default::default()
+        };
+        imu.publish(m).expect("publish");
+        std::thread::sleep(Duration::from_millis(10));
+        while sol.receive().expect("receive").is_some() {
+            got += 1;
+        }
+    }
+    assert!(
+        got > 200,
+        "{got} solutions from the daemon in its namespace"
+    );
+    assert!(dir.path().join("cp.json").exists(), "no checkpoint written");
+    let status = daemon.terminate(Duration::from_secs(10));
+    assert!(status.is_some_and(|s| s.success()), "{status:?}");
+}
