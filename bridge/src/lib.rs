@@ -26,6 +26,7 @@ use auvnav_shm_schema::{
 };
 use serde::{Deserialize, Serialize};
 
+pub mod gate;
 pub mod live;
 pub mod live_client;
 

@@ -50,6 +50,23 @@ pub struct LiveConfig {
     /// Period of the health message (s, 0.05..60, default 1).
     #[serde(default = "crate::default_health_period")]
     pub health_period_s: f64,
+    /// Web origins allowed to open the stream (`scheme://host[:port]`, `*` for any). A browser
+    /// sends the page's origin with the WebSocket upgrade; any other page open in the operator's
+    /// browser is refused (403). Clients that send no origin (the Foxglove desktop app, scripts)
+    /// are let through. Default `["https://app.foxglove.dev"]`.
+    #[serde(default = "default_origins")]
+    pub allowed_origins: Vec<String>,
+    /// Clients served at once (1..=1000); more are refused (503). Default 8.
+    #[serde(default = "default_max_connections")]
+    pub max_connections: usize,
+}
+
+fn default_origins() -> Vec<String> {
+    vec!["https://app.foxglove.dev".into()]
+}
+
+fn default_max_connections() -> usize {
+    8
 }
 
 /// One `[[rate_limit]]`: at most `max_rate_hz` messages per second on each matching topic.
@@ -87,6 +104,8 @@ impl Default for LiveConfig {
             rate_limit: Vec::new(),
             backlog: default_backlog(),
             health_period_s: crate::default_health_period(),
+            allowed_origins: default_origins(),
+            max_connections: default_max_connections(),
         }
     }
 }
@@ -116,6 +135,22 @@ impl LiveConfig {
             return Err(format!(
                 "health_period_s = {}: expected 0.05..=60",
                 self.health_period_s
+            ));
+        }
+        if let Some(o) = self
+            .allowed_origins
+            .iter()
+            .find(|o| !crate::gate::is_origin(o))
+        {
+            return Err(format!(
+                "allowed_origins: {o:?}: expected an origin, scheme://host[:port] \
+                 (https://app.foxglove.dev), or \"*\""
+            ));
+        }
+        if !(1..=1000).contains(&self.max_connections) {
+            return Err(format!(
+                "max_connections = {}: expected 1..=1000",
+                self.max_connections
             ));
         }
         if !(16..=1_000_000).contains(&self.backlog) {

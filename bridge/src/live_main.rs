@@ -10,6 +10,7 @@ use clap::Parser;
 use foxglove::{ChannelBuilder, Context, PartialMetadata, RawChannel, Schema, WebSocketServer};
 use std::process::ExitCode;
 use std::sync::Arc;
+use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 #[derive(Parser)]
@@ -82,9 +83,11 @@ fn run(cfg: &LiveConfig, slow: &SlowClientReports) -> Result<(), String> {
                 .context(&ctx)
                 .build::<foxglove::schemas::LocationFix>()
         });
+    // The SDK's server listens on loopback only; clients reach it through the gate
+    // (`auvnav_bridge::gate`: origin check and connection limit) on the configured address.
     let server = WebSocketServer::new()
         .name(format!("auvnav {} ({})", cfg.name, cfg.prefix))
-        .bind(cfg.listen_address.clone(), cfg.port)
+        .bind("127.0.0.1", 0)
         .context(&ctx)
         .message_backlog_size(cfg.backlog)
         // Read-only: no client publishing, services, parameters or assets.
@@ -96,14 +99,23 @@ fn run(cfg: &LiveConfig, slow: &SlowClientReports) -> Result<(), String> {
                 cfg.listen_address, cfg.port
             )
         })?;
+    let gate = auvnav_bridge::gate::Gate::start(
+        &cfg.listen_address,
+        cfg.port,
+        std::net::SocketAddr::from(([127, 0, 0, 1], server.port())),
+        cfg.allowed_origins.clone(),
+        cfg.max_connections,
+    )
+    .map_err(|x| format!("listening on {}:{}: {x}", cfg.listen_address, cfg.port))?;
+    let gate_counters = gate.counters.clone();
     tracing::info!(
         address = %cfg.listen_address,
-        port = server.port(),
+        port = gate.port,
         topics = served.len(),
         "{}: live view on ws://{}:{} ({} topics of {}/)",
         cfg.name,
         cfg.listen_address,
-        server.port(),
+        gate.port,
         served.len(),
         cfg.prefix
     );
@@ -151,14 +163,18 @@ fn run(cfg: &LiveConfig, slow: &SlowClientReports) -> Result<(), String> {
             }
         }
         if now >= next_health {
-            let m = health(cfg, &served, slow, ProcessState::Running);
+            let mut m = health(cfg, &served, slow, ProcessState::Running);
+            m.invalid += refused(&gate_counters);
             health_pub.publish(m).map_err(|x| x.to_string())?;
             next_health = now + health_ns;
         }
         Ok(())
     });
-    let _ = health_pub.publish(health(cfg, &served, slow, ProcessState::Stopping));
+    let mut last = health(cfg, &served, slow, ProcessState::Stopping);
+    last.invalid += refused(&gate_counters);
+    let _ = health_pub.publish(last);
     let clients = server.client_count();
+    gate.stop();
     server.stop().wait_blocking();
     let sum = |f: fn(&Served) -> u64| served.iter().map(f).sum::<u64>();
     tracing::info!(
@@ -169,16 +185,25 @@ fn run(cfg: &LiveConfig, slow: &SlowClientReports) -> Result<(), String> {
         clients,
         "{}: stopped: {} messages served ({} solutions on {LOCATION_TOPIC}), {} held back by \
          rate limits, {} failed, {} reports of a client not keeping up, {} clients connected at \
-         the end",
+         the end, {} connections accepted, {} refused for their origin, {} refused over \
+         max_connections",
         cfg.name,
         sum(|s| s.logged),
         solutions_mapped,
         sum(|s| s.rate_limited),
         sum(|s| s.failed),
         slow.count(),
-        clients
+        clients,
+        gate_counters.accepted.load(Ordering::Relaxed),
+        gate_counters.refused_origin.load(Ordering::Relaxed),
+        gate_counters.refused_limit.load(Ordering::Relaxed)
     );
     result
+}
+
+/// Connections the gate refused (origin or limit): counted as invalid in the health.
+fn refused(c: &auvnav_bridge::gate::GateCounters) -> u64 {
+    c.refused_origin.load(Ordering::Relaxed) + c.refused_limit.load(Ordering::Relaxed)
 }
 
 /// The live view's health: `frames` messages served, `drops` held back by a rate limit or

@@ -228,7 +228,7 @@ fn every_number_of_every_configuration_is_range_checked() {
 fn addresses_paths_and_names_are_checked() {
     let dir = TempDir::new("cfgother");
     let d = dir.path();
-    let cases: [(&str, &str, CheckArgs, String, &str); 4] = [
+    let cases: [(&str, &str, CheckArgs, String, &str); 5] = [
         (
             "auvnavd",
             "empty prefix",
@@ -256,6 +256,13 @@ fn addresses_paths_and_names_are_checked() {
             check_flag,
             "protocol = \"kvh1750\"\nstage_times_csv = \"/nonexistent-folder/t.csv\"\n[serial]\nport = \"/dev/ttyX\"\n".into(),
             "stage_times_csv",
+        ),
+        (
+            "auvnav-live",
+            "an allowed origin that is not an origin",
+            check_file,
+            "allowed_origins = [\"not an origin\"]\n".into(),
+            "allowed_origins",
         ),
     ];
     for (bin, what, check, text, key) in cases {

@@ -156,3 +156,70 @@ fn the_daemon_navigates_in_a_network_namespace_without_interfaces() {
     let status = daemon.terminate(Duration::from_secs(10));
     assert!(status.is_some_and(|s| s.success()), "{status:?}");
 }
+
+/// The live view's gate: a WebSocket upgrade from a web page of another origin is refused (403),
+/// one without an origin (the desktop app) or from an allowed origin is served (101), and
+/// connections beyond `max_connections` are refused (503).
+#[test]
+fn the_live_view_checks_origins_and_limits_connections() {
+    use std::io::{Read, Write};
+    use std::net::TcpStream;
+    let dir = TempDir::new("gate");
+    let prefix = unique("gate");
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port();
+    let cfg = dir.path().join("live.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "prefix = \"{prefix}\"\nport = {port}\nmax_connections = 2\n\
+             allowed_origins = [\"https://app.foxglove.dev\"]\n"
+        ),
+    )
+    .expect("config");
+    let mut live = Proc::spawn(
+        "auvnav-live",
+        Command::new(binary("auvnav-live"))
+            .arg("--config")
+            .arg(&cfg),
+    )
+    .expect("spawn");
+    let upgrade = |origin: Option<&str>| -> (String, TcpStream) {
+        let mut s = None;
+        for _ in 0..100 {
+            match TcpStream::connect(("127.0.0.1", port)) {
+                Ok(c) => {
+                    s = Some(c);
+                    break;
+                }
+                Err(_) => std::thread::sleep(Duration::from_millis(50)),
+            }
+        }
+        let mut s = s.expect("the live view listens");
+        let origin = origin.map_or(String::new(), |o| format!("Origin: {o}\r\n"));
+        write!(
+            s,
+            "GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+             Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\
+             Sec-WebSocket-Protocol: foxglove.sdk.v1\r\n{origin}\r\n"
+        )
+        .expect("request");
+        s.set_read_timeout(Some(Duration::from_secs(5)))
+            .expect("timeout");
+        let mut b = [0u8; 12];
+        s.read_exact(&mut b).expect("a response");
+        (String::from_utf8_lossy(&b).into_owned(), s)
+    };
+    let (evil, _) = upgrade(Some("https://evil.example"));
+    assert!(evil.starts_with("HTTP/1.1 403"), "{evil}");
+    let (desktop, _a) = upgrade(None);
+    assert!(desktop.starts_with("HTTP/1.1 101"), "{desktop}");
+    let (browser, _b) = upgrade(Some("https://app.foxglove.dev"));
+    assert!(browser.starts_with("HTTP/1.1 101"), "{browser}");
+    let (third, _) = upgrade(None);
+    assert!(third.starts_with("HTTP/1.1 503"), "{third}");
+    let status = live.terminate(Duration::from_secs(10));
+    assert!(status.is_some_and(|s| s.success()), "{status:?}");
+}
