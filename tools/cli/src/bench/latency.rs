@@ -401,6 +401,11 @@ pub fn e2e(rate_hz: f64, seconds: f64, live_view: bool) -> anyhow::Result<E2eLat
             velocity_ned_m_s: [0.0; 3],
             euler_deg: [0.0; 3],
         }),
+        // As deployed: a checkpoint every 2 s (written by the daemon's own thread).
+        checkpoint: auvnav_core::config::CheckpointConfig {
+            path: dir.join("auvnavd.checkpoint.json").display().to_string(),
+            ..Default::default()
+        },
         ..Default::default()
     };
     std::fs::write(&daemon_cfg, daemon.to_toml()?)?;
