@@ -21,7 +21,8 @@
 //! process runs on, or simulated time in a simulated log) and device time (the sensor's own clock).
 //!
 //! The zero-copy derive of iceoryx2 emits `unsafe impl`, so this crate cannot forbid unsafe code;
-//! it contains no hand-written `unsafe`. The host clock is read through `nix` (safe wrappers).
+//! its one hand-written `unsafe` sets SIGHUP to be ignored (`logging::ignore_hangup`). The host
+//! clock is read through `nix` (safe wrappers).
 
 pub mod bus;
 pub mod clock;

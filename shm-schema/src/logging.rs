@@ -71,6 +71,17 @@ pub fn init() {
     init_with(None);
 }
 
+/// Ignores SIGHUP in this process (and the programs it starts): the on-board processes offer no
+/// configuration reload, and a hang-up (a closed terminal, a stray `kill -HUP`) must not end
+/// navigation. Only SIGTERM and SIGINT stop them. Called first thing by [`init`]. (Blocking the
+/// signal is not enough: a blocked mask does not survive every library's threads.)
+pub fn ignore_hangup() {
+    use nix::sys::signal::{SigHandler, Signal, signal};
+    // SAFETY: SIG_IGN installs no handler, so no code runs in signal context; the previous
+    // disposition (the default, terminate) is not needed.
+    let _ = unsafe { signal(Signal::SIGHUP, SigHandler::SigIgn) };
+}
+
 /// A layer given to [`init_with`]: it sees every event of every level, before `RUST_LOG`'s filter
 /// (which applies to the printed lines only), and should filter for itself.
 pub type ExtraLayer = Box<dyn Layer<Registry> + Send + Sync + 'static>;
@@ -78,6 +89,7 @@ pub type ExtraLayer = Box<dyn Layer<Registry> + Send + Sync + 'static>;
 /// [`init`] with one more layer beside the printed lines: a process counting a library's
 /// reports (the live view counts the WebSocket server's slow-client reports), say.
 pub fn init_with(extra: Option<ExtraLayer>) {
+    ignore_hangup();
     use iceoryx2::prelude::{LogLevel, set_log_level_from_env_or};
     set_log_level_from_env_or(LogLevel::Warn);
     let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));

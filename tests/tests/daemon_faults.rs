@@ -251,6 +251,7 @@ fn killed_driver_degrades_and_recovers_and_a_killed_daemon_is_replaced() {
     // 3. SIGCONT alone, and a SIGSTOP/SIGCONT pair, stop nothing.
     for p in [&daemon, &imu, &dvl2, &recorder] {
         signal(p, "-CONT");
+        signal(p, "-HUP");
     }
     signal(&daemon, "-STOP");
     std::thread::sleep(Duration::from_millis(200));
@@ -258,10 +259,12 @@ fn killed_driver_degrades_and_recovers_and_a_killed_daemon_is_replaced() {
     let continued = Instant::now();
     w.poll(&mut sol, &mut health, Duration::from_secs(1));
     for p in [&mut daemon, &mut imu, &mut dvl2, &mut recorder] {
+        let st = p.child.try_wait();
         assert!(
-            matches!(p.child.try_wait(), Ok(None)),
-            "{} stopped after SIGCONT",
-            p.name
+            matches!(st, Ok(None)),
+            "{} stopped after SIGCONT and SIGHUP ({st:?}): {}",
+            p.name,
+            std::fs::read_to_string(d.join(format!("{}.err", p.name))).unwrap_or_default()
         );
     }
     assert!(

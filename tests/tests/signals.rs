@@ -1,5 +1,6 @@
-//! Only SIGTERM and SIGINT stop a process: SIGCONT alone, and a SIGSTOP/SIGCONT pair (a job
-//! control `fg`, a debugger, a container runtime), leave the bridge and the live view running;
+//! Only SIGTERM and SIGINT stop a process: SIGCONT alone, SIGHUP (no configuration reload is
+//! offered), and a SIGSTOP/SIGCONT pair (a job control `fg`, a debugger, a container runtime),
+//! leave the bridge and the live view running;
 //! SIGTERM then stops them cleanly (status 0). The daemon, drivers and recorder are tried the same
 //! way in `daemon_faults`.
 
@@ -24,13 +25,15 @@ fn survives_sigcont_and_stops_on_sigterm(mut p: Proc) {
     );
     signal(&p, "-CONT");
     std::thread::sleep(Duration::from_millis(300));
+    signal(&p, "-HUP");
+    std::thread::sleep(Duration::from_millis(300));
     signal(&p, "-STOP");
     std::thread::sleep(Duration::from_millis(300));
     signal(&p, "-CONT");
     std::thread::sleep(Duration::from_millis(700));
     assert!(
         matches!(p.child.try_wait(), Ok(None)),
-        "{} stopped on SIGCONT",
+        "{} stopped on SIGCONT or SIGHUP",
         p.name
     );
     let status = p.terminate(Duration::from_secs(10));
