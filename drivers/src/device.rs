@@ -213,8 +213,15 @@ impl DeviceDecoder {
         self.counters
     }
 
-    /// Counts a gap in a device counter that wraps at `modulus`.
+    /// Counts a gap in a device counter that wraps at `modulus`. A counter at or beyond the
+    /// modulus cannot come from the device (a corrupted value under a valid checksum): counted
+    /// out of range, and the next sample starts the count again.
     fn device_counter(&mut self, counter: u16, modulus: u32) {
+        if u32::from(counter) >= modulus {
+            self.counters.out_of_range += 1;
+            self.last_counter = None;
+            return;
+        }
         if let Some(last) = self.last_counter {
             let step = (u32::from(counter) + modulus - u32::from(last)) % modulus;
             if step > 1 {

@@ -513,6 +513,21 @@ impl NavSolutionV1 {
     pub const HEALTH_MAGNETOMETER: u32 = 1 << 4;
     pub const HEALTH_GNSS: u32 = 1 << 5;
 
+    /// True when every floating-point field is finite (what a consumer may steer by).
+    pub fn all_finite(&self) -> bool {
+        [self.latitude_rad, self.longitude_rad, self.height_m]
+            .iter()
+            .chain(&self.velocity_ned_m_s)
+            .chain(&self.quaternion_body_to_ned)
+            .chain(&self.euler_rad)
+            .chain(&self.position_std_ned_m)
+            .chain(&self.velocity_std_ned_m_s)
+            .chain(&self.attitude_std_rad)
+            .chain(&self.gyro_bias_rad_s)
+            .chain(&self.accel_bias_m_s2)
+            .all(|x| x.is_finite())
+    }
+
     /// The mode field as a [`NavMode`], or the raw value when it is out of range.
     pub fn nav_mode(&self) -> Result<NavMode, u32> {
         NavMode::try_from(self.mode)

@@ -97,6 +97,15 @@ pub mod processes {
         }
     }
 
+    /// Sends `sig` (as `kill` names it: `-CONT`, `-HUP`, …) to `p`.
+    pub fn signal(p: &Proc, sig: &str) {
+        let ok = Command::new("kill")
+            .args([sig, &p.pid().to_string()])
+            .status()
+            .expect("kill");
+        assert!(ok.success(), "kill {sig} {}", p.pid());
+    }
+
     /// A child process that is killed if the test ends before it was stopped: the harness the
     /// `auvnav` program uses for its own processes.
     pub use auvnav_tools::process::ChildProcess as Proc;

@@ -7,18 +7,10 @@
 use auvnav_log::{LogMessage, LogReader};
 use auvnav_shm_schema::bus::Bus;
 use auvnav_shm_schema::{NavMode, NavSolutionV1, ProcessHealthV1, ProcessState, qos, topic};
-use auvnav_tests::processes::{Proc, TempDir, binary, unique};
+use auvnav_tests::processes::{Proc, TempDir, binary, signal, unique};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
-
-fn signal(p: &Proc, sig: &str) {
-    let ok = Command::new("kill")
-        .args([sig, &p.pid().to_string()])
-        .status()
-        .expect("kill");
-    assert!(ok.success(), "kill {sig} {}", p.pid());
-}
 
 /// Horizontal distance between two solutions (m).
 fn distance(a: &NavSolutionV1, b: &NavSolutionV1) -> f64 {

@@ -91,14 +91,7 @@ fn run(
 }
 
 fn all_finite(s: &NavSolutionV1) -> bool {
-    [s.latitude_rad, s.longitude_rad, s.height_m]
-        .iter()
-        .chain(&s.velocity_ned_m_s)
-        .chain(&s.quaternion_body_to_ned)
-        .chain(&s.position_std_ned_m)
-        .chain(&s.velocity_std_ned_m_s)
-        .chain(&s.attitude_std_rad)
-        .all(|x| x.is_finite())
+    s.all_finite()
 }
 
 /// Horizontal error (m) and the published horizontal standard deviation (m, the larger axis) of
@@ -413,4 +406,127 @@ fn plausibility_applies_to_increments_as_rates() {
         ..m
     };
     assert!(auvnav_core::nav_core::plausible_rates(&nan, 1e9, 1e9).is_none());
+}
+
+/// Every kind of sensor message with arbitrary values (random bits in every field, or one field
+/// set to an extreme: NaN, ±infinity, ±1e30, 1e-300), mixed into a docking run with tight USBL
+/// fusion (AUKF), the magnetometer aid and the DVL parameter states switched on: the session never
+/// panics and never gives a solution holding NaN. (Debug builds also check every integer
+/// operation for overflow here.)
+#[test]
+fn arbitrary_sensor_values_never_give_a_nan_solution() {
+    use auvnav_sim::StationGeometry;
+    use auvnav_tools::usbl::navigation_config;
+    let scenario = Scenario::load("docking").expect("scenario");
+    let station = StationGeometry::from_scenario(&scenario).expect("station");
+    let msgs = sim::simulate_to_vec(&SimConfig {
+        effects: scenario.effects().expect("effects"),
+        scenario,
+        seed: 33,
+        duration_s: Some(200.0),
+    })
+    .expect("simulate")
+    .0;
+    let mut nav = navigation_config(
+        &station,
+        auvnav_core::aid::usbl::Coupling::Tight,
+        auvnav_core::aid::usbl::UsblFilter::Aukf,
+    );
+    nav.magnetometer = Some(auvnav_core::aid::magnetometer::MagnetometerConfig {
+        model_date: Some(2026.5),
+        ..Default::default()
+    });
+    nav.estimate_dvl_mounting = true;
+    nav.estimate_dvl_scale = true;
+    nav.estimate_dvl_lever_arm = true;
+    nav.imu_dt_from_device_time = true;
+    let extremes = [
+        f64::NAN,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        1e30,
+        -1e30,
+        1e-300,
+        0.0,
+    ];
+    let mut x = 0x853c_49e6_748f_ea9bu64;
+    let mut next = move || {
+        x ^= x >> 12;
+        x ^= x << 25;
+        x ^= x >> 27;
+        x.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    };
+    // Randomises every byte of a message after its host time (its first 8 bytes: the driver's
+    // clock, not the device's), device time and sequence included, or sets one f64 field after
+    // the first 24 bytes to an extreme.
+    fn scramble<T: bytemuck::Pod>(m: &mut T, r: u64, r2: u64, extremes: &[f64]) {
+        let bytes = bytemuck::bytes_of_mut(m);
+        let n = bytes.len();
+        if r.is_multiple_of(2) {
+            for (i, b) in bytes[8..].iter_mut().enumerate() {
+                *b = (r2.rotate_left((i % 64) as u32) >> (i % 8)) as u8 ^ (i as u8);
+            }
+        } else {
+            let slots = (n - 24) / 8;
+            let k = 24 + 8 * (r2 as usize % slots.max(1));
+            let v = extremes[(r >> 8) as usize % extremes.len()];
+            bytes[k..k + 8].copy_from_slice(&v.to_le_bytes());
+        }
+    }
+    let mut scrambled = 0u64;
+    let r = run(
+        &msgs,
+        nav,
+        |m| {
+            let roll = next();
+            if !roll.is_multiple_of(10) {
+                return Some(m);
+            }
+            scrambled += 1;
+            let (a, b) = (next(), next());
+            Some(match m {
+                SensorMessage::Imu(mut v) => {
+                    scramble(&mut v, a, b, &extremes);
+                    SensorMessage::Imu(v)
+                }
+                SensorMessage::Dvl(mut v) => {
+                    scramble(&mut v, a, b, &extremes);
+                    SensorMessage::Dvl(v)
+                }
+                SensorMessage::Depth(mut v) => {
+                    scramble(&mut v, a, b, &extremes);
+                    SensorMessage::Depth(v)
+                }
+                SensorMessage::Gnss(mut v) => {
+                    scramble(&mut v, a, b, &extremes);
+                    SensorMessage::Gnss(v)
+                }
+                SensorMessage::Usbl(mut v) => {
+                    scramble(&mut v, a, b, &extremes);
+                    SensorMessage::Usbl(v)
+                }
+                SensorMessage::Magnetometer(mut v) => {
+                    scramble(&mut v, a, b, &extremes);
+                    SensorMessage::Magnetometer(v)
+                }
+            })
+        },
+        |_, _| {},
+    );
+    assert!(scrambled > 1000, "{scrambled} messages scrambled");
+    let bad = r.solutions.iter().filter(|s| !all_finite(s)).count();
+    assert_eq!(bad, 0, "{bad} of {} solutions hold NaN", r.solutions.len());
+    assert!(r.solutions.len() > 10_000);
+    let c = r.session.navigator().expect("navigating").counters();
+    eprintln!(
+        "{scrambled} scrambled; {} solutions; invalid: imu {} dvl {} depth {} usbl {} magnetometer {}; clock jumps {}; reinitialisations {}",
+        r.solutions.len(),
+        c.imu_invalid,
+        c.dvl_invalid,
+        c.depth_invalid,
+        c.usbl_invalid,
+        c.magnetometer_invalid,
+        c.imu_clock_jumps,
+        r.session.reinitialisations
+    );
 }

@@ -4,17 +4,9 @@
 //! SIGTERM then stops them cleanly (status 0). The daemon, drivers and recorder are tried the same
 //! way in `daemon_faults`.
 
-use auvnav_tests::processes::{Proc, TempDir, binary, unique};
+use auvnav_tests::processes::{Proc, TempDir, binary, signal, unique};
 use std::process::Command;
 use std::time::Duration;
-
-fn signal(p: &Proc, sig: &str) {
-    let ok = Command::new("kill")
-        .args([sig, &p.pid().to_string()])
-        .status()
-        .expect("kill");
-    assert!(ok.success(), "kill {sig} {}", p.pid());
-}
 
 fn survives_sigcont_and_stops_on_sigterm(mut p: Proc) {
     std::thread::sleep(Duration::from_millis(1500));

@@ -239,17 +239,7 @@ impl Navigator {
     /// the state or covariance is not sound; the whole covariance is examined only when it changed
     /// since the last call (at the propagation interval or after an aid), the solution always.
     pub fn still_sound(&mut self, sol: &NavSolutionV1) -> bool {
-        let finite = [sol.latitude_rad, sol.longitude_rad, sol.height_m]
-            .iter()
-            .chain(&sol.velocity_ned_m_s)
-            .chain(&sol.quaternion_body_to_ned)
-            .chain(&sol.euler_rad)
-            .chain(&sol.position_std_ned_m)
-            .chain(&sol.velocity_std_ned_m_s)
-            .chain(&sol.attitude_std_rad)
-            .chain(&sol.gyro_bias_rad_s)
-            .chain(&sol.accel_bias_m_s2)
-            .all(|x| x.is_finite());
+        let finite = sol.all_finite();
         if !finite {
             return false;
         }
