@@ -48,6 +48,7 @@ impl Bus {
             .name(&node_name)
             .create::<ipc::Service>()
             .map_err(|e| err(format!("creating node {name:?}"), e))?;
+        restrict_global_segment(std::path::Path::new("/dev/shm"));
         // The first wait installs the signal handlers.
         let bus = Bus {
             node,
@@ -285,4 +286,36 @@ pub fn wait(
         Err(ListenerWaitError::InterruptSignal) => Ok(0),
         Err(e) => Err(err(format!("wait on {:?}", listener.name()), e)),
     }
+}
+
+/// iceoryx2 creates its global management segment (`/dev/shm/iox2_…global_mgmt`) readable and
+/// writable by every user, whatever the umask. A segment this process owns loses the permissions
+/// of other users (0666 → 0660): the bus stays open to the processes of the deployment's user and
+/// group (the units run as `auvnav:auvnav`), and any other user of the host can neither read nor
+/// corrupt it. A segment owned by another user is left as it is (it cannot be changed from here).
+/// Returns how many segments were restricted.
+pub fn restrict_global_segment(shm: &std::path::Path) -> usize {
+    use std::os::unix::fs::{MetadataExt, PermissionsExt};
+    let me = nix::unistd::geteuid().as_raw();
+    let Ok(entries) = std::fs::read_dir(shm) else {
+        return 0;
+    };
+    let mut n = 0;
+    for e in entries.flatten() {
+        let name = e.file_name();
+        let name = name.to_string_lossy();
+        if !(name.starts_with("iox2_") && name.ends_with("global_mgmt")) {
+            continue;
+        }
+        let Ok(meta) = e.metadata() else { continue };
+        let mode = meta.mode() & 0o777;
+        if meta.uid() == me
+            && mode & 0o007 != 0
+            && std::fs::set_permissions(e.path(), std::fs::Permissions::from_mode(mode & !0o007))
+                .is_ok()
+        {
+            n += 1;
+        }
+    }
+    n
 }

@@ -215,3 +215,35 @@ fn modes_convert_and_reject_unknown_values() {
     assert_eq!(AidSource::try_from(5), Ok(AidSource::UsblSlantRange));
     assert_eq!(AidSource::try_from(0), Err(0));
 }
+
+/// The bus's global management segment, which iceoryx2 creates world-writable, keeps no
+/// permission for other users once a bus is opened by its owner.
+#[test]
+fn the_global_management_segment_is_not_world_writable() {
+    use std::os::unix::fs::{MetadataExt, PermissionsExt};
+    let bus =
+        auvnav_shm_schema::bus::Bus::new("layoutperm", &format!("perm{}", std::process::id()))
+            .expect("bus");
+    let me = std::fs::metadata("/proc/self").expect("proc").uid();
+    let mut seen = 0;
+    for e in std::fs::read_dir("/dev/shm").expect("/dev/shm").flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if name.starts_with("iox2_") && name.ends_with("global_mgmt") {
+            let m = e.metadata().expect("metadata");
+            if m.uid() == me {
+                seen += 1;
+                assert_eq!(
+                    m.permissions().mode() & 0o007,
+                    0,
+                    "{name} is open to other users: {:o}",
+                    m.permissions().mode()
+                );
+            }
+        }
+    }
+    if seen == 0 {
+        // Another user of this host created it first: only they can change it.
+        eprintln!("the management segment belongs to another user; nothing to check");
+    }
+    drop(bus);
+}
