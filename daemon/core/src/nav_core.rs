@@ -230,10 +230,20 @@ impl NavCore {
         let dv = a * dt;
         let dp = 0.5 * a * dt * dt;
         let da = (self.timing.gap_rate_std_rad_s * dt).min(std::f64::consts::PI);
+        self.add_variances(dp * dp, dv * dv, da * da);
+    }
+
+    /// Adds to the variances of every position (m²), velocity ((m/s)²) and attitude (rad²) axis.
+    pub(crate) fn add_variances(
+        &mut self,
+        position_m2: f64,
+        velocity_m2_s2: f64,
+        attitude_rad2: f64,
+    ) {
         for i in 0..3 {
-            self.kf.p[(ekf::POS + i, ekf::POS + i)] += dp * dp;
-            self.kf.p[(ekf::VEL + i, ekf::VEL + i)] += dv * dv;
-            self.kf.p[(ekf::ATT + i, ekf::ATT + i)] += da * da;
+            self.kf.p[(ekf::POS + i, ekf::POS + i)] += position_m2;
+            self.kf.p[(ekf::VEL + i, ekf::VEL + i)] += velocity_m2_s2;
+            self.kf.p[(ekf::ATT + i, ekf::ATT + i)] += attitude_rad2;
         }
     }
 

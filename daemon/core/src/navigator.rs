@@ -267,10 +267,7 @@ impl Navigator {
     /// Adds to the position (m²) and velocity ((m/s)²) variances: what the vehicle may have done
     /// while nobody watched.
     pub fn grow_variances(&mut self, position_m2: f64, velocity_m2_s2: f64) {
-        for i in 0..3 {
-            self.core.kf.p[(ekf::POS + i, ekf::POS + i)] += position_m2;
-            self.core.kf.p[(ekf::VEL + i, ekf::VEL + i)] += velocity_m2_s2;
-        }
+        self.core.add_variances(position_m2, velocity_m2_s2, 0.0);
         self.covariance_changed = true;
     }
 

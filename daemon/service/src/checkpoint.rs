@@ -9,7 +9,7 @@
 //! used either: the daemon then starts with its position flagged unknown, never from the
 //! configured start with a small standard deviation.
 
-use auvnav_core::config::{AlignmentConfig, DaemonConfig, InitialState, SessionConfig};
+use auvnav_core::config::{AlignmentConfig, DaemonConfig, InitialState};
 use auvnav_core::navigator::Checkpoint;
 use serde::{Deserialize, Serialize};
 use std::io::Write;
@@ -119,6 +119,9 @@ pub fn write_atomically(path: &Path, file: &CheckpointFile) -> std::io::Result<(
 /// The writer thread and the channel to it (one checkpoint waiting at most: a newer one replaces
 /// nothing, it is dropped while the disk is busy, and the next interval brings another).
 pub struct Writer {
+    /// The configured start the checkpoints belong to (written into each file).
+    initial: Option<InitialState>,
+    alignment: Option<AlignmentConfig>,
     tx: Option<SyncSender<CheckpointFile>>,
     thread: Option<std::thread::JoinHandle<u64>>,
 }
@@ -136,18 +139,20 @@ impl Writer {
             .spawn(move || write_loop(&path, rx))
             .ok()?;
         Some(Writer {
+            initial: cfg.initial.clone(),
+            alignment: cfg.alignment.clone(),
             tx: Some(tx),
             thread: Some(thread),
         })
     }
 
     /// Hands a checkpoint to the writer (dropped when it is still writing the previous one).
-    pub fn submit(&mut self, cp: Checkpoint, session: &SessionConfig) {
+    pub fn submit(&mut self, cp: Checkpoint) {
         let file = CheckpointFile {
             format_version: 1,
             written_unix_s: unix_now_s(),
-            initial: session.initial.clone(),
-            alignment: session.alignment.clone(),
+            initial: self.initial.clone(),
+            alignment: self.alignment.clone(),
             navigation: cp,
         };
         if let Some(tx) = &self.tx

@@ -427,7 +427,7 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
             && now >= next_checkpoint
             && let Some(cp) = session.checkpoint()
         {
-            w.submit(cp, &cfg.session());
+            w.submit(cp);
             next_checkpoint = now + checkpoint_ns;
         }
         if now >= next_flush {
@@ -456,7 +456,7 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
     if let Some(w) = checkpoints.as_mut()
         && let Some(cp) = session.checkpoint()
     {
-        w.submit(cp, &cfg.session());
+        w.submit(cp);
     }
     let checkpoint_errors = checkpoints.map_or(0, checkpoint::Writer::finish);
     let flushed = out.flush();
