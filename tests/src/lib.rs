@@ -3,6 +3,19 @@
 
 pub mod shared;
 
+/// xorshift64*: a fixed, dependency-free stream of test bits (the same sequence for a seed on
+/// every machine), for tests that inject random faults.
+pub struct Bits(pub u64);
+
+impl Bits {
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+}
+
 /// The measured data set `name` under `<shared>/data` when its file `probe` exists, or `None`
 /// (with a SKIPPED message) outside CI; under CI (`CI=true`) its absence is a failure.
 pub fn measured_data(name: &str, probe: &str) -> Option<std::path::PathBuf> {

@@ -8,23 +8,12 @@
 use auvnav_drivers::kvh::{KvhSample, encode};
 use auvnav_shm_schema::bus::Bus;
 use auvnav_shm_schema::{NavSolutionV1, ProcessHealthV1, qos, topic};
+use auvnav_tests::Bits;
 use auvnav_tests::processes::{Proc, TempDir, binary, unique};
 use serialport::SerialPort;
 use std::io::Write;
 use std::process::Command;
 use std::time::{Duration, Instant};
-
-/// xorshift64*: a fixed, dependency-free stream of test bits.
-struct Bits(u64);
-
-impl Bits {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-}
 
 /// A vehicle at rest, level, heading north at 45° N: the Earth's rate and gravity (rad/s, g).
 fn at_rest(sequence: u8, t_us: u32) -> KvhSample {
@@ -120,16 +109,16 @@ fn absurd_valid_checksum_frames_never_give_a_nan_solution() {
             // Ten frames of 1e30.
             s.gyro = [1e30; 3];
             s.accel = [-1e30; 3];
-        } else if bits.next().is_multiple_of(8) {
+        } else if bits.next_u64().is_multiple_of(8) {
             // Arbitrary bits in every field the CRC covers.
             for v in s.gyro.iter_mut().chain(s.accel.iter_mut()) {
-                *v = f32::from_bits(bits.next() as u32);
+                *v = f32::from_bits(bits.next_u64() as u32);
             }
-            s.status = bits.next() as u8;
-            s.sequence = bits.next() as u8;
-            s.temperature_raw = bits.next() as i16;
-            if bits.next().is_multiple_of(4) {
-                s.timestamp_us = Some(bits.next() as u32);
+            s.status = bits.next_u64() as u8;
+            s.sequence = bits.next_u64() as u8;
+            s.temperature_raw = bits.next_u64() as i16;
+            if bits.next_u64().is_multiple_of(4) {
+                s.timestamp_us = Some(bits.next_u64() as u32);
             }
         }
         encode(&s)

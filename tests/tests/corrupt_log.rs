@@ -26,16 +26,11 @@ fn s(p: &Path) -> &str {
     p.to_str().expect("utf-8")
 }
 
-/// xorshift64* positions, fixed.
+/// `n` fixed pseudo-random positions in `lo..hi`.
 fn positions(n: usize, lo: usize, hi: usize, seed: u64) -> Vec<usize> {
-    let mut x = seed;
+    let mut bits = auvnav_tests::Bits(seed);
     (0..n)
-        .map(|_| {
-            x ^= x >> 12;
-            x ^= x << 25;
-            x ^= x >> 27;
-            lo + (x.wrapping_mul(0x2545_f491_4f6c_dd1d) as usize) % (hi - lo)
-        })
+        .map(|_| lo + (bits.next_u64() as usize) % (hi - lo))
         .collect()
 }
 

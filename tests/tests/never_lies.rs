@@ -449,13 +449,8 @@ fn arbitrary_sensor_values_never_give_a_nan_solution() {
         1e-300,
         0.0,
     ];
-    let mut x = 0x853c_49e6_748f_ea9bu64;
-    let mut next = move || {
-        x ^= x >> 12;
-        x ^= x << 25;
-        x ^= x >> 27;
-        x.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    };
+    let mut bits = auvnav_tests::Bits(0x853c_49e6_748f_ea9b);
+    let mut next = move || bits.next_u64();
     // Randomises every byte of a message after its host time (its first 8 bytes: the driver's
     // clock, not the device's), device time and sequence included, or sets one f64 field after
     // the first 24 bytes to an extreme.
