@@ -449,10 +449,18 @@ impl Session {
             return Ok(());
         };
         let t = x.host_time_ns as f64 * 1e-9;
+        // The aligner runs on the IMU's own time, its intervals from the first sample on: the
+        // Earth turns between its epochs by what the gyros saw, also where the host clock runs
+        // otherwise (a log played faster than real time turned 8x less Earth rate in host time
+        // and the coarse stage never ended).
+        let clock = self
+            .aligner
+            .as_ref()
+            .map_or(t, |al| al.time_s() + x.interval_s);
         let aligner = self
             .aligner
             .get_or_insert_with(|| InMotionAligner::new(a.latitude_deg.to_radians(), a.height_m));
-        aligner.on_imu(t, &w, &f, x.interval_s);
+        aligner.on_imu(clock, &w, &f, x.interval_s);
         self.last_omega = w;
         if a.moored {
             aligner.on_velocity(None);
@@ -504,6 +512,12 @@ impl Session {
             velocity_ned: c_b_n * v_b,
             q_body_to_ned: UnitQuaternion::from_matrix(&c_b_n),
         };
+        // The dead-reckoned displacement turns with the found heading: its error grows with
+        // the distance made good and goes into the position uncertainty handed on (with the
+        // configured one alone, a 5 deg coarse heading after 90 m left 7 m of error under a
+        // reported 1.7 m).
+        let dr_std = a.coarse_heading_std_deg.to_radians() * moved.xy().norm();
+        let position_std_m = self.cfg.initial_position_std_m.hypot(dr_std);
         if due && let Some(model) = ErrorModel::from_number(a.fine_model) {
             // Coarse → fine: the alignment filter of the chosen error model.
             let cfg = FineAlignConfig {
@@ -513,7 +527,7 @@ impl Session {
                 initial_tilt_std_deg: a.coarse_tilt_std_deg,
                 initial_heading_std_deg: a.coarse_heading_std_deg,
                 initial_velocity_std_m_s: self.cfg.initial_velocity_std_m_s,
-                initial_position_std_m: self.cfg.initial_position_std_m,
+                initial_position_std_m: position_std_m,
                 initial_gyro_bias_std_deg_h: self.cfg.initial_gyro_bias_std_deg_h,
                 initial_accel_bias_std_ug: self.cfg.initial_accel_bias_std_ug,
                 initial_mounting_std_deg: self.cfg.initial_dvl_mounting_std_deg,
@@ -528,6 +542,7 @@ impl Session {
             let mut cfg = self.cfg.clone();
             cfg.initial_heading_std_deg = a.coarse_heading_std_deg;
             cfg.initial_tilt_std_deg = a.coarse_tilt_std_deg;
+            cfg.initial_position_std_m = position_std_m;
             let saved = std::mem::replace(&mut self.cfg, cfg);
             let r = self.start(state, "in-motion coarse alignment", &mut |o| match o {
                 SessionOutput::Solution(s) => {
@@ -609,11 +624,18 @@ impl Session {
             cfg.initial_position_std_m = pos.x.max(pos.y);
             cfg.initial_gyro_bias_std_deg_h = gyro.max() * deg * 3600.0;
             cfg.initial_accel_bias_std_ug = accel.max() / 9.806_65e-6;
-            if fine.model != ErrorModel::Navigation {
+            if let (true, Some(m_std)) = (fine.model != ErrorModel::Navigation, fine.mounting_std())
+            {
+                // The mounting estimate goes on with its uncertainty: the navigation filter keeps
+                // estimating it. Handed over as exact, an angle the alignment could not observe
+                // (pitch, without depth) turned the DVL's velocity and pulled the vertical
+                // channel away from the depth sensor, whose fixes the gate then refused.
                 let m = fine.mounting();
                 let mut d = cfg.dvl_installation();
                 d.mount_deg = [m.x * deg, m.y * deg, m.z * deg];
                 cfg.set_dvl_installation(d);
+                cfg.estimate_dvl_mounting = true;
+                cfg.initial_dvl_mounting_std_deg = m_std.max() * deg;
             }
             let (bg, ba) = fine.imu_biases();
             self.fine = None;

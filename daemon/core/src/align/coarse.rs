@@ -134,6 +134,11 @@ impl InMotionAligner {
         self.t0.map_or(0.0, |t0| self.t - t0)
     }
 
+    /// The time of the latest IMU sample (s).
+    pub fn time_s(&self) -> f64 {
+        self.t
+    }
+
     /// One IMU interval ending at `t` (s): angular rate (rad/s) and specific force (m/s²) in
     /// body axes, held over `dt`.
     pub fn on_imu(&mut self, t: f64, w: &Vector3<f64>, f: &Vector3<f64>, dt: f64) {

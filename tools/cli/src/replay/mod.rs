@@ -426,6 +426,11 @@ impl Replay {
         self.has_truth.then(|| self.tracker.result())
     }
 
+    /// The configuration aligns (`[alignment]`) instead of starting from a given state.
+    pub fn has_alignment(&self) -> bool {
+        self.session.has_alignment()
+    }
+
     pub fn initial(&self) -> Option<&InitialReport> {
         self.session.initial()
     }

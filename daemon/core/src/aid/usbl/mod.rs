@@ -216,6 +216,7 @@ impl UsblAid {
             Vector3::from(idx.map(|k| k.map_or(0.0, |k| dx[k])))
         };
         let coupling = u.cfg.coupling;
+        let max_range_m = u.cfg.max_range_m;
         let errors = errors(core);
         let array = u.array;
         // Loose: array frame → line-of-sight coordinates of this fix.
@@ -228,15 +229,18 @@ impl UsblAid {
             };
             DVector::from_column_slice(z.as_slice())
         };
-        let p: DMatrix<f64> = DMatrix::from_fn(active.len(), active.len(), |i, j| {
-            core.kf.p[(active[i], active[j])]
-        });
+        let active_p = |kf: &ErrorFilter| -> DMatrix<f64> {
+            DMatrix::from_fn(active.len(), active.len(), |i, j| {
+                kf.p[(active[i], active[j])]
+            })
+        };
+        let p = active_p(&core.kf);
         let z = DVector::from_column_slice(meas.z.as_slice());
         let unscented = u.cfg.unscented();
         let kind = u.cfg.filter;
-        let update = |r: &DMatrix<f64>| match kind {
-            UsblFilter::Akf => linearized_update(&p, &z, r, &h),
-            UsblFilter::Ukf | UsblFilter::Aukf => unscented_update(&p, &z, r, &h, unscented),
+        let update = |p: &DMatrix<f64>, r: &DMatrix<f64>| match kind {
+            UsblFilter::Akf => linearized_update(p, &z, r, &h),
+            UsblFilter::Ukf | UsblFilter::Aukf => unscented_update(p, &z, r, &h, unscented),
         };
         // Fixed noise (ukf): this fix's configured noise (diagonal in the measurement's
         // coordinates); adaptive: the estimator's.
@@ -244,7 +248,7 @@ impl UsblAid {
             noise.set_variances(&DVector::from_column_slice(meas.r.diagonal().as_slice()));
         }
         let r_used = noise.covariance();
-        let Some(mut upd) = update(&r_used) else {
+        let Some(mut upd) = update(&p, &r_used) else {
             self.counters.failed += 1;
             return AidUpdate::rejected(d);
         };
@@ -255,10 +259,27 @@ impl UsblAid {
         let gated = noise.gate(&upd.innovation, &hph);
         let accepted = noise.observe(&upd.innovation, &hph);
         if noise.reopened != reopened {
+            // A run of fixes that agree with one another but not with the state: the state is
+            // what is wrong (an outlier fused at the first fix of a wide prior left the filter
+            // sure of a position metres off). The position's covariance is re-opened by the
+            // range innovation and the noise goes back to this fix's nominal one; taken as the
+            // new noise instead, the innovation became measurement noise and the filter kept
+            // its wrong position for good.
             self.counters.reopened += 1;
             d.flags |= AidDiagnosticsV1::FLAG_RESET;
+            // Bounded by the acoustic range: an absurd fix must not open it without limit.
+            let reopen_by = upd.innovation[0].abs();
+            reopen_position(
+                &mut core.kf.p,
+                if reopen_by.is_finite() {
+                    reopen_by.min(max_range_m)
+                } else {
+                    max_range_m
+                },
+            );
+            noise.set_variances(&DVector::from_column_slice(meas.r.diagonal().as_slice()));
             let r = noise.covariance();
-            match update(&r) {
+            match update(&active_p(&core.kf), &r) {
                 Some(x) => upd = x,
                 None => {
                     self.counters.failed += 1;
@@ -295,6 +316,20 @@ impl UsblAid {
             diagnostics: d,
             correction: Some(dx),
         }
+    }
+}
+
+/// Drops the position states' cross-covariances and adds the squared range innovation to their
+/// variances, so the next fixes are believed again.
+fn reopen_position(p: &mut ekf::Covariance, range_innovation_m: f64) {
+    for i in 0..3 {
+        let k = ekf::POS + i;
+        let keep = p[(k, k)] + range_innovation_m * range_innovation_m;
+        for j in 0..ekf::N {
+            p[(k, j)] = 0.0;
+            p[(j, k)] = 0.0;
+        }
+        p[(k, k)] = keep;
     }
 }
 
