@@ -90,12 +90,13 @@ fn replay(dir: &Path, name: &str, log: &Path, extra: &[&str]) -> [(String, Strin
     ]
 }
 
-const SCENARIOS: [&str; 10] = [
+const SCENARIOS: [&str; 11] = [
     "straight",
     "turns",
     "depth_changes",
     "lawnmower",
     "docking",
+    "homing",
     "moored",
     "survey",
     "align_moored",

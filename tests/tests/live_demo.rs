@@ -10,7 +10,8 @@ fn live_demo_reproduces_bit_for_bit_from_its_recording() {
     let dir = TempDir::new("livedemo");
     let out = dir.path().join("run");
     let o = Command::new(binary("auvnav"))
-        .args(["demo", "--seconds", "30", "--speed", "4", "--json", "--out"])
+        .args(["demo", "--scenario", "lawnmower", "--start", "known"])
+        .args(["--seconds", "30", "--speed", "4", "--json", "--out"])
         .arg(&out)
         .output()
         .expect("auvnav demo");
@@ -61,7 +62,15 @@ fn live_daemon_fuses_usbl_fixes_from_a_seatrac_on_a_pseudo_terminal() {
     let dir = TempDir::new("livedock");
     let out = dir.path().join("run");
     let o = Command::new(binary("auvnav"))
-        .args(["demo", "--scenario", "docking", "--seconds", "30"])
+        .args([
+            "demo",
+            "--scenario",
+            "docking",
+            "--start",
+            "known",
+            "--seconds",
+            "30",
+        ])
         .args(["--speed", "4", "--json", "--out"])
         .arg(&out)
         .output()
@@ -97,4 +106,69 @@ fn live_daemon_fuses_usbl_fixes_from_a_seatrac_on_a_pseudo_terminal() {
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
     assert_eq!(r["navigator"]["usbl_fused"], fused, "{r}");
     assert_eq!(r["navigator"]["usbl_invalid"], 0, "{r}");
+}
+
+/// The README's first command (`auvnav demo`, seed 1): alignment from no heading, then USBL
+/// homing with multipath outliers, as real processes; the figures meet their targets and the
+/// replay of the recording reproduces the live solution byte for byte.
+#[test]
+fn the_readme_demo_aligns_in_motion_then_homes_on_usbl_and_reproduces() {
+    let dir = TempDir::new("readmedemo");
+    let out = dir.path().join("run");
+    let o = Command::new(binary("auvnav"))
+        .args(["demo", "--json", "--out"])
+        .arg(&out)
+        .output()
+        .expect("auvnav demo");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    assert_eq!(v["scenario"], "homing", "{v}");
+    assert_eq!(v["start"], "align", "{v}");
+    assert_eq!(v["replay_identical"], true, "{v}");
+    assert_eq!(v["clean_stop"], true, "{v}");
+    assert_eq!(v["imu_samples_complete"], true, "{v}");
+    let al = &v["phases"]["alignment"];
+    let first = al["first_heading_error_deg"]
+        .as_f64()
+        .expect("first heading");
+    assert!(first.abs() > 2.0, "{al}");
+    let aligned = al["aligned_after_s"].as_f64().expect("aligned");
+    assert!(aligned > 60.0 && aligned < 298.0, "{al}");
+    let heading = al["heading_error_at_aligned_deg"]
+        .as_f64()
+        .expect("heading");
+    assert!(heading.abs() <= 0.5, "{al}");
+    let u = &v["phases"]["usbl"];
+    assert!(u["fused"].as_u64().expect("fused") > 150, "{u}");
+    // Every multipath outlier rejected, and none fused: the outliers add 10 to 50 m of path.
+    let outliers = u["outliers_simulated"].as_u64().expect("outliers");
+    assert!(outliers > 0, "{u}");
+    assert!(u["rejected"].as_u64().expect("rejected") >= outliers, "{u}");
+    let innovation = u["largest_fused_range_innovation_m"]
+        .as_f64()
+        .expect("innovation");
+    assert!(innovation < 5.0, "{u}");
+    assert!(
+        u["error"]["horizontal_error_rms_m"].as_f64().expect("rms") <= 1.0,
+        "{u}"
+    );
+    assert!(
+        u["error"]["horizontal_error_final_m"]
+            .as_f64()
+            .expect("final")
+            <= 0.5,
+        "{u}"
+    );
+    // The configuration the daemon ran is the deployable one: [alignment], [navigation.usbl].
+    let cfg = std::fs::read_to_string(out.join("auvnavd.toml")).expect("auvnavd.toml");
+    assert!(
+        cfg.contains("[alignment]") && cfg.contains("[navigation.usbl]"),
+        "{cfg}"
+    );
+    assert!(!cfg.contains("[initial]"), "{cfg}");
 }

@@ -1,32 +1,52 @@
 //! `auvnav demo`: simulates a voyage and runs it through the on-board chain as real processes
 //! (emulated devices on pseudo-terminals, drivers, daemon, recorder; see [`crate::live`]), or,
 //! with `--in-process`, straight through the navigation core (the same
-//! [`auvnav_core::navigator::Navigator`] the daemon and replay use); then prints the accuracy
-//! against the simulated truth.
+//! [`auvnav_core::navigator::Navigator`] the daemon and replay use); then prints what happened
+//! phase by phase against the simulated truth: the in-motion alignment, the navigation before
+//! the USBL fixes and the USBL homing ([`crate::phases`]).
 
 use crate::accuracy::Accuracy;
+use crate::phases::{PhaseFigures, PhaseRecorder};
 use crate::replay::{Output, Replay, ReplayConfig};
 use anyhow::Context;
-use auvnav_core::navigator::{NavConfig, NavCounters};
+use auvnav_core::config::{AlignmentConfig, HeadingSource, InitialState, NavConfig};
+use auvnav_core::navigator::NavCounters;
+use auvnav_shm_schema::TruthStateV1;
 use auvnav_sim::{self as sim, SimConfig, SimSummary, scenario::Scenario};
 use serde::Serialize;
 use std::path::PathBuf;
 
+/// How the navigator starts.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DemoStart {
+    /// Only the launch position is known: the attitude comes from in-motion alignment (coarse,
+    /// then DVL-aided fine alignment, model 1), as the daemon's `[alignment]` does it.
+    Align,
+    /// The whole initial state is known (`[initial]` from the simulated truth).
+    Known,
+}
+
 #[derive(clap::Args, Debug, Clone)]
 pub struct DemoArgs {
-    /// Simulated seconds (default: 120 with processes, the whole scenario in process).
+    /// Simulated seconds (default: the whole scenario).
     #[arg(long)]
     pub seconds: Option<f64>,
     /// Play the voyage this many times faster than real time (processes only).
-    #[arg(long, default_value_t = 4.0)]
+    #[arg(long, default_value_t = 8.0)]
     pub speed: f64,
     /// Run the voyage through the navigation core in this process (no drivers, daemon or
     /// shared memory): fast, for the whole scenario.
     #[arg(long)]
     pub in_process: bool,
-    /// Built-in scenario or scenario file.
-    #[arg(long, default_value = "lawnmower")]
+    /// Built-in scenario or scenario file (`homing`: alignment, then USBL homing to the docking
+    /// station; `lawnmower`: a survey without USBL).
+    #[arg(long, default_value = "homing")]
     pub scenario: String,
+    /// How the navigator starts: `align` (the launch position only) or `known` (the true
+    /// initial state).
+    #[arg(long, value_enum, default_value_t = DemoStart::Align)]
+    pub start: DemoStart,
     /// Random seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -47,42 +67,150 @@ pub struct DemoArgs {
     pub json: bool,
 }
 
+/// The heading standard deviation at which the demo's navigator declares itself aligned (deg).
+/// The daemon's default (0.1°) is the filter's floor on this motion with the default gyro bias
+/// uncertainty and is met only after about ten minutes; 0.2° is met after about four.
+pub const ALIGNED_HEADING_STD_DEG: f64 = 0.2;
+
+/// Coarse alignment time of the demo (s): the coarse heading is within about 0.5° after a minute
+/// of this motion, and the fine stage takes it from there.
+pub const COARSE_ALIGNMENT_S: f64 = 60.0;
+
+/// The navigation part of the demo's configuration: the scenario's USBL station (tight, AUKF)
+/// and magnetometer when there are any, and the start. `first_truth` is the voyage's first truth
+/// record (the `[initial]` state of `DemoStart::Known`, the launch position of `Align`).
+pub fn session_config(
+    cfg: &SimConfig,
+    start: DemoStart,
+    magnetometer: bool,
+    first_truth: &TruthStateV1,
+) -> ReplayConfig {
+    let navigation = NavConfig {
+        usbl: sim::StationGeometry::from_scenario(&cfg.scenario).map(|st| st.usbl_config()),
+        magnetometer: (magnetometer && cfg.scenario.rates.magnetometer_hz > 0)
+            .then(|| sim::sensors::MagnetometerModel::navigator_config(&cfg.effects)),
+        ..NavConfig::default()
+    };
+    let t = first_truth;
+    let (initial, alignment) = match start {
+        DemoStart::Known => (
+            Some(InitialState {
+                latitude_deg: t.latitude_rad.to_degrees(),
+                longitude_deg: t.longitude_rad.to_degrees(),
+                height_m: t.height_m,
+                velocity_ned_m_s: t.velocity_ned_m_s,
+                euler_deg: t.euler_rad.map(f64::to_degrees),
+            }),
+            None,
+        ),
+        DemoStart::Align => (
+            None,
+            Some(AlignmentConfig {
+                latitude_deg: t.latitude_rad.to_degrees(),
+                longitude_deg: t.longitude_rad.to_degrees(),
+                height_m: t.height_m,
+                coarse_s: COARSE_ALIGNMENT_S,
+                moored: false,
+                coarse_heading_std_deg: 2.0,
+                coarse_tilt_std_deg: 0.05,
+                aligned_heading_std_deg: ALIGNED_HEADING_STD_DEG,
+                fine_model: 1,
+                heading_source: HeadingSource::Gyrocompass,
+            }),
+        ),
+    };
+    ReplayConfig {
+        navigation,
+        initial,
+        alignment,
+        ..Default::default()
+    }
+}
+
+/// The first truth record of a simulated voyage (simulates its first second).
+pub fn first_truth(cfg: &SimConfig) -> anyhow::Result<TruthStateV1> {
+    let short = SimConfig {
+        duration_s: Some(1.0),
+        ..cfg.clone()
+    };
+    let mut first = None;
+    sim::simulate(&short, |m| {
+        if let (None, auvnav_log::LogMessage::Truth(t)) = (&first, m) {
+            first = Some(*t);
+        }
+        Ok(())
+    })?;
+    first.context("the simulation wrote no truth")
+}
+
 #[derive(Debug, Serialize)]
 pub struct DemoResult {
     pub scenario: String,
     pub seed: u64,
+    pub start: DemoStart,
     pub simulated: SimSummary,
     pub accuracy: Accuracy,
+    pub phases: PhaseFigures,
     pub counters: NavCounters,
     pub wall_s: f64,
 }
 
 /// Runs a simulated voyage through the navigator (the same [`Replay`] as `auvnav replay`, fed
-/// from memory); optionally writes the solution as CSV rows.
+/// from memory) from the true initial state; optionally writes the solution as CSV rows.
 pub fn run_voyage(
     cfg: &SimConfig,
     nav_cfg: NavConfig,
-    mut csv: Option<&mut dyn std::io::Write>,
+    csv: Option<&mut dyn std::io::Write>,
 ) -> anyhow::Result<(SimSummary, Accuracy, NavCounters)> {
-    let mut replay = Replay::new(
-        &ReplayConfig {
-            navigation: nav_cfg,
-            ..Default::default()
-        },
-        100.0,
-    );
+    let session = ReplayConfig {
+        navigation: nav_cfg,
+        ..Default::default()
+    };
+    run_session_voyage(cfg, &session, csv, None)
+}
+
+/// [`run_voyage`] with a whole session configuration (`[initial]` or `[alignment]`), and the
+/// phase figures collected into `phases` when given.
+pub fn run_session_voyage(
+    cfg: &SimConfig,
+    session: &ReplayConfig,
+    mut csv: Option<&mut dyn std::io::Write>,
+    mut phases: Option<&mut PhaseRecorder>,
+) -> anyhow::Result<(SimSummary, Accuracy, NavCounters)> {
+    let mut replay = Replay::new(session, 100.0);
     if let Some(w) = csv.as_deref_mut() {
         writeln!(w, "{}", crate::csv::NAV_HEADER)?;
     }
-    // Each simulated message goes straight into the navigator: nothing is held in memory.
+    // Each simulated message goes straight into the navigator: nothing is held in memory but
+    // what the phase figures keep.
     let mut write = |o: Output| {
-        if let (Output::Solution(s), Some(w)) = (o, csv.as_deref_mut()) {
-            crate::csv::write_nav_row(w, s)?;
+        let s = |ns: u64| ns as f64 * 1e-9;
+        match (o, phases.as_deref_mut()) {
+            (Output::Solution(sol), p) => {
+                if let Some(p) = p {
+                    p.solution(s(sol.host_time_ns), sol);
+                }
+                if let Some(w) = csv.as_deref_mut() {
+                    crate::csv::write_nav_row(w, sol)?;
+                }
+            }
+            (Output::Truth(t), Some(p)) => p.truth(s(t.host_time_ns), t),
+            (Output::Diagnostics(d), Some(p)) => p.diagnostics(s(d.host_time_ns), d),
+            _ => {}
         }
         Ok(())
     };
-    let summary = sim::simulate(cfg, |m| replay.process(m, &mut write))?;
+    let mut first_imu_ns = None;
+    let summary = sim::simulate(cfg, |m| {
+        if let auvnav_log::LogMessage::Imu(x) = m {
+            first_imu_ns.get_or_insert(x.host_time_ns);
+        }
+        replay.process(m, &mut write)
+    })?;
     replay.finish(&mut write)?;
+    if let (Some(p), Some(t)) = (phases, first_imu_ns) {
+        p.imu(t as f64 * 1e-9);
+    }
     Ok((
         summary,
         replay.accuracy().unwrap_or_default(),
@@ -90,18 +218,28 @@ pub fn run_voyage(
     ))
 }
 
-pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
-    if !a.in_process {
-        return run_processes(a);
-    }
+/// The simulation of the demo's scenario.
+fn sim_config(a: &DemoArgs) -> anyhow::Result<SimConfig> {
     let scenario = Scenario::load(&a.scenario)?;
     let effects = scenario.effects()?;
-    let cfg = SimConfig {
+    Ok(SimConfig {
         scenario,
         effects,
         seed: a.seed,
         duration_s: a.seconds,
-    };
+    })
+}
+
+pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
+    if let Some(s) = a.seconds
+        && !(s.is_finite() && s > 1.0)
+    {
+        return Err(crate::Failure::Usage(format!("--seconds {s}: expected more than 1 s")).into());
+    }
+    if !a.in_process {
+        return run_processes(a);
+    }
+    let cfg = sim_config(a)?;
     let start = std::time::Instant::now();
     let mut csv_file = None;
     if let Some(dir) = &a.out {
@@ -110,20 +248,14 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
         let f = std::fs::File::create(dir.join("nav.csv")).context("creating nav.csv")?;
         csv_file = Some(std::io::BufWriter::new(f));
     }
-    // With a USBL station in the scenario, its fixes are fused (tight, AUKF).
-    let usbl = auvnav_sim::StationGeometry::from_scenario(&cfg.scenario).map(|st| st.usbl_config());
-    let has_usbl = usbl.is_some();
-    // With a magnetometer in the scenario, its heading is fused (calibrated as simulated).
-    let magnetometer = (cfg.scenario.rates.magnetometer_hz > 0)
-        .then(|| sim::sensors::MagnetometerModel::navigator_config(&cfg.effects));
-    let (simulated, accuracy, counters) = run_voyage(
+    let session = session_config(&cfg, a.start, true, &first_truth(&cfg)?);
+    let has_usbl = session.navigation.usbl.is_some();
+    let mut recorder = PhaseRecorder::new();
+    let (simulated, accuracy, counters) = run_session_voyage(
         &cfg,
-        NavConfig {
-            usbl,
-            magnetometer,
-            ..NavConfig::default()
-        },
+        &session,
         csv_file.as_mut().map(|w| w as &mut dyn std::io::Write),
+        Some(&mut recorder),
     )?;
     if let Some(mut w) = csv_file {
         std::io::Write::flush(&mut w)?;
@@ -131,6 +263,8 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
     let result = DemoResult {
         scenario: cfg.scenario.name.clone(),
         seed: cfg.seed,
+        start: a.start,
+        phases: recorder.figures(simulated.usbl_outliers),
         simulated,
         accuracy,
         counters,
@@ -152,13 +286,13 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
                 ""
             }
         );
+        print_phases(&result.phases);
         println!(
-            "  horizontal error: final {:.2} m, max {:.2} m, CEP50 {:.2} m",
-            acc.horizontal_error_final_m, acc.horizontal_error_max_m, acc.horizontal_error_cep50_m
-        );
-        println!(
-            "  error/distance CEP50 {:.3} %, heading error RMS {:.4} deg",
-            acc.error_per_distance_cep50_percent, acc.heading_error_rms_deg
+            "  over the run: horizontal error final {:.2} m, max {:.2} m, CEP50 {:.2} m; heading error RMS {:.4} deg",
+            acc.horizontal_error_final_m,
+            acc.horizontal_error_max_m,
+            acc.horizontal_error_cep50_m,
+            acc.heading_error_rms_deg
         );
         println!(
             "  fused: {} DVL ({} rejected), {} depth ({} rejected); {:.2} s wall",
@@ -168,14 +302,6 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
             result.counters.depth_rejected,
             result.wall_s
         );
-        if has_usbl {
-            println!(
-                "  USBL: {} fused, {} rejected by the gate ({} outliers simulated)",
-                result.counters.usbl_fused,
-                result.counters.usbl_rejected,
-                result.simulated.usbl_outliers
-            );
-        }
         if result.simulated.magnetometer > 0 {
             let c = &result.counters;
             println!(
@@ -194,6 +320,54 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The phase lines of the summary.
+pub fn print_phases(p: &PhaseFigures) {
+    if let Some(al) = &p.alignment {
+        println!(
+            "  alignment: started with no heading (first estimate {:+.1} deg off); coarse {:.0} s, then DVL-aided fine alignment",
+            al.first_heading_error_deg, COARSE_ALIGNMENT_S
+        );
+        match (al.aligned_after_s, al.heading_error_at_aligned_deg) {
+            (Some(t), Some(e)) => println!(
+                "    aligned after {t:.1} s: heading error {e:+.3} deg (reported sigma {:.3} deg), position error {:.2} m (sigma {:.2} m)",
+                al.heading_std_at_aligned_deg.unwrap_or(f64::NAN),
+                al.horizontal_error_at_aligned_m.unwrap_or(f64::NAN),
+                al.horizontal_std_at_aligned_m.unwrap_or(f64::NAN),
+            ),
+            _ => println!("    NOT aligned by the end of the run"),
+        }
+    }
+    if let Some(e) = &p.before_usbl {
+        println!(
+            "  navigation {:.0}-{:.0} s (INS + DVL + depth): horizontal error RMS {:.2} m, max {:.2} m, at the end {:.2} m",
+            e.from_s,
+            e.to_s,
+            e.horizontal_error_rms_m,
+            e.horizontal_error_max_m,
+            e.horizontal_error_final_m
+        );
+    }
+    if let Some(u) = &p.usbl {
+        println!(
+            "  USBL homing from {:.0} s: {} fixes fused, {} rejected by the gate ({} multipath outliers simulated); largest fused range innovation {:.2} m",
+            u.first_fix_after_s,
+            u.fused,
+            u.rejected,
+            u.outliers_simulated,
+            u.largest_fused_range_innovation_m
+        );
+        if let Some(e) = &u.error {
+            println!(
+                "    horizontal error {:.2} m at the first fix; from {:.0} s on: RMS {:.2} m, max {:.2} m, at the end {:.2} m",
+                u.horizontal_error_at_first_fix_m.unwrap_or(f64::NAN),
+                e.from_s,
+                e.horizontal_error_rms_m,
+                e.horizontal_error_max_m,
+                e.horizontal_error_final_m
+            );
+        }
+    }
+}
 fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
     let imu = match auvnav_drivers::device::Protocol::from_name(&a.imu) {
         Some(
@@ -210,9 +384,10 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
     };
     let r = crate::live::run_live(
         &a.scenario,
+        a.start,
         imu,
         a.seed,
-        a.seconds.unwrap_or(120.0),
+        a.seconds,
         a.speed,
         a.out.as_deref(),
         a.live_view,
@@ -234,13 +409,13 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
                 .map(|a| format!("; live view on ws://{a}"))
                 .unwrap_or_default()
         );
+        print_phases(&r.phases);
         println!(
-            "  live solution: {} rows; horizontal error final {:.2} m, max {:.2} m, CEP50 {:.2} m; heading RMS {:.3} deg",
+            "  live solution: {} rows; horizontal error over the run: final {:.2} m, max {:.2} m, CEP50 {:.2} m",
             r.solutions,
             acc.horizontal_error_final_m,
             acc.horizontal_error_max_m,
             acc.horizontal_error_cep50_m,
-            acc.heading_error_rms_deg
         );
         println!(
             "  replay of the recording byte-identical to the live solution: {}",

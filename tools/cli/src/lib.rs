@@ -14,6 +14,7 @@ pub mod json;
 pub mod live;
 pub mod montecarlo;
 pub mod parallel;
+pub mod phases;
 pub mod process;
 pub mod progress;
 pub mod replay;

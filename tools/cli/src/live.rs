@@ -1,11 +1,13 @@
 //! `auvnav demo` with real processes: simulates a voyage, then runs the on-board chain on it —
 //! device emulators on pseudo-terminals, the serial drivers, the CAN driver fed from a candump
 //! log, the fusion daemon and the recorder, each its own process talking through shared memory —
-//! stops them cleanly and reports the live navigation accuracy against the simulated truth. It
-//! then replays the recording through `auvnav replay` and says whether the replayed solution is
-//! byte-identical to the live one.
+//! stops them cleanly and reports the live navigation against the simulated truth, phase by phase
+//! ([`crate::phases`]). It then replays the recording through `auvnav replay` and says whether the
+//! replayed solution is byte-identical to the live one.
 
 use crate::accuracy::{Accuracy, AccuracyTracker};
+use crate::demo::{DemoStart, session_config};
+use crate::phases::{PhaseFigures, PhaseRecorder};
 use crate::process::{ChildProcess, sibling};
 use crate::replay::interpolate;
 use anyhow::{Context, bail};
@@ -26,6 +28,7 @@ use std::time::{Duration, Instant};
 pub struct LiveResult {
     pub scenario: String,
     pub seed: u64,
+    pub start: DemoStart,
     pub simulated_s: f64,
     pub speed: f64,
     /// The emulated IMU's protocol (`xsens` also sends the magnetic field).
@@ -37,6 +40,11 @@ pub struct LiveResult {
     pub live_view: Option<String>,
     pub solutions: u64,
     pub accuracy: Accuracy,
+    /// The live run phase by phase: alignment, navigation before the USBL fixes, USBL homing.
+    pub phases: PhaseFigures,
+    /// Every IMU sample of the voyage reached the recording (the host-to-simulator time map is
+    /// exact; otherwise samples after a lost one are mapped one interval early).
+    pub imu_samples_complete: bool,
     /// `auvnav replay DIR/record.mcap --out DIR/replay_nav.csv` gave a byte-identical file.
     pub replay_identical: bool,
     /// Every process stopped cleanly (exit status 0 after SIGTERM).
@@ -102,36 +110,91 @@ pub fn read_nav_csv(path: &Path) -> anyhow::Result<Vec<NavSolutionV1>> {
     Ok(out)
 }
 
-/// Compares live solutions (host time) with the simulated truth (simulated time). The daemon
-/// starts at the first IMU sample it receives: host time `h0` is simulated time `t0`; later times
-/// map at the playback speed.
-pub fn live_accuracy(
-    nav: &[NavSolutionV1],
-    truth: &[TruthStateV1],
-    t0_ns: u64,
-    speed: f64,
-) -> Accuracy {
+/// Maps the daemon's host times onto the simulator's: the k-th IMU sample in the recording is the
+/// voyage's k-th, and every solution is stamped with the host time of the IMU sample it
+/// integrated, so solutions map exactly; other times (aid diagnostics) are interpolated between
+/// the samples around them.
+pub struct HostToSim {
+    host_ns: Vec<u64>,
+    sim_ns: Vec<u64>,
+}
+
+impl HostToSim {
+    /// From the voyage's IMU times and the recorded ones, in order (the shorter length is used).
+    pub fn new(sim_ns: Vec<u64>, host_ns: Vec<u64>) -> HostToSim {
+        let n = sim_ns.len().min(host_ns.len());
+        HostToSim {
+            host_ns: host_ns[..n].to_vec(),
+            sim_ns: sim_ns[..n].to_vec(),
+        }
+    }
+
+    /// The simulator's time of host time `h` (ns); none outside the recorded IMU samples.
+    pub fn sim_ns(&self, h: u64) -> Option<u64> {
+        let k = self.host_ns.partition_point(|&x| x < h);
+        let b = *self.host_ns.get(k)?;
+        if b == h {
+            return Some(self.sim_ns[k]);
+        }
+        let a = *self.host_ns.get(k.checked_sub(1)?)?;
+        let w = (h - a) as f64 / (b - a) as f64;
+        let (sa, sb) = (self.sim_ns[k - 1], self.sim_ns[k]);
+        Some(sa + (w * (sb - sa) as f64) as u64)
+    }
+}
+
+/// Compares solutions with the simulated truth on the simulator's time axis: each solution's
+/// time is mapped by `map` first.
+pub fn live_accuracy(nav: &[NavSolutionV1], truth: &[TruthStateV1], map: &HostToSim) -> Accuracy {
     let mut tracker = AccuracyTracker::new(100.0);
-    let Some(first) = nav.first() else {
-        return tracker.result();
-    };
-    let h0 = first.host_time_ns;
+    let nav: Vec<NavSolutionV1> = nav
+        .iter()
+        .filter_map(|s| {
+            map.sim_ns(s.host_time_ns).map(|t| NavSolutionV1 {
+                host_time_ns: t,
+                ..*s
+            })
+        })
+        .collect();
     let mut k = 0;
     for t in truth {
-        if t.host_time_ns < t0_ns {
-            continue;
-        }
-        let h = h0 + ((t.host_time_ns - t0_ns) as f64 / speed) as u64;
-        while k + 1 < nav.len() && nav[k + 1].host_time_ns < h {
+        while k + 1 < nav.len() && nav[k + 1].host_time_ns < t.host_time_ns {
             k += 1;
         }
         if k + 1 >= nav.len() {
             break;
         }
-        let sol = interpolate(&nav[k], &nav[k + 1], h);
+        if nav[k].host_time_ns > t.host_time_ns {
+            continue;
+        }
+        let sol = interpolate(&nav[k], &nav[k + 1], t.host_time_ns);
         tracker.add(&sol, t);
     }
     tracker.result()
+}
+
+/// What the recording holds for the phase figures: the recorded IMU times, the daemon's
+/// solutions and its aid diagnostics.
+fn read_recording(
+    record: &Path,
+) -> anyhow::Result<(
+    Vec<u64>,
+    Vec<NavSolutionV1>,
+    Vec<auvnav_shm_schema::AidDiagnosticsV1>,
+)> {
+    let mut imu = Vec::new();
+    let mut nav = Vec::new();
+    let mut diagnostics = Vec::new();
+    let mut reader = LogReader::open(record)?;
+    while let Some(raw) = reader.next_message()? {
+        match raw.decode_any()? {
+            LogMessage::Imu(x) => imu.push(x.host_time_ns),
+            LogMessage::NavSolution(s) => nav.push(s),
+            LogMessage::AidDiagnostics(d) => diagnostics.push(d),
+            _ => {}
+        }
+    }
+    Ok((imu, nav, diagnostics))
 }
 
 fn write_candump(path: &Path, depths: &[auvnav_shm_schema::DepthV1]) -> anyhow::Result<()> {
@@ -158,11 +221,13 @@ fn write_candump(path: &Path, depths: &[auvnav_shm_schema::DepthV1]) -> anyhow::
 }
 
 /// Runs the live demo.
+#[allow(clippy::too_many_arguments)]
 pub fn run_live(
     scenario_name: &str,
+    start_mode: DemoStart,
     imu: Protocol,
     seed: u64,
-    seconds: f64,
+    seconds: Option<f64>,
     speed: f64,
     out: Option<&Path>,
     live_view: Option<std::net::SocketAddr>,
@@ -170,8 +235,10 @@ pub fn run_live(
     if !(speed.is_finite() && (0.1..=20.0).contains(&speed)) {
         bail!("--speed {speed}: expected 0.1..=20");
     }
-    if !(seconds.is_finite() && seconds > 1.0) {
-        bail!("--seconds {seconds}: expected more than 1 s");
+    if let Some(s) = seconds
+        && !(s.is_finite() && s > 1.0)
+    {
+        bail!("--seconds {s}: expected more than 1 s");
     }
     let binaries = [
         "auvnavd",
@@ -203,50 +270,37 @@ pub fn run_live(
         scenario,
         effects,
         seed,
-        duration_s: Some(seconds),
+        duration_s: seconds,
     };
     let voyage = dir.join("voyage.mcap");
-    sim::simulate_to_log(&cfg, &voyage)?;
+    let simulated = sim::simulate_to_log(&cfg, &voyage)?;
+    let seconds = simulated.duration_s;
     let mut truth = Vec::new();
     let mut depths = Vec::new();
-    let mut first_imu_ns = None;
+    let mut imu_sim_ns = Vec::new();
     let mut reader = LogReader::open(&voyage)?;
     while let Some(raw) = reader.next_message()? {
         match raw.decode_any()? {
             LogMessage::Truth(t) => truth.push(t),
             LogMessage::Depth(d) => depths.push(d),
-            LogMessage::Imu(i) => {
-                first_imu_ns.get_or_insert(i.host_time_ns);
-            }
+            LogMessage::Imu(i) => imu_sim_ns.push(i.host_time_ns),
             _ => {}
         }
     }
     let t0 = truth.first().context("the simulation wrote no truth")?;
-    let t0_ns = first_imu_ns.context("the simulation wrote no IMU sample")?;
     write_candump(&dir.join("depth.candump"), &depths)?;
 
-    // 2. Configurations. With a USBL station in the scenario, the daemon fuses its fixes.
-    let [roll, pitch, yaw] = t0.euler_rad.map(f64::to_degrees);
+    // 2. Configurations: the demo's session (USBL station, magnetometer when the IMU carries
+    // the field, the start), with the IMU's device clock for the intervals.
+    let mut session = session_config(&cfg, start_mode, imu.carries_magnetic_field(), t0);
+    session.navigation.imu_dt_from_device_time = true;
     let daemon_config = auvnav_core::config::DaemonConfig {
         prefix: prefix.to_string(),
         aid_delay_s: 0.02,
         health_period_s: 0.5,
-        navigation: auvnav_core::config::NavConfig {
-            imu_dt_from_device_time: true,
-            usbl: auvnav_sim::StationGeometry::from_scenario(&cfg.scenario)
-                .map(|st| st.usbl_config()),
-            // The field reaches the daemon when the IMU carries it (Xsens).
-            magnetometer: (imu.carries_magnetic_field() && rates.magnetometer_hz > 0)
-                .then(|| auvnav_sim::sensors::MagnetometerModel::navigator_config(&cfg.effects)),
-            ..Default::default()
-        },
-        initial: Some(auvnav_core::config::InitialState {
-            latitude_deg: t0.latitude_rad.to_degrees(),
-            longitude_deg: t0.longitude_rad.to_degrees(),
-            height_m: t0.height_m,
-            velocity_ned_m_s: t0.velocity_ned_m_s,
-            euler_deg: [roll, pitch, yaw],
-        }),
+        navigation: session.navigation,
+        initial: session.initial,
+        alignment: session.alignment,
         output: auvnav_core::config::OutputConfig {
             nav_csv: dir.join("live_nav.csv").display().to_string(),
             ..Default::default()
@@ -397,10 +451,32 @@ pub fn run_live(
         process_reports.push((p.name.clone(), p.last_log_line()));
     }
 
-    // 5. Accuracy of the live solution, and the replay of the recording.
+    // 5. The live solution against the truth, on the simulator's time axis.
     let live_csv = dir.join("live_nav.csv");
     let nav = read_nav_csv(&live_csv)?;
-    let accuracy = live_accuracy(&nav, &truth, t0_ns, speed);
+    let (recorded_imu, recorded_nav, diagnostics) = read_recording(&record)?;
+    let imu_samples_complete = recorded_imu.len() == imu_sim_ns.len();
+    let map = HostToSim::new(imu_sim_ns, recorded_imu);
+    let accuracy = live_accuracy(&nav, &truth, &map);
+    let s = |ns: u64| ns as f64 * 1e-9;
+    let mut phases = PhaseRecorder::new();
+    if let Some(&first) = map.sim_ns.first() {
+        phases.imu(s(first));
+    }
+    for sol in &recorded_nav {
+        if let Some(t) = map.sim_ns(sol.host_time_ns) {
+            phases.solution(s(t), sol);
+        }
+    }
+    for t in &truth {
+        phases.truth(s(t.host_time_ns), t);
+    }
+    for d in &diagnostics {
+        if let Some(t) = map.sim_ns(d.host_time_ns) {
+            phases.diagnostics(s(t), d);
+        }
+    }
+    let phases = phases.figures(simulated.usbl_outliers);
     let replay_csv = dir.join("replay_nav.csv");
     let status = Command::new(&me)
         .arg("replay")
@@ -415,6 +491,7 @@ pub fn run_live(
     Ok(LiveResult {
         scenario: cfg.scenario.name.clone(),
         seed,
+        start: start_mode,
         simulated_s: seconds,
         speed,
         imu: imu.name().to_string(),
@@ -424,6 +501,8 @@ pub fn run_live(
         live_view: live_view.map(|a| a.to_string()),
         solutions: nav.len() as u64,
         accuracy,
+        phases,
+        imu_samples_complete,
         replay_identical,
         clean_stop: clean,
         wall_s: start.elapsed().as_secs_f64(),
