@@ -26,7 +26,27 @@ identical=0
 for i in $(seq "$runs"); do
     if "$auvnav" demo --json --out "$out/run$i" "$@" >"$out/run$i.json" 2>"$out/run$i.err"; then
         identical=$((identical + 1))
-        echo "run $i: byte-identical"
+        figures=""
+        if command -v python3 >/dev/null; then
+            figures=$(python3 - "$out/run$i.json" <<'PY' || true
+import json, sys
+v = json.load(open(sys.argv[1]))
+p = v.get("phases") or {}
+a = p.get("alignment") or {}
+u = p.get("usbl") or {}
+e = u.get("error") or {}
+parts = []
+if a.get("aligned_after_s") is not None:
+    parts.append(f"aligned after {a['aligned_after_s']:.1f} s, heading error {a['heading_error_at_aligned_deg']:+.3f} deg")
+if e:
+    parts.append(f"USBL {u['fused']} fused / {u['rejected']} rejected ({u['outliers_simulated']} outliers), "
+                 f"RMS {e['horizontal_error_rms_m']:.2f} m, end {e['horizontal_error_final_m']:.2f} m")
+parts.append(f"{v['wall_s']:.1f} s wall")
+print("; ".join(parts))
+PY
+)
+        fi
+        echo "run $i: byte-identical; $figures"
     else
         echo "run $i: NOT reproduced (see $out/run$i.json, $out/run$i.err)"
     fi

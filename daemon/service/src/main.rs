@@ -280,6 +280,8 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
     let checkpoint_ns = (cfg.checkpoint.interval_s * 1e9) as u64;
     let mut next_checkpoint = 0u64;
     let mut reported_reinitialisations = 0u64;
+    // The moment in-motion alignment ends is reported once (operators wait for it).
+    let mut was_aligning = session.aligning();
     let now = monotonic_ns();
     let d = &cfg.deadlines;
     let mut watches = [
@@ -413,6 +415,23 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
         }
         if session.started() {
             state = ProcessState::Running;
+        }
+        if was_aligning
+            && !session.aligning()
+            && let Some(nav) = session.navigator()
+        {
+            was_aligning = false;
+            let p = nav.covariance();
+            let sigma = |i: usize| p[(i, i)].max(0.0).sqrt();
+            let att = auvnav_core::ekf::ATT;
+            let pos = auvnav_core::ekf::POS;
+            tracing::info!(
+                heading_std_deg = sigma(att + 2).to_degrees(),
+                horizontal_std_m = sigma(pos).hypot(sigma(pos + 1)),
+                "auvnavd: aligned (heading sigma {:.3} deg, horizontal position sigma {:.2} m); navigating",
+                sigma(att + 2).to_degrees(),
+                sigma(pos).hypot(sigma(pos + 1)),
+            );
         }
         if session.reinitialisations > reported_reinitialisations {
             reported_reinitialisations = session.reinitialisations;

@@ -288,7 +288,7 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
         );
         print_phases(&result.phases);
         println!(
-            "  over the run: horizontal error final {:.2} m, max {:.2} m, CEP50 {:.2} m; heading error RMS {:.4} deg",
+            "  over the whole run (alignment included): horizontal error final {:.2} m, max {:.2} m, CEP50 {:.2} m; heading error RMS {:.4} deg",
             acc.horizontal_error_final_m,
             acc.horizontal_error_max_m,
             acc.horizontal_error_cep50_m,
@@ -411,7 +411,7 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
         );
         print_phases(&r.phases);
         println!(
-            "  live solution: {} rows; horizontal error over the run: final {:.2} m, max {:.2} m, CEP50 {:.2} m",
+            "  live solution: {} rows; horizontal error over the whole run (alignment included): final {:.2} m, max {:.2} m, CEP50 {:.2} m",
             r.solutions,
             acc.horizontal_error_final_m,
             acc.horizontal_error_max_m,

@@ -21,7 +21,8 @@ struct Cli {
 enum Command {
     /// Simulate a voyage and its sensors into a log (MCAP).
     Sim(SimArgs),
-    /// Simulate a voyage, run it through the navigation core and print the accuracy.
+    /// Simulate a voyage and run it through the on-board chain (real processes, or the core in
+    /// process): in-motion alignment from no heading, USBL homing, figures against the truth.
     Demo(auvnav_tools::demo::DemoArgs),
     /// What a log holds: header, channels with counts and rates, duration, configuration.
     Info(auvnav_tools::info::InfoArgs),

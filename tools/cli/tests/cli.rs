@@ -295,9 +295,6 @@ fn demo_aligns_without_a_heading_and_homes_on_usbl_fixes_on_other_seeds() {
         assert!(o.status.success(), "{}", stderr(&o));
         let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
         let al = &v["phases"]["alignment"];
-        // The first published heading is the coarse stage's first guess: far off.
-        let first = al["first_heading_error_deg"].as_f64().expect("first");
-        assert!(first.abs() > 2.0, "seed {seed}: {al}");
         let t = al["aligned_after_s"].as_f64().expect("aligned");
         assert!(t > 60.0 && t < 298.0, "seed {seed}: {al}");
         let e = al["heading_error_at_aligned_deg"]
