@@ -9,15 +9,13 @@ use std::process::Command;
 /// and not the other tests.
 static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
-#[test]
-fn live_demo_reproduces_bit_for_bit_from_its_recording() {
-    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let dir = TempDir::new("livedemo");
-    let out = dir.path().join("run");
+/// Runs `auvnav demo ARGS --json --out OUT` and returns its JSON document (the run must succeed).
+fn demo(args: &[&str], out: &std::path::Path) -> serde_json::Value {
     let o = Command::new(binary("auvnav"))
-        .args(["demo", "--scenario", "lawnmower", "--start", "known"])
-        .args(["--seconds", "30", "--speed", "4", "--json", "--out"])
-        .arg(&out)
+        .arg("demo")
+        .args(args)
+        .args(["--json", "--out"])
+        .arg(out)
         .output()
         .expect("auvnav demo");
     let stdout = String::from_utf8_lossy(&o.stdout);
@@ -26,7 +24,25 @@ fn live_demo_reproduces_bit_for_bit_from_its_recording() {
         "{stdout}\n{}",
         String::from_utf8_lossy(&o.stderr)
     );
-    let v: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    serde_json::from_str(&stdout).expect("json")
+}
+
+#[test]
+fn live_demo_reproduces_bit_for_bit_from_its_recording() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = TempDir::new("livedemo");
+    let out = dir.path().join("run");
+    let args = [
+        "--scenario",
+        "lawnmower",
+        "--start",
+        "known",
+        "--seconds",
+        "30",
+        "--speed",
+        "4",
+    ];
+    let v = demo(&args, &out);
     assert_eq!(v["replay_identical"], true, "{v}");
     assert_eq!(v["clean_stop"], true, "{v}");
     // 30 s of a 200 Hz IMU: one solution per sample (the first is the initial state).
@@ -67,27 +83,17 @@ fn live_daemon_fuses_usbl_fixes_from_a_seatrac_on_a_pseudo_terminal() {
     // through the baseline) and the replay of the recording does the same.
     let dir = TempDir::new("livedock");
     let out = dir.path().join("run");
-    let o = Command::new(binary("auvnav"))
-        .args([
-            "demo",
-            "--scenario",
-            "docking",
-            "--start",
-            "known",
-            "--seconds",
-            "30",
-        ])
-        .args(["--speed", "4", "--json", "--out"])
-        .arg(&out)
-        .output()
-        .expect("auvnav demo");
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    let args = [
+        "--scenario",
+        "docking",
+        "--start",
+        "known",
+        "--seconds",
+        "30",
+        "--speed",
+        "4",
+    ];
+    let v = demo(&args, &out);
     assert_eq!(v["replay_identical"], true, "{v}");
     let daemon = v["process_reports"]
         .as_array()
@@ -122,18 +128,7 @@ fn the_readme_demo_aligns_in_motion_then_homes_on_usbl_and_reproduces() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let dir = TempDir::new("readmedemo");
     let out = dir.path().join("run");
-    let o = Command::new(binary("auvnav"))
-        .args(["demo", "--json", "--out"])
-        .arg(&out)
-        .output()
-        .expect("auvnav demo");
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    let v = demo(&[], &out);
     assert_eq!(v["scenario"], "homing", "{v}");
     assert_eq!(v["start"], "align", "{v}");
     assert_eq!(v["replay_identical"], true, "{v}");

@@ -167,19 +167,10 @@ impl PhaseRecorder {
         }
     }
 
-    /// The solution track at time `t_s`, interpolated between the two solutions around it
-    /// (none when the track does not cover it or has a gap over a second there).
+    /// The solution track's position at time `t_s`, interpolated between the two solutions
+    /// around it.
     fn track_at(&self, t_s: f64) -> Option<Geodetic> {
-        let k = self.track.partition_point(|p| p.t_s < t_s);
-        let b = self.track.get(k)?;
-        if b.t_s == t_s {
-            return Some(b.position);
-        }
-        let a = self.track.get(k.checked_sub(1)?)?;
-        if b.t_s - a.t_s > 1.0 {
-            return None;
-        }
-        let w = (t_s - a.t_s) / (b.t_s - a.t_s);
+        let (a, b, w) = around(&self.track, t_s, |p| p.t_s)?;
         let lerp = |x: f64, y: f64| x + w * (y - x);
         Some(Geodetic {
             latitude_rad: lerp(a.position.latitude_rad, b.position.latitude_rad),
@@ -188,31 +179,16 @@ impl PhaseRecorder {
         })
     }
 
-    /// The true heading at `t_s`, interpolated between the truth records around it (none
-    /// outside the truth or across a gap over a second).
+    /// The true heading at `t_s`, interpolated between the truth records around it.
     fn true_heading_at(&self, t_s: f64) -> Option<f64> {
-        let k = self.truth.partition_point(|p| p.t_s < t_s);
-        let b = self.truth.get(k)?;
-        if b.t_s == t_s {
-            return Some(b.heading_rad);
-        }
-        let a = self.truth.get(k.checked_sub(1)?)?;
-        if b.t_s - a.t_s > 1.0 {
-            return None;
-        }
-        let w = (t_s - a.t_s) / (b.t_s - a.t_s);
+        let (a, b, w) = around(&self.truth, t_s, |p| p.t_s)?;
         Some(a.heading_rad + w * wrap_pi(b.heading_rad - a.heading_rad))
     }
 
     /// The horizontal position error of a solution (m), against the truth interpolated at its
     /// time.
     fn position_error(&self, p: &TrackPoint) -> Option<f64> {
-        let k = self.truth.partition_point(|t| t.t_s < p.t_s);
-        let (a, b) = (self.truth.get(k.checked_sub(1)?)?, self.truth.get(k)?);
-        if b.t_s - a.t_s > 1.0 {
-            return None;
-        }
-        let w = (p.t_s - a.t_s) / (b.t_s - a.t_s);
+        let (a, b, w) = around(&self.truth, p.t_s, |t| t.t_s)?;
         let d = ned_offset(&a.position, &b.position) * w - ned_offset(&a.position, &p.position);
         Some(d.x.hypot(d.y))
     }
@@ -306,7 +282,125 @@ impl PhaseRecorder {
     }
 }
 
+/// The two records of a time-ordered series around `t_s` and the weight of the second for a
+/// linear interpolation (an exact hit: the record twice, weight 0); none outside the series or
+/// across a gap of over a second.
+fn around<T>(v: &[T], t_s: f64, time: impl Fn(&T) -> f64) -> Option<(&T, &T, f64)> {
+    let k = v.partition_point(|p| time(p) < t_s);
+    let b = v.get(k)?;
+    if time(b) == t_s {
+        return Some((b, b, 0.0));
+    }
+    let a = v.get(k.checked_sub(1)?)?;
+    let span = time(b) - time(a);
+    (span <= 1.0).then(|| (a, b, (t_s - time(a)) / span))
+}
+
 /// A mode in which the navigator has declared itself aligned.
 fn aligned(mode: u32) -> bool {
     mode == NavMode::Navigating as u32 || mode == NavMode::Degraded as u32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn solution(t_s: f64, north_m: f64, heading_deg: f64, mode: NavMode) -> NavSolutionV1 {
+        NavSolutionV1 {
+            host_time_ns: (t_s * 1e9) as u64,
+            latitude_rad: 0.5 + north_m / 6_356_752.0,
+            longitude_rad: 2.0,
+            euler_rad: [0.0, 0.0, heading_deg.to_radians()],
+            attitude_std_rad: [0.0, 0.0, 0.2f64.to_radians()],
+            position_std_ned_m: [3.0, 4.0, 1.0],
+            mode: mode as u32,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn the_figures_of_a_known_run_are_its_own() {
+        let mut r = PhaseRecorder::new();
+        r.imu(0.0);
+        // Truth: at rest at the origin, heading 10 deg, 20 Hz for 100 s.
+        for k in 0..=2000 {
+            let t = TruthStateV1 {
+                host_time_ns: k * 50_000_000,
+                latitude_rad: 0.5,
+                longitude_rad: 2.0,
+                euler_rad: [0.0, 0.0, 10f64.to_radians()],
+                ..Default::default()
+            };
+            r.truth(k as f64 * 0.05, &t);
+        }
+        // The navigator: 40 deg off first, aligned at 30 s with 0.3 deg of error and 2 m north;
+        // the first fix at 50 s pulls it to 0.5 m north.
+        for k in 1..=1000 {
+            let t = k as f64 * 0.1;
+            let s = match t {
+                t if t < 30.0 => solution(t, 2.0, 50.0, NavMode::Aligning),
+                t if t < 50.0 => solution(t, 2.0, 10.3, NavMode::Navigating),
+                t => solution(t, 0.5, 10.3, NavMode::Navigating),
+            };
+            r.solution(t, &s);
+        }
+        for (k, (fused, innovation)) in [(true, 1.5), (false, 30.0), (true, -0.2)]
+            .into_iter()
+            .enumerate()
+        {
+            let d = AidDiagnosticsV1 {
+                source: AidSource::UsblSlantRange as u32,
+                flags: if fused {
+                    AidDiagnosticsV1::FLAG_FUSED
+                } else {
+                    AidDiagnosticsV1::FLAG_REJECTED
+                },
+                innovation: [innovation, 0.0, 0.0],
+                ..Default::default()
+            };
+            r.diagnostics(50.0 + k as f64, &d);
+        }
+        let f = r.figures(1);
+        let al = f.alignment.expect("alignment");
+        assert!((al.first_heading_error_deg - 40.0).abs() < 1e-9, "{al:?}");
+        assert!((al.aligned_after_s.expect("aligned") - 30.0).abs() < 1e-9);
+        let e = al.heading_error_at_aligned_deg.expect("heading");
+        assert!((e - 0.3).abs() < 1e-9, "{e}");
+        assert!((al.heading_std_at_aligned_deg.expect("std") - 0.2).abs() < 1e-9);
+        assert!((al.horizontal_error_at_aligned_m.expect("error") - 2.0).abs() < 0.01);
+        assert!((al.horizontal_std_at_aligned_m.expect("std") - 5.0).abs() < 1e-9);
+        let b = f.before_usbl.expect("before");
+        assert!((b.from_s - 30.0).abs() < 1e-9 && (b.to_s - 50.0).abs() < 1e-9);
+        assert!((b.horizontal_error_rms_m - 2.0).abs() < 0.01, "{b:?}");
+        let u = f.usbl.expect("usbl");
+        assert_eq!((u.fused, u.rejected, u.outliers_simulated), (2, 1, 1));
+        assert_eq!(u.largest_fused_range_innovation_m, 1.5);
+        let after = u.error.expect("after");
+        assert!((after.from_s - (50.0 + USBL_SETTLE_S)).abs() < 1e-9);
+        assert!(
+            (after.horizontal_error_max_m - 0.5).abs() < 0.01,
+            "{after:?}"
+        );
+        assert!(
+            (after.horizontal_error_final_m - 0.5).abs() < 0.01,
+            "{after:?}"
+        );
+    }
+
+    #[test]
+    fn a_run_that_never_aligns_says_so_and_one_started_aligned_has_no_alignment() {
+        let mut r = PhaseRecorder::new();
+        for k in 0..100 {
+            let t = k as f64 * 0.1;
+            r.truth(t, &TruthStateV1::default());
+            r.solution(t, &solution(t, 0.0, 0.0, NavMode::Aligning));
+        }
+        let al = r.figures(0).alignment.expect("alignment");
+        assert_eq!(al.aligned_after_s, None);
+        assert_eq!(al.heading_error_at_aligned_deg, None);
+        let mut r = PhaseRecorder::new();
+        r.solution(0.0, &solution(0.0, 0.0, 0.0, NavMode::Navigating));
+        let f = r.figures(0);
+        assert!(f.alignment.is_none() && f.usbl.is_none());
+    }
 }
