@@ -145,7 +145,11 @@ impl DvlAid {
         let since = *self.rejected_since_s.get_or_insert(t);
         if rejected && self.reset_after_s > 0.0 && t - since >= self.reset_after_s {
             let innovation_ned = core.state().c_body_to_ned() * y;
-            reopen_velocity(&mut core.kf.p, &innovation_ned);
+            ekf::reopen_block(
+                &mut core.kf.p,
+                ekf::VEL,
+                innovation_ned.map(|x| x * x).into(),
+            );
             self.resets += 1;
             d.flags |= AidDiagnosticsV1::FLAG_RESET;
             let (predicted, h) = dvl_model(
@@ -170,20 +174,6 @@ impl DvlAid {
             diagnostics: d,
             correction,
         }
-    }
-}
-
-/// Drops the velocity states' cross-covariances and adds `innovation_ned` squared to their
-/// variances, so the next velocity measurement is believed again.
-fn reopen_velocity(p: &mut ekf::Covariance, innovation_ned: &Vector3<f64>) {
-    for i in 0..3 {
-        let v = ekf::VEL + i;
-        let keep = p[(v, v)] + innovation_ned[i].powi(2);
-        for j in 0..ekf::N {
-            p[(v, j)] = 0.0;
-            p[(j, v)] = 0.0;
-        }
-        p[(v, v)] = keep;
     }
 }
 

@@ -53,6 +53,21 @@ const _: () = assert!(USBL + 3 == N, "state layout must fill N");
 
 pub type StateVector = SVector<f64, N>;
 pub type Covariance = SMatrix<f64, N, N>;
+
+/// Re-opens a block of three states after an aid was refused for too long: drops their
+/// cross-covariances and adds `extra_variances` to their variances, so that the aid's next
+/// measurement is believed again (the DVL re-opens the velocity, the USBL the position).
+pub fn reopen_block(p: &mut Covariance, first: usize, extra_variances: [f64; 3]) {
+    for (i, extra) in extra_variances.into_iter().enumerate() {
+        let k = first + i;
+        let keep = p[(k, k)] + extra;
+        for j in 0..N {
+            p[(k, j)] = 0.0;
+            p[(j, k)] = 0.0;
+        }
+        p[(k, k)] = keep;
+    }
+}
 /// The dynamics of the core states.
 pub type CoreMatrix = SMatrix<f64, CORE, CORE>;
 

@@ -269,14 +269,12 @@ impl UsblAid {
             d.flags |= AidDiagnosticsV1::FLAG_RESET;
             // Bounded by the acoustic range: an absurd fix must not open it without limit.
             let reopen_by = upd.innovation[0].abs();
-            reopen_position(
-                &mut core.kf.p,
-                if reopen_by.is_finite() {
-                    reopen_by.min(max_range_m)
-                } else {
-                    max_range_m
-                },
-            );
+            let reopen_by = if reopen_by.is_finite() {
+                reopen_by.min(max_range_m)
+            } else {
+                max_range_m
+            };
+            ekf::reopen_block(&mut core.kf.p, ekf::POS, [reopen_by * reopen_by; 3]);
             noise.set_variances(&DVector::from_column_slice(meas.r.diagonal().as_slice()));
             let r = noise.covariance();
             match update(&active_p(&core.kf), &r) {
@@ -316,20 +314,6 @@ impl UsblAid {
             diagnostics: d,
             correction: Some(dx),
         }
-    }
-}
-
-/// Drops the position states' cross-covariances and adds the squared range innovation to their
-/// variances, so the next fixes are believed again.
-fn reopen_position(p: &mut ekf::Covariance, range_innovation_m: f64) {
-    for i in 0..3 {
-        let k = ekf::POS + i;
-        let keep = p[(k, k)] + range_innovation_m * range_innovation_m;
-        for j in 0..ekf::N {
-            p[(k, j)] = 0.0;
-            p[(j, k)] = 0.0;
-        }
-        p[(k, k)] = keep;
     }
 }
 
