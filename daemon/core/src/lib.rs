@@ -5,7 +5,7 @@
 //! gates, unscented update, adaptive noise), [`aid`] (one module per aiding sensor),
 //! [`nav_core`] (strapdown, covariance, correction), [`navigator`] (the core plus its aids), [`align`] (coarse and fine alignment), [`session`]
 //! (how a run starts and the order in which messages meet the navigator), [`feed`] (the one
-//! message → session path), [`config`] (the configuration types and their validation), [`csv`]
+//! message → session path), [`smoother`] (the forward–backward smoother over the session), [`config`] (the configuration types and their validation), [`csv`]
 //! (solution and diagnostics files).
 #![deny(unsafe_code)]
 
@@ -19,5 +19,6 @@ pub mod feed;
 pub mod nav_core;
 pub mod navigator;
 pub mod session;
+pub mod smoother;
 pub mod strapdown;
 pub mod wmm;

@@ -53,6 +53,8 @@ pub struct NavCore {
     timing: ImuTiming,
     /// IMU and lateness counters (the aids count the rest).
     pub counters: CoreCounters,
+    /// Epochs and corrections for a smoother (`None`: not asked for).
+    pub(crate) trace: Option<ekf::trace::Trace>,
 }
 
 /// What the inertial core counted.
@@ -136,6 +138,7 @@ impl NavCore {
             covariance_interval_s: timing.covariance_interval_s,
             timing,
             counters: CoreCounters::default(),
+            trace: None,
         }
     }
 
@@ -240,11 +243,24 @@ impl NavCore {
         velocity_m2_s2: f64,
         attitude_rad2: f64,
     ) {
+        let mut added = StateVector::zeros();
         for i in 0..3 {
-            self.kf.p[(ekf::POS + i, ekf::POS + i)] += position_m2;
-            self.kf.p[(ekf::VEL + i, ekf::VEL + i)] += velocity_m2_s2;
-            self.kf.p[(ekf::ATT + i, ekf::ATT + i)] += attitude_rad2;
+            added[ekf::POS + i] = position_m2;
+            added[ekf::VEL + i] = velocity_m2_s2;
+            added[ekf::ATT + i] = attitude_rad2;
         }
+        for i in 0..ekf::N {
+            self.kf.p[(i, i)] += added[i];
+        }
+        if let Some(t) = self.trace.as_mut() {
+            t.grow(&added);
+        }
+    }
+
+    /// The time of the state (ns): the time stamp of the IMU sample integrated last.
+    pub(crate) fn state_time_ns(&self) -> u64 {
+        self.last_imu_ns
+            .unwrap_or_else(|| (self.sd.state.time_s * 1e9).round() as u64)
     }
 
     /// True when the state, the biases and the covariance are finite and the covariance looks
@@ -283,8 +299,35 @@ impl NavCore {
             height_m: s.position.height_m,
         };
         let f = ekf::dynamics_matrix(&inputs);
+        // Copied only when a smoother asked for the trace.
+        let before = match self.trace {
+            Some(_) => Some(self.kf.p),
+            None => None,
+        };
         self.kf
             .predict(&f, &inputs.c_body_to_ned, &self.noise, self.pending_dt);
+        if let (Some(p_updated), Some(_)) = (before, self.trace.as_ref()) {
+            // The same transition the propagation used (its navigation rows).
+            let fdt =
+                f.fixed_view::<{ ekf::trace::NAV_ROWS }, { ekf::CORE }>(0, 0) * self.pending_dt;
+            let half_nn =
+                0.5 * fdt.fixed_view::<{ ekf::trace::NAV_ROWS }, { ekf::trace::NAV_ROWS }>(0, 0);
+            let mut nav = fdt + half_nn * fdt;
+            for i in 0..ekf::trace::NAV_ROWS {
+                nav[(i, i)] += 1.0;
+            }
+            let event = ekf::trace::Propagation {
+                time_ns: self.state_time_ns(),
+                p_updated,
+                transition_nav: nav,
+                transition_params: self.kf.param_transition(self.pending_dt),
+                p_predicted: self.kf.p,
+            };
+            if let Some(t) = self.trace.as_mut() {
+                t.events
+                    .push(ekf::trace::TraceEvent::Propagation(Box::new(event)));
+            }
+        }
         // The expected value of a Gauss-Markov parameter state decays with its correlation
         // time (constants: a = 1).
         let a = self.kf.param_transition(self.pending_dt);
@@ -309,6 +352,9 @@ impl NavCore {
         self.accel_bias += Vector3::new(dx[ekf::BA], dx[ekf::BA + 1], dx[ekf::BA + 2]);
         for i in 0..ekf::PARAMS {
             self.markov_means[i] -= dx[ekf::CORE + i];
+        }
+        if let Some(t) = self.trace.as_mut() {
+            t.events.push(ekf::trace::TraceEvent::Correction(*dx));
         }
     }
 

@@ -271,6 +271,35 @@ impl Navigator {
         self.covariance_changed = true;
     }
 
+    /// Starts (or restarts, dropping what it held) the trace of covariance epochs and corrections
+    /// a smoother records (`crate::ekf::trace`).
+    pub(crate) fn start_trace(&mut self) {
+        self.core.trace = Some(ekf::trace::Trace::default());
+    }
+
+    /// The trace events since the last call.
+    pub(crate) fn take_trace(&mut self) -> Vec<ekf::trace::TraceEvent> {
+        self.core
+            .trace
+            .as_mut()
+            .map(|t| std::mem::take(&mut t.events))
+            .unwrap_or_default()
+    }
+
+    /// The time of the state (ns).
+    pub(crate) fn state_time_ns(&self) -> u64 {
+        self.core.state_time_ns()
+    }
+
+    /// The nominal values of the parameter states (for the smoother's report).
+    pub(crate) fn nominal_parameters(&self) -> crate::smoother::NominalParameters {
+        crate::smoother::NominalParameters {
+            time_ns: self.state_time_ns(),
+            dvl: self.dvl.params,
+            markov_means: self.core.markov_means.into(),
+        }
+    }
+
     #[doc(hidden)]
     pub fn poison_covariance_for_tests(&mut self) {
         self.core.kf.p[(ekf::POS, ekf::VEL)] = f64::NAN;

@@ -10,6 +10,7 @@ use crate::config::{HeadingSource, NavConfig};
 use crate::earth::Geodetic;
 use crate::feed::SensorMessage;
 use crate::navigator::{Checkpoint, Navigator};
+use crate::smoother::{NominalParameters, SmootherLog, SmoothingRun};
 use crate::strapdown::NavState;
 use auvnav_shm_schema::{
     AidDiagnosticsV1, DvlVelocityV1, ImuSampleV1, LateAidV1, NavMode, NavSolutionV1,
@@ -73,8 +74,20 @@ impl Ord for Pending {
     }
 }
 
+/// What the session does for a smoother (`crate::smoother`).
+enum Smoothing {
+    Off,
+    /// The first run: the navigator's epochs go to the log; each chain's nominal parameters
+    /// at its start (and end, once known).
+    Record {
+        log: Box<SmootherLog>,
+        chains: Vec<(NominalParameters, Option<NominalParameters>)>,
+    },
+}
+
 /// The navigator, its start and the order in which aid messages meet the IMU stream.
 pub struct Session {
+    smoothing: Smoothing,
     cfg: NavConfig,
     configured_initial: Option<InitialState>,
     nav: Option<Navigator>,
@@ -122,6 +135,7 @@ pub struct Session {
 impl Session {
     pub fn new(cfg: &SessionConfig) -> Session {
         Session {
+            smoothing: Smoothing::Off,
             cfg: cfg.navigation.clone(),
             configured_initial: cfg.initial.clone(),
             nav: None,
@@ -266,6 +280,90 @@ impl Session {
         source: &'static str,
         out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
     ) -> Result<(), E> {
+        self.with_outputs(out, |s, out| s.start_navigator(state, source, out))
+    }
+
+    /// Records, from now on, what a smoother's backward pass needs (the first run of
+    /// `crate::smoother`); [`Session::finish_recording`] hands it over.
+    pub fn record_for_smoothing(&mut self, log: SmootherLog) {
+        self.smoothing = Smoothing::Record {
+            log: Box::new(log),
+            chains: Vec::new(),
+        };
+        self.begin_smoothing_chain();
+    }
+
+    /// Ends the recording started by [`Session::record_for_smoothing`]: the log with each chain's
+    /// nominal parameters. `None` when the session was not recording.
+    pub fn finish_recording(&mut self) -> Option<SmoothingRun> {
+        self.drain_trace();
+        let Smoothing::Record { mut log, chains } =
+            std::mem::replace(&mut self.smoothing, Smoothing::Off)
+        else {
+            return None;
+        };
+        let mut chains = chains;
+        if let Some(nav) = self.nav.as_ref()
+            && let Some(last) = chains.last_mut()
+        {
+            log.end_chain(nav.covariance());
+            last.1 = Some(nav.nominal_parameters());
+        }
+        Some(SmoothingRun {
+            log: *log,
+            chains: chains
+                .into_iter()
+                .map(|(start, end)| (start, end.unwrap_or(start)))
+                .collect(),
+        })
+    }
+
+    /// A new navigator took over (start, restart, resume): a new chain of the smoother's
+    /// record begins with its state.
+    fn begin_smoothing_chain(&mut self) {
+        let Smoothing::Record { log, chains } = &mut self.smoothing else {
+            return;
+        };
+        let Some(nav) = self.nav.as_mut() else {
+            return;
+        };
+        nav.start_trace();
+        if let Some(last) = chains.last_mut()
+            && last.1.is_none()
+        {
+            // The previous navigator was replaced without an end (a restart after it failed):
+            // its start values stand for its end.
+            last.1 = Some(last.0);
+        }
+        log.begin_chain(nav.state_time_ns(), nav.covariance());
+        chains.push((nav.nominal_parameters(), None));
+    }
+
+    /// Moves the navigator's trace events into the smoother's record.
+    fn drain_trace(&mut self) {
+        if let (Smoothing::Record { log, .. }, Some(nav)) = (&mut self.smoothing, self.nav.as_mut())
+        {
+            log.take(nav.take_trace());
+        }
+    }
+
+    /// Runs `f` with `out` and moves the trace into the smoother's record afterwards.
+    fn with_outputs<E>(
+        &mut self,
+        out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
+        f: impl FnOnce(&mut Self, &mut dyn FnMut(SessionOutput) -> Result<(), E>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        let r = f(self, out);
+        self.drain_trace();
+        r
+    }
+
+    fn start_navigator<E>(
+        &mut self,
+        state: NavState,
+        source: &'static str,
+        out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
+    ) -> Result<(), E> {
         let e = state.euler();
         self.initial = Some(InitialReport {
             source,
@@ -281,6 +379,7 @@ impl Session {
         let sol = nav.solution(t_ns);
         out(SessionOutput::Solution(&sol))?;
         self.nav = Some(nav);
+        self.begin_smoothing_chain();
         Ok(())
     }
 
@@ -346,13 +445,14 @@ impl Session {
             self.resumed = true;
             let sol = nav.solution(x.host_time_ns);
             self.nav = Some(nav);
+            self.begin_smoothing_chain();
             return out(SessionOutput::Solution(&sol));
         }
         if self.nav.is_none()
             && let Some(i) = self.configured_initial.clone()
         {
             let state = i.state(x.host_time_ns as f64 * 1e-9);
-            self.start(state, "[initial] table of the configuration", out)?;
+            self.start_navigator(state, "[initial] table of the configuration", out)?;
             if let Some(nav) = self.nav.as_mut() {
                 nav.start_at_imu(x);
             }
@@ -421,6 +521,7 @@ impl Session {
         let mut sol = nav.solution(x.host_time_ns);
         sol.mode = NavMode::Invalid as u32;
         self.nav = Some(nav);
+        self.begin_smoothing_chain();
         out(SessionOutput::Solution(&sol))
     }
 
@@ -544,7 +645,7 @@ impl Session {
             cfg.initial_tilt_std_deg = a.coarse_tilt_std_deg;
             cfg.initial_position_std_m = position_std_m;
             let saved = std::mem::replace(&mut self.cfg, cfg);
-            let r = self.start(state, "in-motion coarse alignment", &mut |o| match o {
+            let r = self.start_navigator(state, "in-motion coarse alignment", &mut |o| match o {
                 SessionOutput::Solution(s) => {
                     let mut s = *s;
                     s.mode = NavMode::Aligning as u32;
@@ -641,7 +742,7 @@ impl Session {
             self.fine = None;
             self.aligned = true;
             let saved = std::mem::replace(&mut self.cfg, cfg);
-            let r = self.start(state, "in-motion alignment (coarse, then fine)", out);
+            let r = self.start_navigator(state, "in-motion alignment (coarse, then fine)", out);
             self.cfg = saved;
             r?;
             if let Some(nav) = self.nav.as_mut() {
@@ -756,10 +857,12 @@ impl Session {
         &mut self,
         out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
     ) -> Result<(), E> {
-        while let Some(Pending(aid, _)) = self.pending.pop() {
-            self.apply(aid, out)?;
-        }
-        Ok(())
+        self.with_outputs(out, |s, out| {
+            while let Some(Pending(aid, _)) = s.pending.pop() {
+                s.apply(aid, out)?;
+            }
+            Ok(())
+        })
     }
 
     /// Feeds one sensor message. IMU samples are processed at once (after the aid messages due
@@ -770,7 +873,7 @@ impl Session {
         out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
     ) -> Result<(), E> {
         match m {
-            SensorMessage::Imu(x) => self.on_imu(x, out),
+            SensorMessage::Imu(x) => self.with_outputs(out, |s, out| s.on_imu(x, out)),
             aid => {
                 self.queue(*aid);
                 Ok(())

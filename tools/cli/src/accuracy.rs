@@ -23,6 +23,7 @@ pub struct AccuracyTracker {
 pub struct Accuracy {
     pub horizontal_error_final_m: f64,
     pub horizontal_error_max_m: f64,
+    pub horizontal_error_rms_m: f64,
     pub horizontal_error_cep50_m: f64,
     /// 0.8326 sqrt(mean((dD/D)^2)) over the points beyond `min_distance_m`, in percent.
     pub error_per_distance_cep50_percent: f64,
@@ -129,6 +130,8 @@ impl AccuracyTracker {
         Accuracy {
             horizontal_error_final_m: self.errors.last().copied().unwrap_or(0.0),
             horizontal_error_max_m: sorted.last().copied().unwrap_or(0.0),
+            horizontal_error_rms_m: mean(&self.errors.iter().map(|e| e * e).collect::<Vec<_>>())
+                .sqrt(),
             horizontal_error_cep50_m: median,
             error_per_distance_cep50_percent: 100.0
                 * SCAL_CEP50_FACTOR

@@ -18,6 +18,7 @@ pub mod phases;
 pub mod process;
 pub mod progress;
 pub mod replay;
+pub mod smooth;
 pub mod study;
 pub mod usbl;
 

@@ -28,6 +28,9 @@ enum Command {
     Info(auvnav_tools::info::InfoArgs),
     /// Run a log through the navigation core; with a truth channel, report the accuracy.
     Replay(auvnav_tools::replay::ReplayArgs),
+    /// Post-process logs: forward-backward (RTS) smoothing with fixes from the log and a fix
+    /// file; smoothed track (CSV, MCAP, GeoJSON, KML, plain CSV), parameters and a report.
+    Smooth(auvnav_tools::smooth::SmoothArgs),
     /// Decode a captured device byte stream (one JSON object per frame with --json).
     Decode(auvnav_tools::decode::DecodeArgs),
     /// Play a log's sensor messages into pseudo-terminals in the devices' protocols.
@@ -605,6 +608,14 @@ fn main() -> std::process::ExitCode {
         Command::Sim(a) => run_sim(a),
         Command::Demo(a) => auvnav_tools::demo::run(&a),
         Command::Replay(a) => run_replay(&a),
+        Command::Smooth(a) => auvnav_tools::smooth::run(&a).and_then(|r| {
+            if a.json {
+                Ok(auvnav_tools::json::print(&r)?)
+            } else {
+                auvnav_tools::smooth::print_report(&r);
+                Ok(())
+            }
+        }),
         Command::Info(a) => auvnav_tools::info::run(&a).map(|_| ()),
         Command::Completions { shell, out } => completions(shell, out.as_deref()),
         Command::Man { out } => man_pages(&out),

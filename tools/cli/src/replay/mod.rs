@@ -207,6 +207,9 @@ pub struct Replay {
     first_time_ns: Option<u64>,
     last_time_ns: u64,
     recorded: Option<RecordedComparison>,
+    /// Messages from outside the log (position fixes of a file), fed in time order among the
+    /// log's.
+    injected: std::collections::VecDeque<LogMessage>,
 }
 
 impl Replay {
@@ -222,7 +225,48 @@ impl Replay {
             first_time_ns: None,
             last_time_ns: 0,
             recorded: None,
+            injected: std::collections::VecDeque::new(),
         }
+    }
+
+    /// Feeds `messages` (aids from outside the log, e.g. position fixes of a file) among the
+    /// log's, each before the first log message stamped at or after it.
+    pub fn inject(&mut self, mut messages: Vec<LogMessage>) {
+        let time = |m: &LogMessage| m.sensor().map_or(0, |s| s.host_time_ns());
+        messages.sort_by_key(time);
+        self.injected = messages.into();
+    }
+
+    /// Records what the smoother's backward pass needs (`auvnav_core::smoother`).
+    pub fn record_for_smoothing(&mut self, log: auvnav_core::smoother::SmootherLog) {
+        self.session.record_for_smoothing(log);
+    }
+
+    /// The smoother's record, at the end of the replay.
+    pub fn finish_recording(&mut self) -> Option<auvnav_core::smoother::SmoothingRun> {
+        self.session.finish_recording()
+    }
+
+    fn push_injected(
+        &mut self,
+        before_ns: Option<u64>,
+        out: &mut dyn FnMut(Output) -> anyhow::Result<()>,
+    ) -> anyhow::Result<()> {
+        while let Some(m) = self.injected.front() {
+            let t = m.sensor().map_or(0, |s| s.host_time_ns());
+            if before_ns.is_some_and(|b| t > b) {
+                break;
+            }
+            let Some(m) = self.injected.pop_front() else {
+                break;
+            };
+            if self.order.push(&m) {
+                while let Some(h) = self.order.pop_ready() {
+                    self.feed(h, out)?;
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Compares the solutions with those the log recorded (see [`RecordedComparison`]).
@@ -276,6 +320,14 @@ impl Replay {
         out: &mut dyn FnMut(Output) -> anyhow::Result<()>,
     ) -> anyhow::Result<()> {
         self.counts.messages += 1;
+        if !self.injected.is_empty()
+            && let Some(t) = m.sensor().map(|x| x.host_time_ns()).or(match m {
+                LogMessage::Truth(t) => Some(t.host_time_ns),
+                _ => None,
+            })
+        {
+            self.push_injected(Some(t), out)?;
+        }
         match m {
             LogMessage::Unknown => self.counts.unknown += 1,
             LogMessage::LateAid(r) => {
@@ -380,6 +432,7 @@ impl Replay {
         &mut self,
         out: &mut dyn FnMut(Output) -> anyhow::Result<()>,
     ) -> anyhow::Result<()> {
+        self.push_injected(None, out)?;
         while let Some(m) = self.order.pop_any() {
             self.feed(m, out)?;
         }
