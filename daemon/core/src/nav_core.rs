@@ -257,6 +257,40 @@ impl NavCore {
         }
     }
 
+    /// Re-opens a block of three navigation states (`ekf::reopen_block`). For a smoother this
+    /// is a step of its own at the same time: the block's rows of the transition are zero and
+    /// their new variances the process noise, so that the backward pass sees a model step, not
+    /// an update that added variance.
+    pub(crate) fn reopen(&mut self, first: usize, extra_variances: [f64; 3]) {
+        let before = match self.trace {
+            Some(_) => Some(self.kf.p),
+            None => None,
+        };
+        ekf::reopen_block(&mut self.kf.p, first, extra_variances);
+        if let Some(p_updated) = before {
+            let mut nav =
+                nalgebra::SMatrix::<f64, { ekf::trace::NAV_ROWS }, { ekf::CORE }>::zeros();
+            for i in 0..ekf::trace::NAV_ROWS {
+                nav[(i, i)] = if (first..first + 3).contains(&i) {
+                    0.0
+                } else {
+                    1.0
+                };
+            }
+            let event = ekf::trace::Propagation {
+                time_ns: self.state_time_ns(),
+                p_updated,
+                transition_nav: nav,
+                transition_params: nalgebra::SVector::repeat(1.0),
+                p_predicted: self.kf.p,
+            };
+            if let Some(t) = self.trace.as_mut() {
+                t.events
+                    .push(ekf::trace::TraceEvent::Propagation(Box::new(event)));
+            }
+        }
+    }
+
     /// The time of the state (ns): the time stamp of the IMU sample integrated last.
     pub(crate) fn state_time_ns(&self) -> u64 {
         self.last_imu_ns

@@ -145,11 +145,7 @@ impl DvlAid {
         let since = *self.rejected_since_s.get_or_insert(t);
         if rejected && self.reset_after_s > 0.0 && t - since >= self.reset_after_s {
             let innovation_ned = core.state().c_body_to_ned() * y;
-            ekf::reopen_block(
-                &mut core.kf.p,
-                ekf::VEL,
-                innovation_ned.map(|x| x * x).into(),
-            );
+            core.reopen(ekf::VEL, innovation_ned.map(|x| x * x).into());
             self.resets += 1;
             d.flags |= AidDiagnosticsV1::FLAG_RESET;
             let (predicted, h) = dvl_model(

@@ -102,7 +102,11 @@ impl SmoothedTrack {
             return Some((err, var));
         }
         let (t0, t1) = (e.time_ns[j] as f64, e.time_ns[j + 1] as f64);
-        let w = ((t_ns as f64 - t0) / (t1 - t0)).clamp(0.0, 1.0);
+        let w = if t1 > t0 {
+            ((t_ns as f64 - t0) / (t1 - t0)).clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
         let (a, b) = (e.after(j), e.before(j + 1));
         let (va, vb) = (e.variance(j), e.variance(j + 1));
         for i in 0..N {

@@ -284,11 +284,17 @@ pub fn rts_step(
     let phi_ar = sub(transition, &a, &r);
     let x_t = &phi_ar * &pu_rr; // (a × r) = (P⁺ Φᵀ)ᵀ
     let pm_aa = sub(p_predicted, &a, &a);
-    let g_t = match pm_aa.clone().cholesky() {
-        Some(ch) => ch.solve(&x_t),
+    // Solved on the correlation matrix `D P⁻ D` (`D` = diag(P⁻)^-1/2): the variances span twenty
+    // orders of magnitude (position in m², gyro bias in (rad/s)²), which the unscaled
+    // factorisation loses to rounding.
+    let d = DVector::from_iterator(a.len(), (0..a.len()).map(|i| 1.0 / pm_aa[(i, i)].sqrt()));
+    let scaled = DMatrix::from_fn(a.len(), a.len(), |i, j| pm_aa[(i, j)] * d[i] * d[j]);
+    let x_scaled = DMatrix::from_fn(x_t.nrows(), x_t.ncols(), |i, j| x_t[(i, j)] * d[i]);
+    let solved = match scaled.clone().cholesky() {
+        Some(ch) => ch.solve(&x_scaled),
         None => {
-            // Positive semi-definite only: the pseudo-inverse of the predicted covariance.
-            let eig = pm_aa.clone().symmetric_eigen();
+            // Positive semi-definite only: the pseudo-inverse.
+            let eig = scaled.symmetric_eigen();
             let max = eig.eigenvalues.amax();
             if !(max.is_finite() && max > 0.0) {
                 return None;
@@ -300,9 +306,10 @@ pub fn rts_step(
                     .map(|&l| if l > max * 1e-12 { 1.0 / l } else { 0.0 }),
             );
             let v = &eig.eigenvectors;
-            v * DMatrix::from_diagonal(&inv) * v.transpose() * &x_t
+            v * DMatrix::from_diagonal(&inv) * v.transpose() * &x_scaled
         }
     };
+    let g_t = DMatrix::from_fn(solved.nrows(), solved.ncols(), |i, j| solved[(i, j)] * d[i]);
     let g = g_t.transpose(); // r × a
     let s_a = DVector::from_iterator(a.len(), a.iter().map(|&i| s_next[i]));
     let s_r = &g * s_a;

@@ -274,7 +274,7 @@ impl UsblAid {
             } else {
                 max_range_m
             };
-            ekf::reopen_block(&mut core.kf.p, ekf::POS, [reopen_by * reopen_by; 3]);
+            core.reopen(ekf::POS, [reopen_by * reopen_by; 3]);
             noise.set_variances(&DVector::from_column_slice(meas.r.diagonal().as_slice()));
             let r = noise.covariance();
             match update(&active_p(&core.kf), &r) {
