@@ -29,17 +29,14 @@ fn simulate(dir: &Path, scenario: &str, seed: u64, seconds: Option<f64>) -> Path
     log
 }
 
-/// The truth records of a log one second after its start and at its end.
+/// The first and last truth records of a log.
 fn truth_ends(log: &Path) -> (TruthStateV1, TruthStateV1) {
     let mut r = LogReader::open(log).expect("open");
     r.read_header().expect("header");
-    let (mut start, mut first, mut last) = (None, None, None);
+    let (mut first, mut last) = (None, None);
     while let Ok(Some(step)) = r.next_decoded_with(|m| {
         if let Ok(LogMessage::Truth(t)) = m {
-            start.get_or_insert(t.host_time_ns);
-            if start.is_some_and(|s| t.host_time_ns >= s + 1_000_000_000) {
-                first.get_or_insert(*t);
-            }
+            first.get_or_insert(*t);
             last = Some(*t);
         }
         Ok::<(), anyhow::Error>(())
@@ -47,25 +44,6 @@ fn truth_ends(log: &Path) -> (TruthStateV1, TruthStateV1) {
         step.expect("read");
     }
     (first.expect("truth"), last.expect("truth"))
-}
-
-/// The first truth record of a log.
-fn truth_start(log: &Path) -> TruthStateV1 {
-    let mut r = LogReader::open(log).expect("open");
-    r.read_header().expect("header");
-    let mut first = None;
-    while let Ok(Some(step)) = r.next_decoded_with(|m| {
-        if let Ok(LogMessage::Truth(t)) = m {
-            first.get_or_insert(*t);
-        }
-        Ok::<(), anyhow::Error>(())
-    }) {
-        step.expect("read");
-        if first.is_some() {
-            break;
-        }
-    }
-    first.expect("truth")
 }
 
 /// A fix line at the truth `t` displaced by (north, east) metres.
@@ -142,8 +120,7 @@ fn survey_line_with_fixes_before_and_after_is_smoothed_below_the_forward_error()
     let mut ratios = Vec::new();
     for seed in [7101u64, 7102] {
         let log = simulate(&dir, "survey", seed, None);
-        let (_, last) = truth_ends(&log);
-        let first = truth_start(&log);
+        let (first, last) = truth_ends(&log);
         let mut rng = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
         // The fix before the dive is where the filter starts; the one after it comes from the
         // file.

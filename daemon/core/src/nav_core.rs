@@ -262,10 +262,7 @@ impl NavCore {
     /// their new variances the process noise, so that the backward pass sees a model step, not
     /// an update that added variance.
     pub(crate) fn reopen(&mut self, first: usize, extra_variances: [f64; 3]) {
-        let before = match self.trace {
-            Some(_) => Some(self.kf.p),
-            None => None,
-        };
+        let before = self.covariance_for_trace();
         ekf::reopen_block(&mut self.kf.p, first, extra_variances);
         if let Some(p_updated) = before {
             let mut nav =
@@ -277,17 +274,33 @@ impl NavCore {
                     1.0
                 };
             }
-            let event = ekf::trace::Propagation {
-                time_ns: self.state_time_ns(),
-                p_updated,
-                transition_nav: nav,
-                transition_params: nalgebra::SVector::repeat(1.0),
-                p_predicted: self.kf.p,
-            };
-            if let Some(t) = self.trace.as_mut() {
-                t.events
-                    .push(ekf::trace::TraceEvent::Propagation(Box::new(event)));
-            }
+            self.trace_step(p_updated, nav, nalgebra::SVector::repeat(1.0));
+        }
+    }
+
+    /// The covariance now, when a smoother asked for the trace (copied only then).
+    fn covariance_for_trace(&self) -> Option<ekf::Covariance> {
+        self.trace.as_ref().map(|_| self.kf.p)
+    }
+
+    /// Records a step of the trace to the state's time: from `p_updated` by the transition's
+    /// navigation rows and parameter factors to the covariance now.
+    fn trace_step(
+        &mut self,
+        p_updated: ekf::Covariance,
+        transition_nav: nalgebra::SMatrix<f64, { ekf::trace::NAV_ROWS }, { ekf::CORE }>,
+        transition_params: nalgebra::SVector<f64, { ekf::PARAMS }>,
+    ) {
+        let event = ekf::trace::Propagation {
+            time_ns: self.state_time_ns(),
+            p_updated,
+            transition_nav,
+            transition_params,
+            p_predicted: self.kf.p,
+        };
+        if let Some(t) = self.trace.as_mut() {
+            t.events
+                .push(ekf::trace::TraceEvent::Propagation(Box::new(event)));
         }
     }
 
@@ -333,14 +346,10 @@ impl NavCore {
             height_m: s.position.height_m,
         };
         let f = ekf::dynamics_matrix(&inputs);
-        // Copied only when a smoother asked for the trace.
-        let before = match self.trace {
-            Some(_) => Some(self.kf.p),
-            None => None,
-        };
+        let before = self.covariance_for_trace();
         self.kf
             .predict(&f, &inputs.c_body_to_ned, &self.noise, self.pending_dt);
-        if let (Some(p_updated), Some(_)) = (before, self.trace.as_ref()) {
+        if let Some(p_updated) = before {
             // The same transition the propagation used (its navigation rows).
             let fdt =
                 f.fixed_view::<{ ekf::trace::NAV_ROWS }, { ekf::CORE }>(0, 0) * self.pending_dt;
@@ -350,17 +359,8 @@ impl NavCore {
             for i in 0..ekf::trace::NAV_ROWS {
                 nav[(i, i)] += 1.0;
             }
-            let event = ekf::trace::Propagation {
-                time_ns: self.state_time_ns(),
-                p_updated,
-                transition_nav: nav,
-                transition_params: self.kf.param_transition(self.pending_dt),
-                p_predicted: self.kf.p,
-            };
-            if let Some(t) = self.trace.as_mut() {
-                t.events
-                    .push(ekf::trace::TraceEvent::Propagation(Box::new(event)));
-            }
+            let params = self.kf.param_transition(self.pending_dt);
+            self.trace_step(p_updated, nav, params);
         }
         // The expected value of a Gauss-Markov parameter state decays with its correlation
         // time (constants: a = 1).

@@ -356,9 +356,8 @@ pub fn smooth_log(
     let (cfg, configuration) = replay_config(&replay_args(a, log))?;
     let name = stem(log);
     let spill_dir = a.spill_dir.clone().unwrap_or_else(|| a.out.clone());
-    // The log's time span, for the fixes (a first read of the index-free header is not enough:
-    // the first pass tells it, and the fixes join from the second pass on if the first had to
-    // guess). Fixes are fed in both passes, so both see the same messages.
+    // The fixes inside the log's time span (from a quick read before the passes), fed in both
+    // passes so that both see the same messages.
     let fix_messages = |span: Option<(u64, u64)>| -> (Vec<LogMessage>, usize, usize) {
         let Some(f) = fix_file else {
             return (Vec::new(), 0, 0);
@@ -375,7 +374,8 @@ pub fn smooth_log(
         let n = inside.len();
         (inside, n, outside)
     };
-    let span = log_span(log)?;
+    let scan = scan_log(log)?;
+    let (span, gnss_time) = (scan.span_ns, scan.unix_time_of_log_zero);
     let (fix_msgs, from_file, from_file_outside_log) = fix_messages(span);
 
     // First pass: the forward filter, recording its epochs.
@@ -388,7 +388,6 @@ pub fn smooth_log(
     ));
     let mut truths = Vec::new();
     let mut forward_solutions = 0u64;
-    let mut gnss_time: Option<f64> = None;
     let (_, log_error) = run_log(log, &mut first, &mut |o| {
         match o {
             Output::Truth(t) => truths.push(*t),
@@ -420,9 +419,6 @@ pub fn smooth_log(
         .smooth()
         .with_context(|| format!("smoothing {}", log.display()))?;
     let backward_wall_s = t_back.elapsed().as_secs_f64();
-    if let Ok(mut r) = auvnav_log::LogReader::open(log) {
-        gnss_time = first_gnss_unix_offset(&mut r);
-    }
 
     // Second pass: the same forward run, each solution written as it was and smoothed.
     let t_second = std::time::Instant::now();
@@ -583,52 +579,49 @@ pub fn smooth_log(
     })
 }
 
-/// The first and last sensor time stamps of a log (ns), from a quick read.
-fn log_span(log: &Path) -> anyhow::Result<Option<(u64, u64)>> {
+/// What one quick read of a log tells before the passes: the first and last sensor time stamps
+/// (ns), and the Unix time of the log's time 0 from the first GNSS fix with a valid GNSS time
+/// (GPS time less the 18 leap seconds in force since 2017).
+struct LogScan {
+    span_ns: Option<(u64, u64)>,
+    unix_time_of_log_zero: Option<f64>,
+}
+
+fn scan_log(log: &Path) -> anyhow::Result<LogScan> {
+    const GPS_EPOCH_UNIX_S: f64 = 315_964_800.0;
+    const LEAP_S: f64 = 18.0;
     let mut r =
         auvnav_log::LogReader::open(log).with_context(|| format!("opening {}", log.display()))?;
     r.read_header()
         .with_context(|| format!("reading {}", log.display()))?;
     let mut span: Option<(u64, u64)> = None;
+    let mut unix_offset = None;
     while let Ok(Some(step)) = r.next_decoded_with(|m| {
-        if let Ok(m) = m
-            && let Some(s) = m.sensor()
-        {
+        let Ok(m) = m else {
+            return Ok::<(), anyhow::Error>(());
+        };
+        if let Some(s) = m.sensor() {
             let t = s.host_time_ns();
             span = Some(span.map_or((t, t), |(a, b)| (a.min(t), b.max(t))));
         }
-        Ok::<(), anyhow::Error>(())
+        if let LogMessage::Gnss(g) = m
+            && unix_offset.is_none()
+            && g.validity & auvnav_shm_schema::GnssFixV1::VALID_DEVICE_TIME != 0
+        {
+            unix_offset = Some(
+                GPS_EPOCH_UNIX_S + g.device_time_ns as f64 * 1e-9
+                    - LEAP_S
+                    - g.host_time_ns as f64 * 1e-9,
+            );
+        }
+        Ok(())
     }) {
         step?;
     }
-    Ok(span)
-}
-
-/// Unix time of the log's time 0 from the first GNSS fix with a valid GNSS time (GPS time less
-/// the 18 leap seconds in force since 2017).
-fn first_gnss_unix_offset<R: std::io::Read>(r: &mut auvnav_log::LogReader<R>) -> Option<f64> {
-    const GPS_EPOCH_UNIX_S: f64 = 315_964_800.0;
-    const LEAP_S: f64 = 18.0;
-    r.read_header().ok()?;
-    let mut found = None;
-    loop {
-        let step = r.next_decoded_with(|m| {
-            if let Ok(LogMessage::Gnss(g)) = m
-                && g.validity & auvnav_shm_schema::GnssFixV1::VALID_DEVICE_TIME != 0
-            {
-                found = Some(
-                    GPS_EPOCH_UNIX_S + g.device_time_ns as f64 * 1e-9
-                        - LEAP_S
-                        - g.host_time_ns as f64 * 1e-9,
-                );
-            }
-            Ok::<(), anyhow::Error>(())
-        });
-        match step {
-            Ok(Some(_)) if found.is_none() => {}
-            _ => return found,
-        }
-    }
+    Ok(LogScan {
+        span_ns: span,
+        unix_time_of_log_zero: unix_offset,
+    })
 }
 
 fn fix_innovation(d: &AidDiagnosticsV1) -> Option<FixInnovation> {
