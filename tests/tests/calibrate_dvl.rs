@@ -396,3 +396,83 @@ fn perturb_hides_the_installation_the_simulator_would_have_produced() {
         Some("dvl.mount_yaw=1.5;dvl.scale_factor=0.996;dvl.lever_arm=-1.5,0.1,0.3")
     );
 }
+
+/// A short dive that starts and ends at the surface (GNSS there only), with two turns and a dive
+/// and ascent in between: the motion that shows the mounting pitch besides the yaw and scale.
+fn surface_to_surface_legs(turn_deg: f64) -> String {
+    let depth = |change: f64| {
+        format!("[[legs]]\nkind = \"depth\"\nchange_m = {change}\npitch_deg = 10.0\n")
+    };
+    let turn = |angle: f64| {
+        format!(
+            "[[legs]]\nkind = \"turn\"\nangle_deg = {angle}\nrate_deg_s = 3.0\nbank_deg = {}\n",
+            8.0 * angle.signum()
+        )
+    };
+    [
+        straight(60.0),
+        depth(20.0),
+        straight(200.0),
+        turn(turn_deg),
+        straight(200.0),
+        turn(-turn_deg),
+        straight(150.0),
+        depth(-20.0),
+        straight(60.0),
+    ]
+    .concat()
+}
+
+#[test]
+fn the_smoother_method_recovers_the_installation_from_surface_fixes_and_holds_what_it_cannot_see() {
+    let dir = TempDir::new("calsmooth");
+    let (yaw, pitch, scale) = (-1.7, 0.4, 0.998);
+    let fx: &[(&str, &[f64])] = &[
+        ("dvl.mount_yaw", &[yaw]),
+        ("dvl.mount_pitch", &[pitch]),
+        ("dvl.scale_factor", &[scale]),
+    ];
+    let paths: Vec<PathBuf> = (0..2)
+        .map(|k| {
+            voyage(
+                dir.path(),
+                &format!("v{k}"),
+                20.0 + 150.0 * k as f64,
+                0.0,
+                &surface_to_surface_legs(if k == 0 { 70.0 } else { -100.0 }),
+                fx,
+                4101 + k,
+            )
+        })
+        .collect();
+    let mut a = CalibrateDvlArgs::new(specs(&paths));
+    a.method = Method::Smoother;
+    a.fixes = FixSource::Gnss;
+    a.threshold = 1000.0;
+    a.holdout = Holdout::None;
+    let r = calibrate_dvl(&a).expect("calibrate by smoothing");
+    let p = |n: &str| r.parameters.iter().find(|p| p.name == n).cloned().expect(n);
+    for (n, truth, max_err) in [
+        ("dvl.mount_yaw", yaw, 0.2),
+        ("dvl.mount_pitch", pitch, 0.1),
+        ("dvl.scale_factor", scale, 5e-4),
+    ] {
+        let q = p(n);
+        let std = q.std.expect("a std");
+        eprintln!("{n}: {} ± {std} (hidden {truth})", q.value);
+        assert_eq!(q.status, "estimated", "{n}: {q:?}\n{}", r.verdict);
+        // Within its own uncertainty (4 sigma) and within what an installation needs.
+        assert!(
+            (q.value - truth).abs() < (4.0 * std).max(1e-9) && (q.value - truth).abs() < max_err,
+            "{n}: {} ± {std} against {truth}",
+            q.value
+        );
+    }
+    // Roll is hardly seen by a DVL on a vehicle that does not roll: held, not fitted to noise.
+    assert_eq!(p("dvl.mount_roll").status, "held_at_prior", "{}", r.verdict);
+    assert!(
+        r.objective.after < 0.5 * r.objective.before,
+        "{:?}",
+        r.objective
+    );
+}

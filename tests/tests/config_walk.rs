@@ -90,7 +90,7 @@ fn programs(dir: &Path) -> Vec<Program> {
     let initial = "[initial]\nlatitude_deg = 31.0\nlongitude_deg = 120.0\nheight_m = -20.0\n\
                    velocity_ned_m_s = [1.0, 0.5, 0.0]\neuler_deg = [1.0, 2.0, 45.0]\n";
     let daemon_flat = format!(
-        "[navigation]\ndvl_scale_factor = 1.001\n{initial}\
+        "[navigation]\ndvl_scale_factor = 1.001\ninitial_dvl_mounting_axis_std_deg = [1.0, 1.0, 5.0]\n{initial}\
          [alignment]\nlatitude_deg = 31.0\nlongitude_deg = 120.0\nheight_m = -20.0\n\
          [checkpoint]\npath = \"{}\"\n",
         dir.join("cp.json").display()

@@ -250,3 +250,68 @@ fn bad_input_gives_a_clear_error_or_a_stated_result() {
     assert!(format!("{e:#}").contains("no IMU"), "{e:#}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The smoother's consistency by Monte Carlo, with small counts (the tool runs 50): sensor errors
+/// drawn from the filter's own model, the start and the end fixed. Errors common to a whole run
+/// (a heading draw) make the time-averaged NEES of a few runs vary like chi-square(N)/N, so each
+/// smoothed axis must lie inside that distribution's 99.9 % bounds, and, since the forward and
+/// smoothed estimates share those draws, within a factor of two of the forward filter's own
+/// consistency: a backward pass that shrank (or inflated) its variances beyond what the fixes
+/// give fails the second test long before the first.
+#[test]
+fn smoothed_errors_agree_with_the_smoothed_covariance_over_monte_carlo_runs() {
+    use auvnav_tools::montecarlo::chi2_quantile;
+    use auvnav_tools::smooth::montecarlo::{SmootherMonteCarloArgs, smoother_monte_carlo};
+    let runs = 10;
+    let a = SmootherMonteCarloArgs {
+        runs,
+        scenario: "survey".into(),
+        seconds: None,
+        seed: 7301,
+        dvl_beam_noise: 0.01,
+        end_fix_std: 3.0,
+        config: None,
+        series: None,
+        threads: None,
+        json: true,
+    };
+    let r =
+        smoother_monte_carlo(&a, &auvnav_core::config::NavConfig::default()).expect("Monte Carlo");
+    eprintln!(
+        "smoothed per-axis ANEES N {:.2} E {:.2} D {:.2}; forward N {:.2} E {:.2} D {:.2}; RMS {:.2} -> {:.2} m",
+        r.smoothed.north.mean_anees,
+        r.smoothed.east.mean_anees,
+        r.smoothed.down.mean_anees,
+        r.forward.north.mean_anees,
+        r.forward.east.mean_anees,
+        r.forward.down.mean_anees,
+        r.forward.horizontal_error_rms_m,
+        r.smoothed.horizontal_error_rms_m
+    );
+    assert_eq!(r.runs_end_fix_rejected, 0, "{r:?}");
+    let n = runs as f64;
+    let (lo, hi) = (chi2_quantile(n, -3.29) / n, chi2_quantile(n, 3.29) / n);
+    for (axis, s, f) in [
+        ("north", r.smoothed.north, r.forward.north),
+        ("east", r.smoothed.east, r.forward.east),
+        ("down", r.smoothed.down, r.forward.down),
+    ] {
+        assert!(
+            (lo..hi).contains(&s.mean_anees),
+            "smoothed {axis}: mean ANEES {:.2} outside [{lo:.2}, {hi:.2}]",
+            s.mean_anees
+        );
+        let ratio = s.mean_anees / f.mean_anees;
+        assert!(
+            (0.5..2.0).contains(&ratio),
+            "{axis}: smoothed mean ANEES {:.2} against the forward {:.2}",
+            s.mean_anees,
+            f.mean_anees
+        );
+    }
+    assert!(
+        r.rms_ratio < 0.5,
+        "smoothed / forward RMS {:.2}",
+        r.rms_ratio
+    );
+}

@@ -87,6 +87,10 @@ pub struct NavConfig {
     pub estimate_dvl_mounting: bool,
     /// Initial one-sigma of the DVL mounting angles when estimated (deg). Default 1.
     pub initial_dvl_mounting_std_deg: f64,
+    /// Initial one-sigma of each mounting angle (roll, pitch, yaw; deg) when they differ: the
+    /// yaw of a DVL is often known to degrees and its roll and pitch to a fraction of one.
+    /// Replaces `initial_dvl_mounting_std_deg` when given. Default none.
+    pub initial_dvl_mounting_axis_std_deg: Option<[f64; 3]>,
     /// Estimate the DVL scale factor (parameter state). Default false.
     pub estimate_dvl_scale: bool,
     /// Initial one-sigma of the DVL scale factor when estimated (1). Default 0.01.
@@ -163,6 +167,7 @@ impl Default for NavConfig {
             dvl_time_offset_s: 0.0,
             estimate_dvl_mounting: false,
             initial_dvl_mounting_std_deg: 1.0,
+            initial_dvl_mounting_axis_std_deg: None,
             estimate_dvl_scale: false,
             initial_dvl_scale_std: 0.01,
             estimate_dvl_lever_arm: false,
@@ -228,6 +233,12 @@ impl NavConfig {
 
     /// Sets the DVL installation: into the `[navigation.dvl]` table (the flat keys go back to
     /// their defaults, so the configuration stays valid).
+    /// The initial one-sigma of the mounting roll, pitch and yaw when estimated (deg).
+    pub fn dvl_mounting_std_deg(&self) -> [f64; 3] {
+        self.initial_dvl_mounting_axis_std_deg
+            .unwrap_or([self.initial_dvl_mounting_std_deg; 3])
+    }
+
     pub fn set_dvl_installation(&mut self, d: DvlInstallation) {
         let defaults = NavConfig::default();
         self.dvl_mount_deg = defaults.dvl_mount_deg;
@@ -696,7 +707,14 @@ impl NavConfig {
                 1e6,
             ),
             ("dvl_reset_after_s", self.dvl_reset_after_s, 0.0, 3600.0),
-        ] {
+        ]
+        .into_iter()
+        .chain(
+            self.initial_dvl_mounting_axis_std_deg
+                .into_iter()
+                .flatten()
+                .map(|v| ("initial_dvl_mounting_axis_std_deg", v, 1e-4, 180.0)),
+        ) {
             p.range(&format!("navigation.{key}"), v, lo, hi);
         }
         p.array(

@@ -133,11 +133,13 @@ impl Navigator {
     /// Starts navigating from a known initial state (alignment is a separate mode).
     pub fn new(cfg: NavConfig, initial: NavState) -> Navigator {
         let mut p0 = Self::initial_variances(&cfg);
-        let on = |flag: bool, std: f64| flag.then_some(std);
+        fn on<T>(flag: bool, std: T) -> Option<T> {
+            flag.then_some(std)
+        }
         DvlAid::initial_variances(
             &mut p0,
             &DvlEstimation {
-                mounting_std_deg: on(cfg.estimate_dvl_mounting, cfg.initial_dvl_mounting_std_deg),
+                mounting_std_deg: on(cfg.estimate_dvl_mounting, cfg.dvl_mounting_std_deg()),
                 scale_std: on(cfg.estimate_dvl_scale, cfg.initial_dvl_scale_std),
                 lever_arm_std_m: on(cfg.estimate_dvl_lever_arm, cfg.initial_dvl_lever_arm_std_m),
                 time_offset_std_s: on(

@@ -90,6 +90,9 @@ enum Command {
 enum MonteCarloWhat {
     /// Filter consistency: normalised estimation error squared of position, velocity and attitude.
     Nees(auvnav_tools::montecarlo::NeesArgs),
+    /// Smoother consistency and gain: runs with matched sensor errors, a start and an end fix,
+    /// smoothed; per-axis NEES of the forward and the smoothed position, and their errors.
+    Smoother(auvnav_tools::smooth::montecarlo::SmootherMonteCarloArgs),
 }
 
 #[derive(Subcommand)]
@@ -288,6 +291,24 @@ enum BenchWhat {
         #[arg(long)]
         json: bool,
     },
+    /// Wall time, real-time factor and peak memory of `auvnav smooth` on the replay log (one hour
+    /// of 200 Hz IMU, 1 Hz DVL and depth) and on a long voyage, each in a child process.
+    Smooth {
+        /// Hours of the timed log.
+        #[arg(long, default_value_t = 1.0)]
+        hours: f64,
+        /// Runs on it (the median is reported).
+        #[arg(long, default_value_t = 3)]
+        repeat: usize,
+        /// Hours of the long voyage, smoothed once for its peak memory (0: skip).
+        #[arg(long, default_value_t = 10.0)]
+        long_hours: f64,
+        /// `auvnav smooth --memory-budget-mib` for the runs.
+        #[arg(long, default_value_t = 1024)]
+        memory_budget_mib: usize,
+        #[arg(long)]
+        json: bool,
+    },
     /// Real-time factor of INS/DVL/depth replay: one hour of 200 Hz IMU, 1 Hz DVL, 1 Hz depth.
     Replay {
         /// Log hours.
@@ -299,7 +320,7 @@ enum BenchWhat {
         #[arg(long)]
         json: bool,
     },
-    /// Wall time and full replays of the DVL calibration methods (fast, seed, two-point) on the
+    /// Wall time and full replays of the DVL calibration methods (fast, seed, smoother, two-point) on the
     /// simulated S-CAL campaign (four voyages of 5.8–6.9 km) on all cores.
     Calibrate {
         /// Campaign seed.
@@ -650,6 +671,7 @@ fn main() -> std::process::ExitCode {
         }),
         Command::Montecarlo { what } => match what {
             MonteCarloWhat::Nees(a) => auvnav_tools::montecarlo::run_nees(&a),
+            MonteCarloWhat::Smoother(a) => auvnav_tools::smooth::montecarlo::run(&a),
         },
         Command::Calibrate { what } => match what {
             CalibrateWhat::Dvl(a) => run_calibrate_dvl(&a),
@@ -675,7 +697,12 @@ fn main() -> std::process::ExitCode {
             } => {
                 use auvnav_tools::calibrate::Method;
                 let methods = if methods.is_empty() {
-                    vec![Method::Fast, Method::Seed, Method::TwoPoint]
+                    vec![
+                        Method::Fast,
+                        Method::Seed,
+                        Method::Smoother,
+                        Method::TwoPoint,
+                    ]
                 } else {
                     methods
                 };
@@ -720,6 +747,13 @@ fn main() -> std::process::ExitCode {
                 repeat,
                 json,
             } => auvnav_tools::bench::replay(hours, repeat, json),
+            BenchWhat::Smooth {
+                hours,
+                repeat,
+                long_hours,
+                memory_budget_mib,
+                json,
+            } => auvnav_tools::bench::smooth(hours, repeat, long_hours, memory_budget_mib, json),
         },
     };
     match result {

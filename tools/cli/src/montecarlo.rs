@@ -98,7 +98,11 @@ fn nees(e: &Vector3<f64>, p: &Matrix3<f64>) -> f64 {
 }
 
 /// The simulation effects matching the filter's noise model, with biases drawn for one run.
-fn matched_effects(cfg: &NavConfig, dvl_beam_noise: f64, rng: &mut Rng) -> anyhow::Result<Effects> {
+pub(crate) fn matched_effects(
+    cfg: &NavConfig,
+    dvl_beam_noise: f64,
+    rng: &mut Rng,
+) -> anyhow::Result<Effects> {
     let mut e = Effects::default();
     // A Gauss-Markov bias with sigma s and correlation time T grows like a random walk of
     // density sqrt(2 s^2 / T) for t << T: pick s so the densities agree. The simulator starts

@@ -16,7 +16,8 @@ const DEG: f64 = std::f64::consts::PI / 180.0;
 /// one-sigma values; `None` = not estimated.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct DvlEstimation {
-    pub mounting_std_deg: Option<f64>,
+    /// Roll, pitch, yaw (deg).
+    pub mounting_std_deg: Option<[f64; 3]>,
     pub scale_std: Option<f64>,
     pub lever_arm_std_m: Option<f64>,
     pub time_offset_std_s: Option<f64>,
@@ -70,7 +71,7 @@ impl DvlAid {
     pub fn initial_variances(p0: &mut StateVector, estimate: &DvlEstimation) {
         for i in 0..3 {
             if let Some(s) = estimate.mounting_std_deg {
-                p0[ekf::DVL_MOUNT + i] = (s * DEG).powi(2);
+                p0[ekf::DVL_MOUNT + i] = (s[i] * DEG).powi(2);
             }
             if let Some(s) = estimate.lever_arm_std_m {
                 p0[ekf::DVL_LEVER + i] = s.powi(2);

@@ -327,10 +327,15 @@ impl SmootherLog {
         let Some(s) = self.spill.as_mut() else {
             return Ok(());
         };
-        let bytes: Vec<u8> = self.words.iter().flat_map(|w| w.to_le_bytes()).collect();
-        s.file.write_all(&bytes)?;
+        // In pieces, so that spilling costs no second copy of the budget.
+        let mut bytes = Vec::with_capacity(SPILL_PIECE_WORDS * 8);
+        for piece in self.words.chunks(SPILL_PIECE_WORDS) {
+            bytes.clear();
+            bytes.extend(piece.iter().flat_map(|w| w.to_le_bytes()));
+            s.file.write_all(&bytes)?;
+        }
         s.chunks.push((s.written, self.words.len()));
-        s.written += bytes.len() as u64;
+        s.written += self.words.len() as u64 * 8;
         self.words.clear();
         Ok(())
     }
@@ -356,20 +361,32 @@ impl SmootherLog {
             }
             Ok(())
         };
-        walk(&self.words, &mut back)?;
+        // The records in memory first (the latest), then each spilled chunk, read back into one
+        // buffer in pieces: at most one chunk (the memory budget) is in memory at a time.
+        let mut words = std::mem::take(&mut self.words);
+        walk(&words, &mut back)?;
         if let Some(s) = self.spill.as_mut() {
             let err = |source| LogError::Spill {
                 dir: s.dir.clone(),
                 source,
             };
+            let mut bytes = vec![0u8; SPILL_PIECE_WORDS * 8];
             for &(offset, len) in s.chunks.iter().rev() {
-                let mut bytes = vec![0u8; len * 8];
+                words.clear();
+                words.reserve(len);
                 s.file.seek(SeekFrom::Start(offset)).map_err(err)?;
-                s.file.read_exact(&mut bytes).map_err(err)?;
-                let words: Vec<u64> = bytes
-                    .chunks_exact(8)
-                    .map(|b| u64::from_le_bytes(b.try_into().unwrap_or([0; 8])))
-                    .collect();
+                let mut left = len;
+                while left > 0 {
+                    let n = left.min(SPILL_PIECE_WORDS);
+                    let piece = &mut bytes[..n * 8];
+                    s.file.read_exact(piece).map_err(err)?;
+                    words.extend(piece.chunks_exact(8).map(|b| {
+                        let mut w = [0u8; 8];
+                        w.copy_from_slice(b);
+                        u64::from_le_bytes(w)
+                    }));
+                    left -= n;
+                }
                 walk(&words, &mut back)?;
             }
         }
@@ -377,6 +394,10 @@ impl SmootherLog {
         Ok((back.finish(), larger))
     }
 }
+
+/// Words per write or read of the spill file (8 MiB; 8 KiB in the unit tests, so that their
+/// small chunks are read back in several pieces).
+const SPILL_PIECE_WORDS: usize = if cfg!(test) { 1 << 10 } else { 1 << 20 };
 
 /// A file in `dir` that no other process can open and that disappears when closed: created
 /// under a unique name, then unlinked at once.

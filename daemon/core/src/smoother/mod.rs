@@ -66,6 +66,20 @@ impl SmoothedTrack {
         }
     }
 
+    /// The last chain's smoothed parameters at its first epoch (after that epoch's corrections)
+    /// and at its last, with the indices of those epochs; `None` when nothing was smoothed.
+    pub fn last_chain_parameters(&self) -> Option<[(usize, SmoothedParameters); 2]> {
+        let e = &self.epochs;
+        let (start, end) = self.chains.last()?;
+        let last_i = e.len().checked_sub(1)?;
+        let first_i = (0..=last_i).rev().find(|&i| e.chain_start[i])?;
+        let nominal_first = nominal_after_start(start, e, first_i);
+        Some([
+            (first_i, parameters_at(e, first_i, &nominal_first)),
+            (last_i, parameters_at(e, last_i, end)),
+        ])
+    }
+
     /// The smoothed error (estimate minus truth) and variances at `t_ns`, or `None` before the
     /// first epoch.
     pub fn error_at(&mut self, t_ns: u64) -> Option<([f64; N], [f64; N])> {

@@ -37,7 +37,7 @@ pub struct CalibrateBenchReport {
     pub seed_over_fast: f64,
 }
 
-/// Simulates the campaign and times `fast`, `seed` and `two-point` on it.
+/// Simulates the campaign and times `fast`, `seed`, `smoother` and `two-point` on it.
 pub fn calibrate(seed: u64, methods: &[Method], json: bool) -> anyhow::Result<()> {
     let dir = std::env::temp_dir().join(format!("auvnav-bench-calibrate-{}", std::process::id()));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;

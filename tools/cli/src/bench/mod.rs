@@ -1,5 +1,5 @@
 //! `auvnav bench`: throughput, latency and cost figures, one module per kind
-//! ([`throughput`], [`decode`], [`latency`], [`bridge`], [`studies`], [`calibrate`]).
+//! ([`throughput`], [`decode`], [`latency`], [`bridge`], [`studies`], [`calibrate`], [`smooth`]).
 
 use anyhow::Context;
 use auvnav_sim::{self as sim, SimConfig, scenario::Scenario};
@@ -11,6 +11,7 @@ mod decode;
 mod discover;
 mod latency;
 mod mag;
+mod smooth;
 mod studies;
 mod throughput;
 
@@ -20,5 +21,6 @@ pub use decode::*;
 pub use discover::*;
 pub use latency::*;
 pub use mag::*;
+pub use smooth::*;
 pub use studies::*;
 pub use throughput::*;

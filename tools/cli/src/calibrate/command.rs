@@ -25,6 +25,9 @@ pub enum Method {
     Seed,
     /// The seed's two-point formulas on the start and end fixes (yaw and scale only).
     TwoPoint,
+    /// The filter's installation states, smoothed over each voyage with its fixes as aids and
+    /// fused across the voyages (one shared installation).
+    Smoother,
 }
 
 /// Hold-out evaluation.
@@ -169,6 +172,10 @@ fn run_method(
             Vec::new(),
         )),
         Method::TwoPoint => two_point::calibrate(problem, params, baseline),
+        Method::Smoother => Ok((
+            super::smoother::calibrate(problem, params, &mut p)?,
+            Vec::new(),
+        )),
     }
 }
 
@@ -246,7 +253,8 @@ pub fn calibrate_dvl(args: &CalibrateDvlArgs) -> anyhow::Result<CalibrationRepor
     )?;
     let after = problem.evaluate(&result.x, record_all)?;
     let fit_wall_s = fit_started.elapsed().as_secs_f64();
-    if args.method != Method::Fast {
+    // The smoother's standard deviations are its own; the others get the fast method's analysis.
+    if !matches!(args.method, Method::Fast | Method::Smoother) {
         let a = fast::analyse(&problem, &params, &after.runs, &result.x)?;
         result.std = a.std;
         result.determined = a.determined;

@@ -3,10 +3,11 @@
 //! A [`Problem`] is a set of voyages ([`voyage::Voyage`], in memory), the navigation
 //! configuration and the distance threshold; its objective is the S-CAL mean CEP50 of
 //! error/distance over the fixes beyond the threshold, each voyage dead-reckoned by a full replay
-//! through the navigation session ([`objective::run_voyage`]). Three methods search the
+//! through the navigation session ([`objective::run_voyage`]). Four methods search the
 //! installation ([`params::ParameterSet`]): [`two_point`] (the seed's formulas), [`seed`] (Latin
-//! hypercube → response surface → particle swarm) and [`fast`] (Gauss–Newton with replay
-//! sensitivities, the default). [`command`] is `auvnav calibrate dvl`; [`report`] writes JSON,
+//! hypercube → response surface → particle swarm), [`fast`] (Gauss–Newton with replay
+//! sensitivities, the default) and [`smoother`] (the installation states of the filter, smoothed
+//! over each voyage and fused across them). [`command`] is `auvnav calibrate dvl`; [`report`] writes JSON,
 //! the `[navigation.dvl]` table and the report directory.
 
 pub mod command;
@@ -16,6 +17,7 @@ pub mod objective;
 pub mod params;
 pub mod report;
 pub mod seed;
+pub mod smoother;
 pub mod svg;
 pub mod two_point;
 pub mod voyage;

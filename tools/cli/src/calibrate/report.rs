@@ -189,7 +189,9 @@ pub fn build(i: Inputs) -> CalibrationReport {
             let determined = r.determined.iter().find(|(j, _)| *j == k).map(|(_, d)| *d);
             let status = if !p.estimate {
                 "not_estimated"
-            } else if i.args.method == Method::Fast && determined == Some(false) {
+            } else if matches!(i.args.method, Method::Fast | Method::Smoother)
+                && determined == Some(false)
+            {
                 "held_at_prior"
             } else if i.args.method == Method::TwoPoint && k != 2 && k != 3 {
                 "not_estimated"

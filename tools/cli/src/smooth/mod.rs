@@ -11,14 +11,13 @@
 
 pub mod export;
 pub mod fixes;
+pub mod montecarlo;
 pub mod report;
 
 use crate::replay::{Output, Replay, ReplayArgs, replay_config, run_log};
 use anyhow::{Context, bail};
 use auvnav_core::ekf;
-use auvnav_core::smoother::{
-    SmoothedParameters, SmoothedTrack, SmoothedValue, SmootherLog, parameters_at,
-};
+use auvnav_core::smoother::{SmoothedParameters, SmoothedTrack, SmoothedValue, SmootherLog};
 use auvnav_log::{LogHeader, LogMessage, write_log_atomically};
 use auvnav_shm_schema::{AidDiagnosticsV1, AidSource, NavSolutionV1, TruthStateV1, topic};
 use serde::Serialize;
@@ -200,6 +199,16 @@ pub struct LogSmoothReport {
 pub struct SmoothReport {
     pub fix_file: Option<fixes::FixFile>,
     pub logs: Vec<LogSmoothReport>,
+    /// The process's peak resident memory so far (MiB; Linux `VmHWM`), when the system says.
+    pub peak_memory_mib: Option<f64>,
+}
+
+/// This process's peak resident memory (MiB), from `/proc/self/status`.
+pub fn peak_memory_mib() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib / 1024.0)
 }
 
 /// Forward and smoothed solutions against the reference epochs: each reference epoch between two
@@ -334,14 +343,10 @@ fn parameters(
     first: Option<&NavSolutionV1>,
     last: Option<&NavSolutionV1>,
 ) -> Option<ParameterReport> {
-    let e = &track.epochs;
-    let (start, end) = track.chains.last()?;
-    let last_i = e.len().checked_sub(1)?;
-    let first_i = (0..=last_i).rev().find(|&i| e.chain_start[i])?;
-    let nominal_first = auvnav_core::smoother::nominal_after_start(start, e, first_i);
+    let [(first_i, first_p), (last_i, last_p)] = track.last_chain_parameters()?;
     Some(ParameterReport {
-        first: parameters_at(e, first_i, &nominal_first),
-        last: parameters_at(e, last_i, end),
+        first: first_p,
+        last: last_p,
         imu_biases_first: biases_at(track, first_i, first),
         imu_biases_last: biases_at(track, last_i, last),
     })
@@ -658,7 +663,11 @@ pub fn run(a: &SmoothArgs) -> anyhow::Result<SmoothReport> {
         logs.push(smooth_log(a, log, fix_file.as_ref())?);
     }
     progress.update("smoothing logs", a.logs.len(), a.logs.len());
-    let r = SmoothReport { fix_file, logs };
+    let r = SmoothReport {
+        fix_file,
+        logs,
+        peak_memory_mib: peak_memory_mib(),
+    };
     if let Some(dir) = &a.report {
         report::write(dir, &r)?;
     }
