@@ -13,10 +13,11 @@ declare -A seeds=(
   [kvh1750]="$shared/kvh_1750"
   [xsens]="$shared/xsens_mtdata2"
   [seatrac]="$shared/seatrac_usbl"
+  [nortek]="$shared/nortek_dvl"
   [can_dbc]=""
 )
 status=0
-for target in pd0 wldvl kvh1750 xsens seatrac can_dbc; do
+for target in pd0 wldvl kvh1750 xsens seatrac nortek can_dbc; do
   corpus="corpus/$target"
   mkdir -p "$corpus"
   if [ -d "${seeds[$target]}" ]; then

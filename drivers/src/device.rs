@@ -5,6 +5,7 @@
 use crate::convert::{self, KvhConfig};
 use crate::framing::DecoderStats;
 use crate::kvh::KvhDecoder;
+use crate::nortek::{NortekDecoder, NortekFrame};
 use crate::pd0::Pd0Decoder;
 use crate::seatrac::{SeatracDecoder, SeatracMessage};
 use crate::wldvl::{WlDecoder, WlFrame};
@@ -26,15 +27,18 @@ pub enum Protocol {
     Xsens,
     /// Blueprint Subsea SeaTrac USBL (`CID_XCVR_FIX`, `CID_PING_RESP`).
     Seatrac,
+    /// Nortek DVL1000/DVL500 binary records (bottom track, id 0x1B).
+    Nortek,
 }
 
 impl Protocol {
-    pub const ALL: [Protocol; 5] = [
+    pub const ALL: [Protocol; 6] = [
         Protocol::Pd0,
         Protocol::Wldvl,
         Protocol::Kvh1750,
         Protocol::Xsens,
         Protocol::Seatrac,
+        Protocol::Nortek,
     ];
 
     /// The name used in configuration files and on the command line.
@@ -45,6 +49,7 @@ impl Protocol {
             Protocol::Kvh1750 => "kvh1750",
             Protocol::Xsens => "xsens",
             Protocol::Seatrac => "seatrac",
+            Protocol::Nortek => "nortek",
         }
     }
 
@@ -60,7 +65,7 @@ impl Protocol {
 
     pub fn class(self) -> DeviceClass {
         match self {
-            Protocol::Pd0 | Protocol::Wldvl => DeviceClass::Dvl,
+            Protocol::Pd0 | Protocol::Wldvl | Protocol::Nortek => DeviceClass::Dvl,
             Protocol::Kvh1750 | Protocol::Xsens => DeviceClass::Imu,
             Protocol::Seatrac => DeviceClass::Usbl,
         }
@@ -91,7 +96,7 @@ impl DeviceClass {
 #[serde(deny_unknown_fields, default)]
 pub struct ProtocolSettings {
     /// Time from validity to the end of the frame on the line, for protocols that do not report it
-    /// (PD0, SeaTrac) (s, 0..10, default 0).
+    /// (PD0, SeaTrac, Nortek) (s, 0..10, default 0).
     pub latency_s: f64,
     /// Xsens output data rate: the integration interval of delta-q/delta-v is its inverse (Hz,
     /// default 400).
@@ -138,6 +143,7 @@ enum Inner {
     Kvh(KvhDecoder),
     Xsens(XbusDecoder),
     Seatrac(SeatracDecoder),
+    Nortek(NortekDecoder),
 }
 
 /// Counters beyond the stream decoder's.
@@ -172,6 +178,7 @@ impl DeviceDecoder {
             Protocol::Kvh1750 => Inner::Kvh(KvhDecoder::new()),
             Protocol::Xsens => Inner::Xsens(XbusDecoder::new()),
             Protocol::Seatrac => Inner::Seatrac(SeatracDecoder::new()),
+            Protocol::Nortek => Inner::Nortek(NortekDecoder::new()),
         };
         DeviceDecoder {
             protocol,
@@ -195,6 +202,7 @@ impl DeviceDecoder {
             Inner::Kvh(d) => d.push(bytes),
             Inner::Xsens(d) => d.push(bytes),
             Inner::Seatrac(d) => d.push(bytes),
+            Inner::Nortek(d) => d.push(bytes),
         }
     }
 
@@ -206,6 +214,7 @@ impl DeviceDecoder {
             Inner::Kvh(d) => d.stats(),
             Inner::Xsens(d) => d.stats(),
             Inner::Seatrac(d) => d.stats(),
+            Inner::Nortek(d) => d.stats(),
         }
     }
 
@@ -296,6 +305,18 @@ impl DeviceDecoder {
                         }
                     }
                     XbusMessage::Other(_) => self.counters.other_frames += 1,
+                },
+                Inner::Nortek(d) => match d.next_frame()? {
+                    Ok(NortekFrame::BottomTrack(bt)) => {
+                        return Some(Output::Dvl(convert::nortek_velocity(
+                            &bt,
+                            host_time_ns,
+                            s.latency_s,
+                            0,
+                        )));
+                    }
+                    Ok(NortekFrame::Other(_)) => self.counters.other_frames += 1,
+                    Err(_) => continue,
                 },
                 Inner::Seatrac(d) => match d.next_frame()? {
                     Ok(f) => match f.message {

@@ -9,6 +9,7 @@ pub mod device;
 pub mod emulate;
 pub mod framing;
 pub mod kvh;
+pub mod nortek;
 pub mod pd0;
 pub mod seatrac;
 pub mod serial_driver;

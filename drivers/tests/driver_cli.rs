@@ -21,6 +21,7 @@ fn example_configurations_check() {
     for (bin, file) in [
         (env!("CARGO_BIN_EXE_auvnav-dvl"), "dvl-pd0.toml"),
         (env!("CARGO_BIN_EXE_auvnav-dvl"), "dvl-wldvl.toml"),
+        (env!("CARGO_BIN_EXE_auvnav-dvl"), "dvl-nortek.toml"),
         (env!("CARGO_BIN_EXE_auvnav-imu"), "imu-kvh1750.toml"),
         (env!("CARGO_BIN_EXE_auvnav-imu"), "imu-xsens.toml"),
         (env!("CARGO_BIN_EXE_auvnav-usbl"), "usbl-seatrac.toml"),

@@ -352,3 +352,100 @@ fn seatrac_fixes_synthetic_round_trip_and_damage_is_counted() {
         Some(Err(SeatracError::Malformed(_)))
     ));
 }
+
+#[test]
+fn nortek_dvl1000_captures_decode_to_their_documented_values() {
+    use auvnav_drivers::device::{DeviceDecoder, Output, Protocol, ProtocolSettings};
+    use auvnav_drivers::nortek::{self, NortekDecoder, NortekError, NortekFrame};
+    use auvnav_shm_schema::DvlVelocityV1;
+    let Some(dir) = shared("protocols/nortek_dvl") else {
+        return;
+    };
+    let read = |name: &str| std::fs::read(dir.join(name)).expect(name);
+
+    // The good record: DVL1000 serial 100996, 2019-08-08 14:49:21.001 (month counted from 0),
+    // sound speed 1500 m/s, 21.96 °C, 0.0575 dbar, no bottom lock (every velocity the
+    // invalid sentinel, every figure of merit 10, every distance 0).
+    let pass = read("whoi_ds_sensors_dvl1000_pass.bin");
+    assert_eq!(pass.len(), 222);
+    assert_eq!(nortek::checksum(&pass[..8]), 0xde2c);
+    assert_eq!(nortek::checksum(&pass[10..]), 0x0d0c);
+    let mut d = NortekDecoder::new();
+    d.push(&pass);
+    let Some(Ok(NortekFrame::BottomTrack(bt))) = d.next_frame() else {
+        panic!("the good capture does not decode: {:?}", d.stats())
+    };
+    assert_eq!(
+        (bt.version, bt.offset_of_data, bt.serial_number),
+        (1, 36, 100_996)
+    );
+    assert_eq!(bt.date_time, [119, 7, 8, 14, 49, 21]);
+    assert_eq!((bt.time_100us, bt.beams, bt.error), (10, 4, 0));
+    assert_eq!(bt.sound_speed_m_s, 1500.0);
+    assert!(
+        (bt.temperature_c - 21.96).abs() < 0.005,
+        "{}",
+        bt.temperature_c
+    );
+    assert!((bt.pressure_dbar - 0.0575).abs() < 1e-6);
+    for e in bt.beam.iter().chain(bt.xyz.iter()) {
+        assert_eq!(e.velocity_m_s, nortek::INVALID_VELOCITY);
+        assert_eq!(e.figure_of_merit_m_s, nortek::INVALID_FOM);
+        assert!(!e.valid());
+    }
+    assert_eq!(bt.beam_distance_m, [0.0; 4]);
+    let t = bt.unix_time_s().expect("a calendar date");
+    assert!((t - 1_565_275_761.001).abs() < 1e-6, "{t}");
+    assert_eq!(d.stats().frames, 1);
+
+    // Through the driver's conversion: a DVL message without a valid velocity or altitude,
+    // with the sound speed and the device clock.
+    let mut dev = DeviceDecoder::new(Protocol::Nortek, ProtocolSettings::default());
+    dev.push(&pass);
+    let Some(Output::Dvl(m)) = dev.next_output(7) else {
+        panic!("no DVL message")
+    };
+    assert_eq!(m.validity & DvlVelocityV1::VALID_VELOCITY, 0);
+    assert_eq!(m.validity & DvlVelocityV1::VALID_ALTITUDE, 0);
+    assert_eq!(m.sound_speed_m_s, 1500.0);
+    assert_eq!(m.device_time_ns, 1_565_275_761_001_000_000);
+    assert_eq!(m.beams_used, 0);
+
+    // The failed capture (the good record's header with other data and trailing bytes) and the
+    // one whose sound speed was edited without its checksum: each a counted data-checksum
+    // error, never a record.
+    for name in [
+        "whoi_ds_sensors_dvl1000_fail.bin",
+        "whoi_ds_sensors_dvl1000_badsoundspeed.bin",
+    ] {
+        let bytes = read(name);
+        let mut d = NortekDecoder::new();
+        d.push(&bytes);
+        let mut good = 0;
+        let mut bad = 0;
+        while let Some(f) = d.next_frame() {
+            match f {
+                Ok(NortekFrame::BottomTrack(_)) => good += 1,
+                Err(NortekError::DataChecksum { .. }) => bad += 1,
+                other => panic!("{name}: {other:?}"),
+            }
+        }
+        assert_eq!((good, bad), (0, 1), "{name}: {:?}", d.stats());
+        assert_eq!(d.stats().checksum_errors, 1, "{name}");
+    }
+
+    // Good, bad, good in one stream: the bad one costs only itself.
+    let mut stream = pass.clone();
+    stream.extend(read("whoi_ds_sensors_dvl1000_badsoundspeed.bin"));
+    stream.extend(&pass);
+    let mut d = NortekDecoder::new();
+    let mut good = 0;
+    for chunk in stream.chunks(17) {
+        d.push(chunk);
+        while let Some(f) = d.next_frame() {
+            good += usize::from(matches!(f, Ok(NortekFrame::BottomTrack(_))));
+        }
+    }
+    assert_eq!(good, 2);
+    assert_eq!(d.stats().checksum_errors, 1);
+}

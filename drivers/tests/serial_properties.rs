@@ -236,3 +236,63 @@ fn reads_of_64_kib_never_overflow_a_decoder_drained_after_each_read() {
     );
     assert_eq!((out.len(), d.stats().overflow_bytes), (n, 0));
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// Nortek records (bottom track with arbitrary finite values, and records of other ids)
+    /// after garbage without a sync byte, in any chunking: every record comes back, the garbage
+    /// is counted as skipped, and random bytes fed the same way never panic and are all
+    /// accounted for.
+    #[test]
+    fn nortek_round_trip_any_chunking_and_random_bytes_never_panic(
+        velocities in proptest::collection::vec(-5.0f32..5.0, 1..8),
+        junk in proptest::collection::vec(any::<u8>(), 0..40),
+        random in proptest::collection::vec(any::<u8>(), 0..600),
+        chunks in proptest::collection::vec(1usize..64, 1..6),
+    ) {
+        use auvnav_drivers::nortek::{self, BottomTrack, Estimate, NortekDecoder, NortekFrame};
+        let junk: Vec<u8> = junk.into_iter().filter(|b| *b != nortek::SYNC).collect();
+        let mut bytes = junk.clone();
+        let mut expected = Vec::new();
+        for (k, v) in velocities.iter().enumerate() {
+            let e = Estimate { velocity_m_s: *v, figure_of_merit_m_s: 0.003, ..Default::default() };
+            let bt = BottomTrack {
+                version: 1,
+                offset_of_data: 36,
+                serial_number: k as u32,
+                date_time: [126, 10, 25, 12, 0, k as u8],
+                time_100us: 7,
+                beams: 4,
+                error: 0,
+                status: 0,
+                sound_speed_m_s: 1500.0,
+                temperature_c: 9.0,
+                pressure_dbar: 30.0,
+                beam: [e; 4],
+                beam_distance_m: [20.0; 4],
+                xyz: [e; 4],
+            };
+            bytes.extend(nortek::encode_bottom_track(&bt));
+            expected.push(NortekFrame::BottomTrack(Box::new(bt)));
+            if k % 3 == 2 {
+                bytes.extend(nortek::record(0xbe, &[k as u8; 5]));
+                expected.push(NortekFrame::Other(nortek::OtherRecord {
+                    id: 0xbe,
+                    family: nortek::FAMILY_DVL,
+                    data_len: 5,
+                }));
+            }
+        }
+        let mut d = NortekDecoder::new();
+        let out = feed(&bytes, &chunks, &mut d, |d, b| d.push(b), |d| d.next_frame());
+        let out: Vec<NortekFrame> = out.into_iter().filter_map(Result::ok).collect();
+        prop_assert_eq!(&out, &expected);
+        prop_assert_eq!(d.stats().bytes_skipped, junk.len() as u64);
+
+        let mut d = NortekDecoder::new();
+        let _ = feed(&random, &chunks, &mut d, |d, b| d.push(b), |d| d.next_frame());
+        prop_assert_eq!(d.stats().bytes, random.len() as u64);
+        prop_assert!(d.stats().bytes_skipped <= d.stats().bytes);
+    }
+}

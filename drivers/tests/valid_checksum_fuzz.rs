@@ -141,3 +141,76 @@ fn seatrac_lines_with_arbitrary_payloads() {
     let s = d.stats();
     assert!(s.malformed > 1000, "malformed lines not counted: {s:?}");
 }
+
+/// Nortek bottom-track records with every float drawn from random bits and random headers,
+/// ids and lengths around them: never a panic, and a velocity published as valid is finite and
+/// within the schema's range.
+#[test]
+fn nortek_records_with_arbitrary_values() {
+    use auvnav_drivers::nortek::{self, BottomTrack, Estimate};
+    use auvnav_shm_schema::DvlVelocityV1;
+    let mut b = Bits(0x5eed_0001);
+    let mut d = DeviceDecoder::new(Protocol::Nortek, ProtocolSettings::default());
+    let mut published = 0;
+    for k in 0..3000u64 {
+        let bytes = if k % 5 == 4 {
+            // A random record around random data (any id, any length up to the limit).
+            let len = (b.next() % 300) as usize;
+            let data: Vec<u8> = (0..len).map(|_| b.next() as u8).collect();
+            nortek::record(b.next() as u8, &data)
+        } else {
+            let mut f = || b.f64() as f32;
+            let mut est = || Estimate {
+                velocity_m_s: f(),
+                figure_of_merit_m_s: f(),
+                time_difference_1_s: f(),
+                time_difference_2_s: f(),
+                time_of_estimate_s: f(),
+            };
+            let (beam, xyz) = ([est(), est(), est(), est()], [est(), est(), est(), est()]);
+            let mut f = || b.f64() as f32;
+            let bt = BottomTrack {
+                version: 1,
+                offset_of_data: 36,
+                serial_number: 1,
+                date_time: std::array::from_fn(|_| (k * 37 % 256) as u8),
+                time_100us: (k * 7919 % 65_536) as u16,
+                beams: 4,
+                error: k as u32,
+                status: (k * 31) as u32,
+                sound_speed_m_s: f(),
+                temperature_c: f(),
+                pressure_dbar: f(),
+                beam,
+                beam_distance_m: [f(), f(), f(), f()],
+                xyz,
+            };
+            nortek::encode_bottom_track(&bt)
+        };
+        d.push(&bytes);
+        for o in drain(&mut d, k) {
+            let Output::Dvl(m) = o else {
+                panic!("a DVL decoder published {o:?}")
+            };
+            if m.validity & DvlVelocityV1::VALID_VELOCITY != 0 {
+                assert!(
+                    m.velocity_dvl_m_s
+                        .iter()
+                        .all(|v| v.is_finite() && v.abs() < 20.0),
+                    "{m:?}"
+                );
+                published += 1;
+            }
+            if m.validity & DvlVelocityV1::VALID_ALTITUDE != 0 {
+                assert!((0.0..=1000.0).contains(&m.altitude_m), "{m:?}");
+            }
+            if m.validity & DvlVelocityV1::VALID_SOUND_SPEED != 0 {
+                assert!((1375.0..=1650.0).contains(&m.sound_speed_m_s), "{m:?}");
+            }
+        }
+    }
+    assert!(
+        published > 0,
+        "no record was valid: the draw never tests the valid path"
+    );
+}

@@ -472,3 +472,39 @@ fn garbage_is_counted_never_published_and_an_unplugged_device_comes_back() {
         })
     }));
 }
+
+#[test]
+fn a_nortek_dvl_on_a_pty_publishes_what_was_played() {
+    let dir = TempDir::new("ptynortek");
+    let (log, played) = simulate(dir.path());
+    let o = play(dir.path(), &log, &[("dvl", "nortek")], &[]);
+    let d = device(&o.summary, "dvl");
+    assert_eq!(count(d, "written"), played.dvl.len(), "all played");
+    assert_eq!(o.got.dvl.len(), played.dvl.len(), "received\n{}", o.stderr);
+    let h = last_health(&o.got, "dvl");
+    assert_eq!(h.frames as usize, played.dvl.len(), "health frames");
+    assert_eq!(h.checksum_errors + h.invalid + h.bytes_skipped, 0);
+    for (g, p) in o.got.dvl.iter().zip(&played.dvl) {
+        assert_eq!(
+            g.validity & DvlVelocityV1::VALID_VELOCITY,
+            p.validity & DvlVelocityV1::VALID_VELOCITY
+        );
+        // Nortek records carry f32 values.
+        for i in 0..3 {
+            assert!(close(
+                g.velocity_dvl_m_s[i],
+                p.velocity_dvl_m_s[i],
+                1e-6 * p.velocity_dvl_m_s[i].abs() + 1e-9
+            ));
+        }
+        if p.validity & DvlVelocityV1::VALID_ALTITUDE != 0 {
+            assert!(close(
+                g.altitude_m,
+                p.altitude_m,
+                1e-5 * p.altitude_m + 1e-9
+            ));
+        }
+        assert_ne!(g.validity & DvlVelocityV1::VALID_SOUND_SPEED, 0);
+        assert_ne!(g.validity & DvlVelocityV1::VALID_DEVICE_TIME, 0);
+    }
+}

@@ -27,8 +27,8 @@ use std::time::{Duration, Instant};
 pub struct EmulateArgs {
     /// The log to play (MCAP, as written by `auvnav sim` or the recorder).
     pub log: PathBuf,
-    /// Emulate the DVL in this protocol (pd0 or wldvl).
-    #[arg(long, value_parser = ["pd0", "wldvl"])]
+    /// Emulate the DVL in this protocol (pd0, wldvl or nortek).
+    #[arg(long, value_parser = ["pd0", "wldvl", "nortek"])]
     pub dvl: Option<String>,
     /// Emulate the IMU in this protocol (kvh1750 or xsens).
     #[arg(long, value_parser = ["kvh1750", "xsens"])]
@@ -200,6 +200,7 @@ impl Device {
         let bytes = match (self.protocol, m) {
             (Protocol::Pd0, LogMessage::Dvl(d)) => enc::pd0_from_dvl(d, self.counter),
             (Protocol::Wldvl, LogMessage::Dvl(d)) => enc::wrz_from_dvl(d, 0.0),
+            (Protocol::Nortek, LogMessage::Dvl(d)) => enc::nortek_from_dvl(d),
             (Protocol::Kvh1750, LogMessage::Imu(s)) => {
                 let mut cfg = self.kvh;
                 cfg.increments = s.status & auvnav_shm_schema::ImuSampleV1::STATUS_INCREMENTS != 0;

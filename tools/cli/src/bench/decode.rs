@@ -45,11 +45,11 @@ pub(crate) fn time_decoder<D: auvnav_drivers::framing::StreamDecoder>(
 }
 
 /// Decoder throughput per protocol: synthetic streams of typical navigation frames (PD0
-/// variable leader + bottom track, Water Linked `wrz`, KVH format A, Xsens MTData2 with
+/// variable leader + bottom track, Water Linked `wrz`, Nortek bottom track, KVH format A, Xsens MTData2 with
 /// counter/time/status/acceleration/rate/delta-v/delta-q, SeaTrac fixes with range, USBL and
 /// position) fed in 4 KiB reads, as a driver reads a serial port.
 pub fn decode(repeat: usize, pty_seconds: f64, json: bool) -> anyhow::Result<()> {
-    use auvnav_drivers::{kvh, pd0, seatrac, wldvl, xsens};
+    use auvnav_drivers::{kvh, nortek, pd0, seatrac, wldvl, xsens};
     let n = 100_000u32;
     let mut results = Vec::new();
 
@@ -104,6 +104,31 @@ pub fn decode(repeat: usize, pty_seconds: f64, json: bool) -> anyhow::Result<()>
         &stream,
         repeat,
         wldvl::WlDecoder::new,
+    ));
+
+    let mut stream = Vec::new();
+    for k in 0..n {
+        stream.extend(auvnav_drivers::emulate::nortek_from_dvl(
+            &auvnav_shm_schema::DvlVelocityV1 {
+                device_time_ns: 1_795_000_000_000_000_000 + u64::from(k) * 100_000_000,
+                velocity_dvl_m_s: [1.5, 0.01 * f64::from(k % 7), -0.02],
+                altitude_m: 12.3,
+                figure_of_merit_m_s: 0.004,
+                sound_speed_m_s: 1500.0,
+                validity: auvnav_shm_schema::DvlVelocityV1::VALID_VELOCITY
+                    | auvnav_shm_schema::DvlVelocityV1::VALID_ALTITUDE
+                    | auvnav_shm_schema::DvlVelocityV1::VALID_FOM
+                    | auvnav_shm_schema::DvlVelocityV1::VALID_SOUND_SPEED
+                    | auvnav_shm_schema::DvlVelocityV1::VALID_DEVICE_TIME,
+                ..Default::default()
+            },
+        ));
+    }
+    results.push(time_decoder(
+        "nortek",
+        &stream,
+        repeat,
+        nortek::NortekDecoder::new,
     ));
 
     let mut stream = Vec::new();
