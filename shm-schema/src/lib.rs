@@ -601,6 +601,9 @@ impl AidDiagnosticsV1 {
     /// The aid had been rejected for too long: the covariance of the states it observes was
     /// re-opened before this measurement was fused.
     pub const FLAG_RESET: u32 = 1 << 2;
+    /// The DVL velocity was corrected from the sound speed the DVL assumed to the true one
+    /// (`dvl_sound_speed_source`); the observation is the corrected velocity.
+    pub const FLAG_SOUND_SPEED_CORRECTED: u32 = 1 << 3;
 }
 
 /// The state of a process as reported in its health message.

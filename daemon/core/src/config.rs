@@ -118,6 +118,17 @@ pub struct NavConfig {
     /// and the measurement fused: the filter had become too sure of a wrong velocity (s; 0 =
     /// never). Default 5.
     pub dvl_reset_after_s: f64,
+    /// Where the true speed of sound at the DVL comes from. A DVL computes its velocity with a
+    /// sound speed it assumes (the one it reports, else `dvl_assumed_sound_speed_m_s`); with
+    /// the true one known the velocity is corrected by true / assumed (a Janus piston DVL:
+    /// 1 % of sound speed is 1 % of distance). `"none"` (default): no correction; `"value"`:
+    /// `sound_speed_m_s`; `"dvl"`: the DVL measures it and used it, so its velocity stands.
+    pub dvl_sound_speed_source: SoundSpeedSource,
+    /// The true speed of sound at the DVL for `dvl_sound_speed_source = "value"` (m/s,
+    /// 1375..1650). Default 1500.
+    pub sound_speed_m_s: f64,
+    /// The sound speed a DVL that reports none assumed (m/s, 1375..1650). Default 1500.
+    pub dvl_assumed_sound_speed_m_s: f64,
     /// The DVL installation as a table (`[navigation.dvl]`, what `auvnav calibrate dvl` writes).
     /// When present it replaces `dvl_mount_deg`, `dvl_scale_factor`, `dvl_lever_arm_m` and
     /// `dvl_time_offset_s`, which must then stay at their defaults. Default none.
@@ -180,11 +191,27 @@ impl Default for NavConfig {
             zero_velocity_std_m_s: 0.01,
             zero_velocity_gate_chi2: gate::CHI2_3DOF_999,
             dvl_reset_after_s: 5.0,
+            dvl_sound_speed_source: SoundSpeedSource::None,
+            sound_speed_m_s: 1500.0,
+            dvl_assumed_sound_speed_m_s: 1500.0,
             dvl: None,
             usbl: None,
             magnetometer: None,
         }
     }
+}
+
+/// Where the true speed of sound at the DVL comes from (`dvl_sound_speed_source`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SoundSpeedSource {
+    /// No correction.
+    #[default]
+    None,
+    /// The configured `sound_speed_m_s`.
+    Value,
+    /// The DVL measures it and used it: its velocity stands.
+    Dvl,
 }
 
 /// The DVL installation (`[navigation.dvl]`): the same quantities, units and sign conventions as
@@ -707,6 +734,13 @@ impl NavConfig {
                 1e6,
             ),
             ("dvl_reset_after_s", self.dvl_reset_after_s, 0.0, 3600.0),
+            ("sound_speed_m_s", self.sound_speed_m_s, 1375.0, 1650.0),
+            (
+                "dvl_assumed_sound_speed_m_s",
+                self.dvl_assumed_sound_speed_m_s,
+                1375.0,
+                1650.0,
+            ),
         ]
         .into_iter()
         .chain(

@@ -11,12 +11,13 @@
 
 use crate::aid::AidUpdate;
 use crate::aid::depth::DepthAid;
-use crate::aid::dvl::{DvlAid, DvlEstimation, DvlParameters};
+use crate::aid::dvl::{DvlAid, DvlEstimation, DvlParameters, SoundSpeed};
 use crate::aid::gnss::GnssAid;
 use crate::aid::magnetometer::MagnetometerAid;
 use crate::aid::usbl::UsblAid;
 use crate::aid::zero_velocity::ZeroVelocityAid;
 pub use crate::config::NavConfig;
+use crate::config::SoundSpeedSource;
 use crate::ekf::{self, ProcessNoise, StateVector};
 use crate::nav_core::{ImuTiming, NavCore};
 use crate::strapdown::NavState;
@@ -50,6 +51,8 @@ pub struct NavCounters {
     pub dvl_invalid: u64,
     /// Velocity covariance re-opened after a run of DVL rejections (see `dvl_reset_after_s`).
     pub dvl_resets: u64,
+    /// DVL velocities corrected for the sound speed (`dvl_sound_speed_source`).
+    pub dvl_sound_speed_corrected: u64,
     pub depth_fused: u64,
     pub depth_rejected: u64,
     pub depth_invalid: u64,
@@ -101,6 +104,18 @@ pub struct Navigator {
     solution_sequence: u64,
     /// The covariance changed (propagated or updated) since the last soundness check.
     covariance_changed: bool,
+}
+
+/// The DVL sound-speed correction a configuration asks for (`dvl_sound_speed_source`), or
+/// `None`.
+pub fn sound_speed_correction(cfg: &NavConfig) -> Option<SoundSpeed> {
+    match cfg.dvl_sound_speed_source {
+        SoundSpeedSource::Value => Some(SoundSpeed {
+            true_m_s: cfg.sound_speed_m_s,
+            assumed_default_m_s: cfg.dvl_assumed_sound_speed_m_s,
+        }),
+        SoundSpeedSource::None | SoundSpeedSource::Dvl => None,
+    }
 }
 
 impl Navigator {
@@ -162,14 +177,16 @@ impl Navigator {
         let usbl = UsblAid::new(cfg.usbl.as_ref(), &mut core.kf);
         let d = cfg.dvl_installation();
         let dvl = DvlParameters::new(d.mount_deg, d.scale_factor, d.lever_arm_m, d.time_offset_s);
+        let mut dvl = DvlAid::new(
+            dvl,
+            cfg.dvl_velocity_std_m_s,
+            cfg.dvl_gate_chi2,
+            cfg.dvl_reset_after_s,
+            initial.time_s,
+        );
+        dvl.sound_speed = sound_speed_correction(&cfg);
         Navigator {
-            dvl: DvlAid::new(
-                dvl,
-                cfg.dvl_velocity_std_m_s,
-                cfg.dvl_gate_chi2,
-                cfg.dvl_reset_after_s,
-                initial.time_s,
-            ),
+            dvl,
             depth: DepthAid::new(cfg.depth_std_m, cfg.depth_gate_chi2),
             gnss: GnssAid::new(cfg.gnss_lever_arm_m, cfg.gnss_min_std_m, cfg.gnss_gate_chi2),
             zero_velocity: ZeroVelocityAid::new(
@@ -467,6 +484,7 @@ impl Navigator {
             dvl_rejected: dvl.rejected,
             dvl_invalid: dvl.invalid,
             dvl_resets: self.dvl.resets,
+            dvl_sound_speed_corrected: self.dvl.sound_speed_corrected,
             depth_fused: depth.fused,
             depth_rejected: depth.rejected,
             depth_invalid: depth.invalid,

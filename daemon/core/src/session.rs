@@ -9,7 +9,7 @@ pub use crate::config::{AlignmentConfig, InitialState, SessionConfig};
 use crate::config::{HeadingSource, NavConfig};
 use crate::earth::Geodetic;
 use crate::feed::SensorMessage;
-use crate::navigator::{Checkpoint, Navigator};
+use crate::navigator::{Checkpoint, Navigator, sound_speed_correction};
 use crate::smoother::{NominalParameters, SmootherLog, SmoothingRun};
 use crate::strapdown::NavState;
 use auvnav_shm_schema::{
@@ -777,7 +777,8 @@ impl Session {
         if m.validity & DvlVelocityV1::VALID_VELOCITY == 0 {
             return None;
         }
-        let v = Vector3::from(m.velocity_dvl_m_s);
+        let ratio = sound_speed_correction(&self.cfg).map_or(1.0, |c| c.ratio(m));
+        let v = Vector3::from(m.velocity_dvl_m_s) * ratio;
         if !v.iter().all(|x| x.is_finite()) {
             return None;
         }
@@ -805,7 +806,8 @@ impl Session {
             if m.validity & DvlVelocityV1::VALID_VELOCITY != 0
                 && m.host_time_ns > self.fine_start_ns
             {
-                let v = Vector3::from(m.velocity_dvl_m_s);
+                let ratio = sound_speed_correction(&self.cfg).map_or(1.0, |c| c.ratio(&m));
+                let v = Vector3::from(m.velocity_dvl_m_s) * ratio;
                 if v.iter().all(|x| x.is_finite()) {
                     fine.on_dvl(&v);
                 }

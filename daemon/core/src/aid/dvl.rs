@@ -40,6 +40,35 @@ pub struct DvlAid {
     pub counters: AidCounters,
     /// Velocity covariance re-opened after a run of rejections.
     pub resets: u64,
+    /// The true sound speed (m/s) the velocity is corrected to, and the one assumed by a DVL
+    /// that reports none; `None`: no correction.
+    pub sound_speed: Option<SoundSpeed>,
+    /// Velocities corrected for the sound speed.
+    pub sound_speed_corrected: u64,
+}
+
+/// The sound-speed correction of the DVL velocity: true / assumed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SoundSpeed {
+    pub true_m_s: f64,
+    /// What a DVL that reports no sound speed assumed (m/s).
+    pub assumed_default_m_s: f64,
+}
+
+impl SoundSpeed {
+    /// True over assumed for a reading: the DVL's reported sound speed when valid, else the
+    /// default.
+    pub fn ratio(&self, m: &DvlVelocityV1) -> f64 {
+        let reported = m.sound_speed_m_s;
+        let assumed = if m.validity & DvlVelocityV1::VALID_SOUND_SPEED != 0
+            && (1375.0..=1650.0).contains(&reported)
+        {
+            reported
+        } else {
+            self.assumed_default_m_s
+        };
+        self.true_m_s / assumed
+    }
 }
 
 impl DvlAid {
@@ -62,6 +91,8 @@ impl DvlAid {
             rejected_since_s: None,
             counters: AidCounters::default(),
             resets: 0,
+            sound_speed: None,
+            sound_speed_corrected: 0,
         }
     }
 
@@ -123,7 +154,12 @@ impl DvlAid {
         if !self.usable(core, m) {
             return AidUpdate::rejected(d);
         }
-        let z = Vector3::from(m.velocity_dvl_m_s);
+        let ratio = self.sound_speed.map_or(1.0, |c| c.ratio(m));
+        let z = Vector3::from(m.velocity_dvl_m_s) * ratio;
+        if ratio != 1.0 {
+            self.sound_speed_corrected += 1;
+            d.flags |= AidDiagnosticsV1::FLAG_SOUND_SPEED_CORRECTED;
+        }
         core.propagate_covariance();
         let (predicted, h) = dvl_model(
             core.state(),
@@ -133,7 +169,7 @@ impl DvlAid {
         );
         let y = predicted - z;
         let sigma = if m.validity & DvlVelocityV1::VALID_STD != 0 {
-            Vector3::from(m.velocity_std_m_s).map(|x| x.max(1e-3))
+            Vector3::from(m.velocity_std_m_s).map(|x| (x * ratio).max(1e-3))
         } else {
             Vector3::repeat(self.velocity_std_m_s)
         };
@@ -157,7 +193,8 @@ impl DvlAid {
             );
             result = core.kf.update(&(predicted - z), &h, &r, f64::INFINITY);
         }
-        let reset = d.flags & AidDiagnosticsV1::FLAG_RESET;
+        let kept =
+            d.flags & (AidDiagnosticsV1::FLAG_RESET | AidDiagnosticsV1::FLAG_SOUND_SPEED_CORRECTED);
         let correction = NavCore::report(result, &mut d);
         if correction.is_some() {
             self.counters.fused += 1;
@@ -166,7 +203,7 @@ impl DvlAid {
         } else {
             self.counters.rejected += 1;
         }
-        d.flags |= reset;
+        d.flags |= kept;
         AidUpdate {
             diagnostics: d,
             correction,

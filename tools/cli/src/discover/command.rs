@@ -70,6 +70,49 @@ pub struct FoundEffect {
     pub evidence: String,
     /// Relative drop of the held-out mean squared residual when it was added.
     pub gain: f64,
+    /// Another effect of the vocabulary that acts on the readings exactly as this one does, with
+    /// the value that would explain the same change: the data cannot tell them apart, the
+    /// engineer can (`dvl.scale_factor` and `dvl.sound_speed`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub equivalent: Option<Equivalent>,
+}
+
+/// An exact alias of a found effect.
+#[derive(Debug, Clone, Serialize)]
+pub struct Equivalent {
+    pub name: String,
+    pub value: f64,
+    pub std: f64,
+    pub unit: String,
+    pub note: String,
+}
+
+/// `dvl.sound_speed` as the cause of a DVL scale change: the DVL's velocity scales with the
+/// assumed over the true sound speed, so a scale `value` (nominal `nominal_scale`, with the
+/// nominal true sound speed `nominal_sound_speed`) is the same as a true sound speed of
+/// `nominal_sound_speed × nominal_scale / value`.
+fn sound_speed_equivalent(
+    value: f64,
+    std: f64,
+    nominal_scale: f64,
+    nominal_sound_speed: f64,
+) -> Option<Equivalent> {
+    if !(value.is_finite() && value > 0.0 && nominal_scale > 0.0) {
+        return None;
+    }
+    let c = nominal_sound_speed * nominal_scale / value;
+    Some(Equivalent {
+        name: "dvl.sound_speed".into(),
+        value: c,
+        std: c * std / value,
+        unit: "m/s".into(),
+        note: format!(
+            "the same change as a true sound speed of {c:.1} m/s at the DVL where it assumed \
+             {nominal_sound_speed:.0} m/s (a Janus DVL's velocity scales with assumed / true): \
+             measure the sound speed (CTD) to tell the two apart; if it is the sound speed, set \
+             [navigation] dvl_sound_speed_source = \"value\" and sound_speed_m_s = {c:.1}"
+        ),
+    })
 }
 
 /// Two effects the motion cannot tell apart.
@@ -580,6 +623,22 @@ pub fn discover(
                     ),
                 });
             }
+            let equivalent = if name == "dvl.scale_factor" {
+                let first = |n: &str, default: f64| {
+                    nominal
+                        .get(n)
+                        .and_then(|v| v.first().copied())
+                        .unwrap_or(default)
+                };
+                sound_speed_equivalent(
+                    f.theta[off],
+                    std.first().copied().unwrap_or(f64::NAN),
+                    first("dvl.scale_factor", 1.0),
+                    first("dvl.sound_speed", auvnav_sim::sensors::ASSUMED_SOUND_SPEED),
+                )
+            } else {
+                None
+            };
             r.effects.push(FoundEffect {
                 name: name.into(),
                 value: json_of(&f.theta[off..off + len]),
@@ -589,6 +648,7 @@ pub fn discover(
                 channel: kind,
                 evidence,
                 gain,
+                equivalent,
             });
         }
         // Pairs the motion cannot separate among the channel's candidates (for the reader, even
@@ -1018,6 +1078,12 @@ fn print_text(r: &DiscoverReport) {
                 "    {} = {} ± {} {} (nominal {})  ({})",
                 e.name, e.value, e.std, e.unit, e.nominal, e.evidence
             );
+            if let Some(q) = &e.equivalent {
+                println!(
+                    "      or {} = {:.1} ± {:.1} {}: {}",
+                    q.name, q.value, q.std, q.unit, q.note
+                );
+            }
         }
     }
     for u in &r.unseparable {
