@@ -210,14 +210,18 @@ pub fn pd0_rtc(ns: u64) -> [u8; 7] {
     ]
 }
 
+/// System configuration bit of a convex transducer head (clear: concave).
+pub const PD0_CONVEX: u16 = 0x0008;
+
 /// An RDI PD0 ensemble as a DVL message, or `None` when it has no bottom-track block.
 ///
 /// Axes: RDI instrument and ship coordinates are x starboard, y forward, z up (beam 3 forward,
 /// transducer down); the schema's DVL frame is x forward, y starboard, z down, so
 /// `[x, y, z]_dvl = [y, x, -z]_rdi`. PD0 records the bottom's velocity relative to the
-/// instrument; the vehicle's is its negative. Earth-coordinate velocities are not in the DVL
-/// frame and beam-coordinate ones are not transformed here: for both only the beam data are
-/// published and the velocity is marked invalid. Ranges: PD0 gives vertical range per beam;
+/// instrument; the vehicle's is its negative. Beam coordinates: the beam velocities are
+/// published, and the velocity from them by RDI's beam-to-instrument transformation
+/// ([`crate::pd0::beam_to_instrument`]; three beams suffice). Earth-coordinate velocities are
+/// not rotated back here: their velocity is marked invalid. Ranges: PD0 gives vertical range per beam;
 /// the schema's slant range is vertical / cos(beam angle). PD0 carries no latency, so the time
 /// of validity is the read time minus `latency_s` from the driver configuration.
 pub fn pd0_velocity(
@@ -255,6 +259,7 @@ pub fn pd0_velocity(
             }
         }
         CoordinateSystem::Beam => {
+            let mut good = [None; 4];
             for (i, v) in bt.velocity_m_s.iter().enumerate() {
                 if let Some(v) = v
                     && v.abs() < 20.0
@@ -262,6 +267,24 @@ pub fn pd0_velocity(
                     m.beam_velocity_m_s[i] = *v;
                     m.validity |= DvlVelocityV1::VALID_BEAM_VELOCITY << i;
                     m.beams_used += 1;
+                    good[i] = Some(*v);
+                }
+            }
+            // The instrument velocity from the beams (three-beam solution with one bad), then
+            // as the instrument coordinates above.
+            let convex = e
+                .fixed
+                .as_ref()
+                .is_some_and(|f| f.system_configuration & PD0_CONVEX != 0);
+            if let Some(angle) = beam_angle
+                && let Some((v, error)) = crate::pd0::beam_to_instrument(&good, angle, convex)
+                && v.iter().all(|x| x.abs() < 20.0)
+            {
+                m.velocity_dvl_m_s = [-v[1], -v[0], v[2]];
+                m.validity |= DvlVelocityV1::VALID_VELOCITY;
+                if let Some(err) = error {
+                    m.figure_of_merit_m_s = err.abs();
+                    m.validity |= DvlVelocityV1::VALID_FOM;
                 }
             }
         }

@@ -115,6 +115,49 @@ pub struct BottomTrack {
     pub max_depth_m: f64,
 }
 
+/// Bottom velocity relative to the instrument in instrument coordinates from beam velocities:
+/// RDI's transformation for a four-beam Janus head with beams `beam_angle_deg` from the
+/// vertical, convex or concave (`x = ±a (b1 − b2)`, `y = ±a (b4 − b3)`, `z = b Σ bᵢ`, error
+/// velocity `d (b1 + b2 − b3 − b4)`, `a = 1/(2 sin θ)`, `b = 1/(4 cos θ)`, `d = a/√2`). With one
+/// beam bad, the three-beam solution: the missing beam is the one that makes the error velocity
+/// zero (returned as `None`). `None` with fewer than three beams or a beam angle outside
+/// (0°, 60°).
+pub fn beam_to_instrument(
+    beams: &[Option<f64>; 4],
+    beam_angle_deg: f64,
+    convex: bool,
+) -> Option<([f64; 3], Option<f64>)> {
+    if !(beam_angle_deg > 0.0 && beam_angle_deg < 60.0) {
+        return None;
+    }
+    let mut b = [0.0; 4];
+    let missing: Vec<usize> = (0..4).filter(|&i| beams[i].is_none()).collect();
+    for (i, v) in beams.iter().enumerate() {
+        b[i] = v.unwrap_or(0.0);
+    }
+    match missing.as_slice() {
+        [] => {}
+        // b1 + b2 = b3 + b4 solved for the missing beam.
+        [0] => b[0] = b[2] + b[3] - b[1],
+        [1] => b[1] = b[2] + b[3] - b[0],
+        [2] => b[2] = b[0] + b[1] - b[3],
+        [3] => b[3] = b[0] + b[1] - b[2],
+        _ => return None,
+    }
+    let th = beam_angle_deg.to_radians();
+    let a = 1.0 / (2.0 * th.sin());
+    let bz = 1.0 / (4.0 * th.cos());
+    let d = a / std::f64::consts::SQRT_2;
+    let c = if convex { 1.0 } else { -1.0 };
+    let xyz = [
+        c * a * (b[0] - b[1]),
+        c * a * (b[3] - b[2]),
+        bz * (b[0] + b[1] + b[2] + b[3]),
+    ];
+    let error = missing.is_empty().then(|| d * (b[0] + b[1] - b[2] - b[3]));
+    Some((xyz, error))
+}
+
 impl BottomTrack {
     /// The vehicle's velocity over the bottom (the negative of what PD0 records), first three
     /// components, when all three are valid.
@@ -773,5 +816,48 @@ impl crate::framing::StreamDecoder for Pd0Decoder {
     }
     fn stats(&self) -> &DecoderStats {
         &self.input.stats
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn beams_give_the_instrument_velocity_with_four_or_three() {
+        // Beam velocities of a known bottom velocity (x, y, z), error velocity zero.
+        let (x, y, z) = (0.8, -1.3, 0.05);
+        let th = 30f64.to_radians();
+        let (a, b) = (1.0 / (2.0 * th.sin()), 1.0 / (4.0 * th.cos()));
+        let s = z / b;
+        for convex in [true, false] {
+            let c = if convex { 1.0 } else { -1.0 };
+            let beams = [
+                s / 4.0 + x / (2.0 * c * a),
+                s / 4.0 - x / (2.0 * c * a),
+                s / 4.0 - y / (2.0 * c * a),
+                s / 4.0 + y / (2.0 * c * a),
+            ];
+            let all = beams.map(Some);
+            let (v, e) = beam_to_instrument(&all, 30.0, convex).expect("four beams");
+            for (got, want) in v.iter().zip([x, y, z]) {
+                assert!((got - want).abs() < 1e-12, "{v:?}");
+            }
+            assert!(e.expect("an error velocity").abs() < 1e-12);
+            for k in 0..4 {
+                let mut three = all;
+                three[k] = None;
+                let (v3, e3) = beam_to_instrument(&three, 30.0, convex).expect("three beams");
+                assert_eq!(e3, None);
+                for (got, want) in v3.iter().zip([x, y, z]) {
+                    assert!((got - want).abs() < 1e-12, "beam {k} missing: {v3:?}");
+                }
+            }
+            let mut two = all;
+            two[0] = None;
+            two[2] = None;
+            assert_eq!(beam_to_instrument(&two, 30.0, convex), None);
+        }
+        assert_eq!(beam_to_instrument(&[Some(0.0); 4], 0.0, true), None);
     }
 }

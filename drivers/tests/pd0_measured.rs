@@ -526,3 +526,75 @@ fn newer_and_odd_files_are_handled_without_error() {
     let (ens, _) = decode(&dir.join("RDI_7f79.000"));
     assert_eq!(ens.len(), 60);
 }
+
+/// A body-frame (forward, starboard, down) vector in north-east-down for roll, pitch, yaw (rad):
+/// `Rz(yaw) Ry(pitch) Rx(roll) v`.
+fn body_to_ned(v: [f64; 3], roll: f64, pitch: f64, yaw: f64) -> [f64; 3] {
+    let (sr, cr) = roll.sin_cos();
+    let (sp, cp) = pitch.sin_cos();
+    let (sy, cy) = yaw.sin_cos();
+    let [x, y, z] = v;
+    let (y1, z1) = (cr * y - sr * z, sr * y + cr * z);
+    let (x2, z2) = (cp * x + sp * z1, -sp * x + cp * z1);
+    [cy * x2 - sy * y1, sy * x2 + cy * y1, z2]
+}
+
+/// Beam coordinates against GPS: the RiverPro file records bottom track per beam (20° convex
+/// head, down-looking) with the boat's GPS (VTG). Each ensemble's velocity from the beams
+/// (`beam_to_instrument` through the driver's conversion), rotated to north-east by the
+/// ensemble's heading, pitch and roll, must give the GPS speed over ground and, within the
+/// magnetic declination and the compass, its course: a wrong sign or beam order shows as a
+/// course off by 90–180° or a speed off by the beam geometry.
+#[test]
+fn beam_coordinates_give_the_gps_speed_and_course() {
+    use auvnav_drivers::convert::pd0_velocity;
+    use auvnav_shm_schema::DvlVelocityV1;
+    let Some(dir) = shared("data/rdi-pd0/raw") else {
+        return;
+    };
+    let (ens, _) = decode(&dir.join("RiverPro_test01.PD0"));
+    let (mut ratios, mut course_diffs, mut three_beam) = (Vec::new(), Vec::new(), 0);
+    for e in &ens {
+        let (Some(v), Some(m)) = (&e.variable, pd0_velocity(e, 0, 0.0, 0)) else {
+            continue;
+        };
+        let Some(NmeaBlock::Vtg {
+            true_track_deg,
+            speed_over_ground_m_s,
+            ..
+        }) = last_vtg(e)
+        else {
+            continue;
+        };
+        if m.validity & DvlVelocityV1::VALID_VELOCITY == 0 || *speed_over_ground_m_s < 0.5 {
+            continue;
+        }
+        three_beam += usize::from(m.validity & DvlVelocityV1::VALID_FOM == 0);
+        let ned = body_to_ned(
+            m.velocity_dvl_m_s,
+            v.roll_deg.to_radians(),
+            v.pitch_deg.to_radians(),
+            v.heading_deg.to_radians(),
+        );
+        let speed = ned[0].hypot(ned[1]);
+        let course = ned[1].atan2(ned[0]).to_degrees();
+        ratios.push(speed / speed_over_ground_m_s);
+        course_diffs.push((course - f64::from(*true_track_deg) + 540.0).rem_euclid(360.0) - 180.0);
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let n = ratios.len();
+    let (r, c) = (median(&mut ratios), median(&mut course_diffs));
+    eprintln!(
+        "RiverPro beam coordinates: {n} ensembles above 0.5 m/s ({three_beam} three-beam): \
+         speed / GPS median {r:.4}, course − GPS median {c:.1}°"
+    );
+    assert!(n > 150, "{n}");
+    assert!((r - 1.0).abs() < 0.03, "speed ratio {r}");
+    // The ADCP's magnetic heading against the GPS's true course: the median difference is the
+    // declination and the compass's error (the file sets no heading bias), well inside ±30°; a
+    // sign or beam-order error gives 90–180°.
+    assert!(c.abs() < 30.0, "course difference {c}°");
+}
