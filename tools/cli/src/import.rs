@@ -9,7 +9,7 @@
 
 use anyhow::{Context, bail};
 use auvnav_log::{LogHeader, LogMessage, LogWriter, write_log_atomically};
-use auvnav_shm_schema::{DepthV1, DvlVelocityV1, ImuSampleV1, TruthStateV1, topic};
+use auvnav_shm_schema::{DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, TruthStateV1, topic};
 use nalgebra::UnitQuaternion;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -502,6 +502,12 @@ pub struct Pd0Args {
     /// Where the reference velocity comes from.
     #[arg(long, value_enum, default_value_t = GpsVelocity::Auto)]
     pub velocity: GpsVelocity,
+    /// Position fixes logged elsewhere (a glider's or an AUV's surface fixes): CSV `time_s,
+    /// latitude_deg, longitude_deg, depth_m, std_m` with time in seconds from the first ensemble
+    /// (the format of `auvnav smooth --fixes`), written as GNSS fixes for `auvnav calibrate dvl`
+    /// and `auvnav smooth`.
+    #[arg(long)]
+    pub fixes: Option<PathBuf>,
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
@@ -526,6 +532,12 @@ pub struct Pd0Summary {
     pub duration_s: f64,
     /// Bytes the decoder skipped or could not decode (checksum errors, bad blocks).
     pub decoder_errors: u64,
+    /// Fixes from `--fixes` written as GNSS fixes, and those outside the file's time span (left
+    /// out).
+    pub fixes_written: u64,
+    pub fixes_outside: u64,
+    /// Lines of the fix file that did not parse (left out).
+    pub fixes_unparsable_lines: u64,
 }
 
 /// A GPS sample on the ensemble clock: time (s), north and east (m from the first fix), or
@@ -591,6 +603,9 @@ pub fn pd0_messages(
         reference: 0,
         duration_s: 0.0,
         decoder_errors: stats.checksum_errors + stats.malformed,
+        fixes_written: 0,
+        fixes_outside: 0,
+        fixes_unparsable_lines: 0,
     };
     if let Some(f) = ensembles.iter().find_map(|e| e.fixed.as_ref()) {
         s.coordinate_system = format!("{:?}", f.coordinate_system).to_lowercase();
@@ -753,11 +768,28 @@ pub fn pd0_messages(
 /// Imports a PD0 file with GPS into a log at `out` (written atomically).
 pub fn pd0(a: &Pd0Args) -> anyhow::Result<Pd0Summary> {
     let bytes = std::fs::read(&a.file).with_context(|| format!("reading {}", a.file.display()))?;
-    let (messages, summary) = pd0_messages(&bytes, a.velocity)?;
-    if summary.reference == 0 {
+    let (messages, mut summary) = pd0_messages(&bytes, a.velocity)?;
+    let fix_file = a
+        .fixes
+        .as_deref()
+        .map(crate::smooth::fixes::read)
+        .transpose()?;
+    let mut gnss = Vec::new();
+    if let Some(f) = &fix_file {
+        summary.fixes_unparsable_lines = f.unparsable_lines as u64;
+        for fix in &f.fixes {
+            if (0.0..=summary.duration_s).contains(&fix.time_s) {
+                gnss.push(fix.to_gnss(gnss.len() as u64));
+            } else {
+                summary.fixes_outside += 1;
+            }
+        }
+        summary.fixes_written = gnss.len() as u64;
+    }
+    if summary.reference == 0 && gnss.is_empty() {
         bail!(
-            "{}: no ensemble has GPS on both sides ({} GGA fixes, {} VTG): nothing to compare the \
-             bottom track with",
+            "{}: no ensemble has GPS on both sides ({} GGA fixes, {} VTG) and no --fixes inside \
+             its time span: nothing to compare the bottom track with",
             a.file.display(),
             summary.gga,
             summary.vtg
@@ -791,12 +823,34 @@ pub fn pd0(a: &Pd0Args) -> anyhow::Result<Pd0Summary> {
                 "reference from GPS: GGA position and VTG course/speed over ground (or GGA position differences), interpolated to the ensemble; attitude is the DVL's own heading, pitch and roll (its compass, not independent); vertical velocity 0 (surface vessel); rates unknown (NaN)",
             )]),
         )?;
+        if !gnss.is_empty() {
+            w.declare::<GnssFixV1>(
+                topic::GNSS,
+                &note(&[(
+                    "source",
+                    "position fixes from --fixes (logged elsewhere), on the ensemble clock",
+                )]),
+            )?;
+        }
+        // The fixes in time order among the ensemble's messages.
+        let mut next_fix = gnss.iter().peekable();
         for (t, m) in &messages {
+            let t_ns = match m {
+                LogMessage::Dvl(x) => x.host_time_ns,
+                LogMessage::Truth(x) => x.host_time_ns,
+                _ => 0,
+            };
+            while let Some(f) = next_fix.next_if(|f| f.host_time_ns <= t_ns) {
+                w.write(topic::GNSS, f)?;
+            }
             match m {
                 LogMessage::Dvl(x) => w.write(t, x)?,
                 LogMessage::Truth(x) => w.write(t, x)?,
                 _ => {}
             }
+        }
+        for f in next_fix {
+            w.write(topic::GNSS, f)?;
         }
         Ok(())
     })

@@ -549,6 +549,12 @@ fn run_import_pd0(a: &auvnav_tools::import::Pd0Args) -> anyhow::Result<()> {
             s.bad_time,
             s.decoder_errors
         );
+        if a.fixes.is_some() {
+            eprintln!(
+                "  fixes from --fixes: {} written as GNSS fixes, {} outside the file's time span, {} lines that did not parse",
+                s.fixes_written, s.fixes_outside, s.fixes_unparsable_lines
+            );
+        }
     }
     Ok(())
 }
