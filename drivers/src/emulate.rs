@@ -100,12 +100,39 @@ pub fn nortek_from_dvl(m: &DvlVelocityV1) -> Vec<u8> {
 /// A DVL message as a PD0 ensemble (fixed leader, variable leader, bottom track) of an
 /// instrument-coordinate 4-beam DVL. Invalid velocity is written as PD0's -32768.
 pub fn pd0_from_dvl(m: &DvlVelocityV1, ensemble_number: u32) -> Vec<u8> {
+    pd0_from_dvl_in(m, ensemble_number, CoordinateSystem::Instrument)
+}
+
+/// The same DVL in beam coordinates (EX 0x00): each beam's radial velocity of the bottom, the
+/// inverse of RDI's beam-to-instrument transformation for the 30° convex head with zero error
+/// velocity.
+pub fn pd0_beam_from_dvl(m: &DvlVelocityV1, ensemble_number: u32) -> Vec<u8> {
+    pd0_from_dvl_in(m, ensemble_number, CoordinateSystem::Beam)
+}
+
+/// Beam velocities for an instrument-frame bottom velocity (x, y, z) with zero error velocity
+/// (the inverse of [`pd0::beam_to_instrument`] for a convex head).
+fn pd0_beams(xyz: [f64; 3], beam_angle_deg: f64) -> [f64; 4] {
+    let th = beam_angle_deg.to_radians();
+    let a = 1.0 / (2.0 * th.sin());
+    let s = xyz[2] * 4.0 * th.cos();
+    [
+        s / 4.0 + xyz[0] / (2.0 * a),
+        s / 4.0 - xyz[0] / (2.0 * a),
+        s / 4.0 - xyz[1] / (2.0 * a),
+        s / 4.0 + xyz[1] / (2.0 * a),
+    ]
+}
+
+fn pd0_from_dvl_in(m: &DvlVelocityV1, ensemble_number: u32, system: CoordinateSystem) -> Vec<u8> {
     let valid = m.validity & DvlVelocityV1::VALID_VELOCITY != 0;
     let v = m.velocity_dvl_m_s;
     // Schema [x fwd, y stbd, z down] (vehicle) -> RDI [x stbd, y fwd, z up] (bottom).
     let rdi = [-v[1], -v[0], v[2]];
     let mut velocity = [None; 4];
-    if valid {
+    if valid && system == CoordinateSystem::Beam {
+        velocity = pd0_beams(rdi, PD0_BEAM_ANGLE_DEG).map(Some);
+    } else if valid {
         for i in 0..3 {
             velocity[i] = Some(rdi[i]);
         }
@@ -135,8 +162,12 @@ pub fn pd0_from_dvl(m: &DvlVelocityV1, ensemble_number: u32) -> Vec<u8> {
             pings_per_ensemble: 1,
             cell_size_m: 1.0,
             blank_m: 0.5,
-            coordinate_transform: PD0_COORDINATE_TRANSFORM,
-            coordinate_system: CoordinateSystem::Instrument,
+            coordinate_transform: if system == CoordinateSystem::Beam {
+                0x00
+            } else {
+                PD0_COORDINATE_TRANSFORM
+            },
+            coordinate_system: system,
             heading_alignment_deg: 0.0,
             heading_bias_deg: 0.0,
             sensor_source: 0,
@@ -442,6 +473,24 @@ mod tests {
         };
         assert_eq!(back.validity & DvlVelocityV1::VALID_VELOCITY, 0);
         assert_eq!(back.beams_used, 0);
+    }
+
+    #[test]
+    fn pd0_in_beam_coordinates_gives_the_same_velocity() {
+        let m = dvl();
+        let Output::Dvl(back) = decode_one(
+            Protocol::Pd0,
+            ProtocolSettings::default(),
+            &pd0_beam_from_dvl(&m, 9),
+        ) else {
+            panic!("not a DVL message")
+        };
+        assert_ne!(back.validity & DvlVelocityV1::VALID_VELOCITY, 0);
+        assert_eq!(back.beams_used, 4);
+        for i in 0..3 {
+            // Four beams at 1 mm/s resolution through the transformation.
+            assert!((back.velocity_dvl_m_s[i] - m.velocity_dvl_m_s[i]).abs() < 0.002);
+        }
     }
 
     #[test]

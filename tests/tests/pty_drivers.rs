@@ -508,3 +508,52 @@ fn a_nortek_dvl_on_a_pty_publishes_what_was_played() {
         assert_ne!(g.validity & DvlVelocityV1::VALID_DEVICE_TIME, 0);
     }
 }
+
+/// The same voyage from an emulated PD0 DVL in instrument and in beam coordinates, through the
+/// real driver: the velocities from the beams (RDI's transformation in the driver) equal the
+/// instrument-coordinate ones within the beams' 1 mm/s resolution, and both equal what was
+/// played.
+#[test]
+fn pd0_in_beam_coordinates_publishes_what_instrument_coordinates_do() {
+    let dir = TempDir::new("ptypd0beam");
+    let (log, played) = simulate(dir.path());
+    let instrument = play(dir.path(), &log, &[("dvl", "pd0")], &[]);
+    let beam = play(
+        dir.path(),
+        &log,
+        &[("dvl", "pd0")],
+        &["--pd0-coordinates", "beam"],
+    );
+    for (name, o) in [("instrument", &instrument), ("beam", &beam)] {
+        assert_eq!(o.got.dvl.len(), played.dvl.len(), "{name}\n{}", o.stderr);
+        let h = last_health(&o.got, "dvl");
+        assert_eq!(h.checksum_errors + h.invalid + h.bytes_skipped, 0, "{name}");
+    }
+    let mut valid = 0;
+    for ((i, b), p) in instrument
+        .got
+        .dvl
+        .iter()
+        .zip(&beam.got.dvl)
+        .zip(&played.dvl)
+    {
+        let flag = DvlVelocityV1::VALID_VELOCITY;
+        assert_eq!(b.validity & flag, p.validity & flag);
+        assert_eq!(i.validity & flag, p.validity & flag);
+        if p.validity & flag == 0 {
+            continue;
+        }
+        valid += 1;
+        assert_eq!(b.beams_used, 4);
+        for k in 0..3 {
+            assert!(
+                close(b.velocity_dvl_m_s[k], i.velocity_dvl_m_s[k], 0.002),
+                "beam {:?} against instrument {:?}",
+                b.velocity_dvl_m_s,
+                i.velocity_dvl_m_s
+            );
+            assert!(close(b.velocity_dvl_m_s[k], p.velocity_dvl_m_s[k], 0.002));
+        }
+    }
+    assert!(valid > 10, "{valid}");
+}

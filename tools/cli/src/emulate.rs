@@ -23,6 +23,13 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+/// The coordinate system an emulated PD0 DVL records its bottom track in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Pd0Coordinates {
+    Instrument,
+    Beam,
+}
+
 #[derive(Debug, clap::Args)]
 pub struct EmulateArgs {
     /// The log to play (MCAP, as written by `auvnav sim` or the recorder).
@@ -30,6 +37,10 @@ pub struct EmulateArgs {
     /// Emulate the DVL in this protocol (pd0, wldvl or nortek).
     #[arg(long, value_parser = ["pd0", "wldvl", "nortek"])]
     pub dvl: Option<String>,
+    /// The coordinate system of an emulated PD0 DVL's bottom track: instrument (x, y, z and
+    /// error velocity) or beam (the four radial velocities).
+    #[arg(long, value_enum, default_value_t = Pd0Coordinates::Instrument)]
+    pub pd0_coordinates: Pd0Coordinates,
     /// Emulate the IMU in this protocol (kvh1750 or xsens).
     #[arg(long, value_parser = ["kvh1750", "xsens"])]
     pub imu: Option<String>,
@@ -162,6 +173,7 @@ struct Device {
     unplugs: Vec<Window>,
     counter: u32,
     kvh: KvhConfig,
+    pd0_coordinates: Pd0Coordinates,
     summary: DeviceSummary,
 }
 
@@ -198,7 +210,10 @@ impl Device {
 
     fn encode(&mut self, m: &LogMessage) -> Option<Vec<u8>> {
         let bytes = match (self.protocol, m) {
-            (Protocol::Pd0, LogMessage::Dvl(d)) => enc::pd0_from_dvl(d, self.counter),
+            (Protocol::Pd0, LogMessage::Dvl(d)) => match self.pd0_coordinates {
+                Pd0Coordinates::Instrument => enc::pd0_from_dvl(d, self.counter),
+                Pd0Coordinates::Beam => enc::pd0_beam_from_dvl(d, self.counter),
+            },
             (Protocol::Wldvl, LogMessage::Dvl(d)) => enc::wrz_from_dvl(d, 0.0),
             (Protocol::Nortek, LogMessage::Dvl(d)) => enc::nortek_from_dvl(d),
             (Protocol::Kvh1750, LogMessage::Imu(s)) => {
@@ -310,6 +325,7 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
                     rate_hz: 0.0,
                     temperature_centi: false,
                 },
+                pd0_coordinates: a.pd0_coordinates,
                 summary: DeviceSummary {
                     device: class.name().to_string(),
                     protocol: protocol.name().to_string(),
