@@ -52,24 +52,6 @@ pub struct SmoothBenchReport {
     pub target_peak_memory_mib: f64,
 }
 
-fn log_config(hours: f64) -> anyhow::Result<SimConfig> {
-    let mut scenario = Scenario::load("lawnmower")?;
-    scenario.rates.imu_hz = 200;
-    scenario.rates.dvl_hz = 1;
-    scenario.rates.depth_hz = 1;
-    scenario.rates.truth_hz = 1;
-    scenario.rates.usbl_hz = 0;
-    scenario.rates.magnetometer_hz = 0;
-    scenario.rates.gnss_hz = 0;
-    let effects = scenario.effects()?;
-    Ok(SimConfig {
-        scenario,
-        effects,
-        seed: 1,
-        duration_s: Some(hours * 3600.0),
-    })
-}
-
 /// Runs `auvnav smooth --json` on `log` in a child process.
 fn smooth_child(
     exe: &std::path::Path,
@@ -132,7 +114,7 @@ fn bench_log(
     dir: &std::path::Path,
     label: &str,
 ) -> anyhow::Result<SmoothLogBench> {
-    let cfg = log_config(hours)?;
+    let cfg = super::throughput::replay_log_config(hours)?;
     let path = dir.join(format!("{label}.mcap"));
     eprintln!("bench smooth: simulating {hours} h ({label}) ...");
     let summary = sim::simulate_to_log(&cfg, &path)?;

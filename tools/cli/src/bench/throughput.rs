@@ -103,11 +103,9 @@ pub(crate) fn median(v: &[f64]) -> f64 {
     s[s.len() / 2]
 }
 
-/// Replays `hours` of simulated INS/DVL/depth (200 Hz IMU, 1 Hz DVL, 1 Hz depth, 1 Hz truth for
-/// the initial state and the accuracy) through the navigation core, `repeat` times, from the log
-/// file and from memory. One thread.
-pub fn replay(hours: f64, repeat: usize, json: bool) -> anyhow::Result<()> {
-    use crate::replay::{Replay, ReplayArgs, ReplayConfig};
+/// The replay benchmarks' log: `hours` of the lawnmower with a 200 Hz IMU and 1 Hz DVL, depth
+/// and truth, seed 1 (also what `auvnav bench smooth` smooths).
+pub(crate) fn replay_log_config(hours: f64) -> anyhow::Result<SimConfig> {
     let mut scenario = Scenario::load("lawnmower")?;
     scenario.rates.imu_hz = 200;
     scenario.rates.dvl_hz = 1;
@@ -117,12 +115,20 @@ pub fn replay(hours: f64, repeat: usize, json: bool) -> anyhow::Result<()> {
     scenario.rates.magnetometer_hz = 0;
     scenario.rates.gnss_hz = 0;
     let effects = scenario.effects()?;
-    let cfg = SimConfig {
+    Ok(SimConfig {
         scenario,
         effects,
         seed: 1,
         duration_s: Some(hours * 3600.0),
-    };
+    })
+}
+
+/// Replays `hours` of simulated INS/DVL/depth (200 Hz IMU, 1 Hz DVL, 1 Hz depth, 1 Hz truth for
+/// the initial state and the accuracy) through the navigation core, `repeat` times, from the log
+/// file and from memory. One thread.
+pub fn replay(hours: f64, repeat: usize, json: bool) -> anyhow::Result<()> {
+    use crate::replay::{Replay, ReplayArgs, ReplayConfig};
+    let cfg = replay_log_config(hours)?;
     let dir = std::env::temp_dir().join(format!("auvnav-bench-replay-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
     let path = dir.join("bench.mcap");
