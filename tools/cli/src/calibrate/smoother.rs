@@ -38,9 +38,10 @@ const REFERENCE_FIX_STD_M: f64 = 1.0;
 type VoyageEstimate = [Option<SmoothedValue>; 8];
 
 /// The navigation configuration of a smoothing run around the installation `x`: the installation
-/// states of the estimated parameters switched on with their prior std (a mounting angle or
-/// lever-arm component not estimated but switched on with its group gets a small one). Returns
-/// the filter's prior std per parameter (0 when off).
+/// states of the estimated parameters switched on with their prior std. A mounting angle not
+/// estimated but switched on with the others gets a hundredth of its prior std; the lever arm
+/// takes one std, the largest of its estimated components, for all three. Returns the filter's
+/// prior std per parameter (0 when off).
 fn filter_config(nav: &NavConfig, params: &ParameterSet, x: &[f64; 8]) -> (NavConfig, [f64; 8]) {
     let mut n = nav.clone();
     n.set_dvl_installation(installation(x));
