@@ -14,4 +14,5 @@ pub mod pd0;
 pub mod seatrac;
 pub mod serial_driver;
 pub mod wldvl;
+pub mod wldvl_json;
 pub mod xsens;

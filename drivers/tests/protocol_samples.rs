@@ -449,3 +449,70 @@ fn nortek_dvl1000_captures_decode_to_their_documented_values() {
     assert_eq!(good, 2);
     assert_eq!(d.stats().checksum_errors, 1);
 }
+
+#[test]
+fn water_linked_tcp_json_reports_decode_to_the_documented_values() {
+    use auvnav_drivers::convert::water_linked_velocity;
+    use auvnav_drivers::wldvl_json::{JsonDecoder, JsonFrame};
+    use auvnav_shm_schema::DvlVelocityV1;
+    let Some(dir) = shared("protocols/waterlinked_dvl") else {
+        return;
+    };
+    let text = std::fs::read(dir.join("doc_example_tcp_velocity.json")).expect("example");
+    let mut d = JsonDecoder::new();
+    let mut frames = Vec::new();
+    // In reads of 7 bytes: a report split anywhere still decodes.
+    for chunk in text.chunks(7) {
+        d.push(chunk);
+        while let Some(f) = d.next_frame() {
+            frames.push(f.expect("the documented reports parse"));
+        }
+    }
+    d.push(b"\n");
+    while let Some(f) = d.next_frame() {
+        frames.push(f.expect("the documented reports parse"));
+    }
+    assert_eq!(frames.len(), 2, "{:?}", d.stats());
+    let JsonFrame::Velocity {
+        velocity: v,
+        transducers,
+    } = &frames[0]
+    else {
+        panic!("{:?}", frames[0])
+    };
+    assert_eq!(
+        v.velocity_m_s,
+        [
+            -3.713480691658333e-05,
+            5.703703573090024e-05,
+            2.4990416932269e-05
+        ]
+    );
+    assert!(v.valid);
+    assert_eq!(v.figure_of_merit_m_s, 0.00016016385052353144);
+    assert_eq!(v.altitude_m, 0.4949815273284912);
+    assert_eq!(v.covariance[0], 2.4471841442164077e-08);
+    assert_eq!(v.covariance[1], -3.3937477272871774e-09);
+    assert_eq!(v.covariance[8], 1.5971971523143225e-09);
+    assert_eq!(
+        (v.time_of_validity_us, v.time_of_transmission_us),
+        (1_638_191_471_563_017, 1_638_191_471_752_336)
+    );
+    assert_eq!(transducers.len(), 4);
+    assert_eq!(transducers[2].distance, 0.537600040435791);
+    assert!(transducers.iter().all(|t| t.beam_valid));
+    let JsonFrame::DeadReckoning(p) = &frames[1] else {
+        panic!("{:?}", frames[1])
+    };
+    assert_eq!(p.time_s, 49056.809);
+    assert_eq!(p.position_std_m, 0.001959984190762043);
+
+    // The same conversion as the serial report: time of validity = read time minus the
+    // report's transmission delay (189.319 ms), σ from the covariance's diagonal.
+    let m = water_linked_velocity(v, 10_000_000_000, 0);
+    assert_eq!(m.validity_time_ns, 10_000_000_000 - 189_319_000);
+    assert_ne!(m.validity & DvlVelocityV1::VALID_VELOCITY, 0);
+    assert_ne!(m.validity & DvlVelocityV1::VALID_STD, 0);
+    assert!((m.velocity_std_m_s[0] - 2.4471841442164077e-08f64.sqrt()).abs() < 1e-15);
+    assert_eq!(d.stats().malformed, 0);
+}

@@ -296,3 +296,23 @@ proptest! {
         prop_assert!(d.stats().bytes_skipped <= d.stats().bytes);
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// Water Linked TCP reports: random bytes (and random bytes between braces) in any chunking
+    /// never panic, and every byte is accounted for.
+    #[test]
+    fn water_linked_json_random_bytes_never_panic(
+        random in proptest::collection::vec(any::<u8>(), 0..600),
+        chunks in proptest::collection::vec(1usize..64, 1..6),
+    ) {
+        use auvnav_drivers::wldvl_json::JsonDecoder;
+        for bytes in [random.clone(), [b"{".as_slice(), &random, b"}\n"].concat()] {
+            let mut d = JsonDecoder::new();
+            let _ = feed(&bytes, &chunks, &mut d, |d, b| d.push(b), |d| d.next_frame());
+            prop_assert_eq!(d.stats().bytes, bytes.len() as u64);
+            prop_assert!(d.stats().bytes_skipped <= d.stats().bytes);
+        }
+    }
+}
