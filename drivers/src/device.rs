@@ -9,6 +9,7 @@ use crate::nortek::{NortekDecoder, NortekFrame};
 use crate::pd0::Pd0Decoder;
 use crate::seatrac::{SeatracDecoder, SeatracMessage};
 use crate::wldvl::{WlDecoder, WlFrame};
+use crate::wldvl_json::{JsonDecoder, JsonFrame};
 use crate::xsens::{XbusDecoder, XbusMessage};
 use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, MagnetometerV1, UsblFixV1};
 use serde::{Deserialize, Serialize};
@@ -29,16 +30,21 @@ pub enum Protocol {
     Seatrac,
     /// Nortek DVL1000/DVL500 binary records (bottom track, id 0x1B).
     Nortek,
+    /// Water Linked DVL JSON reports from its TCP service (`[tcp]`, port 16171).
+    #[serde(rename = "wldvl-json")]
+    #[value(name = "wldvl-json")]
+    WldvlJson,
 }
 
 impl Protocol {
-    pub const ALL: [Protocol; 6] = [
+    pub const ALL: [Protocol; 7] = [
         Protocol::Pd0,
         Protocol::Wldvl,
         Protocol::Kvh1750,
         Protocol::Xsens,
         Protocol::Seatrac,
         Protocol::Nortek,
+        Protocol::WldvlJson,
     ];
 
     /// The name used in configuration files and on the command line.
@@ -50,6 +56,7 @@ impl Protocol {
             Protocol::Xsens => "xsens",
             Protocol::Seatrac => "seatrac",
             Protocol::Nortek => "nortek",
+            Protocol::WldvlJson => "wldvl-json",
         }
     }
 
@@ -65,7 +72,9 @@ impl Protocol {
 
     pub fn class(self) -> DeviceClass {
         match self {
-            Protocol::Pd0 | Protocol::Wldvl | Protocol::Nortek => DeviceClass::Dvl,
+            Protocol::Pd0 | Protocol::Wldvl | Protocol::Nortek | Protocol::WldvlJson => {
+                DeviceClass::Dvl
+            }
             Protocol::Kvh1750 | Protocol::Xsens => DeviceClass::Imu,
             Protocol::Seatrac => DeviceClass::Usbl,
         }
@@ -144,6 +153,7 @@ enum Inner {
     Xsens(XbusDecoder),
     Seatrac(SeatracDecoder),
     Nortek(NortekDecoder),
+    WldvlJson(JsonDecoder),
 }
 
 /// Counters beyond the stream decoder's.
@@ -179,6 +189,7 @@ impl DeviceDecoder {
             Protocol::Xsens => Inner::Xsens(XbusDecoder::new()),
             Protocol::Seatrac => Inner::Seatrac(SeatracDecoder::new()),
             Protocol::Nortek => Inner::Nortek(NortekDecoder::new()),
+            Protocol::WldvlJson => Inner::WldvlJson(JsonDecoder::new()),
         };
         DeviceDecoder {
             protocol,
@@ -203,6 +214,7 @@ impl DeviceDecoder {
             Inner::Xsens(d) => d.push(bytes),
             Inner::Seatrac(d) => d.push(bytes),
             Inner::Nortek(d) => d.push(bytes),
+            Inner::WldvlJson(d) => d.push(bytes),
         }
     }
 
@@ -215,6 +227,7 @@ impl DeviceDecoder {
             Inner::Xsens(d) => d.stats(),
             Inner::Seatrac(d) => d.stats(),
             Inner::Nortek(d) => d.stats(),
+            Inner::WldvlJson(d) => d.stats(),
         }
     }
 
@@ -316,6 +329,17 @@ impl DeviceDecoder {
                         )));
                     }
                     Ok(NortekFrame::Other(_)) => self.counters.other_frames += 1,
+                    Err(_) => continue,
+                },
+                Inner::WldvlJson(d) => match d.next_frame()? {
+                    Ok(JsonFrame::Velocity { velocity, .. }) => {
+                        return Some(Output::Dvl(convert::water_linked_velocity(
+                            &velocity,
+                            host_time_ns,
+                            0,
+                        )));
+                    }
+                    Ok(_) => self.counters.other_frames += 1,
                     Err(_) => continue,
                 },
                 Inner::Seatrac(d) => match d.next_frame()? {

@@ -85,6 +85,14 @@ impl Default for TimingConfig {
     }
 }
 
+/// A device's TCP service (`[tcp]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TcpConfig {
+    /// `host:port`, e.g. `192.168.194.95:16171` (a Water Linked DVL's default).
+    pub address: String,
+}
+
 /// How the device is installed on the vehicle (`[mounting]`): metadata for the navigation
 /// configuration and the log, not applied by the driver (messages stay in the device frame).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
@@ -107,12 +115,17 @@ pub struct SerialDriverConfig {
     /// Service-name prefix of the deployment (default `auvnav`).
     #[serde(default = "default_prefix")]
     pub prefix: String,
-    /// The device's protocol (`pd0`, `wldvl`, `kvh1750`, `xsens`, `seatrac`).
+    /// The device's protocol (`pd0`, `wldvl`, `wldvl-json`, `nortek`, `kvh1750`, `xsens`, `seatrac`).
     pub protocol: Protocol,
     /// Publish every byte read on `raw/<name>` for the recorder (default false).
     #[serde(default)]
     pub raw_capture: bool,
-    pub serial: SerialConfig,
+    /// The serial line (every protocol but `wldvl-json`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub serial: Option<SerialConfig>,
+    /// The device's TCP service (`wldvl-json`: a Water Linked DVL on Ethernet).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tcp: Option<TcpConfig>,
     #[serde(default)]
     pub settings: ProtocolSettings,
     #[serde(default)]
@@ -183,7 +196,53 @@ impl SerialDriverConfig {
                 format!("a {} driver speaks {}", class.name(), allowed.join(" or ")),
             ));
         }
-        let s = &self.serial;
+        let tcp_protocol = self.protocol == Protocol::WldvlJson;
+        match (&self.serial, &self.tcp, tcp_protocol) {
+            (None, Some(t), true) => {
+                if t.address.parse::<std::net::SocketAddr>().is_err()
+                    && !t.address.rsplit_once(':').is_some_and(|(h, p)| {
+                        !h.is_empty() && p.parse::<u16>().is_ok_and(|p| p > 0)
+                    })
+                {
+                    return Err(range(
+                        "tcp.address",
+                        format!("{:?}", t.address),
+                        "host:port".into(),
+                    ));
+                }
+            }
+            (Some(_), None, false) => {}
+            (_, _, true) => {
+                return Err(range(
+                    "tcp",
+                    "missing or beside [serial]".into(),
+                    "protocol wldvl-json reads a [tcp] address (and no [serial])".into(),
+                ));
+            }
+            (_, _, false) => {
+                return Err(range(
+                    "serial",
+                    "missing or beside [tcp]".into(),
+                    format!("protocol {} reads a [serial] line", self.protocol.name()),
+                ));
+            }
+        }
+        if let Some(s) = &self.serial {
+            self.check_serial(s, path)?;
+        }
+        self.check_rest(path)
+    }
+
+    fn check_serial(&self, s: &SerialConfig, path: &str) -> Result<(), ConfigError> {
+        let range = |key: &'static str, value: String, expected: String| ConfigError::Range {
+            path: path.to_string(),
+            key,
+            value,
+            expected,
+        };
+        if s.port.is_empty() {
+            return Err(range("serial.port", "\"\"".into(), "a device path".into()));
+        }
         if !(50..=4_000_000).contains(&s.baud) {
             return Err(range(
                 "serial.baud",
@@ -205,6 +264,16 @@ impl SerialDriverConfig {
                 "1 or 2".into(),
             ));
         }
+        Ok(())
+    }
+
+    fn check_rest(&self, path: &str) -> Result<(), ConfigError> {
+        let range = |key: &'static str, value: String, expected: String| ConfigError::Range {
+            path: path.to_string(),
+            key,
+            value,
+            expected,
+        };
         let t = &self.timing;
         let checks: [(&'static str, f64, f64, f64); 5] = [
             ("timing.read_timeout_s", t.read_timeout_s, 0.001, 1.0),
@@ -278,9 +347,6 @@ impl SerialDriverConfig {
                 ));
             }
         }
-        if self.serial.port.is_empty() {
-            return Err(range("serial.port", "\"\"".into(), "a device path".into()));
-        }
         if self.prefix.is_empty()
             || !self
                 .prefix
@@ -315,12 +381,62 @@ impl SerialDriverConfig {
         Ok(())
     }
 
+    /// Where the bytes come from: the serial device path, or `tcp://host:port`.
+    pub fn source(&self) -> String {
+        match (&self.serial, &self.tcp) {
+            (Some(s), _) => s.port.clone(),
+            (None, Some(t)) => format!("tcp://{}", t.address),
+            (None, None) => String::new(),
+        }
+    }
+
     /// The process name.
     pub fn process_name(&self) -> String {
         self.name
             .clone()
             .unwrap_or_else(|| self.protocol.class().name().to_string())
     }
+}
+
+/// Where a driver reads its bytes: a serial line or a TCP connection.
+pub enum Link {
+    Serial(serialport::TTYPort),
+    Tcp(std::net::TcpStream),
+}
+
+impl std::io::Read for Link {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        match self {
+            Link::Serial(p) => p.read(buf),
+            Link::Tcp(t) => t.read(buf),
+        }
+    }
+}
+
+/// Opens the configured link: the serial port, or a TCP connection (connect timeout 1 s) with
+/// `read_timeout` on reads.
+pub fn open_link(cfg: &SerialDriverConfig, read_timeout: Duration) -> Result<Link, String> {
+    if let Some(s) = &cfg.serial {
+        return open_port(s, read_timeout)
+            .map(Link::Serial)
+            .map_err(|e| e.to_string());
+    }
+    let Some(t) = &cfg.tcp else {
+        return Err("no [serial] or [tcp] in the configuration".into());
+    };
+    use std::net::ToSocketAddrs;
+    let addr = t
+        .address
+        .to_socket_addrs()
+        .map_err(|e| format!("resolving {}: {e}", t.address))?
+        .next()
+        .ok_or_else(|| format!("{} resolves to no address", t.address))?;
+    let stream = std::net::TcpStream::connect_timeout(&addr, Duration::from_secs(1))
+        .map_err(|e| e.to_string())?;
+    stream
+        .set_read_timeout(Some(read_timeout))
+        .map_err(|e| e.to_string())?;
+    Ok(Link::Tcp(stream))
 }
 
 /// Opens the serial port in raw mode (serialport configures termios raw) with the line settings
@@ -435,7 +551,7 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
     let health_ns = (t.health_period_s * 1e9) as u64;
     let mut decoder = DeviceDecoder::new(cfg.protocol, cfg.settings);
     let mut health = Health::default();
-    let mut port: Option<serialport::TTYPort> = None;
+    let mut port: Option<Link> = None;
     let mut state = ProcessState::Starting;
     let mut ever_open = false;
     let mut backoff_s = t.reconnect_initial_s;
@@ -448,11 +564,15 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
     let mut stage_times =
         StageTimes::create(&cfg.stage_times_csv, "read_ns,decoded_ns,published_ns")
             .map_err(|e| DriverError::Output(format!("creating {}: {e}", cfg.stage_times_csv)))?;
+    let source = cfg.source();
     tracing::info!(
-        "{name}: {} on {} at {} baud, publishing on {}/{}{} (mounting rpy {:?} deg, lever arm {:?} m)",
+        "{name}: {} on {}{}, publishing on {}/{}{} (mounting rpy {:?} deg, lever arm {:?} m)",
         cfg.protocol.name(),
-        cfg.serial.port,
-        cfg.serial.baud,
+        source,
+        cfg.serial
+            .as_ref()
+            .map(|s| format!(" at {} baud", s.baud))
+            .unwrap_or_default(),
         cfg.prefix,
         class.name(),
         if cfg.protocol.carries_magnetic_field() {
@@ -500,11 +620,11 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
                 std::thread::sleep(Duration::from_nanos((next_attempt - now).min(20_000_000)));
                 continue;
             }
-            match open_port(&cfg.serial, read_timeout) {
+            match open_link(cfg, read_timeout) {
                 Ok(p) => {
                     if ever_open {
                         health.reconnects += 1;
-                        tracing::info!("{name}: {} reopened", cfg.serial.port);
+                        tracing::info!("{name}: {source} reopened");
                     }
                     ever_open = true;
                     port = Some(p);
@@ -518,8 +638,7 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
                     let msg = e.to_string();
                     if msg != last_open_error {
                         tracing::warn!(
-                            "{name}: cannot open {}: {msg}; retrying with back-off up to {} s",
-                            cfg.serial.port,
+                            "{name}: cannot open {source}: {msg}; retrying with back-off up to {} s",
                             t.reconnect_max_s
                         );
                         last_open_error = msg;
@@ -533,7 +652,7 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
         };
         match p.read(&mut buf) {
             Ok(0) => {
-                tracing::warn!("{name}: {} hung up", cfg.serial.port);
+                tracing::warn!("{name}: {source} hung up");
                 port = None;
                 state = ProcessState::Reconnecting;
                 next_attempt = monotonic_ns();
@@ -542,7 +661,7 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
                 let host_ns = monotonic_ns();
                 last_bytes = host_ns;
                 if silent {
-                    tracing::info!("{name}: data again on {}", cfg.serial.port);
+                    tracing::info!("{name}: data again on {source}");
                     silent = false;
                 }
                 if let Some(rp) = raw_pub.as_mut() {
@@ -583,15 +702,11 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
                     silent = true;
                     health.timeouts += 1;
                     state = ProcessState::Reconnecting;
-                    tracing::warn!(
-                        "{name}: no data on {} for {} s",
-                        cfg.serial.port,
-                        t.silence_timeout_s
-                    );
+                    tracing::warn!("{name}: no data on {source} for {} s", t.silence_timeout_s);
                 }
             }
             Err(e) => {
-                tracing::warn!(device = %cfg.serial.port, error = %e, "{name}: {} lost: {e}", cfg.serial.port);
+                tracing::warn!(device = %source, error = %e, "{name}: {source} lost: {e}");
                 port = None;
                 state = ProcessState::Reconnecting;
                 next_attempt = monotonic_ns() + (backoff_s * 1e9) as u64;

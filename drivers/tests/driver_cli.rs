@@ -22,6 +22,7 @@ fn example_configurations_check() {
         (env!("CARGO_BIN_EXE_auvnav-dvl"), "dvl-pd0.toml"),
         (env!("CARGO_BIN_EXE_auvnav-dvl"), "dvl-wldvl.toml"),
         (env!("CARGO_BIN_EXE_auvnav-dvl"), "dvl-nortek.toml"),
+        (env!("CARGO_BIN_EXE_auvnav-dvl"), "dvl-wldvl-tcp.toml"),
         (env!("CARGO_BIN_EXE_auvnav-imu"), "imu-kvh1750.toml"),
         (env!("CARGO_BIN_EXE_auvnav-imu"), "imu-xsens.toml"),
         (env!("CARGO_BIN_EXE_auvnav-usbl"), "usbl-seatrac.toml"),
@@ -30,7 +31,7 @@ fn example_configurations_check() {
         let (code, out, err) = run(bin, &["--config", &config(file), "--check-config"]);
         assert_eq!(code, Some(0), "{file}: {err}");
         assert!(
-            out.contains("[serial]") || out.contains("[depth]"),
+            out.contains("[serial]") || out.contains("[tcp]") || out.contains("[depth]"),
             "{file}: {out}"
         );
     }
