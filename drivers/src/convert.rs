@@ -210,6 +210,34 @@ pub fn pd0_rtc(ns: u64) -> [u8; 7] {
     ]
 }
 
+/// A DVL message read at `host_time_ns` from a device that reports no latency: valid at the read
+/// time minus `latency_s` (the driver configuration's).
+fn dvl_message(host_time_ns: u64, latency_s: f64, sequence: u64) -> DvlVelocityV1 {
+    let latency_ns = (latency_s.max(0.0) * 1e9) as u64;
+    DvlVelocityV1 {
+        host_time_ns,
+        sequence,
+        validity_time_ns: host_time_ns.saturating_sub(latency_ns),
+        ..Default::default()
+    }
+}
+
+/// The altitude as the mean of the beams' valid vertical distances (none: not valid).
+fn set_altitude(m: &mut DvlVelocityV1, vertical: &[f64]) {
+    if !vertical.is_empty() {
+        m.altitude_m = vertical.iter().sum::<f64>() / vertical.len() as f64;
+        m.validity |= DvlVelocityV1::VALID_ALTITUDE;
+    }
+}
+
+/// The sound speed the device reports, when within the schema's range.
+fn set_sound_speed(m: &mut DvlVelocityV1, c: f64) {
+    if (1375.0..=1650.0).contains(&c) {
+        m.sound_speed_m_s = c;
+        m.validity |= DvlVelocityV1::VALID_SOUND_SPEED;
+    }
+}
+
 /// System configuration bit of a convex transducer head (clear: concave).
 pub const PD0_CONVEX: u16 = 0x0008;
 
@@ -231,13 +259,7 @@ pub fn pd0_velocity(
     sequence: u64,
 ) -> Option<DvlVelocityV1> {
     let bt = e.bottom_track.as_ref()?;
-    let latency_ns = (latency_s.max(0.0) * 1e9) as u64;
-    let mut m = DvlVelocityV1 {
-        host_time_ns,
-        sequence,
-        validity_time_ns: host_time_ns.saturating_sub(latency_ns),
-        ..Default::default()
-    };
+    let mut m = dvl_message(host_time_ns, latency_s, sequence);
     let system = e
         .fixed
         .as_ref()
@@ -303,15 +325,9 @@ pub fn pd0_velocity(
             }
         }
     }
-    if !vertical.is_empty() {
-        m.altitude_m = vertical.iter().sum::<f64>() / vertical.len() as f64;
-        m.validity |= DvlVelocityV1::VALID_ALTITUDE;
-    }
+    set_altitude(&mut m, &vertical);
     if let Some(v) = &e.variable {
-        if (1375.0..=1650.0).contains(&v.sound_speed_m_s) {
-            m.sound_speed_m_s = v.sound_speed_m_s;
-            m.validity |= DvlVelocityV1::VALID_SOUND_SPEED;
-        }
+        set_sound_speed(&mut m, v.sound_speed_m_s);
         if let Some(t) = pd0_rtc_ns(&v.rtc) {
             m.device_time_ns = t;
             m.validity |= DvlVelocityV1::VALID_DEVICE_TIME;
@@ -336,13 +352,7 @@ pub fn nortek_velocity(
     latency_s: f64,
     sequence: u64,
 ) -> DvlVelocityV1 {
-    let latency_ns = (latency_s.max(0.0) * 1e9) as u64;
-    let mut m = DvlVelocityV1 {
-        host_time_ns,
-        sequence,
-        validity_time_ns: host_time_ns.saturating_sub(latency_ns),
-        ..Default::default()
-    };
+    let mut m = dvl_message(host_time_ns, latency_s, sequence);
     let [x, y, z1, z2] = bt.xyz;
     let z = match (z1.valid(), z2.valid()) {
         (true, true) => Some(0.5 * (f64::from(z1.velocity_m_s) + f64::from(z2.velocity_m_s))),
@@ -372,15 +382,8 @@ pub fn nortek_velocity(
         .map(|d| f64::from(*d))
         .filter(|d| *d > 0.0 && *d <= 1000.0)
         .collect();
-    if !distances.is_empty() {
-        m.altitude_m = distances.iter().sum::<f64>() / distances.len() as f64;
-        m.validity |= DvlVelocityV1::VALID_ALTITUDE;
-    }
-    let c = f64::from(bt.sound_speed_m_s);
-    if (1375.0..=1650.0).contains(&c) {
-        m.sound_speed_m_s = c;
-        m.validity |= DvlVelocityV1::VALID_SOUND_SPEED;
-    }
+    set_altitude(&mut m, &distances);
+    set_sound_speed(&mut m, f64::from(bt.sound_speed_m_s));
     if let Some(t) = bt.unix_time_ns() {
         m.device_time_ns = t;
         m.validity |= DvlVelocityV1::VALID_DEVICE_TIME;
