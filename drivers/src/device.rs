@@ -4,14 +4,17 @@
 
 use crate::convert::{self, KvhConfig};
 use crate::framing::DecoderStats;
+use crate::gnss::{EpochGatherer, GnssSettings};
 use crate::kvh::KvhDecoder;
+use crate::nmea::NmeaDecoder;
 use crate::nortek::{NortekDecoder, NortekFrame};
 use crate::pd0::Pd0Decoder;
 use crate::seatrac::{SeatracDecoder, SeatracMessage};
+use crate::ubx::{UbxDecoder, UbxFrame};
 use crate::wldvl::{WlDecoder, WlFrame};
 use crate::wldvl_json::{JsonDecoder, JsonFrame};
 use crate::xsens::{XbusDecoder, XbusMessage};
-use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, MagnetometerV1, UsblFixV1};
+use auvnav_shm_schema::{DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, UsblFixV1};
 use serde::{Deserialize, Serialize};
 
 /// A serial protocol the drivers speak.
@@ -34,10 +37,14 @@ pub enum Protocol {
     #[serde(rename = "wldvl-json")]
     #[value(name = "wldvl-json")]
     WldvlJson,
+    /// NMEA 0183 from a GNSS receiver (GGA, RMC, VTG, GST, ZDA, HDT).
+    Nmea,
+    /// u-blox UBX (`NAV-PVT`).
+    Ubx,
 }
 
 impl Protocol {
-    pub const ALL: [Protocol; 7] = [
+    pub const ALL: [Protocol; 9] = [
         Protocol::Pd0,
         Protocol::Wldvl,
         Protocol::Kvh1750,
@@ -45,6 +52,8 @@ impl Protocol {
         Protocol::Seatrac,
         Protocol::Nortek,
         Protocol::WldvlJson,
+        Protocol::Nmea,
+        Protocol::Ubx,
     ];
 
     /// The name used in configuration files and on the command line.
@@ -57,6 +66,8 @@ impl Protocol {
             Protocol::Seatrac => "seatrac",
             Protocol::Nortek => "nortek",
             Protocol::WldvlJson => "wldvl-json",
+            Protocol::Nmea => "nmea",
+            Protocol::Ubx => "ubx",
         }
     }
 
@@ -77,6 +88,7 @@ impl Protocol {
             }
             Protocol::Kvh1750 | Protocol::Xsens => DeviceClass::Imu,
             Protocol::Seatrac => DeviceClass::Usbl,
+            Protocol::Nmea | Protocol::Ubx => DeviceClass::Gnss,
         }
     }
 }
@@ -88,6 +100,7 @@ pub enum DeviceClass {
     Dvl,
     Imu,
     Usbl,
+    Gnss,
 }
 
 impl DeviceClass {
@@ -96,6 +109,7 @@ impl DeviceClass {
             DeviceClass::Dvl => "dvl",
             DeviceClass::Imu => "imu",
             DeviceClass::Usbl => "usbl",
+            DeviceClass::Gnss => "gnss",
         }
     }
 }
@@ -116,6 +130,8 @@ pub struct ProtocolSettings {
     pub xsens_field_unit_ut: f64,
     /// KVH output configuration (=ROTFMT, =ROTUNITS, =TEMPUNITS, rate).
     pub kvh: KvhConfig,
+    /// GNSS receiver settings (uncertainty without GST, leap seconds, the surface gate).
+    pub gnss: GnssSettings,
 }
 
 /// Default of [`ProtocolSettings::xsens_field_unit_ut`] (µT).
@@ -133,6 +149,7 @@ impl Default for ProtocolSettings {
                 rate_hz: 1000.0,
                 temperature_centi: false,
             },
+            gnss: GnssSettings::default(),
         }
     }
 }
@@ -144,6 +161,7 @@ pub enum Output {
     Dvl(DvlVelocityV1),
     Usbl(UsblFixV1),
     Magnetometer(MagnetometerV1),
+    Gnss(GnssFixV1),
 }
 
 enum Inner {
@@ -154,6 +172,8 @@ enum Inner {
     Seatrac(SeatracDecoder),
     Nortek(NortekDecoder),
     WldvlJson(JsonDecoder),
+    Nmea(NmeaDecoder, Box<EpochGatherer>),
+    Ubx(UbxDecoder),
 }
 
 /// Counters beyond the stream decoder's.
@@ -166,6 +186,8 @@ pub struct DeviceCounters {
     /// Samples with a value outside the device's documented measurement range (published
     /// flagged invalid, so that nothing integrates them).
     pub out_of_range: u64,
+    /// GNSS epochs without a usable position (no fix, a warning status, dead reckoning).
+    pub no_fix: u64,
 }
 
 /// The decoder and conversion of one device.
@@ -190,6 +212,8 @@ impl DeviceDecoder {
             Protocol::Seatrac => Inner::Seatrac(SeatracDecoder::new()),
             Protocol::Nortek => Inner::Nortek(NortekDecoder::new()),
             Protocol::WldvlJson => Inner::WldvlJson(JsonDecoder::new()),
+            Protocol::Nmea => Inner::Nmea(NmeaDecoder::new(), Box::default()),
+            Protocol::Ubx => Inner::Ubx(UbxDecoder::new()),
         };
         DeviceDecoder {
             protocol,
@@ -215,6 +239,8 @@ impl DeviceDecoder {
             Inner::Seatrac(d) => d.push(bytes),
             Inner::Nortek(d) => d.push(bytes),
             Inner::WldvlJson(d) => d.push(bytes),
+            Inner::Nmea(d, _) => d.push(bytes),
+            Inner::Ubx(d) => d.push(bytes),
         }
     }
 
@@ -228,6 +254,8 @@ impl DeviceDecoder {
             Inner::Seatrac(d) => d.stats(),
             Inner::Nortek(d) => d.stats(),
             Inner::WldvlJson(d) => d.stats(),
+            Inner::Nmea(d, _) => d.stats(),
+            Inner::Ubx(d) => d.stats(),
         }
     }
 
@@ -338,6 +366,37 @@ impl DeviceDecoder {
                             host_time_ns,
                             0,
                         )));
+                    }
+                    Ok(_) => self.counters.other_frames += 1,
+                    Err(_) => continue,
+                },
+                Inner::Nmea(d, epochs) => {
+                    if let Some(e) = epochs.pop() {
+                        match crate::gnss::fix_from_epoch(&e, &s.gnss, s.latency_s) {
+                            Some(f) => return Some(Output::Gnss(f)),
+                            None => {
+                                self.counters.no_fix += 1;
+                                continue;
+                            }
+                        }
+                    }
+                    match d.next_sentence()? {
+                        Ok(sentence) => {
+                            if matches!(sentence, crate::nmea::NmeaSentence::Other { .. }) {
+                                self.counters.other_frames += 1;
+                            }
+                            epochs.push(sentence, host_time_ns);
+                        }
+                        Err(_) => continue,
+                    }
+                }
+                Inner::Ubx(d) => match d.next_frame()? {
+                    Ok(UbxFrame::NavPvt(p)) => {
+                        match crate::gnss::fix_from_nav_pvt(&p, host_time_ns, &s.gnss, s.latency_s)
+                        {
+                            Some(f) => return Some(Output::Gnss(f)),
+                            None => self.counters.no_fix += 1,
+                        }
                     }
                     Ok(_) => self.counters.other_frames += 1,
                     Err(_) => continue,

@@ -10,7 +10,7 @@ use crate::pd0::{self, BottomTrack, CoordinateSystem, Ensemble, FixedLeader, Var
 use crate::seatrac::{self, AcoFix, FixRange, FixUsbl};
 use crate::wldvl::{self, Velocity, WlFrame};
 use crate::xsens::{self, MtData2};
-use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, MagnetometerV1, UsblFixV1};
+use auvnav_shm_schema::{DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, UsblFixV1};
 
 /// System configuration word of the emulated PD0 DVL: 600 kHz, convex, 30° beams, down-looking,
 /// 4-beam Janus.
@@ -322,6 +322,107 @@ pub fn xsens_from_magnetometer(m: &MagnetometerV1, unit_ut: f64, packet_counter:
 
 /// A USBL message as a SeaTrac `CID_XCVR_FIX` line (the inverse of
 /// [`crate::convert::seatrac_fix`]; `position_array_m` is `[northing, easting, depth]`).
+/// `ddmm.mmmmmmm,N` / `dddmm.mmmmmmm,E`.
+fn nmea_angle(deg: f64, width: usize, pos: char, neg: char) -> String {
+    let a = deg.abs();
+    let mut d = a.trunc();
+    let mut minutes = ((a - d) * 60.0 * 1e7).round() / 1e7;
+    if minutes >= 60.0 {
+        d += 1.0;
+        minutes -= 60.0;
+    }
+    format!(
+        "{:0width$}{:010.7},{}",
+        d as u32,
+        minutes,
+        if deg < 0.0 { neg } else { pos }
+    )
+}
+
+/// A GNSS fix as a receiver's NMEA epoch — `RMC`, `GGA`, `GST`, `ZDA` — stamped with the UTC
+/// `utc_unix_ns` (the emulator's wall clock, as a live receiver's). The height goes out as the
+/// altitude with a zero geoid separation; GST carries the fix's standard deviations.
+pub fn nmea_from_gnss(m: &GnssFixV1, utc_unix_ns: i64) -> Vec<u8> {
+    let t = chrono::DateTime::from_timestamp_nanos(utc_unix_ns);
+    let time = format!(
+        "{}{:02}",
+        t.format("%H%M%S."),
+        t.timestamp_subsec_millis() / 10
+    );
+    let lat = nmea_angle(m.latitude_rad.to_degrees(), 2, 'N', 'S');
+    let lon = nmea_angle(m.longitude_rad.to_degrees(), 3, 'E', 'W');
+    let [vn, ve, _] = m.velocity_ned_m_s;
+    let knots = vn.hypot(ve) * 3600.0 / 1852.0;
+    let course = ve.atan2(vn).to_degrees().rem_euclid(360.0);
+    let quality = if m.validity & GnssFixV1::DIFFERENTIAL != 0 {
+        2
+    } else {
+        1
+    };
+    let hdop = (m.horizontal_std_m / crate::gnss::GnssSettings::default().uere_m).max(0.5);
+    let mut out = Vec::new();
+    for body in [
+        format!(
+            "GNRMC,{time},A,{lat},{lon},{knots:.3},{course:.2},{},,,A",
+            t.format("%d%m%y")
+        ),
+        format!(
+            "GNGGA,{time},{lat},{lon},{quality},{:02},{hdop:.2},{:.3},M,0.000,M,,",
+            m.satellites.min(99),
+            m.height_m
+        ),
+        format!(
+            "GNGST,{time},{h:.3},{h:.3},{h:.3},0.0,{h:.3},{h:.3},{:.3}",
+            m.vertical_std_m,
+            h = m.horizontal_std_m
+        ),
+        format!("GNZDA,{time},{},00,00", t.format("%d,%m,%Y")),
+    ] {
+        out.extend(crate::nmea::sentence(&body));
+    }
+    out
+}
+
+/// A GNSS fix as a u-blox `NAV-PVT` stamped with the UTC `utc_unix_ns`.
+pub fn ubx_from_gnss(m: &GnssFixV1, utc_unix_ns: i64) -> Vec<u8> {
+    use chrono::{Datelike, Timelike};
+    let t = chrono::DateTime::from_timestamp_nanos(utc_unix_ns);
+    let gps_ms = crate::gnss::gps_time_ns(utc_unix_ns, crate::gnss::GPS_MINUS_UTC_S)
+        .map_or(0, |g| g / 1_000_000);
+    let p = crate::ubx::NavPvt {
+        itow_ms: (gps_ms % (7 * 86_400_000)) as u32,
+        year: t.year() as u16,
+        month: t.month() as u8,
+        day: t.day() as u8,
+        hour: t.hour() as u8,
+        minute: t.minute() as u8,
+        second: t.second() as u8,
+        valid: crate::ubx::NavPvt::VALID_DATE
+            | crate::ubx::NavPvt::VALID_TIME
+            | crate::ubx::NavPvt::FULLY_RESOLVED,
+        time_accuracy_ns: 30,
+        nano_ns: t.nanosecond() as i32,
+        fix_type: 3,
+        flags: crate::ubx::NavPvt::GNSS_FIX_OK
+            | if m.validity & GnssFixV1::DIFFERENTIAL != 0 {
+                crate::ubx::NavPvt::DIFF_SOLN
+            } else {
+                0
+            },
+        satellites: m.satellites.min(255) as u8,
+        longitude_deg: m.longitude_rad.to_degrees(),
+        latitude_deg: m.latitude_rad.to_degrees(),
+        height_m: m.height_m,
+        height_msl_m: m.height_m,
+        horizontal_accuracy_m: m.horizontal_std_m,
+        vertical_accuracy_m: m.vertical_std_m,
+        velocity_ned_m_s: m.velocity_ned_m_s,
+        speed_accuracy_m_s: 0.05,
+        pdop: 1.2,
+    };
+    crate::ubx::encode_nav_pvt(&p)
+}
+
 pub fn seatrac_from_usbl(m: &UsblFixV1, local_id: u8) -> Vec<u8> {
     let c = if m.validity & UsblFixV1::VALID_SOUND_SPEED != 0 {
         m.sound_speed_m_s
@@ -683,5 +784,72 @@ mod tests {
         ] {
             assert_eq!(crate::convert::pd0_rtc_ns(&pd0_rtc(ns)), Some(ns));
         }
+    }
+
+    fn gnss() -> GnssFixV1 {
+        GnssFixV1 {
+            host_time_ns: 5_000_000_000,
+            latitude_rad: (-45.877_591_5f64).to_radians(),
+            longitude_rad: 170.500_124_8f64.to_radians(),
+            height_m: 16.25,
+            velocity_ned_m_s: [1.2, -0.7, 0.0],
+            horizontal_std_m: 1.5,
+            vertical_std_m: 3.0,
+            satellites: 14,
+            validity: GnssFixV1::VALID_POSITION
+                | GnssFixV1::VALID_HEIGHT
+                | GnssFixV1::VALID_VELOCITY
+                | GnssFixV1::DIFFERENTIAL,
+            ..Default::default()
+        }
+    }
+
+    fn same_fix(back: &GnssFixV1, m: &GnssFixV1, utc_ns: i64, velocity_tol: f64) {
+        assert_eq!(back.validity, m.validity | GnssFixV1::VALID_DEVICE_TIME);
+        // 1e-7 arc minute and 1e-7 degree are below 2 cm.
+        assert!((back.latitude_rad - m.latitude_rad).abs() * 6.4e6 < 0.02);
+        assert!((back.longitude_rad - m.longitude_rad).abs() * 6.4e6 < 0.02);
+        assert!((back.height_m - m.height_m).abs() < 1e-3);
+        assert!((back.horizontal_std_m - m.horizontal_std_m).abs() < 1e-3);
+        assert!((back.vertical_std_m - m.vertical_std_m).abs() < 1e-3);
+        for k in 0..3 {
+            assert!((back.velocity_ned_m_s[k] - m.velocity_ned_m_s[k]).abs() < velocity_tol);
+        }
+        assert_eq!(back.satellites, m.satellites);
+        let gps = crate::gnss::gps_time_ns(utc_ns, 18).expect("a value");
+        assert!(back.device_time_ns.abs_diff(gps) < 10_000_000, "{back:?}");
+    }
+
+    #[test]
+    fn gnss_round_trips_through_nmea_and_ubx() {
+        let m = gnss();
+        let utc_ns = 1_795_596_601_234_000_000;
+        let Output::Gnss(back) = decode_one(
+            Protocol::Ubx,
+            ProtocolSettings::default(),
+            &ubx_from_gnss(&m, utc_ns),
+        ) else {
+            panic!("not a fix")
+        };
+        same_fix(&back, &m, utc_ns, 1e-3);
+        assert_eq!(back.host_time_ns, 5_000_000_000);
+        // An NMEA epoch ends when the next one begins.
+        let mut bytes = nmea_from_gnss(&m, utc_ns);
+        bytes.extend(nmea_from_gnss(&m, utc_ns + 1_000_000_000));
+        let mut d = DeviceDecoder::new(Protocol::Nmea, ProtocolSettings::default());
+        d.push(&bytes);
+        let Some(Output::Gnss(back)) = d.next_output(7_000_000_000) else {
+            panic!("no fix")
+        };
+        same_fix(&back, &m, utc_ns, 2e-3);
+        assert_eq!(back.host_time_ns, 7_000_000_000);
+        // The second is complete at its last sentence: the receiver's set is known by then.
+        assert!(matches!(
+            d.next_output(7_000_000_000),
+            Some(Output::Gnss(_))
+        ));
+        assert_eq!(d.next_output(7_000_000_000), None);
+        assert_eq!(d.stats().frames, 8);
+        assert_eq!(d.stats().bytes_skipped, 0);
     }
 }

@@ -1,16 +1,21 @@
-//! The serial driver process (`auvnav-dvl`, `auvnav-imu`, `auvnav-usbl`): owns one serial port,
+//! The serial driver process (`auvnav-dvl`, `auvnav-imu`, `auvnav-usbl`, `auvnav-gnss`): owns one
+//! serial port,
 //! stamps every read with the host clock at read return, decodes the device's protocol and
 //! publishes the messages on the bus, reports its health, and survives the line: garbage is
 //! counted and dropped by the decoder, a silent device is reported, a device that disappears is
 //! reopened with exponential back-off, and the process stops cleanly on SIGTERM/SIGINT.
+//!
+//! A GNSS receiver's driver also listens to the depth topic: with `settings.gnss.surface_only`
+//! it publishes a fix only while the latest depth says the vehicle is at the surface, since a
+//! receiver whose antenna is awash or just under water reports multipath positions as fixes.
 
 use crate::clock::monotonic_ns;
 use crate::device::{DeviceClass, DeviceDecoder, Output, Protocol, ProtocolSettings};
 use auvnav_shm_schema::bus::{Bus, BusError, BusPublisher};
 use auvnav_shm_schema::stage_times::StageTimes;
 use auvnav_shm_schema::{
-    DvlVelocityV1, ImuSampleV1, MagnetometerV1, ProcessHealthV1, ProcessState, RAW_CHUNK,
-    RawBytesV1, UsblFixV1, qos, topic,
+    DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, ProcessHealthV1, ProcessState,
+    RAW_CHUNK, RawBytesV1, UsblFixV1, qos, topic,
 };
 use serde::{Deserialize, Serialize};
 use std::io::Read;
@@ -115,7 +120,8 @@ pub struct SerialDriverConfig {
     /// Service-name prefix of the deployment (default `auvnav`).
     #[serde(default = "default_prefix")]
     pub prefix: String,
-    /// The device's protocol (`pd0`, `wldvl`, `wldvl-json`, `nortek`, `kvh1750`, `xsens`, `seatrac`).
+    /// The device's protocol (`pd0`, `wldvl`, `wldvl-json`, `nortek`, `kvh1750`, `xsens`, `seatrac`,
+    /// `nmea`, `ubx`).
     pub protocol: Protocol,
     /// Publish every byte read on `raw/<name>` for the recorder (default false).
     #[serde(default)]
@@ -327,6 +333,33 @@ impl SerialDriverConfig {
                 "0 < x <= 1000 uT".into(),
             ));
         }
+        let g = &st.gnss;
+        for (key, v, lo, hi) in [
+            ("settings.gnss.uere_m", g.uere_m, 0.01, 100.0),
+            (
+                "settings.gnss.surface_depth_m",
+                g.surface_depth_m,
+                0.0,
+                10.0,
+            ),
+            (
+                "settings.gnss.depth_timeout_s",
+                g.depth_timeout_s,
+                0.1,
+                60.0,
+            ),
+        ] {
+            if !(v.is_finite() && v >= lo && v <= hi) {
+                return Err(range(key, v.to_string(), format!("{lo}..={hi}")));
+            }
+        }
+        if !(0..=100).contains(&g.leap_seconds) {
+            return Err(range(
+                "settings.gnss.leap_seconds",
+                g.leap_seconds.to_string(),
+                "0..=100 s".into(),
+            ));
+        }
         if !(st.kvh.rate_hz.is_finite() && st.kvh.rate_hz > 0.0 && st.kvh.rate_hz <= 10_000.0) {
             return Err(range(
                 "settings.kvh.rate_hz",
@@ -482,6 +515,7 @@ enum ClassPublisher {
     Imu(BusPublisher<ImuSampleV1>),
     Dvl(BusPublisher<DvlVelocityV1>),
     Usbl(BusPublisher<UsblFixV1>),
+    Gnss(BusPublisher<GnssFixV1>),
 }
 
 impl DataPublisher {
@@ -490,6 +524,7 @@ impl DataPublisher {
             DeviceClass::Imu => ClassPublisher::Imu(bus.publisher(topic::IMU, qos::SENSOR)?),
             DeviceClass::Dvl => ClassPublisher::Dvl(bus.publisher(topic::DVL, qos::SENSOR)?),
             DeviceClass::Usbl => ClassPublisher::Usbl(bus.publisher(topic::USBL, qos::SENSOR)?),
+            DeviceClass::Gnss => ClassPublisher::Gnss(bus.publisher(topic::GNSS, qos::SENSOR)?),
         };
         let magnetometer = if protocol.carries_magnetic_field() {
             Some(bus.publisher(topic::MAGNETOMETER, qos::SENSOR)?)
@@ -508,8 +543,77 @@ impl DataPublisher {
             (ClassPublisher::Imu(p), _, Output::Imu(m)) => p.publish(m).map(|_| true),
             (ClassPublisher::Dvl(p), _, Output::Dvl(m)) => p.publish(m).map(|_| true),
             (ClassPublisher::Usbl(p), _, Output::Usbl(m)) => p.publish(m).map(|_| true),
+            (ClassPublisher::Gnss(p), _, Output::Gnss(m)) => p.publish(m).map(|_| true),
             (_, Some(p), Output::Magnetometer(m)) => p.publish(m).map(|_| true),
             _ => Ok(false),
+        }
+    }
+}
+
+/// The surface gate of a GNSS receiver's fixes: the latest depth on the bus.
+struct SurfaceGate {
+    depth: auvnav_shm_schema::bus::BusSubscriber<DepthV1>,
+    max_depth_m: f64,
+    timeout_ns: u64,
+    /// The latest valid depth and its time (ns).
+    latest: Option<(f64, u64)>,
+    /// Fixes withheld, and whether the last one was.
+    withheld: u64,
+    closed: bool,
+}
+
+impl SurfaceGate {
+    fn new(bus: &Bus, s: &crate::gnss::GnssSettings) -> Result<Self, BusError> {
+        Ok(SurfaceGate {
+            depth: bus.subscriber(topic::DEPTH, qos::SENSOR)?,
+            max_depth_m: s.surface_depth_m,
+            timeout_ns: (s.depth_timeout_s * 1e9) as u64,
+            latest: None,
+            withheld: 0,
+            closed: false,
+        })
+    }
+
+    /// Takes in the depths published since the last call.
+    fn update(&mut self) {
+        while let Ok(Some(d)) = self.depth.receive() {
+            if d.validity & DepthV1::VALID_DEPTH != 0 && d.depth_m.is_finite() {
+                self.latest = Some((d.depth_m, d.host_time_ns));
+            }
+        }
+    }
+
+    /// Whether a fix valid at `t_ns` may be published; says so when that changes.
+    fn pass(&mut self, name: &str, t_ns: u64) -> bool {
+        self.update();
+        let verdict = match self.latest {
+            None => Err("no depth on the bus yet".to_string()),
+            Some((_, at)) if t_ns.abs_diff(at) > self.timeout_ns => Err(format!(
+                "the latest depth is {:.1} s old",
+                t_ns.abs_diff(at) as f64 * 1e-9
+            )),
+            Some((d, _)) if d > self.max_depth_m => Err(format!(
+                "depth {d:.2} m is below the surface limit {} m",
+                self.max_depth_m
+            )),
+            Some(_) => Ok(()),
+        };
+        match verdict {
+            Ok(()) => {
+                if self.closed {
+                    tracing::info!("{name}: at the surface again: publishing fixes");
+                    self.closed = false;
+                }
+                true
+            }
+            Err(why) => {
+                if !self.closed {
+                    tracing::info!("{name}: withholding fixes: {why}");
+                    self.closed = true;
+                }
+                self.withheld += 1;
+                false
+            }
         }
     }
 }
@@ -539,6 +643,11 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
     let class = cfg.protocol.class();
     let bus = Bus::new(&name, &cfg.prefix)?;
     let mut data = DataPublisher::new(&bus, cfg.protocol)?;
+    let mut surface_gate = if class == DeviceClass::Gnss && cfg.settings.gnss.surface_only {
+        Some(SurfaceGate::new(&bus, &cfg.settings.gnss)?)
+    } else {
+        None
+    };
     let mut health_pub = bus.publisher::<ProcessHealthV1>(topic::HEALTH, qos::HEALTH)?;
     let mut raw_pub = if cfg.raw_capture {
         Some(bus.publisher::<RawBytesV1>(&topic::raw(&name), qos::RAW)?)
@@ -611,6 +720,9 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
             break;
         }
         let now = monotonic_ns();
+        if let Some(g) = surface_gate.as_mut() {
+            g.update();
+        }
         if now >= next_health {
             publish_health(&mut health_pub, &health, &decoder, state)?;
             next_health = now + health_ns;
@@ -679,6 +791,11 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
                 }
                 decoder.push(&buf[..n]);
                 while let Some(out) = decoder.next_output(host_ns) {
+                    if let (Output::Gnss(f), Some(gate)) = (&out, surface_gate.as_mut())
+                        && !gate.pass(&name, f.host_time_ns)
+                    {
+                        continue;
+                    }
                     let decoded_ns = stage_times.as_ref().map(|_| monotonic_ns());
                     match data.publish(out) {
                         Ok(true) => health.published += 1,
@@ -713,6 +830,13 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
             }
         }
     }
+    if class == DeviceClass::Gnss {
+        tracing::info!(
+            "{name}: {} epochs without a usable position; {} fixes withheld below the surface",
+            decoder.counters().no_fix,
+            surface_gate.as_ref().map_or(0, |g| g.withheld)
+        );
+    }
     tracing::info!(
         published = health.published,
         checksum_errors = decoder.stats().checksum_errors,
@@ -738,13 +862,14 @@ pub struct SerialDriverArgs {
     pub check_config: bool,
 }
 
-/// The command line of the serial driver for `class`: `auvnav-dvl`, `auvnav-imu` or `auvnav-usbl`.
+/// The command line of the serial driver for `class`: `auvnav-dvl`, `auvnav-imu`, `auvnav-usbl`
+/// or `auvnav-gnss`.
 pub fn serial_driver_command(class: DeviceClass) -> clap::Command {
     use clap::CommandFactory;
     let (name, about) = match class {
         DeviceClass::Dvl => (
             "auvnav-dvl",
-            "DVL serial driver: Teledyne PD0 or Water Linked DVL frames to shared memory",
+            "DVL driver: Teledyne PD0, Nortek or Water Linked DVL (serial or TCP) to shared memory",
         ),
         DeviceClass::Imu => (
             "auvnav-imu",
@@ -754,6 +879,10 @@ pub fn serial_driver_command(class: DeviceClass) -> clap::Command {
             "auvnav-usbl",
             "USBL serial driver: Blueprint SeaTrac fixes to shared memory",
         ),
+        DeviceClass::Gnss => (
+            "auvnav-gnss",
+            "GNSS receiver driver: NMEA 0183 or u-blox UBX fixes to shared memory, at the surface",
+        ),
     };
     SerialDriverArgs::command()
         .name(name)
@@ -761,7 +890,7 @@ pub fn serial_driver_command(class: DeviceClass) -> clap::Command {
         .about(about)
 }
 
-/// `main` of `auvnav-dvl`, `auvnav-imu` and `auvnav-usbl`: exit 0 after a clean stop, 2 for a
+/// `main` of `auvnav-dvl`, `auvnav-imu`, `auvnav-usbl` and `auvnav-gnss`: exit 0 after a clean stop, 2 for a
 /// configuration error, 1 for a shared-memory failure.
 pub fn main_for(class: DeviceClass) -> std::process::ExitCode {
     use clap::FromArgMatches;

@@ -26,6 +26,8 @@ fn example_configurations_check() {
         (env!("CARGO_BIN_EXE_auvnav-imu"), "imu-kvh1750.toml"),
         (env!("CARGO_BIN_EXE_auvnav-imu"), "imu-xsens.toml"),
         (env!("CARGO_BIN_EXE_auvnav-usbl"), "usbl-seatrac.toml"),
+        (env!("CARGO_BIN_EXE_auvnav-gnss"), "gnss-nmea.toml"),
+        (env!("CARGO_BIN_EXE_auvnav-gnss"), "gnss-ubx.toml"),
         (env!("CARGO_BIN_EXE_auvnav-can"), "can.toml"),
     ] {
         let (code, out, err) = run(bin, &["--config", &config(file), "--check-config"]);

@@ -140,6 +140,12 @@ fn programs(dir: &Path) -> Vec<Program> {
             base: serial("seatrac", "usbl"),
         },
         Program {
+            name: "auvnav-gnss",
+            bin: "auvnav-gnss",
+            check: check_flag,
+            base: serial("nmea", "gnss"),
+        },
+        Program {
             name: "auvnav-can",
             bin: "auvnav-can",
             check: check_flag,

@@ -148,6 +148,7 @@ fn every_binary_reports_its_version_and_commit() {
         "auvnav-dvl",
         "auvnav-imu",
         "auvnav-usbl",
+        "auvnav-gnss",
         "auvnav-can",
         "auvnav-bridge",
         "auvnav-live",

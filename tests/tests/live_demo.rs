@@ -120,6 +120,64 @@ fn live_daemon_fuses_usbl_fixes_from_a_seatrac_on_a_pseudo_terminal() {
     assert_eq!(r["navigator"]["usbl_invalid"], 0, "{r}");
 }
 
+/// `auvnav demo --gnss`: a u-blox receiver emulated on a pseudo-terminal, `auvnav-gnss` gating
+/// its fixes on the depth from `auvnav-can`; the surface fixes reach the daemon and the
+/// recording, the replay reproduces the live solution, and `auvnav calibrate dvl` runs on the
+/// recording with its GNSS fixes (the daemon's configuration taken from the recording's header).
+#[test]
+fn live_demo_with_a_gnss_receiver_records_the_surface_fixes_for_calibration() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = TempDir::new("livegnss");
+    let out = dir.path().join("run");
+    let args = [
+        "--gnss",
+        "ubx",
+        "--start",
+        "known",
+        "--seconds",
+        "80",
+        "--speed",
+        "8",
+    ];
+    let v = demo(&args, &out);
+    assert_eq!(v["scenario"], "dive", "{v}");
+    assert_eq!(v["gnss"], "ubx", "{v}");
+    assert_eq!(v["replay_identical"], true, "{v}");
+    assert_eq!(v["clean_stop"], true, "{v}");
+    let simulated = v["gnss_fixes_simulated"].as_u64().expect("simulated");
+    let recorded = v["gnss_fixes_recorded"].as_u64().expect("recorded");
+    // 60 s at the surface and the start of the dive, one fix per second; the first may come
+    // before the depth sensor's first reading, which the driver waits for.
+    assert!(simulated >= 60, "{v}");
+    assert!(recorded + 2 >= simulated && recorded <= simulated, "{v}");
+    let o = Command::new(binary("auvnav"))
+        .arg("replay")
+        .arg(out.join("record.mcap"))
+        .arg("--json")
+        .output()
+        .expect("replay");
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let fused = r["navigator"]["gnss_fused"].as_u64().expect("gnss_fused");
+    assert!(fused + 3 >= recorded, "{r}");
+    let o = Command::new(binary("auvnav"))
+        .args(["calibrate", "dvl"])
+        .arg(out.join("record.mcap"))
+        .args(["--threshold", "40", "--json"])
+        .output()
+        .expect("calibrate");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let c: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let voyage = &c["voyages"][0];
+    assert_eq!(
+        voyage["start"], "the configuration's [initial] state",
+        "{voyage}"
+    );
+    assert!(
+        voyage["fixes"].as_u64().expect("fixes") + 3 >= recorded,
+        "{voyage}"
+    );
+}
+
 /// The README's first command (`auvnav demo`, seed 1): alignment from no heading, then USBL
 /// homing with multipath outliers, as real processes; the figures meet their targets and the
 /// replay of the recording reproduces the live solution byte for byte.

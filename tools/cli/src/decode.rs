@@ -33,7 +33,7 @@ struct Summary<'a> {
 
 /// Decodes the file in 1 KiB reads (as a driver would see the bytes) and returns the counters.
 pub fn run(a: &DecodeArgs) -> anyhow::Result<DecoderStats> {
-    use auvnav_drivers::{kvh, nortek, pd0, seatrac, wldvl, wldvl_json, xsens};
+    use auvnav_drivers::{kvh, nmea, nortek, pd0, seatrac, ubx, wldvl, wldvl_json, xsens};
     let bytes = std::fs::read(&a.file).with_context(|| format!("reading {}", a.file.display()))?;
     let (stats, lines) = match a.protocol {
         Protocol::Pd0 => frames_as_json(pd0::Pd0Decoder::new(), &bytes)?,
@@ -43,6 +43,8 @@ pub fn run(a: &DecodeArgs) -> anyhow::Result<DecoderStats> {
         Protocol::Seatrac => frames_as_json(seatrac::SeatracDecoder::new(), &bytes)?,
         Protocol::Nortek => frames_as_json(nortek::NortekDecoder::new(), &bytes)?,
         Protocol::WldvlJson => frames_as_json(wldvl_json::JsonDecoder::new(), &bytes)?,
+        Protocol::Nmea => frames_as_json(nmea::NmeaDecoder::new(), &bytes)?,
+        Protocol::Ubx => frames_as_json(ubx::UbxDecoder::new(), &bytes)?,
     };
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());

@@ -40,9 +40,10 @@ pub struct DemoArgs {
     #[arg(long)]
     pub in_process: bool,
     /// Built-in scenario or scenario file (`homing`: alignment, then USBL homing to the docking
-    /// station; `lawnmower`: a survey without USBL).
-    #[arg(long, default_value = "homing")]
-    pub scenario: String,
+    /// station; `lawnmower`: a survey without USBL; `dive`: from the surface and back, with GNSS
+    /// fixes at the surface). Default: `homing`, or `dive` with `--gnss`.
+    #[arg(long)]
+    pub scenario: Option<String>,
     /// How the navigator starts: `align` (the launch position only) or `known` (the true
     /// initial state).
     #[arg(long, value_enum, default_value_t = DemoStart::Align)]
@@ -54,6 +55,12 @@ pub struct DemoArgs {
     /// too, which the daemon fuses as a heading aid) or `kvh1750`.
     #[arg(long, default_value = "xsens", value_parser = ["xsens", "kvh1750"])]
     pub imu: String,
+    /// Also emulate a GNSS receiver in this protocol (`nmea`, the default, or `ubx`) and run
+    /// `auvnav-gnss` on it (processes only): the surface fixes, passed by the driver while the
+    /// depth on the bus says the vehicle is at the surface, reach the daemon and the recording.
+    #[arg(long, value_name = "PROTOCOL", num_args = 0..=1, default_missing_value = "nmea",
+          value_parser = ["nmea", "ubx"])]
+    pub gnss: Option<String>,
     /// Write the logs and solutions here (processes: voyage.mcap, record.mcap, live_nav.csv,
     /// replay_nav.csv and each process's log; in process: sim.mcap and nav.csv).
     #[arg(long)]
@@ -218,9 +225,21 @@ pub fn run_session_voyage(
     ))
 }
 
+impl DemoArgs {
+    /// The scenario: the one named, or `dive` with `--gnss` (fixes need a surface) and `homing`
+    /// without.
+    pub fn scenario_name(&self) -> &str {
+        match (&self.scenario, &self.gnss) {
+            (Some(s), _) => s,
+            (None, Some(_)) => "dive",
+            (None, None) => "homing",
+        }
+    }
+}
+
 /// The simulation of the demo's scenario.
 fn sim_config(a: &DemoArgs) -> anyhow::Result<SimConfig> {
-    let scenario = Scenario::load(&a.scenario)?;
+    let scenario = Scenario::load(a.scenario_name())?;
     let effects = scenario.effects()?;
     Ok(SimConfig {
         scenario,
@@ -382,10 +401,15 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
             .into());
         }
     };
+    let gnss = a
+        .gnss
+        .as_deref()
+        .and_then(auvnav_drivers::device::Protocol::from_name);
     let r = crate::live::run_live(
-        &a.scenario,
+        a.scenario_name(),
         a.start,
         imu,
+        gnss,
         a.seed,
         a.seconds,
         a.speed,
@@ -401,15 +425,26 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
             r.scenario, r.seed, r.simulated_s, r.speed, acc.distance_travelled_m
         );
         println!(
-            "  processes: emulated PD0 DVL, {} IMU, SeaTrac USBL on pseudo-terminals; \
-             auvnav-dvl, -imu, -usbl, -can (depth); auvnavd; auvnav record{}",
+            "  processes: emulated PD0 DVL, {} IMU, SeaTrac USBL{} on pseudo-terminals; \
+             auvnav-dvl, -imu, -usbl{}, -can (depth); auvnavd; auvnav record{}",
             r.imu,
+            r.gnss
+                .as_ref()
+                .map(|g| format!(", {} GNSS receiver", g.to_uppercase()))
+                .unwrap_or_default(),
+            if r.gnss.is_some() { ", -gnss" } else { "" },
             r.live_view
                 .as_ref()
                 .map(|a| format!("; live view on ws://{a}"))
                 .unwrap_or_default()
         );
         print_phases(&r.phases);
+        if r.gnss.is_some() {
+            println!(
+                "  GNSS: {} surface fixes simulated, {} recorded (the driver passes fixes while the depth on the bus is at most 0.5 m)",
+                r.gnss_fixes_simulated, r.gnss_fixes_recorded
+            );
+        }
         println!(
             "  live solution: {} rows; horizontal error over the whole run (alignment included): final {:.2} m, max {:.2} m, CEP50 {:.2} m",
             r.solutions,

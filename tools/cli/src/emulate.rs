@@ -47,10 +47,15 @@ pub struct EmulateArgs {
     /// Emulate the USBL in this protocol (seatrac).
     #[arg(long, value_parser = ["seatrac"])]
     pub usbl: Option<String>,
+    /// Emulate the GNSS receiver in this protocol (nmea or ubx): the log's fixes, stamped with
+    /// the UTC at which they are written, as a live receiver's.
+    #[arg(long, value_parser = ["nmea", "ubx"])]
+    pub gnss: Option<String>,
     /// Play this many times faster than real time (0.01..1000).
     #[arg(long, default_value_t = 1.0)]
     pub speed: f64,
-    /// Keep stable links DIR/dvl, DIR/imu, DIR/usbl to the pseudo-terminals (needed by --unplug).
+    /// Keep stable links DIR/dvl, DIR/imu, DIR/usbl, DIR/gnss to the pseudo-terminals (needed by
+    /// --unplug).
     #[arg(long)]
     pub link_dir: Option<PathBuf>,
     /// Wait this long after creating the terminals before playing, so drivers can open them (s).
@@ -141,7 +146,8 @@ fn parse_window(spec: &str, option: &str) -> anyhow::Result<(DeviceClass, Window
         "dvl" => DeviceClass::Dvl,
         "imu" => DeviceClass::Imu,
         "usbl" => DeviceClass::Usbl,
-        _ => bail!("--{option} {spec:?}: device must be dvl, imu or usbl"),
+        "gnss" => DeviceClass::Gnss,
+        _ => bail!("--{option} {spec:?}: device must be dvl, imu, usbl or gnss"),
     };
     let num = |s: &str, what: &str| -> anyhow::Result<f64> {
         let v: f64 = s
@@ -228,11 +234,20 @@ impl Device {
                 enc::xsens_from_magnetometer(m, XSENS_FIELD_UNIT_UT, (self.counter % 65_536) as u16)
             }
             (Protocol::Seatrac, LogMessage::Usbl(u)) => enc::seatrac_from_usbl(u, 1),
+            (Protocol::Nmea, LogMessage::Gnss(f)) => enc::nmea_from_gnss(f, utc_now_ns()),
+            (Protocol::Ubx, LogMessage::Gnss(f)) => enc::ubx_from_gnss(f, utc_now_ns()),
             _ => return None,
         };
         self.counter = self.counter.wrapping_add(1);
         Some(bytes)
     }
+}
+
+/// The wall clock's UTC (ns since 1970).
+fn utc_now_ns() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as i64)
 }
 
 /// Line printed for each terminal (and again after a replug).
@@ -308,6 +323,7 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
         (DeviceClass::Dvl, &a.dvl),
         (DeviceClass::Imu, &a.imu),
         (DeviceClass::Usbl, &a.usbl),
+        (DeviceClass::Gnss, &a.gnss),
     ] {
         if let Some(protocol) = protocol_for(class, name)? {
             devices.push(Device {
@@ -335,7 +351,7 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
         }
     }
     if devices.is_empty() {
-        bail!("nothing to emulate: give at least one of --dvl, --imu, --usbl");
+        bail!("nothing to emulate: give at least one of --dvl, --imu, --usbl, --gnss");
     }
     for (specs, option) in [(&a.pause, "pause"), (&a.unplug, "unplug")] {
         for spec in specs {
@@ -383,6 +399,7 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
             LogMessage::Imu(s) => (DeviceClass::Imu, s.host_time_ns),
             LogMessage::Dvl(s) => (DeviceClass::Dvl, s.host_time_ns),
             LogMessage::Usbl(s) => (DeviceClass::Usbl, s.host_time_ns),
+            LogMessage::Gnss(s) => (DeviceClass::Gnss, s.host_time_ns),
             // An IMU that carries the magnetic field (Xsens) sends it in its own packets.
             LogMessage::Magnetometer(s) => (DeviceClass::Imu, s.host_time_ns),
             _ => continue,

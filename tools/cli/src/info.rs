@@ -3,7 +3,7 @@
 //! the file ends cleanly. Reads the whole file (a killed recorder's log has no summary section).
 
 use anyhow::Context;
-use auvnav_log::{LogError, LogHeader, LogReader};
+use auvnav_log::{LogError, LogHeader, LogMessage, LogReader};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -51,6 +51,9 @@ pub struct LogInfo {
     pub start_utc: Option<String>,
     /// Log time of the first message (ns; `CLOCK_MONOTONIC` for recordings).
     pub first_log_time_ns: Option<u64>,
+    /// UTC from the GNSS receiver: its first fix with a valid time ties the log's clock to GPS
+    /// time, independently of the host's clock.
+    pub gnss_time: Option<GnssTime>,
     pub duration_s: f64,
     pub messages: u64,
     pub channels: Vec<ChannelSummary>,
@@ -62,6 +65,43 @@ pub struct LogInfo {
     pub stopped: Option<String>,
     /// What was passed over as damaged (corrupt chunks and their time spans), if anything.
     pub damaged: Option<auvnav_log::Corruption>,
+}
+
+/// The log's time from its GNSS fixes.
+#[derive(Debug, Clone, Serialize)]
+pub struct GnssTime {
+    /// UTC of the first message by the first GNSS fix with a valid time (GPS time minus the
+    /// leap seconds, 18 s since 2017).
+    pub start_utc: String,
+    /// The header's clock anchor minus the GNSS time at the same instant (s): how far the host's
+    /// clock was from GNSS time when the recorder started, within the fix's latency. Absent
+    /// without a header anchor.
+    pub host_clock_minus_gnss_s: Option<f64>,
+}
+
+/// UTC (ns since 1970) of log time `t_ns` by a GNSS fix stamped `fix_host_ns` with GPS time
+/// `gps_ns`.
+fn gnss_utc_ns(t_ns: u64, fix_host_ns: u64, gps_ns: u64) -> i64 {
+    use auvnav_drivers::gnss::{GPS_EPOCH_UNIX_S, GPS_MINUS_UTC_S};
+    gps_ns as i64 + GPS_EPOCH_UNIX_S * 1_000_000_000 - i64::from(GPS_MINUS_UTC_S) * 1_000_000_000
+        + (t_ns as i64 - fix_host_ns as i64)
+}
+
+fn gnss_time(header: &LogHeader, first_ns: u64, fix: &auvnav_shm_schema::GnssFixV1) -> GnssTime {
+    let utc = gnss_utc_ns(first_ns, fix.host_time_ns, fix.device_time_ns);
+    let start_utc = chrono::DateTime::from_timestamp_nanos(utc)
+        .to_rfc3339_opts(chrono::SecondsFormat::Micros, true);
+    let host_clock_minus_gnss_s = (|| {
+        let anchor = chrono::DateTime::parse_from_rfc3339(header.notes.get("clock.utc")?).ok()?;
+        let anchor_mono: u64 = header.notes.get("clock.monotonic_ns")?.parse().ok()?;
+        let host_ns = anchor.timestamp_nanos_opt()?;
+        let gnss_ns = gnss_utc_ns(anchor_mono, fix.host_time_ns, fix.device_time_ns);
+        Some((host_ns - gnss_ns) as f64 * 1e-9)
+    })();
+    GnssTime {
+        start_utc,
+        host_clock_minus_gnss_s,
+    }
 }
 
 /// The UTC time of log time `t_ns`, from the header's anchor notes.
@@ -112,6 +152,7 @@ pub fn info(path: &Path, with_config: bool) -> anyhow::Result<LogInfo> {
     let mut last = 0u64;
     let mut messages = 0u64;
     let mut stopped = None;
+    let mut first_timed_fix = None;
     loop {
         let m = match reader.next_message() {
             Ok(Some(m)) => m,
@@ -131,6 +172,12 @@ pub fn info(path: &Path, with_config: bool) -> anyhow::Result<LogInfo> {
             .or_insert_with(|| Span::new(&m.topic, &m.schema_name, m.log_time_ns));
         span.info.messages += 1;
         span.info.undecodable += undecodable;
+        if first_timed_fix.is_none()
+            && let Ok(LogMessage::Gnss(f)) = m.decode_any()
+            && f.validity & auvnav_shm_schema::GnssFixV1::VALID_DEVICE_TIME != 0
+        {
+            first_timed_fix = Some(f);
+        }
         span.first_ns = span.first_ns.min(m.log_time_ns);
         span.last_ns = span.last_ns.max(m.log_time_ns);
     }
@@ -166,6 +213,9 @@ pub fn info(path: &Path, with_config: bool) -> anyhow::Result<LogInfo> {
         producer_version: header.producer_version.clone(),
         start_utc: first.and_then(|f| utc_of(&header, f)),
         first_log_time_ns: first,
+        gnss_time: first
+            .zip(first_timed_fix.as_ref())
+            .map(|(f, fix)| gnss_time(&header, f, fix)),
         duration_s: last.saturating_sub(t0) as f64 * 1e-9,
         messages,
         channels,
@@ -200,6 +250,15 @@ fn print(i: &LogInfo) {
     match &i.start_utc {
         Some(t) => println!("  starts {t} (UTC, from the header's clock anchor)"),
         None => println!("  no UTC anchor (simulated or imported log)"),
+    }
+    if let Some(g) = &i.gnss_time {
+        println!(
+            "  starts {} (UTC, from the GNSS fixes){}",
+            g.start_utc,
+            g.host_clock_minus_gnss_s
+                .map(|d| format!("; the host clock was {d:+.3} s from GNSS time"))
+                .unwrap_or_default()
+        );
     }
     println!(
         "  {} messages over {:.3} s{}",

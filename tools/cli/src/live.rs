@@ -33,6 +33,12 @@ pub struct LiveResult {
     pub speed: f64,
     /// The emulated IMU's protocol (`xsens` also sends the magnetic field).
     pub imu: String,
+    /// The emulated GNSS receiver's protocol (`--gnss`), when one ran.
+    pub gnss: Option<String>,
+    /// GNSS fixes the simulator made (at the surface) and fixes the recording holds (published
+    /// by `auvnav-gnss` while the depth on the bus said the vehicle was at the surface).
+    pub gnss_fixes_simulated: u64,
+    pub gnss_fixes_recorded: u64,
     pub directory: String,
     pub record: String,
     pub live_nav_csv: String,
@@ -173,28 +179,34 @@ pub fn live_accuracy(nav: &[NavSolutionV1], truth: &[TruthStateV1], map: &HostTo
     tracker.result()
 }
 
-/// What the recording holds for the phase figures: the recorded IMU times, the daemon's
-/// solutions and its aid diagnostics.
-fn read_recording(
-    record: &Path,
-) -> anyhow::Result<(
-    Vec<u64>,
-    Vec<NavSolutionV1>,
-    Vec<auvnav_shm_schema::AidDiagnosticsV1>,
-)> {
-    let mut imu = Vec::new();
-    let mut nav = Vec::new();
-    let mut diagnostics = Vec::new();
+/// What the recording holds for the phase figures and the summary.
+struct Recording {
+    /// The recorded IMU times.
+    imu_ns: Vec<u64>,
+    /// The daemon's solutions and aid diagnostics.
+    nav: Vec<NavSolutionV1>,
+    diagnostics: Vec<auvnav_shm_schema::AidDiagnosticsV1>,
+    gnss_fixes: u64,
+}
+
+fn read_recording(record: &Path) -> anyhow::Result<Recording> {
+    let mut r = Recording {
+        imu_ns: Vec::new(),
+        nav: Vec::new(),
+        diagnostics: Vec::new(),
+        gnss_fixes: 0,
+    };
     let mut reader = LogReader::open(record)?;
     while let Some(raw) = reader.next_message()? {
         match raw.decode_any()? {
-            LogMessage::Imu(x) => imu.push(x.host_time_ns),
-            LogMessage::NavSolution(s) => nav.push(s),
-            LogMessage::AidDiagnostics(d) => diagnostics.push(d),
+            LogMessage::Imu(x) => r.imu_ns.push(x.host_time_ns),
+            LogMessage::NavSolution(s) => r.nav.push(s),
+            LogMessage::AidDiagnostics(d) => r.diagnostics.push(d),
+            LogMessage::Gnss(_) => r.gnss_fixes += 1,
             _ => {}
         }
     }
-    Ok((imu, nav, diagnostics))
+    Ok(r)
 }
 
 fn write_candump(path: &Path, depths: &[auvnav_shm_schema::DepthV1]) -> anyhow::Result<()> {
@@ -226,6 +238,7 @@ pub fn run_live(
     scenario_name: &str,
     start_mode: DemoStart,
     imu: Protocol,
+    gnss: Option<Protocol>,
     seed: u64,
     seconds: Option<f64>,
     speed: f64,
@@ -252,6 +265,10 @@ pub fn run_live(
     .collect::<anyhow::Result<Vec<_>>>()?;
     let [daemon, dvl_bin, imu_bin, usbl_bin, can_bin] = &binaries[..] else {
         bail!("binaries");
+    };
+    let gnss_bin = match gnss {
+        Some(_) => Some(sibling("auvnav-gnss").context("or run `auvnav demo --in-process`")?),
+        None => None,
     };
     let me = std::env::current_exe()?;
     let start = Instant::now();
@@ -333,6 +350,15 @@ pub fn run_live(
     };
     let imu_cfg = driver_cfg("imu", imu.name(), &imu_settings)?;
     let usbl_cfg = driver_cfg("usbl", "seatrac", "")?;
+    // A vehicle's receiver: fixes only while the depth on the bus says it is at the surface.
+    let gnss_cfg = match gnss {
+        Some(p) => Some(driver_cfg(
+            "gnss",
+            p.name(),
+            "[settings.gnss]\nsurface_only = true\nsurface_depth_m = 0.5\n",
+        )?),
+        None => None,
+    };
     let can_cfg = dir.join("can.toml");
     std::fs::write(
         &can_cfg,
@@ -397,15 +423,26 @@ pub fn run_live(
             Command::new(usbl_bin).arg("--config").arg(&usbl_cfg),
         )?,
     ];
+    if let (Some(bin), Some(cfg)) = (&gnss_bin, &gnss_cfg) {
+        drivers.push(ChildProcess::spawn_logged(
+            "auvnav-gnss",
+            &dir,
+            Command::new(bin).arg("--config").arg(cfg),
+        )?);
+    }
     std::thread::sleep(Duration::from_millis(500));
     let start_delay = 1.5;
+    let mut emulated = vec!["--dvl", "pd0", "--imu", imu.name(), "--usbl", "seatrac"];
+    if let Some(p) = gnss {
+        emulated.extend(["--gnss", p.name()]);
+    }
     let mut emulator = ChildProcess::spawn_logged(
         "emulate",
         &dir,
         Command::new(&me)
             .arg("emulate")
             .arg(&voyage)
-            .args(["--dvl", "pd0", "--imu", imu.name(), "--usbl", "seatrac"])
+            .args(&emulated)
             .args(["--speed", &speed.to_string()])
             .arg("--link-dir")
             .arg(&dev)
@@ -454,7 +491,12 @@ pub fn run_live(
     // 5. The live solution against the truth, on the simulator's time axis.
     let live_csv = dir.join("live_nav.csv");
     let nav = read_nav_csv(&live_csv)?;
-    let (recorded_imu, recorded_nav, diagnostics) = read_recording(&record)?;
+    let Recording {
+        imu_ns: recorded_imu,
+        nav: recorded_nav,
+        diagnostics,
+        gnss_fixes: gnss_fixes_recorded,
+    } = read_recording(&record)?;
     let imu_samples_complete = recorded_imu.len() == imu_sim_ns.len();
     let map = HostToSim::new(imu_sim_ns, recorded_imu);
     let accuracy = live_accuracy(&nav, &truth, &map);
@@ -495,6 +537,9 @@ pub fn run_live(
         simulated_s: seconds,
         speed,
         imu: imu.name().to_string(),
+        gnss: gnss.map(|p| p.name().to_string()),
+        gnss_fixes_simulated: simulated.gnss,
+        gnss_fixes_recorded,
         directory: dir.display().to_string(),
         record: record.display().to_string(),
         live_nav_csv: live_csv.display().to_string(),

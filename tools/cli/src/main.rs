@@ -782,6 +782,7 @@ fn programs() -> Vec<clap::Command> {
         serial_driver_command(DeviceClass::Dvl),
         serial_driver_command(DeviceClass::Imu),
         serial_driver_command(DeviceClass::Usbl),
+        serial_driver_command(DeviceClass::Gnss),
         auvnav_drivers::can_driver::CanDriverArgs::command(),
     ]
 }

@@ -563,6 +563,7 @@ fn manual_pages_and_completions_cover_every_program() {
         "auvnav-dvl.1",
         "auvnav-imu.1",
         "auvnav-usbl.1",
+        "auvnav-gnss.1",
         "auvnav-can.1",
     ] {
         let text = std::fs::read_to_string(dir.join(page)).unwrap_or_default();

@@ -163,6 +163,7 @@ pub const BUILTIN: &[(&str, &str)] = &[
     ("lawnmower", include_str!("scenarios/lawnmower.toml")),
     ("docking", include_str!("scenarios/docking.toml")),
     ("homing", include_str!("scenarios/homing.toml")),
+    ("dive", include_str!("scenarios/dive.toml")),
     ("moored", include_str!("scenarios/moored.toml")),
     ("survey", include_str!("scenarios/survey.toml")),
     ("align_moored", include_str!("scenarios/align_moored.toml")),

@@ -128,11 +128,25 @@ impl CalibrateDvlArgs {
 
 pub use crate::progress::Progress;
 
-fn load_session_config(path: Option<&PathBuf>) -> anyhow::Result<SessionConfig> {
-    match path {
-        Some(p) => crate::replay::load_config(p),
-        None => Ok(SessionConfig::default()),
+/// The navigation configuration: `--config`, or, for a recording, the daemon's configuration
+/// embedded in its header (as `auvnav replay` takes it), or the defaults.
+fn load_session_config(
+    path: Option<&PathBuf>,
+    first_voyage: Option<&std::path::Path>,
+) -> anyhow::Result<SessionConfig> {
+    if let Some(p) = path {
+        return crate::replay::load_config(p);
     }
+    if let Some(log) = first_voyage {
+        let header = auvnav_log::LogReader::open(log)?
+            .read_header()
+            .with_context(|| format!("reading {}", log.display()))?;
+        if header.producer == "auvnav record" && !header.config.trim().is_empty() {
+            return crate::replay::session_config_from_toml(&header.config)
+                .with_context(|| format!("{}", log.display()));
+        }
+    }
+    Ok(SessionConfig::default())
 }
 
 fn parameter_set(args: &CalibrateDvlArgs, cfg: &SessionConfig) -> anyhow::Result<ParameterSet> {
@@ -197,7 +211,8 @@ pub fn calibrate_dvl(args: &CalibrateDvlArgs) -> anyhow::Result<CalibrationRepor
             args.threshold
         );
     }
-    let cfg = load_session_config(args.config.as_ref())?;
+    let first_voyage = args.voyages.first().map(|v| v.path.as_path());
+    let cfg = load_session_config(args.config.as_ref(), first_voyage)?;
     let params = parameter_set(args, &cfg)?;
     let threads = args
         .threads

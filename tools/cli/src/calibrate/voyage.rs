@@ -121,7 +121,8 @@ pub struct Voyage {
 
 impl Voyage {
     /// Reads a voyage. The start state is the first truth record in the window, otherwise the
-    /// configuration's `[initial]` state.
+    /// configuration's `[initial]` state, otherwise (a recording of a vehicle that aligned on
+    /// board) the daemon's first recorded solution in mode *navigating*.
     pub fn load(
         spec: &VoyageSpec,
         fixes: FixSource,
@@ -136,6 +137,7 @@ impl Voyage {
         let mut inputs = Vec::new();
         let mut truth = Vec::new();
         let mut gnss: Vec<GnssFixV1> = Vec::new();
+        let mut first_navigating: Option<auvnav_shm_schema::NavSolutionV1> = None;
         let mut dvl_any = 0usize;
         let mut dvl_valid = 0usize;
         while let Some(raw) = reader
@@ -145,6 +147,19 @@ impl Voyage {
             let Ok(m) = raw.decode_any() else { continue };
             let t_ns = match m {
                 LogMessage::Truth(x) => x.host_time_ns,
+                LogMessage::NavSolution(x) => {
+                    // Counted from the first sensor message, like everything else in the window.
+                    if first_navigating.is_none()
+                        && x.mode == auvnav_shm_schema::NavMode::Navigating as u32
+                        && first_ns.is_some_and(|f| {
+                            let rel = x.host_time_ns.saturating_sub(f) as f64 * 1e-9;
+                            spec.window_s.is_none_or(|(a, b)| rel >= a && rel <= b)
+                        })
+                    {
+                        first_navigating = Some(x);
+                    }
+                    continue;
+                }
                 other => match other.sensor() {
                     Some(s) => s.host_time_ns(),
                     None => continue,
@@ -183,17 +198,31 @@ impl Voyage {
         if dvl_valid == 0 {
             bail!("voyage {name}: none of its {dvl_any} DVL messages carries a valid velocity");
         }
-        let (start, start_source) = match (truth.first(), &cfg.initial) {
-            (Some(t), _) => (NavState::from_truth(t), "first truth record of the voyage"),
-            (None, Some(init)) => {
+        let (start, start_source) = match (truth.first(), &cfg.initial, &first_navigating) {
+            (Some(t), _, _) => (NavState::from_truth(t), "first truth record of the voyage"),
+            (None, Some(init), _) => {
                 let t0 = inputs
                     .first()
                     .map(|m| m.host_time_ns() as f64 * 1e-9)
                     .unwrap_or(0.0);
                 (init.state(t0), "the configuration's [initial] state")
             }
-            (None, None) => bail!(
-                "voyage {name}: no start state (the log has no truth channel; give --config with an [initial] table)"
+            (None, None, Some(s)) => (
+                auvnav_core::strapdown::initial_state(
+                    s.host_time_ns as f64 * 1e-9,
+                    Geodetic {
+                        latitude_rad: s.latitude_rad,
+                        longitude_rad: s.longitude_rad,
+                        height_m: s.height_m,
+                    },
+                    s.velocity_ned_m_s,
+                    s.euler_rad,
+                ),
+                "the recorded navigation's first solution after alignment",
+            ),
+            (None, None, None) => bail!(
+                "voyage {name}: no start state (the log has no truth channel and no recorded \
+                 solution in mode navigating; give --config with an [initial] table)"
             ),
         };
         let start_ns = (start.time_s * 1e9).round() as u64;
