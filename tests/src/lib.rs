@@ -64,6 +64,8 @@ pub mod processes {
                 "auvnavd",
                 "-p",
                 "auvnav-bridge",
+                "-p",
+                "auvnav-mavlink",
             ]);
             if dir.file_name().is_some_and(|n| n == "release") {
                 cmd.arg("--release");

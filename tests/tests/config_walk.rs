@@ -155,6 +155,17 @@ fn programs(dir: &Path) -> Vec<Program> {
             .expect("can.toml"),
         },
         Program {
+            name: "auvnav-mavlink",
+            bin: "auvnav-mavlink",
+            check: check_flag,
+            // The deployed file, with the optional fixed origin.
+            base: std::fs::read_to_string(
+                Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy/auvnav-mavlink.toml"),
+            )
+            .expect("mavlink toml")
+                + "[origin]\nlatitude_deg = 31.0\nlongitude_deg = 120.0\naltitude_m = 0.0\n",
+        },
+        Program {
             name: "auvnav-bridge",
             bin: "auvnav-bridge",
             check: check_file,

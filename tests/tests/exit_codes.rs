@@ -149,6 +149,7 @@ fn every_binary_reports_its_version_and_commit() {
         "auvnav-imu",
         "auvnav-usbl",
         "auvnav-gnss",
+        "auvnav-mavlink",
         "auvnav-can",
         "auvnav-bridge",
         "auvnav-live",

@@ -1,0 +1,152 @@
+//! `auvnav-mavlink`: sends the navigation solution (`nav/solution`) to an autopilot over MAVLink
+//! (UDP or serial), with heartbeat, origin and status texts. See `auvnav_mavlink`.
+//!
+//! The solution topic is polled at four times the output rate, without a listener: the daemon's
+//! publish then costs no notification for this process, and only the latest solution matters.
+
+use auvnav_mavlink::{Link, MavlinkConfig};
+use auvnav_shm_schema::bus::Bus;
+use auvnav_shm_schema::{NavSolutionV1, qos, topic};
+use mavlink::MavConnection;
+use mavlink::dialects::ardupilotmega::MavMessage;
+use std::time::Duration;
+
+#[derive(Debug, clap::Parser)]
+#[command(
+    name = "auvnav-mavlink",
+    version = auvnav_version::LONG,
+    about = "The navigation solution to an autopilot (ArduSub) over MAVLink: ODOMETRY or GPS_INPUT, origin, heartbeat, status"
+)]
+struct Args {
+    /// The TOML configuration (see docs/operations.md and deploy/auvnav-mavlink.toml).
+    #[arg(long)]
+    config: String,
+    /// Check the configuration, print it with defaults filled in, and exit.
+    #[arg(long)]
+    check_config: bool,
+}
+
+/// Nanoseconds since the process started (the heartbeat's clock).
+fn elapsed_ns() -> u64 {
+    use std::sync::OnceLock;
+    static START: OnceLock<std::time::Instant> = OnceLock::new();
+    START
+        .get_or_init(std::time::Instant::now)
+        .elapsed()
+        .as_nanos() as u64
+}
+
+fn utc_now_ns() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as i64)
+}
+
+fn run(cfg: &MavlinkConfig) -> Result<(), String> {
+    let bus = Bus::new("mavlink", &cfg.prefix).map_err(|e| e.to_string())?;
+    let mut solutions = bus
+        .subscriber::<NavSolutionV1>(topic::NAV_SOLUTION, qos::NAVIGATION)
+        .map_err(|e| e.to_string())?;
+    let mut link = Link::new(cfg);
+    let mut connection: Option<mavlink::Connection<MavMessage>> = None;
+    let mut sequence: u8 = 0;
+    let mut send_errors = 0u64;
+    let mut last_error = String::new();
+    let mut next_attempt = 0u64;
+    let poll = Duration::from_secs_f64(0.25 / cfg.rate_hz);
+    tracing::info!(
+        "auvnav-mavlink: {} at {} Hz to {} as system {} component {}",
+        match cfg.message {
+            auvnav_mavlink::SolutionMessage::Odometry => "ODOMETRY",
+            auvnav_mavlink::SolutionMessage::GpsInput => "GPS_INPUT",
+        },
+        cfg.rate_hz,
+        cfg.address,
+        cfg.system_id,
+        cfg.component_id
+    );
+    while !bus.termination_requested() {
+        let now = elapsed_ns();
+        if connection.is_none() && now >= next_attempt {
+            match mavlink::connect::<MavMessage>(&cfg.address) {
+                Ok(mut c) => {
+                    c.set_protocol_version(mavlink::MavlinkVersion::V2);
+                    tracing::info!("auvnav-mavlink: {} open", cfg.address);
+                    connection = Some(c);
+                    last_error.clear();
+                }
+                Err(e) => {
+                    let msg = e.to_string();
+                    if msg != last_error {
+                        tracing::warn!(
+                            "auvnav-mavlink: cannot open {}: {msg}; retrying every 1 s",
+                            cfg.address
+                        );
+                        last_error = msg;
+                    }
+                    next_attempt = now + 1_000_000_000;
+                }
+            }
+        }
+        let mut latest = None;
+        while let Ok(Some(s)) = solutions.receive() {
+            latest = Some(s);
+        }
+        let mut out = link.on_tick(now);
+        if let Some(s) = latest {
+            out.extend(link.on_solution(&s, utc_now_ns()));
+        }
+        if let Some(c) = connection.as_ref() {
+            for m in &out {
+                if let Err(e) = c.send(&link.header(sequence), m) {
+                    send_errors += 1;
+                    let msg = e.to_string();
+                    if msg != last_error {
+                        tracing::warn!("auvnav-mavlink: sending to {}: {msg}", cfg.address);
+                        last_error = msg;
+                    }
+                }
+                sequence = sequence.wrapping_add(1);
+            }
+        }
+        std::thread::sleep(poll);
+    }
+    let c = link.counters;
+    tracing::info!(
+        "auvnav-mavlink: stopping; {} solutions, {} heartbeats, {} origins, {} status texts sent, {} solutions withheld (before alignment or above the rate), {} send errors",
+        c.solutions,
+        c.heartbeats,
+        c.origins,
+        c.status_texts,
+        c.withheld,
+        send_errors
+    );
+    Ok(())
+}
+
+fn main() -> std::process::ExitCode {
+    use clap::Parser;
+    let args = Args::parse();
+    auvnav_shm_schema::logging::init();
+    let cfg = match MavlinkConfig::load(&args.config) {
+        Ok(c) => c,
+        Err(e) => {
+            tracing::error!("auvnav-mavlink: {e}");
+            return std::process::ExitCode::from(2);
+        }
+    };
+    if args.check_config {
+        match toml::to_string_pretty(&cfg) {
+            Ok(s) => print!("{s}"),
+            Err(e) => tracing::error!("auvnav-mavlink: {e}"),
+        }
+        return std::process::ExitCode::SUCCESS;
+    }
+    match run(&cfg) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            tracing::error!("auvnav-mavlink: {e}");
+            std::process::ExitCode::from(1)
+        }
+    }
+}
