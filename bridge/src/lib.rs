@@ -29,6 +29,7 @@ use serde::{Deserialize, Serialize};
 pub mod gate;
 pub mod live;
 pub mod live_client;
+pub mod ros2;
 
 /// The bridge's configuration file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -48,6 +49,10 @@ pub struct BridgeConfig {
     /// Remote topics published on this host's bus.
     #[serde(default)]
     pub import: Vec<ImportConfig>,
+    /// The solution, IMU, DVL and health as ROS 2 topics, the way rmw_zenoh publishes them
+    /// (see `auvnav_bridge::ros2`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ros2: Option<ros2::Ros2Config>,
     /// Period of the health message and of the counters in the log (s, 0.05..60, default 1).
     #[serde(default = "default_health_period")]
     pub health_period_s: f64,
@@ -160,8 +165,11 @@ impl BridgeConfig {
                 check_endpoint(e).map_err(|why| format!("{key}: {e:?}: {why}"))?;
             }
         }
-        if self.export.is_empty() && self.import.is_empty() {
-            return Err("nothing to do: no [[export]] and no [[import]]".into());
+        if self.export.is_empty() && self.import.is_empty() && self.ros2.is_none() {
+            return Err("nothing to do: no [[export]], no [[import]] and no [ros2]".into());
+        }
+        if let Some(r) = &self.ros2 {
+            r.check()?;
         }
         for e in &self.export {
             check_key_prefix(&e.key_prefix)?;

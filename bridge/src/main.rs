@@ -1,11 +1,13 @@
 //! `auvnav-bridge`: see the library's documentation (`auvnav_bridge`).
 
+use auvnav_bridge::ros2::{self, Ros2Config, RosType};
 use auvnav_bridge::{
     BridgeConfig, ExportPort, ImportPort, RateLimit, Rejected, TOPICS, TopicKind, ZenohConfig,
     check_type, matches,
 };
-use auvnav_shm_schema::bus::{Bus, BusError};
+use auvnav_shm_schema::bus::{Bus, BusError, BusSubscriber};
 use auvnav_shm_schema::clock::monotonic_ns;
+use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, NavMode, NavSolutionV1};
 use auvnav_shm_schema::{ProcessHealthV1, ProcessState, qos, topic};
 use clap::Parser;
 use std::collections::HashMap;
@@ -53,6 +55,179 @@ struct Import {
     wrong_type: u64,
     wrong_size: u64,
     failed: u64,
+}
+
+/// One ROS 2 topic: its Zenoh publisher, its publisher id and sequence.
+struct RosPublisher {
+    publisher: zenoh::pubsub::Publisher<'static>,
+    gid: [u8; 16],
+    sequence: i64,
+}
+
+impl RosPublisher {
+    fn put(&mut self, payload: Vec<u8>, utc_ns: i64) -> Result<(), String> {
+        self.sequence += 1;
+        self.publisher
+            .put(payload)
+            .attachment(ros2::attachment(self.sequence, utc_ns, &self.gid))
+            .wait()
+            .map_err(|x| x.to_string())
+    }
+}
+
+/// The ROS 2 side of the bridge (`[ros2]`): liveliness tokens kept for as long as it runs, the
+/// bus subscribers it reads (polled on the bridge's tick: no notification listener, so the
+/// daemon's and drivers' 1 kHz publishing costs nothing more) and the ROS publishers.
+struct Ros2Out {
+    cfg: Ros2Config,
+    _tokens: Vec<zenoh::liveliness::LivelinessToken>,
+    solutions: BusSubscriber<NavSolutionV1>,
+    imu: Option<(BusSubscriber<ImuSampleV1>, RosPublisher)>,
+    dvl: Option<(BusSubscriber<DvlVelocityV1>, RosPublisher)>,
+    health: Option<(BusSubscriber<ProcessHealthV1>, RosPublisher)>,
+    odometry: RosPublisher,
+    fix: RosPublisher,
+    limit: RateLimit,
+    /// The first aligned solution (lat, lon, height): the origin of `odometry`.
+    origin: Option<[f64; 3]>,
+    sent: u64,
+    failed: u64,
+}
+
+/// Declares the node and one publisher per ROS topic on `session`.
+fn ros2_out(session: &zenoh::Session, bus: &Bus, cfg: &Ros2Config) -> Result<Ros2Out, String> {
+    let zid = session.zid().to_string();
+    let node_id = 0;
+    let mut tokens = vec![
+        session
+            .liveliness()
+            .declare_token(ros2::node_token(cfg, &zid, node_id))
+            .wait()
+            .map_err(|x| format!("declaring the ROS 2 node's liveliness token: {x}"))?,
+    ];
+    let mut next_id = node_id;
+    let mut declare = |topic: &str, t: &RosType| -> Result<RosPublisher, String> {
+        next_id += 1;
+        let name = cfg.topic(topic);
+        let key = ros2::data_key(cfg.domain_id, &name, t);
+        let token = ros2::publisher_token(cfg, &zid, node_id, next_id, &name, t, 10);
+        tokens.push(
+            session
+                .liveliness()
+                .declare_token(token.clone())
+                .wait()
+                .map_err(|x| format!("declaring the liveliness token of {name}: {x}"))?,
+        );
+        let publisher = session
+            .declare_publisher(key.clone())
+            .congestion_control(zenoh::qos::CongestionControl::Drop)
+            .wait()
+            .map_err(|x| format!("declaring the Zenoh publisher {key}: {x}"))?;
+        tracing::info!("ROS 2: publishing {name} ({}) as {key}", t.name);
+        Ok(RosPublisher {
+            publisher,
+            gid: ros2::gid(&token),
+            sequence: 0,
+        })
+    };
+    let e = |x: BusError| x.to_string();
+    let odometry = declare("odometry", &ros2::ODOMETRY)?;
+    let fix = declare("fix", &ros2::NAV_SAT_FIX)?;
+    let imu = if cfg.imu {
+        Some((
+            bus.subscriber(topic::IMU, qos::SENSOR).map_err(e)?,
+            declare("imu/data_raw", &ros2::IMU)?,
+        ))
+    } else {
+        None
+    };
+    let dvl = if cfg.dvl {
+        Some((
+            bus.subscriber(topic::DVL, qos::SENSOR).map_err(e)?,
+            declare("dvl/twist", &ros2::TWIST_WITH_COVARIANCE_STAMPED)?,
+        ))
+    } else {
+        None
+    };
+    let health = if cfg.diagnostics {
+        Some((
+            bus.subscriber(topic::HEALTH, qos::HEALTH).map_err(e)?,
+            declare("/diagnostics", &ros2::DIAGNOSTIC_ARRAY)?,
+        ))
+    } else {
+        None
+    };
+    Ok(Ros2Out {
+        cfg: cfg.clone(),
+        _tokens: tokens,
+        solutions: bus
+            .subscriber(topic::NAV_SOLUTION, qos::NAVIGATION)
+            .map_err(e)?,
+        imu,
+        dvl,
+        health,
+        odometry,
+        fix,
+        limit: RateLimit::new(cfg.solution_rate_hz),
+        origin: None,
+        sent: 0,
+        failed: 0,
+    })
+}
+
+impl Ros2Out {
+    /// Publishes what arrived on the bus since the last call.
+    fn step(&mut self) {
+        // Host (monotonic) time stamps become UTC, as ROS time stamps are.
+        let utc_now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as i64);
+        let offset = utc_now - monotonic_ns() as i64;
+        let stamp = |host_ns: u64| host_ns as i64 + offset;
+        let mut results = Vec::new();
+        while let Ok(Some(s)) = self.solutions.receive() {
+            if !self.limit.admit(s.host_time_ns) {
+                continue;
+            }
+            let here = [s.latitude_rad, s.longitude_rad, s.height_m];
+            let aligned = matches!(
+                NavMode::try_from(s.mode),
+                Ok(NavMode::Navigating | NavMode::Degraded)
+            );
+            if self.origin.is_none() && aligned {
+                self.origin = Some(here);
+            }
+            if let Some(origin) = self.origin {
+                let ned = ros2::ned_offset(origin, here);
+                let payload = ros2::odometry(&self.cfg, &s, ned, stamp(s.host_time_ns));
+                results.push(self.odometry.put(payload, utc_now));
+            }
+            let payload = ros2::nav_sat_fix(&self.cfg, &s, stamp(s.host_time_ns));
+            results.push(self.fix.put(payload, utc_now));
+        }
+        if let Some((sub, p)) = self.imu.as_mut() {
+            while let Ok(Some(m)) = sub.receive() {
+                results.push(p.put(ros2::imu(&self.cfg, &m, stamp(m.host_time_ns)), utc_now));
+            }
+        }
+        if let Some((sub, p)) = self.dvl.as_mut() {
+            while let Ok(Some(m)) = sub.receive() {
+                let t = stamp(m.validity_time_ns.max(1));
+                results.push(p.put(ros2::dvl_twist(&self.cfg, &m, t), utc_now));
+            }
+        }
+        if let Some((sub, p)) = self.health.as_mut() {
+            while let Ok(Some(h)) = sub.receive() {
+                results.push(p.put(ros2::diagnostics(&h, stamp(h.host_time_ns)), utc_now));
+            }
+        }
+        for r in results {
+            match r {
+                Ok(()) => self.sent += 1,
+                Err(_) => self.failed += 1,
+            }
+        }
+    }
 }
 
 fn zenoh_config(z: &ZenohConfig) -> Result<zenoh::Config, String> {
@@ -141,11 +316,22 @@ fn run(cfg: &BridgeConfig) -> Result<(), String> {
             failed: 0,
         });
     }
+    let mut ros = match &cfg.ros2 {
+        Some(r) => Some(ros2_out(&session, &bus, r)?),
+        None => None,
+    };
     let mut health_pub = bus
         .publisher::<ProcessHealthV1>(topic::HEALTH, qos::HEALTH)
         .map_err(e)?;
-    // Imports arrive on Zenoh's threads: collected every millisecond.
-    let tick = if imports.is_empty() { 50 } else { 1 };
+    // Imports arrive on Zenoh's threads: collected every millisecond; the ROS 2 side polls the
+    // bus every 5 ms.
+    let tick = if !imports.is_empty() {
+        1
+    } else if ros.is_some() {
+        5
+    } else {
+        50
+    };
     let health_ns = (cfg.health_period_s * 1e9) as u64;
     let mut next_health = 0;
     let mut warned = 0u32;
@@ -225,6 +411,9 @@ fn run(cfg: &BridgeConfig) -> Result<(), String> {
                 }
             }
         }
+        if let Some(r) = ros.as_mut() {
+            r.step();
+        }
         if now >= next_health {
             let m = health(cfg, &exports, &imports, ProcessState::Running);
             health_pub.publish(m).map_err(|x| x.to_string())?;
@@ -265,6 +454,17 @@ fn run(cfg: &BridgeConfig) -> Result<(), String> {
             im.failed
         );
     }
+    if let Some(r) = &ros {
+        tracing::info!(
+            sent = r.sent,
+            failed = r.failed,
+            "{}: ROS 2: {} messages sent, {} failed",
+            cfg.name,
+            r.sent,
+            r.failed
+        );
+    }
+    drop(ros);
     let _ = session.close().wait();
     result
 }

@@ -380,4 +380,12 @@ fn a_bad_configuration_is_refused_with_exit_status_2_naming_the_file_and_key() {
         .expect("auvnav-bridge");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(String::from_utf8_lossy(&o.stdout).contains("tcp/127.0.0.1:7447"));
+    // The ROS 2 example.
+    let o = Command::new(binary("auvnav-bridge"))
+        .arg("--check-config")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy/auvnav-bridge-ros2.toml"))
+        .output()
+        .expect("auvnav-bridge");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("[ros2]"));
 }

@@ -172,7 +172,10 @@ fn programs(dir: &Path) -> Vec<Program> {
             base: std::fs::read_to_string(
                 Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy/auvnav-bridge.toml"),
             )
-            .expect("bridge toml"),
+            .expect("bridge toml")
+                // With the ROS 2 output (deploy/auvnav-bridge-ros2.toml is checked whole in
+                // the bridge's tests).
+                + "[ros2]\nsolution_rate_hz = 50.0\n",
         },
         Program {
             name: "auvnav-live",
