@@ -267,6 +267,10 @@ enum BenchWhat {
         /// Seconds per IMU rate.
         #[arg(long, default_value_t = 10.0)]
         seconds: f64,
+        /// Also run the vehicle's outputs: auvnav-mavlink (ODOMETRY at 10 Hz) and auvnav-bridge
+        /// (the solution exported at 10 Hz and the ROS 2 topics).
+        #[arg(long)]
+        outputs: bool,
         #[arg(long)]
         json: bool,
     },
@@ -736,7 +740,11 @@ fn main() -> std::process::ExitCode {
             } => auvnav_tools::bench::mag(samples, repeat, json),
             BenchWhat::Align { runs, json } => auvnav_tools::bench::align(runs, json),
             BenchWhat::Usbl { seconds, json } => auvnav_tools::bench::usbl(seconds, json),
-            BenchWhat::E2e { seconds, json } => auvnav_tools::bench::e2e_bench(seconds, json),
+            BenchWhat::E2e {
+                seconds,
+                outputs,
+                json,
+            } => auvnav_tools::bench::e2e_bench(seconds, outputs, json),
             BenchWhat::Bridge { seconds, json } => auvnav_tools::bench::bridge_bench(seconds, json),
             BenchWhat::Decode {
                 repeat,

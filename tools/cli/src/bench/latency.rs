@@ -183,6 +183,21 @@ pub struct E2eLatency {
     /// The live view's load when it ran beside the chain (`auvnav bench bridge`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub live_view: Option<LiveViewLoad>,
+    /// The vehicle's outputs when they ran beside the chain (`auvnav bench e2e --outputs`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub outputs: Option<OutputsLoad>,
+}
+
+/// The outputs a vehicle runs beside the chain: `auvnav-mavlink` (ODOMETRY at 10 Hz to a UDP
+/// socket of this benchmark) and `auvnav-bridge` (the solution exported at 10 Hz, and the ROS 2
+/// topics: odometry and fix at 50 Hz, the IMU at its rate, DVL, diagnostics).
+#[derive(Debug, Clone, Serialize)]
+pub struct OutputsLoad {
+    /// MAVLink datagrams received from `auvnav-mavlink` during the run.
+    pub mavlink_datagrams: u64,
+    /// CPU of the two processes over the run (% of one core).
+    pub mavlink_cpu_percent: f64,
+    pub bridge_cpu_percent: f64,
 }
 
 /// The live view (`auvnav-live`, no rate limit) with one WebSocket client subscribed to every
@@ -339,7 +354,12 @@ pub(crate) fn cpu_seconds(pid: u32) -> Option<f64> {
 /// Runs the chain with real processes — `auvnav-imu`, `auvnav-dvl` (Water Linked, 5 Hz),
 /// `auvnav-usbl` (SeaTrac, 1 Hz), `auvnavd` and `auvnav record` — on pseudo-terminals written by
 /// this process, and times each IMU frame to its navigation solution.
-pub fn e2e(rate_hz: f64, seconds: f64, live_view: bool) -> anyhow::Result<E2eLatency> {
+pub fn e2e(
+    rate_hz: f64,
+    seconds: f64,
+    live_view: bool,
+    outputs: bool,
+) -> anyhow::Result<E2eLatency> {
     use auvnav_drivers::clock::monotonic_ns;
     use auvnav_drivers::emulate as enc;
     use auvnav_shm_schema::bus::Bus;
@@ -484,7 +504,59 @@ pub fn e2e(rate_hz: f64, seconds: f64, live_view: bool) -> anyhow::Result<E2eLat
     } else {
         None
     };
+    // The vehicle's outputs: MAVLink to a UDP socket counted here, the bridge with ROS 2.
+    let outputs_done = std::sync::Arc::new(AtomicBool::new(false));
+    let mut outputs = if outputs {
+        let socket = std::net::UdpSocket::bind("127.0.0.1:0")?;
+        socket.set_read_timeout(Some(Duration::from_millis(50)))?;
+        let udp_port = socket.local_addr()?.port();
+        let counter = {
+            let done = outputs_done.clone();
+            std::thread::spawn(move || {
+                let mut buf = [0u8; 512];
+                let mut n = 0u64;
+                while !done.load(Ordering::SeqCst) {
+                    if socket.recv(&mut buf).is_ok() {
+                        n += 1;
+                    }
+                }
+                n
+            })
+        };
+        let mavlink_cfg = dir.join("mavlink.toml");
+        std::fs::write(
+            &mavlink_cfg,
+            format!(
+                "prefix = \"{tag}\"\naddress = \"udpout:127.0.0.1:{udp_port}\"\nrate_hz = 10.0\n"
+            ),
+        )?;
+        let zenoh_port = std::net::TcpListener::bind("127.0.0.1:0")?
+            .local_addr()?
+            .port();
+        let bridge_cfg = dir.join("bridge.toml");
+        std::fs::write(
+            &bridge_cfg,
+            format!(
+                "prefix = \"{tag}\"\nname = \"bridge\"\n[zenoh]\nlisten = [\"tcp/127.0.0.1:{zenoh_port}\"]\n\
+                 [[export]]\ntopics = \"nav/solution\"\nkey_prefix = \"bench\"\nmax_rate_hz = 10.0\n\
+                 [ros2]\nsolution_rate_hz = 50.0\n"
+            ),
+        )?;
+        let mavlink = spawn(
+            "auvnav-mavlink",
+            &["--config".as_ref(), mavlink_cfg.as_os_str()],
+        )?;
+        let bridge = spawn(
+            "auvnav-bridge",
+            &["--config".as_ref(), bridge_cfg.as_os_str()],
+        )?;
+        Some((mavlink, bridge, counter))
+    } else {
+        None
+    };
     std::thread::sleep(Duration::from_millis(1500));
+    let outputs_pids = outputs.as_ref().map(|(m, b, _)| (m.pid(), b.pid()));
+    let outputs_cpu0 = outputs_pids.map(|(m, b)| (cpu_seconds(m), cpu_seconds(b)));
     let (recorder_pid, daemon_pid) = (children[0].pid(), children[1].pid());
     let live_pid = live.as_ref().map(|(p, _)| p.pid());
     let cpu0 = (cpu_seconds(daemon_pid), cpu_seconds(recorder_pid));
@@ -544,7 +616,20 @@ pub fn e2e(rate_hz: f64, seconds: f64, live_view: bool) -> anyhow::Result<E2eLat
     let wall = start.elapsed().as_secs_f64();
     let cpu1 = (cpu_seconds(daemon_pid), cpu_seconds(recorder_pid));
     let live_cpu1 = live_pid.and_then(cpu_seconds);
+    let outputs_cpu1 = outputs_pids.map(|(m, b)| (cpu_seconds(m), cpu_seconds(b)));
     std::thread::sleep(Duration::from_millis(300));
+    outputs_done.store(true, Ordering::SeqCst);
+    let outputs_counts = match outputs.as_mut() {
+        Some((mavlink, bridge, counter)) => {
+            mavlink.stop(Duration::from_secs(10));
+            bridge.stop(Duration::from_secs(10));
+            let n = std::mem::replace(counter, std::thread::spawn(|| 0))
+                .join()
+                .map_err(|_| anyhow::anyhow!("UDP counter thread panicked"))?;
+            Some(n)
+        }
+        None => None,
+    };
     live_done.store(true, Ordering::SeqCst);
     let live_load = match live.as_mut() {
         Some((process, client)) => {
@@ -610,6 +695,17 @@ pub fn e2e(rate_hz: f64, seconds: f64, live_view: bool) -> anyhow::Result<E2eLat
             solutions_received: solutions,
             live_view_cpu_percent: cpu(live_cpu0, live_cpu1),
         }),
+        outputs: outputs_counts.map(|datagrams| {
+            let (a, b) = (
+                outputs_cpu0.unwrap_or_default(),
+                outputs_cpu1.unwrap_or_default(),
+            );
+            OutputsLoad {
+                mavlink_datagrams: datagrams,
+                mavlink_cpu_percent: cpu(a.0, b.0),
+                bridge_cpu_percent: cpu(a.1, b.1),
+            }
+        }),
     })
 }
 
@@ -642,10 +738,10 @@ fn live_view_client(
 }
 
 /// `auvnav bench e2e`.
-pub fn e2e_bench(seconds: f64, json: bool) -> anyhow::Result<()> {
+pub fn e2e_bench(seconds: f64, outputs: bool, json: bool) -> anyhow::Result<()> {
     let mut results = Vec::new();
     for rate in [200.0, 1000.0] {
-        results.push(e2e(rate, seconds, false)?);
+        results.push(e2e(rate, seconds, false, outputs)?);
     }
     if json {
         crate::json::print(&results)?;
@@ -664,6 +760,12 @@ pub fn e2e_bench(seconds: f64, json: bool) -> anyhow::Result<()> {
                 r.daemon_cpu_percent,
                 r.recorder_cpu_percent
             );
+            if let Some(o) = &r.outputs {
+                println!(
+                    "  with the outputs: auvnav-mavlink {:.1} % CPU ({} datagrams), auvnav-bridge (export + ROS 2) {:.1} % CPU",
+                    o.mavlink_cpu_percent, o.mavlink_datagrams, o.bridge_cpu_percent
+                );
+            }
             for s in &r.stages_us {
                 println!(
                     "  {:<16} p50 {:>6.1} us  p99 {:>7.1} us  max {:>7.0} us  ({})",
