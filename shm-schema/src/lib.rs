@@ -232,6 +232,11 @@ impl DvlVelocityV1 {
     pub const VALID_BEAM_VELOCITY: u32 = 1 << 8;
     /// Beam i range valid: `VALID_BEAM_RANGE << i`, i in 0..4.
     pub const VALID_BEAM_RANGE: u32 = 1 << 12;
+
+    /// A water-track velocity: relative to the water, not to the bottom.
+    pub fn is_water_track(&self) -> bool {
+        self.validity & Self::TRACK_WATER != 0
+    }
 }
 
 message! {
@@ -604,6 +609,8 @@ impl AidDiagnosticsV1 {
     /// The DVL velocity was corrected from the sound speed the DVL assumed to the true one
     /// (`dvl_sound_speed_source`); the observation is the corrected velocity.
     pub const FLAG_SOUND_SPEED_CORRECTED: u32 = 1 << 3;
+    /// A DVL water-track velocity (relative to the water), fused with the water-current states.
+    pub const FLAG_WATER_TRACK: u32 = 1 << 4;
 }
 
 /// The state of a process as reported in its health message.

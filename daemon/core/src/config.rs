@@ -118,6 +118,16 @@ pub struct NavConfig {
     /// and the measurement fused: the filter had become too sure of a wrong velocity (s; 0 =
     /// never). Default 5.
     pub dvl_reset_after_s: f64,
+    /// Stationary one-sigma of the horizontal water current (m/s; 0 = no current states, and
+    /// DVL water-track velocities are not fused). With it, the filter carries the current north
+    /// and east as Gauss–Markov states, learns it while the DVL reports bottom and water track
+    /// together, and navigates on water track (velocity relative to the water) when bottom lock
+    /// is lost. Default 0.
+    pub water_current_std_m_s: f64,
+    /// Correlation time of the water current (s): how fast it may change while nothing observes
+    /// it (bottom lock lost). Default 10800 (3 h, the time scale of tidal currents); a shorter
+    /// one lets the current absorb what water track says about the velocity.
+    pub water_current_correlation_s: f64,
     /// Where the true speed of sound at the DVL comes from. A DVL computes its velocity with a
     /// sound speed it assumes (the one it reports, else `dvl_assumed_sound_speed_m_s`); with
     /// the true one known the velocity is corrected by true / assumed (a Janus piston DVL:
@@ -191,6 +201,8 @@ impl Default for NavConfig {
             zero_velocity_std_m_s: 0.01,
             zero_velocity_gate_chi2: gate::CHI2_3DOF_999,
             dvl_reset_after_s: 5.0,
+            water_current_std_m_s: 0.0,
+            water_current_correlation_s: 10800.0,
             dvl_sound_speed_source: SoundSpeedSource::None,
             sound_speed_m_s: 1500.0,
             dvl_assumed_sound_speed_m_s: 1500.0,
@@ -734,6 +746,18 @@ impl NavConfig {
                 1e6,
             ),
             ("dvl_reset_after_s", self.dvl_reset_after_s, 0.0, 3600.0),
+            (
+                "water_current_std_m_s",
+                self.water_current_std_m_s,
+                0.0,
+                5.0,
+            ),
+            (
+                "water_current_correlation_s",
+                self.water_current_correlation_s,
+                1.0,
+                1e7,
+            ),
             ("sound_speed_m_s", self.sound_speed_m_s, 1375.0, 1650.0),
             (
                 "dvl_assumed_sound_speed_m_s",

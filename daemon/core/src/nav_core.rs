@@ -388,7 +388,8 @@ impl NavCore {
             self.markov_means[i] -= dx[ekf::CORE + i];
         }
         if let Some(t) = self.trace.as_mut() {
-            t.events.push(ekf::trace::TraceEvent::Correction(*dx));
+            t.events
+                .push(ekf::trace::TraceEvent::Correction(Box::new(*dx)));
         }
     }
 

@@ -53,6 +53,16 @@ pub struct NavCounters {
     pub dvl_resets: u64,
     /// DVL velocities corrected for the sound speed (`dvl_sound_speed_source`).
     pub dvl_sound_speed_corrected: u64,
+    /// DVL water-track velocities fused, rejected by the gate and invalid (with the
+    /// water-current states, `water_current_std_m_s`), and received without them (not fused).
+    pub dvl_water_track_fused: u64,
+    pub dvl_water_track_rejected: u64,
+    pub dvl_water_track_invalid: u64,
+    pub dvl_water_track_unused: u64,
+    /// DVL bottom lock lost (a valid bottom-track reading followed by an invalid one) and
+    /// regained.
+    pub dvl_bottom_lock_lost: u64,
+    pub dvl_bottom_lock_regained: u64,
     pub depth_fused: u64,
     pub depth_rejected: u64,
     pub depth_invalid: u64,
@@ -185,6 +195,16 @@ impl Navigator {
             initial.time_s,
         );
         dvl.sound_speed = sound_speed_correction(&cfg);
+        if cfg.water_current_std_m_s > 0.0 {
+            for k in 0..2 {
+                core.kf.set_gauss_markov(
+                    ekf::CURRENT + k,
+                    cfg.water_current_correlation_s,
+                    cfg.water_current_std_m_s,
+                );
+            }
+            dvl.water_current = true;
+        }
         Navigator {
             dvl,
             depth: DepthAid::new(cfg.depth_std_m, cfg.depth_gate_chi2),
@@ -453,6 +473,23 @@ impl Navigator {
         Some(self.apply(u))
     }
 
+    /// The estimated water current, north and east (m/s), and its standard deviations, when the
+    /// water-current states are on.
+    pub fn water_current(&self) -> Option<([f64; 2], [f64; 2])> {
+        if !self.dvl.water_current {
+            return None;
+        }
+        let k = ekf::CURRENT - ekf::CORE;
+        let p = &self.core.kf.p;
+        Some((
+            [self.core.markov_means[k], self.core.markov_means[k + 1]],
+            [
+                p[(ekf::CURRENT, ekf::CURRENT)].sqrt(),
+                p[(ekf::CURRENT + 1, ekf::CURRENT + 1)].sqrt(),
+            ],
+        ))
+    }
+
     /// The estimated USBL measurement errors [δR, δΔR13, δΔR24] (m) and the noise variances in
     /// use, when USBL fusion is configured and has seen a fix.
     pub fn usbl_estimates(&self) -> Option<(Vector3<f64>, Vector3<f64>)> {
@@ -485,6 +522,12 @@ impl Navigator {
             dvl_invalid: dvl.invalid,
             dvl_resets: self.dvl.resets,
             dvl_sound_speed_corrected: self.dvl.sound_speed_corrected,
+            dvl_water_track_fused: self.dvl.water_track.fused,
+            dvl_water_track_rejected: self.dvl.water_track.rejected,
+            dvl_water_track_invalid: self.dvl.water_track.invalid,
+            dvl_water_track_unused: self.dvl.water_track_unused,
+            dvl_bottom_lock_lost: self.dvl.bottom_lock_lost,
+            dvl_bottom_lock_regained: self.dvl.bottom_lock_regained,
             depth_fused: depth.fused,
             depth_rejected: depth.rejected,
             depth_invalid: depth.invalid,

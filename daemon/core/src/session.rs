@@ -803,7 +803,9 @@ impl Session {
             && let Some(fine) = self.fine.as_mut()
             && let SensorMessage::Dvl(m) = aid
         {
+            // Alignment takes the velocity over the ground: bottom track only.
             if m.validity & DvlVelocityV1::VALID_VELOCITY != 0
+                && !m.is_water_track()
                 && m.host_time_ns > self.fine_start_ns
             {
                 let ratio = sound_speed_correction(&self.cfg).map_or(1.0, |c| c.ratio(&m));
@@ -830,8 +832,10 @@ impl Session {
             && self.aligner.is_some()
             && let SensorMessage::Dvl(m) = aid
         {
-            // Coarse alignment takes the DVL's velocity at the next IMU sample.
-            self.last_velocity_body = self.dvl_body_velocity(&m);
+            // Coarse alignment takes the DVL's velocity over the ground at the next IMU sample.
+            if !m.is_water_track() {
+                self.last_velocity_body = self.dvl_body_velocity(&m);
+            }
             return Ok(());
         }
         let Some(nav) = self.nav.as_mut() else {

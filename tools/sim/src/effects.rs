@@ -208,6 +208,16 @@ effects! {
     dvl_max_altitude: f64 = "dvl.max_altitude", unit "m", range 1.0..=1000.0, default [200.0];
     /// True sound speed in the water; the DVL assumes 1500 m/s, so velocities scale by 1500/value.
     dvl_sound_speed: f64 = "dvl.sound_speed", unit "m/s", range 1375.0..=1650.0, default [1500.0];
+    /// White noise on each axis of a DVL water-track velocity; above 0 the DVL also reports, with
+    /// every ping, its velocity relative to the water (flagged TRACK_WATER), with or without bottom lock.
+    dvl_water_track_noise: f64 = "dvl.water_track_noise", unit "m/s", range 0.0..=1.0, default [0.0];
+
+    /// The water current at the surface, north and east (the vehicle's velocity relative to the water is its velocity over the ground minus the current).
+    water_current: [f64; 2] = "water.current", unit "m/s", range -5.0..=5.0, default [0.0, 0.0];
+    /// Stationary one-sigma of the current's slowly varying part (first-order Gauss-Markov, 600 s correlation), per axis.
+    water_current_variation: f64 = "water.current_variation", unit "m/s", range 0.0..=2.0, default [0.0];
+    /// Decrease of the current with depth: the current at depth d is the surface's times max(0, 1 - shear d).
+    water_current_shear: f64 = "water.current_shear", unit "1/m", range 0.0..=1.0, default [0.0];
 
     /// White noise on the USBL slant range.
     usbl_range_noise: f64 = "usbl.range_noise", unit "m", range 0.0..=100.0, default [0.0];

@@ -162,6 +162,8 @@ pub struct SimSummary {
     pub imu: u64,
     pub dvl: u64,
     pub dvl_valid: u64,
+    /// DVL water-track velocities (`dvl.water_track_noise` above 0).
+    pub dvl_water_track: u64,
     pub usbl: u64,
     pub usbl_outliers: u64,
     pub depth: u64,
@@ -226,6 +228,7 @@ where
 
     let mut imu = ImuModel::new(e, cfg.seed, imu_hz);
     let mut dvl = DvlModel::new(e, cfg.seed, s.seabed_depth_m);
+    let mut current = WaterCurrent::new(e, cfg.seed);
     let station = StationGeometry::from_scenario(s);
     let mut usbl = match (&s.station, &station) {
         (Some(st), Some(geo)) => Some(UsblModel::new(e, cfg.seed, st, &geo.position)),
@@ -285,6 +288,11 @@ where
                 summary.dvl_valid += 1;
             }
             sink(&LogMessage::Dvl(m))?;
+            if dvl.reports_water_track() {
+                let c = current.step(dvl_div as f64 * dt, -truth.position.height_m);
+                summary.dvl_water_track += 1;
+                sink(&LogMessage::Dvl(dvl.sample_water_track(t, &truth, &c)))?;
+            }
         }
         if let Some(u) = usbl.as_mut().filter(|_| usbl_div > 0 && k % usbl_div == 0) {
             let tv = t - e.usbl_latency;

@@ -237,6 +237,8 @@ pub struct DvlModel {
     lost_until: f64,
     pub time_offset: f64,
     sequence: u64,
+    water_noise: f64,
+    water_rng: Rng,
 }
 
 impl DvlModel {
@@ -261,6 +263,45 @@ impl DvlModel {
             lost_until: f64::NEG_INFINITY,
             time_offset: e.dvl_time_offset,
             sequence: 0,
+            water_noise: e.dvl_water_track_noise,
+            water_rng: Rng::new(seed, "dvl-water-track"),
+        }
+    }
+
+    /// Whether the DVL reports water track (`dvl.water_track_noise` above 0).
+    pub fn reports_water_track(&self) -> bool {
+        self.water_noise > 0.0
+    }
+
+    /// The water-track velocity of the same ping as the last [`DvlModel::sample`]: the vehicle's
+    /// velocity relative to the water (`truth` at the time of validity, `current_ned` the water's
+    /// velocity) through the installation, with white noise on each axis.
+    pub fn sample_water_track(
+        &mut self,
+        t: f64,
+        truth: &TruthSample,
+        current_ned: &Vector3<f64>,
+    ) -> DvlVelocityV1 {
+        self.sequence += 1;
+        let relative = truth.velocity_ned - current_ned;
+        let v = self
+            .install
+            .velocity(&truth.c_body_to_ned, &relative, &truth.omega_eb_body);
+        let noise = self.water_noise;
+        DvlVelocityV1 {
+            host_time_ns: ns(t),
+            device_time_ns: ns(t),
+            sequence: self.sequence,
+            validity_time_ns: ns(t),
+            velocity_dvl_m_s: v.map(|x| x + self.water_rng.gauss(noise)).into(),
+            velocity_std_m_s: [noise; 3],
+            sound_speed_m_s: ASSUMED_SOUND_SPEED,
+            validity: DvlVelocityV1::VALID_VELOCITY
+                | DvlVelocityV1::TRACK_WATER
+                | DvlVelocityV1::VALID_STD
+                | DvlVelocityV1::VALID_SOUND_SPEED
+                | DvlVelocityV1::VALID_DEVICE_TIME,
+            ..Default::default()
         }
     }
 
@@ -314,6 +355,51 @@ impl DvlModel {
             m.validity |= DvlVelocityV1::VALID_STD;
         }
         m
+    }
+}
+
+/// The water current at the vehicle: the surface current (`water.current`), a slowly varying
+/// part (`water.current_variation`, first-order Gauss–Markov with a 600 s correlation time) and a
+/// linear decrease with depth (`water.current_shear`). Its random stream is its own: a run
+/// without a varying current draws nothing from it.
+pub struct WaterCurrent {
+    rng: Rng,
+    surface: [f64; 2],
+    variation_std: f64,
+    shear: f64,
+    varying: [f64; 2],
+}
+
+/// Correlation time of the current's slowly varying part (s).
+pub const CURRENT_CORRELATION_S: f64 = 600.0;
+
+impl WaterCurrent {
+    pub fn new(e: &Effects, seed: u64) -> WaterCurrent {
+        WaterCurrent {
+            rng: Rng::new(seed, "water-current"),
+            surface: e.water_current,
+            variation_std: e.water_current_variation,
+            shear: e.water_current_shear,
+            varying: [0.0; 2],
+        }
+    }
+
+    /// Steps the varying part by `dt` (s) and returns the current (NED, m/s, down 0) at
+    /// `depth_m`.
+    pub fn step(&mut self, dt: f64, depth_m: f64) -> Vector3<f64> {
+        if self.variation_std > 0.0 {
+            let a = (-dt / CURRENT_CORRELATION_S).exp();
+            let q = self.variation_std * (1.0 - a * a).sqrt();
+            for v in &mut self.varying {
+                *v = a * *v + self.rng.gauss(q);
+            }
+        }
+        let k = (1.0 - self.shear * depth_m.max(0.0)).max(0.0);
+        Vector3::new(
+            k * (self.surface[0] + self.varying[0]),
+            k * (self.surface[1] + self.varying[1]),
+            0.0,
+        )
     }
 }
 

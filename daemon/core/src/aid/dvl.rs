@@ -2,6 +2,13 @@
 //! ([`dvl_model`]), χ² gate, with the DVL installation (mounting, scale factor, lever arm, time
 //! offset) as optional parameter states, and the re-opening of the velocity covariance after a
 //! run of rejections (`dvl_reset_after_s`).
+//!
+//! **Water track.** A velocity flagged `TRACK_WATER` is relative to the water: with the
+//! water-current states on (`water_current_std_m_s`) it is fused with `v − c` in place of `v`
+//! ([`water_track_model`]), which is how the filter learns the current while bottom and water
+//! track arrive together and navigates on the water when bottom lock is lost; without them it is
+//! counted and never fused (it is not the vehicle's velocity over the ground). Bottom-lock losses
+//! and recoveries (a bottom-track reading turning invalid, then valid again) are counted.
 
 use super::{AidCounters, AidUpdate, NavCore};
 use crate::earth;
@@ -45,6 +52,16 @@ pub struct DvlAid {
     pub sound_speed: Option<SoundSpeed>,
     /// Velocities corrected for the sound speed.
     pub sound_speed_corrected: u64,
+    /// The water-current states are on: water-track velocities are fused.
+    pub water_current: bool,
+    /// Water-track velocities fused, rejected by the gate, invalid.
+    pub water_track: AidCounters,
+    /// Water-track velocities received without the water-current states (not fused).
+    pub water_track_unused: u64,
+    /// Bottom lock lost (a valid bottom-track reading followed by an invalid one) and regained.
+    pub bottom_lock_lost: u64,
+    pub bottom_lock_regained: u64,
+    bottom_locked: Option<bool>,
 }
 
 /// The sound-speed correction of the DVL velocity: true / assumed.
@@ -93,6 +110,12 @@ impl DvlAid {
             resets: 0,
             sound_speed: None,
             sound_speed_corrected: 0,
+            water_current: false,
+            water_track: AidCounters::default(),
+            water_track_unused: 0,
+            bottom_lock_lost: 0,
+            bottom_lock_regained: 0,
+            bottom_locked: None,
         }
     }
 
@@ -146,8 +169,66 @@ impl DvlAid {
         !core.aid_is_late(m.validity_time_ns)
     }
 
-    /// Fuses a DVL velocity (bottom track, in the DVL frame, at its time of validity).
+    /// Fuses a water-track velocity (relative to the water, DVL frame) with the current states.
+    fn fuse_water_track(&mut self, core: &mut NavCore, m: &DvlVelocityV1) -> AidUpdate {
+        let mut d = core.diagnostics(m.validity_time_ns, AidSource::DvlVelocity);
+        d.dimension = 3;
+        d.flags |= AidDiagnosticsV1::FLAG_WATER_TRACK;
+        if !self.water_current {
+            self.water_track_unused += 1;
+            return AidUpdate::rejected(d);
+        }
+        let before = self.counters.invalid;
+        if !self.usable(core, m) {
+            // Counted as the water track's, not the bottom track's.
+            self.counters.invalid = before;
+            self.water_track.invalid += 1;
+            return AidUpdate::rejected(d);
+        }
+        let ratio = self.sound_speed.map_or(1.0, |c| c.ratio(m));
+        let z = Vector3::from(m.velocity_dvl_m_s) * ratio;
+        if ratio != 1.0 {
+            self.sound_speed_corrected += 1;
+            d.flags |= AidDiagnosticsV1::FLAG_SOUND_SPEED_CORRECTED;
+        }
+        core.propagate_covariance();
+        let k = ekf::CURRENT - ekf::CORE;
+        let current = [core.markov_means[k], core.markov_means[k + 1]];
+        let (predicted, h) = water_track_model(
+            core.state(),
+            &core.last_omega_ib,
+            &core.last_f_body,
+            &self.params,
+            current,
+        );
+        let sigma = if m.validity & DvlVelocityV1::VALID_STD != 0 {
+            Vector3::from(m.velocity_std_m_s).map(|x| (x * ratio).max(1e-3))
+        } else {
+            Vector3::repeat(self.velocity_std_m_s)
+        };
+        let r = Matrix3::from_diagonal(&sigma.map(|x| x * x));
+        d.observation = z.into();
+        d.observation_variance = r.diagonal().into();
+        let result = core.kf.update(&(predicted - z), &h, &r, self.gate_chi2);
+        let kept = d.flags;
+        let correction = NavCore::report(result, &mut d);
+        d.flags |= kept & !AidDiagnosticsV1::FLAG_REJECTED;
+        AidUpdate::counted(d, correction, &mut self.water_track)
+    }
+
+    /// Fuses a DVL velocity (in the DVL frame, at its time of validity): bottom track, or water
+    /// track (see the module's documentation).
     pub fn fuse(&mut self, core: &mut NavCore, m: &DvlVelocityV1) -> AidUpdate {
+        if m.is_water_track() {
+            return self.fuse_water_track(core, m);
+        }
+        let locked = m.validity & DvlVelocityV1::VALID_VELOCITY != 0;
+        match (self.bottom_locked, locked) {
+            (Some(true), false) => self.bottom_lock_lost += 1,
+            (Some(false), true) => self.bottom_lock_regained += 1,
+            _ => {}
+        }
+        self.bottom_locked = Some(locked);
         let t_ns = m.validity_time_ns;
         let mut d = core.diagnostics(t_ns, AidSource::DvlVelocity);
         d.dimension = 3;
@@ -243,6 +324,28 @@ pub struct DvlParameters {
     pub lever_arm_m: Vector3<f64>,
     /// The velocity stamped at t is the vehicle's at t - offset (s).
     pub time_offset_s: f64,
+}
+
+/// The water-track model: [`dvl_model`] with the velocity relative to the water, `v − c` (the
+/// current `c` north and east, m/s), and `dh/d dc = −dh/d dv` for the current's states. (The
+/// time-offset term needs the water-relative velocity's rate in the body frame, which for a
+/// current constant in NED is what [`dvl_model`] computes from `v − c`.)
+pub fn water_track_model(
+    s: &NavState,
+    omega_ib_body: &Vector3<f64>,
+    f_body: &Vector3<f64>,
+    p: &DvlParameters,
+    current_ne: [f64; 2],
+) -> (Vector3<f64>, SMatrix<f64, 3, { ekf::N }>) {
+    let mut relative = *s;
+    relative.velocity_ned -= Vector3::new(current_ne[0], current_ne[1], 0.0);
+    let (predicted, mut h) = dvl_model(&relative, omega_ib_body, f_body, p);
+    for i in 0..3 {
+        for k in 0..2 {
+            h[(i, ekf::CURRENT + k)] = -h[(i, ekf::VEL + k)];
+        }
+    }
+    (predicted, h)
 }
 
 /// The DVL measurement model: predicted velocity in the DVL frame,

@@ -16,7 +16,8 @@
 //! Parameter states follow the 15 core states: DVL mounting (small rotation, 3), DVL scale factor
 //! (1), DVL lever arm (3) and DVL time offset (1), all "estimate minus truth" and constant in time,
 //! then the USBL measurement errors (slant range, two range differences: 3), first-order Gauss–
-//! Markov processes `b' = -b / tau + w` (S-USBL). Parameter states appear only in measurement
+//! Markov processes `b' = -b / tau + w` (S-USBL), then the horizontal water current (north,
+//! east: 2), Gauss–Markov too, seen only through DVL water-track velocities. Parameter states appear only in measurement
 //! models, never in `F`, so the covariance propagation handles them as a block with diagonal
 //! transition `A = diag(a_i)`, `a_i = exp(-dt / tau_i)` (1 for constants):
 //! `P_cc <- Phi P_cc Phi^T + Q`, `P_cp <- Phi P_cp A`, `P_pp <- A P_pp A + diag(s_i^2 (1 - a_i^2))`
@@ -27,7 +28,7 @@
 use nalgebra::{SMatrix, SVector, Vector3};
 
 /// Number of error states.
-pub const N: usize = 26;
+pub const N: usize = 28;
 /// Number of core states (navigation errors and IMU biases) that have dynamics.
 pub const CORE: usize = 15;
 /// Index of the first component of each block.
@@ -46,10 +47,12 @@ pub const DVL_LEVER: usize = 19;
 pub const DVL_TIME: usize = 22;
 /// USBL measurement errors: slant range, range differences 1-3 and 2-4 (m), estimate minus truth.
 pub const USBL: usize = 23;
+/// Water-current error, north and east (m/s, estimate minus truth).
+pub const CURRENT: usize = 26;
 /// Number of parameter states.
 pub const PARAMS: usize = N - CORE;
 const _: () = assert!(BA + 3 == CORE, "core layout must fill CORE");
-const _: () = assert!(USBL + 3 == N, "state layout must fill N");
+const _: () = assert!(CURRENT + 2 == N, "state layout must fill N");
 
 pub type StateVector = SVector<f64, N>;
 pub type Covariance = SMatrix<f64, N, N>;

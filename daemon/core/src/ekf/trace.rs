@@ -55,7 +55,7 @@ pub fn transition_matrix(
 pub enum TraceEvent {
     Propagation(Box<Propagation>),
     /// An error-state estimate removed from the nominal state at the current epoch.
-    Correction(StateVector),
+    Correction(Box<StateVector>),
 }
 
 /// The events since the session last took them.

@@ -243,7 +243,7 @@ impl SmootherLog {
                 TraceEvent::Correction(dx) => {
                     if let Some((_, sum)) = self.open.as_mut() {
                         if dx.iter().all(|v| v.is_finite()) {
-                            *sum += dx;
+                            *sum += *dx;
                         } else {
                             self.corrections_dropped += 1;
                         }
@@ -470,7 +470,7 @@ mod tests {
         for k in 1..200u64 {
             log.take([
                 TraceEvent::Propagation(propagation(k * 50_000_000, 0.01 * k as f64)),
-                TraceEvent::Correction(StateVector::repeat(1e-3)),
+                TraceEvent::Correction(Box::new(StateVector::repeat(1e-3))),
             ]);
         }
         log.end_chain(&dense(0.9));

@@ -161,6 +161,7 @@ pub fn run_voyage(
         if record.epochs
             && let SensorMessage::Dvl(d) = m
             && d.validity & DvlVelocityV1::VALID_VELOCITY != 0
+            && !d.is_water_track()
             && let Some(s) = t.prev
         {
             let q = s.quaternion_body_to_ned;

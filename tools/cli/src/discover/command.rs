@@ -263,7 +263,8 @@ impl Collector {
             LogMessage::Truth(t) => self.truth.push(*t),
             LogMessage::Dvl(d) => {
                 let c = &mut self.channels[0];
-                if d.validity & DvlVelocityV1::VALID_VELOCITY != 0 {
+                // Bottom track: the velocity over the ground the model predicts.
+                if d.validity & DvlVelocityV1::VALID_VELOCITY != 0 && !d.is_water_track() {
                     c.push(d.host_time_ns as f64 * 1e-9, d.velocity_dvl_m_s);
                 } else {
                     c.skipped += 1;
