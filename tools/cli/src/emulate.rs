@@ -113,6 +113,10 @@ pub struct DeviceSummary {
     pub garbage_bytes: u64,
     /// Bytes written in total.
     pub bytes: u64,
+    /// DVL water-track velocities of the log not played: the emulated protocols' bottom-track
+    /// records cannot carry them, and played as bottom track they would be a wrong velocity over
+    /// the ground.
+    pub water_track_skipped: u64,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -215,6 +219,12 @@ impl Device {
     }
 
     fn encode(&mut self, m: &LogMessage) -> Option<Vec<u8>> {
+        if let LogMessage::Dvl(d) = m
+            && d.is_water_track()
+        {
+            self.summary.water_track_skipped += 1;
+            return None;
+        }
         let bytes = match (self.protocol, m) {
             (Protocol::Pd0, LogMessage::Dvl(d)) => match self.pd0_coordinates {
                 Pd0Coordinates::Instrument => enc::pd0_from_dvl(d, self.counter),
@@ -502,7 +512,7 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
     } else {
         for s in &summaries {
             println!(
-                "{} ({}): {} messages, {} written, {} corrupted, {} dropped, {} paused, {} unplugged, {} blocked, {} garbage bytes",
+                "{} ({}): {} messages, {} written, {} corrupted, {} dropped, {} paused, {} unplugged, {} blocked, {} garbage bytes{}",
                 s.device,
                 s.protocol,
                 s.messages,
@@ -512,7 +522,15 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
                 s.paused,
                 s.unplugged,
                 s.blocked,
-                s.garbage_bytes
+                s.garbage_bytes,
+                if s.water_track_skipped > 0 {
+                    format!(
+                        ", {} water-track velocities not played (no such record in the protocol)",
+                        s.water_track_skipped
+                    )
+                } else {
+                    String::new()
+                }
             );
         }
     }
@@ -532,4 +550,47 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
 /// Used by tests: the link path of a device under a link directory.
 pub fn link_path(dir: &Path, class: DeviceClass) -> PathBuf {
     dir.join(class.name())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use auvnav_shm_schema::DvlVelocityV1;
+
+    #[test]
+    fn water_track_is_never_played_as_bottom_track() {
+        let mut d = Device {
+            class: DeviceClass::Dvl,
+            protocol: Protocol::Pd0,
+            master: None,
+            slave: None,
+            link: None,
+            pauses: Vec::new(),
+            unplugs: Vec::new(),
+            counter: 0,
+            kvh: KvhConfig {
+                increments: false,
+                degrees: false,
+                rate_hz: 0.0,
+                temperature_centi: false,
+            },
+            pd0_coordinates: Pd0Coordinates::Instrument,
+            summary: DeviceSummary::default(),
+        };
+        let bottom = DvlVelocityV1 {
+            velocity_dvl_m_s: [1.0, 0.0, 0.0],
+            validity: DvlVelocityV1::VALID_VELOCITY,
+            ..Default::default()
+        };
+        let water = DvlVelocityV1 {
+            validity: DvlVelocityV1::VALID_VELOCITY | DvlVelocityV1::TRACK_WATER,
+            ..bottom
+        };
+        for p in [Protocol::Pd0, Protocol::Wldvl, Protocol::Nortek] {
+            d.protocol = p;
+            assert!(d.encode(&LogMessage::Dvl(bottom)).is_some(), "{p:?}");
+            assert!(d.encode(&LogMessage::Dvl(water)).is_none(), "{p:?}");
+        }
+        assert_eq!(d.summary.water_track_skipped, 3);
+    }
 }
