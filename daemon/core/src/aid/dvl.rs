@@ -169,6 +169,30 @@ impl DvlAid {
         !core.aid_is_late(m.validity_time_ns)
     }
 
+    /// The measured velocity corrected for the sound speed and its noise covariance (the
+    /// device's deviations, corrected too, or the configured one), written into `d`.
+    fn measurement(
+        &mut self,
+        m: &DvlVelocityV1,
+        d: &mut AidDiagnosticsV1,
+    ) -> (Vector3<f64>, Matrix3<f64>) {
+        let ratio = self.sound_speed.map_or(1.0, |c| c.ratio(m));
+        let z = Vector3::from(m.velocity_dvl_m_s) * ratio;
+        if ratio != 1.0 {
+            self.sound_speed_corrected += 1;
+            d.flags |= AidDiagnosticsV1::FLAG_SOUND_SPEED_CORRECTED;
+        }
+        let sigma = if m.validity & DvlVelocityV1::VALID_STD != 0 {
+            Vector3::from(m.velocity_std_m_s).map(|x| (x * ratio).max(1e-3))
+        } else {
+            Vector3::repeat(self.velocity_std_m_s)
+        };
+        let r = Matrix3::from_diagonal(&sigma.map(|x| x * x));
+        d.observation = z.into();
+        d.observation_variance = r.diagonal().into();
+        (z, r)
+    }
+
     /// Fuses a water-track velocity (relative to the water, DVL frame) with the current states.
     fn fuse_water_track(&mut self, core: &mut NavCore, m: &DvlVelocityV1) -> AidUpdate {
         let mut d = core.diagnostics(m.validity_time_ns, AidSource::DvlVelocity);
@@ -185,12 +209,7 @@ impl DvlAid {
             self.water_track.invalid += 1;
             return AidUpdate::rejected(d);
         }
-        let ratio = self.sound_speed.map_or(1.0, |c| c.ratio(m));
-        let z = Vector3::from(m.velocity_dvl_m_s) * ratio;
-        if ratio != 1.0 {
-            self.sound_speed_corrected += 1;
-            d.flags |= AidDiagnosticsV1::FLAG_SOUND_SPEED_CORRECTED;
-        }
+        let (z, r) = self.measurement(m, &mut d);
         core.propagate_covariance();
         let k = ekf::CURRENT - ekf::CORE;
         let current = [core.markov_means[k], core.markov_means[k + 1]];
@@ -201,14 +220,6 @@ impl DvlAid {
             &self.params,
             current,
         );
-        let sigma = if m.validity & DvlVelocityV1::VALID_STD != 0 {
-            Vector3::from(m.velocity_std_m_s).map(|x| (x * ratio).max(1e-3))
-        } else {
-            Vector3::repeat(self.velocity_std_m_s)
-        };
-        let r = Matrix3::from_diagonal(&sigma.map(|x| x * x));
-        d.observation = z.into();
-        d.observation_variance = r.diagonal().into();
         let result = core.kf.update(&(predicted - z), &h, &r, self.gate_chi2);
         let kept = d.flags;
         let correction = NavCore::report(result, &mut d);
@@ -235,12 +246,7 @@ impl DvlAid {
         if !self.usable(core, m) {
             return AidUpdate::rejected(d);
         }
-        let ratio = self.sound_speed.map_or(1.0, |c| c.ratio(m));
-        let z = Vector3::from(m.velocity_dvl_m_s) * ratio;
-        if ratio != 1.0 {
-            self.sound_speed_corrected += 1;
-            d.flags |= AidDiagnosticsV1::FLAG_SOUND_SPEED_CORRECTED;
-        }
+        let (z, r) = self.measurement(m, &mut d);
         core.propagate_covariance();
         let (predicted, h) = dvl_model(
             core.state(),
@@ -249,14 +255,6 @@ impl DvlAid {
             &self.params,
         );
         let y = predicted - z;
-        let sigma = if m.validity & DvlVelocityV1::VALID_STD != 0 {
-            Vector3::from(m.velocity_std_m_s).map(|x| (x * ratio).max(1e-3))
-        } else {
-            Vector3::repeat(self.velocity_std_m_s)
-        };
-        let r = Matrix3::from_diagonal(&sigma.map(|x| x * x));
-        d.observation = z.into();
-        d.observation_variance = r.diagonal().into();
         let t = t_ns as f64 * 1e-9;
         let mut result = core.kf.update(&y, &h, &r, self.gate_chi2);
         let rejected = matches!(result, Ok((_, ref rep)) if !rep.fused);
