@@ -611,6 +611,9 @@ impl AidDiagnosticsV1 {
     pub const FLAG_SOUND_SPEED_CORRECTED: u32 = 1 << 3;
     /// A DVL water-track velocity (relative to the water), fused with the water-current states.
     pub const FLAG_WATER_TRACK: u32 = 1 << 4;
+    /// A DVL reading fused from its beam (radial) velocities, each gated alone (`dimension`
+    /// beams accepted).
+    pub const FLAG_BEAMS: u32 = 1 << 5;
 }
 
 /// The state of a process as reported in its health message.

@@ -128,6 +128,17 @@ pub struct NavConfig {
     /// it (bottom lock lost). Default 10800 (3 h, the time scale of tidal currents); a shorter
     /// one lets the current absorb what water track says about the velocity.
     pub water_current_correlation_s: f64,
+    /// Fuse the DVL's beam (radial) velocities when it reports no instrument velocity but some
+    /// beams (one beam blocked, a beam-coordinate reading without a solution): each beam gated
+    /// alone, the accepted ones fused together. Default false.
+    pub dvl_beam_fusion: bool,
+    /// The beams' angle from the DVL's z axis (the Janus angle, deg, 5..60). Default 30.
+    pub dvl_beam_angle_deg: f64,
+    /// The beams' azimuths about the DVL's z axis from its x axis (deg), beams 1..4. Default
+    /// 45, 135, 225, 315 (the simulator's head).
+    pub dvl_beam_azimuths_deg: [f64; 4],
+    /// One-sigma of a beam velocity (m/s). Default 0.01.
+    pub dvl_beam_velocity_std_m_s: f64,
     /// Where the true speed of sound at the DVL comes from. A DVL computes its velocity with a
     /// sound speed it assumes (the one it reports, else `dvl_assumed_sound_speed_m_s`); with
     /// the true one known the velocity is corrected by true / assumed (a Janus piston DVL:
@@ -203,6 +214,10 @@ impl Default for NavConfig {
             dvl_reset_after_s: 5.0,
             water_current_std_m_s: 0.0,
             water_current_correlation_s: 10800.0,
+            dvl_beam_fusion: false,
+            dvl_beam_angle_deg: 30.0,
+            dvl_beam_azimuths_deg: [45.0, 135.0, 225.0, 315.0],
+            dvl_beam_velocity_std_m_s: 0.01,
             dvl_sound_speed_source: SoundSpeedSource::None,
             sound_speed_m_s: 1500.0,
             dvl_assumed_sound_speed_m_s: 1500.0,
@@ -758,6 +773,13 @@ impl NavConfig {
                 1.0,
                 1e7,
             ),
+            ("dvl_beam_angle_deg", self.dvl_beam_angle_deg, 5.0, 60.0),
+            (
+                "dvl_beam_velocity_std_m_s",
+                self.dvl_beam_velocity_std_m_s,
+                1e-4,
+                1.0,
+            ),
             ("sound_speed_m_s", self.sound_speed_m_s, 1375.0, 1650.0),
             (
                 "dvl_assumed_sound_speed_m_s",
@@ -792,6 +814,12 @@ impl NavConfig {
             &self.gnss_lever_arm_m,
             -50.0,
             50.0,
+        );
+        p.array(
+            "navigation.dvl_beam_azimuths_deg",
+            &self.dvl_beam_azimuths_deg,
+            -360.0,
+            360.0,
         );
         let mut out = p.0;
         if let Some(d) = &self.dvl {

@@ -63,6 +63,10 @@ pub struct NavCounters {
     /// regained.
     pub dvl_bottom_lock_lost: u64,
     pub dvl_bottom_lock_regained: u64,
+    /// DVL readings without an instrument velocity fused from their beams (`dvl_beam_fusion`),
+    /// and beams refused by their own gate.
+    pub dvl_beam_readings_fused: u64,
+    pub dvl_beams_rejected: u64,
     pub depth_fused: u64,
     pub depth_rejected: u64,
     pub depth_invalid: u64,
@@ -204,6 +208,12 @@ impl Navigator {
                 );
             }
             dvl.water_current = true;
+        }
+        if cfg.dvl_beam_fusion {
+            dvl.beams = Some((
+                crate::aid::dvl::beam_directions(cfg.dvl_beam_angle_deg, cfg.dvl_beam_azimuths_deg),
+                cfg.dvl_beam_velocity_std_m_s,
+            ));
         }
         Navigator {
             dvl,
@@ -528,6 +538,8 @@ impl Navigator {
             dvl_water_track_unused: self.dvl.water_track_unused,
             dvl_bottom_lock_lost: self.dvl.bottom_lock_lost,
             dvl_bottom_lock_regained: self.dvl.bottom_lock_regained,
+            dvl_beam_readings_fused: self.dvl.beam_readings_fused,
+            dvl_beams_rejected: self.dvl.beams_rejected,
             depth_fused: depth.fused,
             depth_rejected: depth.rejected,
             depth_invalid: depth.invalid,

@@ -211,6 +211,10 @@ effects! {
     /// White noise on each axis of a DVL water-track velocity; above 0 the DVL also reports, with
     /// every ping, its velocity relative to the water (flagged TRACK_WATER), with or without bottom lock.
     dvl_water_track_noise: f64 = "dvl.water_track_noise", unit "m/s", range 0.0..=1.0, default [0.0];
+    /// A DVL beam (1..4; 0 = none) blocked for dvl.beam_blocked_fraction of the time, in 30 s spells: its radial velocity is missing and the DVL reports no instrument velocity then, only the other three beams.
+    dvl_beam_blocked: f64 = "dvl.beam_blocked", unit "1", range 0.0..=4.0, default [0.0];
+    /// Fraction of the time the beam dvl.beam_blocked is blocked.
+    dvl_beam_blocked_fraction: f64 = "dvl.beam_blocked_fraction", unit "1", range 0.0..=0.95, default [0.0];
 
     /// The water current at the surface, north and east (the vehicle's velocity relative to the water is its velocity over the ground minus the current).
     water_current: [f64; 2] = "water.current", unit "m/s", range -5.0..=5.0, default [0.0, 0.0];

@@ -239,7 +239,14 @@ pub struct DvlModel {
     sequence: u64,
     water_noise: f64,
     water_rng: Rng,
+    /// The blocked beam (index 0..4) and the fraction of the time it is blocked.
+    blocked_beam: Option<(usize, f64)>,
+    blocked_until: f64,
+    blocked_rng: Rng,
 }
+
+/// Length of one spell of a blocked beam (s).
+pub const BEAM_BLOCKED_SPELL_S: f64 = 30.0;
 
 impl DvlModel {
     pub fn new(e: &Effects, seed: u64, seabed_depth_m: f64) -> DvlModel {
@@ -265,7 +272,30 @@ impl DvlModel {
             sequence: 0,
             water_noise: e.dvl_water_track_noise,
             water_rng: Rng::new(seed, "dvl-water-track"),
+            blocked_beam: (e.dvl_beam_blocked >= 1.0 && e.dvl_beam_blocked_fraction > 0.0).then(
+                || {
+                    (
+                        (e.dvl_beam_blocked.round() as usize - 1).min(3),
+                        e.dvl_beam_blocked_fraction,
+                    )
+                },
+            ),
+            blocked_until: f64::NEG_INFINITY,
+            blocked_rng: Rng::new(seed, "dvl-beam-blocked"),
         }
+    }
+
+    /// Whether the blocked beam is blocked at `t`: spells of [`BEAM_BLOCKED_SPELL_S`] starting at
+    /// the rate that keeps the beam blocked for its fraction of the time.
+    fn beam_blocked(&mut self, t: f64, interval: f64) -> Option<usize> {
+        let (beam, fraction) = self.blocked_beam?;
+        if t >= self.blocked_until {
+            let rate = fraction / ((1.0 - fraction) * BEAM_BLOCKED_SPELL_S);
+            if self.blocked_rng.uniform() < rate * interval {
+                self.blocked_until = t + BEAM_BLOCKED_SPELL_S;
+            }
+        }
+        (t < self.blocked_until).then_some(beam)
     }
 
     /// Whether the DVL reports water track (`dvl.water_track_noise` above 0).
@@ -328,6 +358,7 @@ impl DvlModel {
         if !locked {
             return m;
         }
+        let blocked = self.beam_blocked(t, interval);
         let v_dvl = self.install.velocity(
             &truth.c_body_to_ned,
             &truth.velocity_ned,
@@ -344,6 +375,17 @@ impl DvlModel {
                 m.beam_range_m[i] = altitude / down;
                 m.validity |= DvlVelocityV1::VALID_BEAM_RANGE << i;
             }
+        }
+        if let Some(b) = blocked {
+            // Three beams: no instrument velocity from this DVL, the other beams as they are.
+            m.beam_velocity_m_s[b] = 0.0;
+            m.beam_range_m[b] = 0.0;
+            m.validity &=
+                !((DvlVelocityV1::VALID_BEAM_VELOCITY | DvlVelocityV1::VALID_BEAM_RANGE) << b);
+            m.altitude_m = altitude;
+            m.beams_used = 3;
+            m.validity |= DvlVelocityV1::VALID_ALTITUDE;
+            return m;
         }
         let v = self.pinv * y;
         m.velocity_dvl_m_s = v.into();

@@ -9,6 +9,13 @@
 //! track arrive together and navigates on the water when bottom lock is lost; without them it is
 //! counted and never fused (it is not the vehicle's velocity over the ground). Bottom-lock losses
 //! and recoveries (a bottom-track reading turning invalid, then valid again) are counted.
+//!
+//! **Beams.** A reading without an instrument velocity but with beam (radial) velocities — one
+//! beam blocked, a beam-coordinate reading the device could not solve — is fused beam by beam
+//! when the beam geometry is configured (`dvl_beam_fusion`): beam `i` measures `b_i · h` with
+//! `b_i` its unit direction in the DVL frame and `h` the velocity model above; each beam is gated
+//! alone (χ², 1 dof), so one bad beam is refused by itself, and the accepted ones are fused
+//! together.
 
 use super::{AidCounters, AidUpdate, NavCore};
 use crate::earth;
@@ -62,7 +69,22 @@ pub struct DvlAid {
     pub bottom_lock_lost: u64,
     pub bottom_lock_regained: u64,
     bottom_locked: Option<bool>,
+    /// Beam fusion (`dvl_beam_fusion`): the beams' unit directions in the DVL frame and a beam
+    /// velocity's one-sigma (m/s).
+    pub beams: Option<([Vector3<f64>; 4], f64)>,
+    /// Readings fused from their beams, and beams refused by their own gate.
+    pub beam_readings_fused: u64,
+    pub beams_rejected: u64,
 }
+
+/// The unit direction of each beam in the DVL frame: `angle_deg` from z, azimuths from x about z.
+pub fn beam_directions(angle_deg: f64, azimuths_deg: [f64; 4]) -> [Vector3<f64>; 4] {
+    let (s, c) = (angle_deg * DEG).sin_cos();
+    azimuths_deg.map(|az| Vector3::new(s * (az * DEG).cos(), s * (az * DEG).sin(), c))
+}
+
+/// χ² at 99.9 % for 1 to 4 degrees of freedom.
+const CHI2_999: [f64; 4] = [10.83, 13.82, 16.27, 18.47];
 
 /// The sound-speed correction of the DVL velocity: true / assumed.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -116,7 +138,94 @@ impl DvlAid {
             bottom_lock_lost: 0,
             bottom_lock_regained: 0,
             bottom_locked: None,
+            beams: None,
+            beam_readings_fused: 0,
+            beams_rejected: 0,
         }
+    }
+
+    /// The beams of a reading that carries no instrument velocity, fused (see the module's
+    /// documentation); `None` when beam fusion is off or the reading has no valid beam.
+    fn fuse_beams(&mut self, core: &mut NavCore, m: &DvlVelocityV1) -> Option<AidUpdate> {
+        let (dirs, std) = self.beams?;
+        let ratio = self.sound_speed.map_or(1.0, |c| c.ratio(m));
+        let beams: Vec<(usize, f64)> = (0..4)
+            .filter(|i| m.validity & (DvlVelocityV1::VALID_BEAM_VELOCITY << i) != 0)
+            .map(|i| (i, m.beam_velocity_m_s[i] * ratio))
+            .filter(|(_, v)| v.is_finite() && v.abs() < 20.0)
+            .collect();
+        if beams.is_empty() {
+            return None;
+        }
+        let mut d = core.diagnostics(m.validity_time_ns, AidSource::DvlVelocity);
+        d.flags |= AidDiagnosticsV1::FLAG_BEAMS;
+        if core.aid_is_late(m.validity_time_ns) {
+            return Some(AidUpdate::rejected(d));
+        }
+        if ratio != 1.0 {
+            self.sound_speed_corrected += 1;
+            d.flags |= AidDiagnosticsV1::FLAG_SOUND_SPEED_CORRECTED;
+        }
+        core.propagate_covariance();
+        let (predicted, h) = dvl_model(
+            core.state(),
+            &core.last_omega_ib,
+            &core.last_f_body,
+            &self.params,
+        );
+        // Each beam against its own gate.
+        let mut accepted: Vec<(f64, f64, SMatrix<f64, 1, { ekf::N }>)> = Vec::new();
+        for (i, z) in beams {
+            let hi = dirs[i].transpose() * h;
+            let y = dirs[i].dot(&predicted) - z;
+            let s = (hi * core.kf.p * hi.transpose())[(0, 0)] + std * std;
+            if s > 0.0 && y * y / s <= CHI2_999[0] {
+                accepted.push((z, y, hi));
+            } else {
+                self.beams_rejected += 1;
+            }
+        }
+        for (k, (z, _, _)) in accepted.iter().take(3).enumerate() {
+            d.observation[k] = *z;
+            d.observation_variance[k] = std * std;
+        }
+        d.dimension = accepted.len() as u32;
+        let kept = d.flags;
+        let correction = match accepted.len() {
+            1 => self.joint::<1>(core, &accepted, std, &mut d),
+            2 => self.joint::<2>(core, &accepted, std, &mut d),
+            3 => self.joint::<3>(core, &accepted, std, &mut d),
+            4 => self.joint::<4>(core, &accepted, std, &mut d),
+            _ => {
+                d.flags |= AidDiagnosticsV1::FLAG_REJECTED;
+                None
+            }
+        };
+        d.flags |= kept & !AidDiagnosticsV1::FLAG_REJECTED;
+        if correction.is_some() {
+            self.beam_readings_fused += 1;
+            self.last_fused_s = m.validity_time_ns as f64 * 1e-9;
+        }
+        Some(AidUpdate::counted(d, correction, &mut self.counters))
+    }
+
+    /// One update with the `M` accepted beams (innovation and Jacobian row each).
+    fn joint<const M: usize>(
+        &self,
+        core: &mut NavCore,
+        beams: &[(f64, f64, SMatrix<f64, 1, { ekf::N }>)],
+        std: f64,
+        d: &mut AidDiagnosticsV1,
+    ) -> Option<StateVector> {
+        let mut y = nalgebra::SVector::<f64, M>::zeros();
+        let mut h = SMatrix::<f64, M, { ekf::N }>::zeros();
+        for (k, (_, yk, hk)) in beams.iter().enumerate().take(M) {
+            y[k] = *yk;
+            h.set_row(k, hk);
+        }
+        let r = SMatrix::<f64, M, M>::from_diagonal_element(std * std);
+        let result = core.kf.update(&y, &h, &r, CHI2_999[M - 1]);
+        NavCore::report(result, d)
     }
 
     /// Switches the installation states on in `p0` with their initial one-sigma values
@@ -233,13 +342,19 @@ impl DvlAid {
         if m.is_water_track() {
             return self.fuse_water_track(core, m);
         }
-        let locked = m.validity & DvlVelocityV1::VALID_VELOCITY != 0;
+        let any_beam = (0..4).any(|i| m.validity & (DvlVelocityV1::VALID_BEAM_VELOCITY << i) != 0);
+        let locked = m.validity & DvlVelocityV1::VALID_VELOCITY != 0 || any_beam;
         match (self.bottom_locked, locked) {
             (Some(true), false) => self.bottom_lock_lost += 1,
             (Some(false), true) => self.bottom_lock_regained += 1,
             _ => {}
         }
         self.bottom_locked = Some(locked);
+        if m.validity & DvlVelocityV1::VALID_VELOCITY == 0
+            && let Some(u) = self.fuse_beams(core, m)
+        {
+            return u;
+        }
         let t_ns = m.validity_time_ns;
         let mut d = core.diagnostics(t_ns, AidSource::DvlVelocity);
         d.dimension = 3;
