@@ -22,7 +22,7 @@ use auvnav_shm_schema::bus::{Bus, BusError, BusPublisher, BusSubscriber, Sequenc
 use auvnav_shm_schema::qos::{self, ServiceQos};
 use auvnav_shm_schema::{
     AcousticRangesV1, AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1,
-    MagnetometerV1, Message, NavSolutionV1, ProcessHealthV1, UsblFixV1, topic,
+    MagnetometerV1, Message, NavSolutionV1, ProcessHealthV1, SoundVelocityV1, UsblFixV1, topic,
 };
 use serde::{Deserialize, Serialize};
 
@@ -313,6 +313,7 @@ topics! {
     topic::MAGNETOMETER => MagnetometerV1, qos::SENSOR;
     topic::ACOUSTIC_RANGES => AcousticRangesV1, qos::SENSOR;
     topic::GNSS => GnssFixV1, qos::SENSOR;
+    topic::SOUND_VELOCITY => SoundVelocityV1, qos::SENSOR;
 }
 
 pub(crate) fn known_topics() -> String {

@@ -396,6 +396,38 @@ impl MagnetometerV1 {
 }
 
 message! {
+    /// The speed of sound in the water from a CTD or sound-velocity probe.
+    #[type_name("auvnav/SoundVelocity/v1")]
+    #[schema_name("auvnav_msgs/msg/SoundVelocityV1")]
+    pub struct SoundVelocityV1 {
+        /// Host time at read return (ns, CLOCK_MONOTONIC; simulated time in simulated logs).
+        pub host_time_ns: u64,
+        /// Device clock (ns); valid with VALID_DEVICE_TIME.
+        pub device_time_ns: u64,
+        /// Sequence number assigned by the publisher.
+        pub sequence: u64,
+        /// Speed of sound (m/s, 1375..1650); valid with VALID_SOUND_SPEED.
+        pub sound_speed_m_s: f64,
+        /// Practical salinity (PSU, 0..45); valid with VALID_SALINITY.
+        pub salinity_psu: f64,
+        /// Gauge pressure (Pa, -1e5..1.2e8); valid with VALID_PRESSURE.
+        pub pressure_pa: f64,
+        /// Water temperature (degC, -5..50); valid with VALID_TEMPERATURE.
+        pub temperature_c: f32,
+        /// Validity bit flags (SoundVelocityV1::VALID_*).
+        pub validity: u32,
+    }
+}
+
+impl SoundVelocityV1 {
+    pub const VALID_SOUND_SPEED: u32 = 1 << 0;
+    pub const VALID_SALINITY: u32 = 1 << 1;
+    pub const VALID_PRESSURE: u32 = 1 << 2;
+    pub const VALID_TEMPERATURE: u32 = 1 << 3;
+    pub const VALID_DEVICE_TIME: u32 = 1 << 4;
+}
+
+message! {
     /// A GNSS position fix (available at the surface only).
     #[type_name("auvnav/GnssFix/v1")]
     #[schema_name("auvnav_msgs/msg/GnssFixV1")]
@@ -736,6 +768,7 @@ impl LateAidV1 {
     pub const TOPIC_GNSS: u32 = 3;
     pub const TOPIC_USBL: u32 = 4;
     pub const TOPIC_MAGNETOMETER: u32 = 5;
+    pub const TOPIC_SOUND_VELOCITY: u32 = 6;
 }
 
 /// Bytes per [`RawBytesV1`] message.
@@ -782,6 +815,7 @@ pub fn all_schemas() -> Vec<(&'static str, &'static str, String)> {
         entry::<AcousticRangesV1>(),
         entry::<GnssFixV1>(),
         entry::<NavSolutionV1>(),
+        entry::<SoundVelocityV1>(),
         entry::<AidDiagnosticsV1>(),
         entry::<ProcessHealthV1>(),
         entry::<LateAidV1>(),

@@ -17,6 +17,8 @@ pub const MAGNETOMETER: &str = "magnetometer";
 pub const ACOUSTIC_RANGES: &str = "acoustic_ranges";
 /// GNSS fixes ([`crate::GnssFixV1`]).
 pub const GNSS: &str = "gnss";
+/// The speed of sound from a CTD or sound-velocity probe ([`crate::SoundVelocityV1`]).
+pub const SOUND_VELOCITY: &str = "sound_velocity";
 /// Navigation solution ([`crate::NavSolutionV1`]).
 pub const NAV_SOLUTION: &str = "nav/solution";
 /// Per-aid-source diagnostics ([`crate::AidDiagnosticsV1`]).
@@ -36,7 +38,7 @@ pub const TRUTH: &str = "truth";
 pub const DEFAULT_PREFIX: &str = "auvnav";
 
 /// Every topic that carries sensor data into the fusion daemon.
-pub const SENSOR_TOPICS: [&str; 6] = [IMU, DVL, USBL, DEPTH, MAGNETOMETER, GNSS];
+pub const SENSOR_TOPICS: [&str; 7] = [IMU, DVL, USBL, DEPTH, MAGNETOMETER, GNSS, SOUND_VELOCITY];
 
 /// The iceoryx2 service name of `topic` under a deployment prefix: `"{prefix}/{topic}"`.
 pub fn service_name(prefix: &str, topic: &str) -> String {

@@ -32,6 +32,11 @@ fn layouts_are_pinned() {
         ),
         ("GnssFixV1", size_of::<GnssFixV1>(), align_of::<GnssFixV1>()),
         (
+            "SoundVelocityV1",
+            size_of::<SoundVelocityV1>(),
+            align_of::<SoundVelocityV1>(),
+        ),
+        (
             "NavSolutionV1",
             size_of::<NavSolutionV1>(),
             align_of::<NavSolutionV1>(),
@@ -62,6 +67,7 @@ fn layouts_are_pinned() {
         ("MagnetometerV1", 56, 8),
         ("AcousticRangesV1", 224, 8),
         ("GnssFixV1", 96, 8),
+        ("SoundVelocityV1", 56, 8),
         ("NavSolutionV1", 248, 8),
         ("AidDiagnosticsV1", 136, 8),
         ("ProcessHealthV1", 120, 8),
@@ -107,6 +113,7 @@ fn schemas_describe_the_whole_struct() {
         size_of::<AcousticRangesV1>(),
         size_of::<GnssFixV1>(),
         size_of::<NavSolutionV1>(),
+        size_of::<SoundVelocityV1>(),
         size_of::<AidDiagnosticsV1>(),
         size_of::<ProcessHealthV1>(),
         size_of::<LateAidV1>(),
@@ -145,6 +152,7 @@ fn every_type_roundtrips_through_bytes() {
     roundtrip_bytes::<UsblFixV1>();
     roundtrip_bytes::<DepthV1>();
     roundtrip_bytes::<MagnetometerV1>();
+    roundtrip_bytes::<SoundVelocityV1>();
     roundtrip_bytes::<AcousticRangesV1>();
     roundtrip_bytes::<GnssFixV1>();
     roundtrip_bytes::<NavSolutionV1>();
@@ -190,6 +198,7 @@ fn every_type_roundtrips_through_iceoryx2() {
     roundtrip_iceoryx2::<UsblFixV1>(&node, &prefix);
     roundtrip_iceoryx2::<DepthV1>(&node, &prefix);
     roundtrip_iceoryx2::<MagnetometerV1>(&node, &prefix);
+    roundtrip_iceoryx2::<SoundVelocityV1>(&node, &prefix);
     roundtrip_iceoryx2::<AcousticRangesV1>(&node, &prefix);
     roundtrip_iceoryx2::<GnssFixV1>(&node, &prefix);
     roundtrip_iceoryx2::<NavSolutionV1>(&node, &prefix);

@@ -504,6 +504,10 @@ fn arbitrary_sensor_values_never_give_a_nan_solution() {
                     scramble(&mut v, a, b, &extremes);
                     SensorMessage::Magnetometer(v)
                 }
+                SensorMessage::SoundVelocity(mut v) => {
+                    scramble(&mut v, a, b, &extremes);
+                    SensorMessage::SoundVelocity(v)
+                }
             })
         },
         |_, _| {},

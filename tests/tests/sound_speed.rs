@@ -101,3 +101,97 @@ fn a_configured_sound_speed_restores_the_navigation_and_discovery_names_it() {
         "{report}"
     );
 }
+
+/// The true sound speed from a CTD on the bus (`sound_velocity`, `dvl_sound_speed_source =
+/// "topic"`): the voyage with a CTD reporting the true 1480 m/s with every DVL ping navigates
+/// exactly as with the sound speed configured as a value (the same solution, byte for byte), so
+/// as well as the clean voyage; the readings are counted in the replay.
+#[test]
+fn a_ctd_on_the_sound_velocity_topic_corrects_the_dvl() {
+    let dir = TempDir::new("soundspeedctd");
+    let mut scenario = auvnav_sim::scenario::Scenario::load("lawnmower").expect("scenario");
+    scenario.rates.ctd_hz = scenario.rates.dvl_hz;
+    let scenario_file = dir.path().join("lawnmower-ctd.toml");
+    std::fs::write(
+        &scenario_file,
+        toml::to_string(&scenario).expect("scenario as TOML"),
+    )
+    .expect("scenario file");
+    let sim = |name: &str, effects: &[&str]| {
+        let log = dir.path().join(format!("{name}.mcap"));
+        let mut args = vec![
+            "sim".to_string(),
+            "--scenario".into(),
+            scenario_file.display().to_string(),
+            "--seed".into(),
+            "9101".into(),
+            "--duration".into(),
+            "900".into(),
+        ];
+        for e in effects {
+            args.extend(["--effect".to_string(), e.to_string()]);
+        }
+        args.extend(["--out".into(), log.display().to_string(), "--json".into()]);
+        let a: Vec<&str> = args.iter().map(String::as_str).collect();
+        let summary = auvnav(&a);
+        assert_eq!(summary["sound_velocity"], 4500, "{summary}");
+        log
+    };
+    let clean = sim("clean", &[]);
+    let hidden = sim("hidden", &["dvl.sound_speed=1480"]);
+    let config = dir.path().join("ctd.toml");
+    std::fs::write(
+        &config,
+        "[navigation]\ndvl_sound_speed_source = \"topic\"\n",
+    )
+    .expect("config");
+    let e_clean = error_per_distance(&clean, None);
+    let e_topic = error_per_distance(&hidden, Some(&config));
+    let e_hidden = error_per_distance(&hidden, None);
+    eprintln!(
+        "error/distance CEP50: clean {e_clean:.4} %, 1480 m/s with the CTD topic {e_topic:.4} %, without {e_hidden:.4} %"
+    );
+    assert!(
+        (e_topic - e_clean).abs() <= 0.1 * e_clean,
+        "CTD topic {e_topic} % against clean {e_clean} %"
+    );
+    assert!(e_hidden > 5.0 * e_clean);
+    let hidden_s = hidden.display().to_string();
+    let config_s = config.display().to_string();
+    let topic_csv = dir.path().join("topic.csv");
+    let r = auvnav(&[
+        "replay",
+        &hidden_s,
+        "--config",
+        &config_s,
+        "--out",
+        &topic_csv.display().to_string(),
+        "--json",
+    ]);
+    assert_eq!(r["counts"]["sound_velocity"], 4500, "{}", r["counts"]);
+    assert_eq!(
+        r["navigator"]["sound_velocity_used"], 4500,
+        "{}",
+        r["navigator"]
+    );
+    let value = dir.path().join("value.toml");
+    std::fs::write(
+        &value,
+        "[navigation]\ndvl_sound_speed_source = \"value\"\nsound_speed_m_s = 1480.0\n",
+    )
+    .expect("config");
+    let value_csv = dir.path().join("value.csv");
+    auvnav(&[
+        "replay",
+        &hidden_s,
+        "--config",
+        &value.display().to_string(),
+        "--out",
+        &value_csv.display().to_string(),
+        "--json",
+    ]);
+    assert!(
+        std::fs::read(&topic_csv).expect("topic") == std::fs::read(&value_csv).expect("value"),
+        "the CTD topic and the configured value give different solutions"
+    );
+}

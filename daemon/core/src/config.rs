@@ -239,6 +239,9 @@ pub enum SoundSpeedSource {
     Value,
     /// The DVL measures it and used it: its velocity stands.
     Dvl,
+    /// The latest reading of a CTD or sound-velocity probe (`sound_velocity` topic); no
+    /// correction before the first one.
+    Topic,
 }
 
 /// The DVL installation (`[navigation.dvl]`): the same quantities, units and sign conventions as

@@ -4,7 +4,8 @@
 //! session decides the order in which aids meet the IMU stream (time stamp + aid delay, then
 //! kind, then sequence), so a figure measured by any of them measures the code the daemon runs.
 use auvnav_shm_schema::{
-    DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1, MagnetometerV1, UsblFixV1,
+    DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1, MagnetometerV1, SoundVelocityV1,
+    UsblFixV1,
 };
 
 /// A sensor message for the navigation session.
@@ -16,6 +17,8 @@ pub enum SensorMessage {
     Gnss(GnssFixV1),
     Usbl(UsblFixV1),
     Magnetometer(MagnetometerV1),
+    /// The speed of sound (a CTD), for `dvl_sound_speed_source = "topic"`.
+    SoundVelocity(SoundVelocityV1),
 }
 
 impl SensorMessage {
@@ -28,6 +31,7 @@ impl SensorMessage {
             SensorMessage::Gnss(m) => m.host_time_ns,
             SensorMessage::Usbl(m) => m.host_time_ns,
             SensorMessage::Magnetometer(m) => m.host_time_ns,
+            SensorMessage::SoundVelocity(m) => m.host_time_ns,
         }
     }
 
@@ -40,6 +44,7 @@ impl SensorMessage {
             SensorMessage::Gnss(m) => m.sequence,
             SensorMessage::Usbl(m) => m.sequence,
             SensorMessage::Magnetometer(m) => m.sequence,
+            SensorMessage::SoundVelocity(m) => m.sequence,
         }
     }
 
@@ -52,6 +57,7 @@ impl SensorMessage {
             SensorMessage::Gnss(_) => LateAidV1::TOPIC_GNSS,
             SensorMessage::Usbl(_) => LateAidV1::TOPIC_USBL,
             SensorMessage::Magnetometer(_) => LateAidV1::TOPIC_MAGNETOMETER,
+            SensorMessage::SoundVelocity(_) => LateAidV1::TOPIC_SOUND_VELOCITY,
         })
     }
 }

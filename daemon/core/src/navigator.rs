@@ -23,7 +23,7 @@ use crate::nav_core::{ImuTiming, NavCore};
 use crate::strapdown::NavState;
 use auvnav_shm_schema::{
     AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, NavMode,
-    NavSolutionV1, UsblFixV1,
+    NavSolutionV1, SoundVelocityV1, UsblFixV1,
 };
 use nalgebra::Vector3;
 use serde::Serialize;
@@ -67,6 +67,11 @@ pub struct NavCounters {
     /// and beams refused by their own gate.
     pub dvl_beam_readings_fused: u64,
     pub dvl_beams_rejected: u64,
+    /// Sound-velocity readings that set the DVL's sound-speed correction
+    /// (`dvl_sound_speed_source = "topic"`), and readings ignored (another source configured, or
+    /// out of 1375..1650 m/s).
+    pub sound_velocity_used: u64,
+    pub sound_velocity_ignored: u64,
     pub depth_fused: u64,
     pub depth_rejected: u64,
     pub depth_invalid: u64,
@@ -114,6 +119,10 @@ pub struct Navigator {
     magnetometer: Option<MagnetometerAid>,
     magnetometer_unconfigured: u64,
     dvl_timeout_s: f64,
+    /// `dvl_sound_speed_source = "topic"`: the sound speed the DVL assumed when it reports none.
+    sound_speed_topic: Option<f64>,
+    sound_velocity_used: u64,
+    sound_velocity_ignored: u64,
     position_unknown_std_m: f64,
     solution_sequence: u64,
     /// The covariance changed (propagated or updated) since the last soundness check.
@@ -128,7 +137,8 @@ pub fn sound_speed_correction(cfg: &NavConfig) -> Option<SoundSpeed> {
             true_m_s: cfg.sound_speed_m_s,
             assumed_default_m_s: cfg.dvl_assumed_sound_speed_m_s,
         }),
-        SoundSpeedSource::None | SoundSpeedSource::Dvl => None,
+        // From the topic: set by each reading (`Navigator::on_sound_velocity`).
+        SoundSpeedSource::None | SoundSpeedSource::Dvl | SoundSpeedSource::Topic => None,
     }
 }
 
@@ -228,6 +238,10 @@ impl Navigator {
             magnetometer_unconfigured: 0,
             core,
             dvl_timeout_s: cfg.dvl_timeout_s,
+            sound_speed_topic: (cfg.dvl_sound_speed_source == SoundSpeedSource::Topic)
+                .then_some(cfg.dvl_assumed_sound_speed_m_s),
+            sound_velocity_used: 0,
+            sound_velocity_ignored: 0,
             position_unknown_std_m: cfg.position_unknown_std_m,
             solution_sequence: 0,
             covariance_changed: true,
@@ -483,6 +497,24 @@ impl Navigator {
         Some(self.apply(u))
     }
 
+    /// Takes a sound-velocity reading (a CTD): with `dvl_sound_speed_source = "topic"` its sound
+    /// speed corrects the DVL velocities from now on; otherwise, or out of range, it is counted
+    /// and ignored.
+    pub fn on_sound_velocity(&mut self, m: &SoundVelocityV1) {
+        let valid = m.validity & SoundVelocityV1::VALID_SOUND_SPEED != 0
+            && (1375.0..=1650.0).contains(&m.sound_speed_m_s);
+        match self.sound_speed_topic {
+            Some(assumed) if valid => {
+                self.dvl.sound_speed = Some(SoundSpeed {
+                    true_m_s: m.sound_speed_m_s,
+                    assumed_default_m_s: assumed,
+                });
+                self.sound_velocity_used += 1;
+            }
+            _ => self.sound_velocity_ignored += 1,
+        }
+    }
+
     /// The estimated water current, north and east (m/s), and its standard deviations, when the
     /// water-current states are on.
     pub fn water_current(&self) -> Option<([f64; 2], [f64; 2])> {
@@ -540,6 +572,8 @@ impl Navigator {
             dvl_bottom_lock_regained: self.dvl.bottom_lock_regained,
             dvl_beam_readings_fused: self.dvl.beam_readings_fused,
             dvl_beams_rejected: self.dvl.beams_rejected,
+            sound_velocity_used: self.sound_velocity_used,
+            sound_velocity_ignored: self.sound_velocity_ignored,
             depth_fused: depth.fused,
             depth_rejected: depth.rejected,
             depth_invalid: depth.invalid,

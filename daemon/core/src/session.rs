@@ -44,12 +44,13 @@ pub struct InitialReport {
 /// then the publisher's sequence number. A USBL fix is queued by delivery like the others; the navigator evaluates it
 /// against the vehicle's pose at its (earlier) time of validity.
 fn aid_key(m: &SensorMessage) -> (u64, u32, u64) {
-    // IMU samples are never queued (processed as they come): last.
-    (
-        m.host_time_ns(),
-        m.aid_topic().unwrap_or(u32::MAX),
-        m.sequence(),
-    )
+    // IMU samples are never queued (processed as they come): last. A sound-velocity reading is
+    // not an aid but what corrects the DVL: first among messages of the same time.
+    let order = match m {
+        SensorMessage::SoundVelocity(_) => 0,
+        other => other.aid_topic().unwrap_or(u32::MAX),
+    };
+    (m.host_time_ns(), order, m.sequence())
 }
 
 /// An aid message waiting for its turn; `late` when it came after the IMU had passed its due
@@ -852,6 +853,11 @@ impl Session {
                 // Without [navigation.magnetometer] the readings are counted, not reported.
                 None => return Ok(()),
             },
+            // Not an aid: it sets the DVL's sound-speed correction.
+            SensorMessage::SoundVelocity(m) => {
+                nav.on_sound_velocity(&m);
+                return Ok(());
+            }
             // Not an aid (the feed never queues IMU samples).
             SensorMessage::Imu(_) => return Ok(()),
         };

@@ -15,7 +15,7 @@ use auvnav_shm_schema::clock::monotonic_ns;
 use auvnav_shm_schema::stage_times::StageTimes;
 use auvnav_shm_schema::{
     AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1, MagnetometerV1,
-    NavSolutionV1, ProcessHealthV1, ProcessState, UsblFixV1, qos, topic,
+    NavSolutionV1, ProcessHealthV1, ProcessState, SoundVelocityV1, UsblFixV1, qos, topic,
 };
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
@@ -202,13 +202,17 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
     let mut magnetometer = bus
         .subscriber::<MagnetometerV1>(topic::MAGNETOMETER, qos::SENSOR)
         .map_err(e)?;
-    const TOPICS: [&str; 6] = [
+    let mut sound_velocity = bus
+        .subscriber::<SoundVelocityV1>(topic::SOUND_VELOCITY, qos::SENSOR)
+        .map_err(e)?;
+    const TOPICS: [&str; 7] = [
         topic::IMU,
         topic::DVL,
         topic::DEPTH,
         topic::GNSS,
         topic::USBL,
         topic::MAGNETOMETER,
+        topic::SOUND_VELOCITY,
     ];
     let listeners = TOPICS
         .iter()
@@ -303,6 +307,7 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
         Vec::new(),
         Vec::new(),
     );
+    let mut svs = Vec::new();
     let mut state = ProcessState::Starting;
     tracing::info!(
         "auvnavd: running under {}/ (aid delay {} s, solution every {} IMU samples)",
@@ -374,6 +379,7 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
             drain(&mut gnss, &mut gnsss)?;
             drain(&mut usbl, &mut usbls)?;
             drain(&mut magnetometer, &mut mags)?;
+            drain(&mut sound_velocity, &mut svs)?;
             drain(&mut imu, &mut imus)?;
             Ok(())
         })();
@@ -402,7 +408,8 @@ fn run(cfg: &DaemonConfig) -> Result<(), String> {
             .chain(depths.drain(..).map(SensorMessage::Depth))
             .chain(gnsss.drain(..).map(SensorMessage::Gnss))
             .chain(usbls.drain(..).map(SensorMessage::Usbl))
-            .chain(mags.drain(..).map(SensorMessage::Magnetometer));
+            .chain(mags.drain(..).map(SensorMessage::Magnetometer))
+            .chain(svs.drain(..).map(SensorMessage::SoundVelocity));
         let mut io_error = None;
         for m in aids.chain(imus.drain(..).map(SensorMessage::Imu)) {
             if let Err(x) = session.feed(&m, &mut |o| out.on(o)) {

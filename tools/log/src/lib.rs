@@ -29,7 +29,8 @@
 
 use auvnav_shm_schema::{
     AcousticRangesV1, AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1,
-    MagnetometerV1, Message, NavSolutionV1, ProcessHealthV1, TruthStateV1, UsblFixV1,
+    MagnetometerV1, Message, NavSolutionV1, ProcessHealthV1, SoundVelocityV1, TruthStateV1,
+    UsblFixV1,
 };
 use mcap::records::{MessageHeader, Metadata, Record, op};
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
@@ -370,6 +371,7 @@ enum MessageKind {
     Usbl,
     Depth,
     Magnetometer,
+    SoundVelocity,
     AcousticRanges,
     Gnss,
     NavSolution,
@@ -388,6 +390,7 @@ impl MessageKind {
             s if s == UsblFixV1::SCHEMA_NAME => MessageKind::Usbl,
             s if s == DepthV1::SCHEMA_NAME => MessageKind::Depth,
             s if s == MagnetometerV1::SCHEMA_NAME => MessageKind::Magnetometer,
+            s if s == SoundVelocityV1::SCHEMA_NAME => MessageKind::SoundVelocity,
             s if s == AcousticRangesV1::SCHEMA_NAME => MessageKind::AcousticRanges,
             s if s == GnssFixV1::SCHEMA_NAME => MessageKind::Gnss,
             s if s == NavSolutionV1::SCHEMA_NAME => MessageKind::NavSolution,
@@ -427,6 +430,7 @@ fn decode_bytes(kind: MessageKind, topic: &str, data: &[u8]) -> Result<LogMessag
         MessageKind::Usbl => LogMessage::Usbl(decode_pod(topic, data)?),
         MessageKind::Depth => LogMessage::Depth(decode_pod(topic, data)?),
         MessageKind::Magnetometer => LogMessage::Magnetometer(decode_pod(topic, data)?),
+        MessageKind::SoundVelocity => LogMessage::SoundVelocity(decode_pod(topic, data)?),
         MessageKind::AcousticRanges => LogMessage::AcousticRanges(decode_pod(topic, data)?),
         MessageKind::Gnss => LogMessage::Gnss(decode_pod(topic, data)?),
         MessageKind::NavSolution => LogMessage::NavSolution(decode_pod(topic, data)?),
@@ -446,6 +450,8 @@ pub enum LogMessage {
     Usbl(UsblFixV1),
     Depth(DepthV1),
     Magnetometer(MagnetometerV1),
+    /// The speed of sound from a CTD.
+    SoundVelocity(SoundVelocityV1),
     AcousticRanges(AcousticRangesV1),
     Gnss(GnssFixV1),
     NavSolution(NavSolutionV1),
@@ -469,6 +475,7 @@ impl LogMessage {
             LogMessage::Gnss(x) => S::Gnss(*x),
             LogMessage::Usbl(x) => S::Usbl(*x),
             LogMessage::Magnetometer(x) => S::Magnetometer(*x),
+            LogMessage::SoundVelocity(x) => S::SoundVelocity(*x),
             _ => return None,
         })
     }

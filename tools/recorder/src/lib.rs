@@ -13,7 +13,8 @@ use auvnav_log::{Corruption, LogError, LogHeader, LogReader, LogWriter, write_lo
 use auvnav_shm_schema::bus::{Bus, BusSubscriber, Sequenced};
 use auvnav_shm_schema::{
     AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1, MagnetometerV1,
-    Message, NavSolutionV1, ProcessHealthV1, RawBytesV1, TruthStateV1, UsblFixV1, qos, topic,
+    Message, NavSolutionV1, ProcessHealthV1, RawBytesV1, SoundVelocityV1, TruthStateV1, UsblFixV1,
+    qos, topic,
 };
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -261,6 +262,7 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
         channel::<DepthV1>(&bus, topic::DEPTH, qos::SENSOR)?,
         channel::<MagnetometerV1>(&bus, topic::MAGNETOMETER, qos::SENSOR)?,
         channel::<GnssFixV1>(&bus, topic::GNSS, qos::SENSOR)?,
+        channel::<SoundVelocityV1>(&bus, topic::SOUND_VELOCITY, qos::SENSOR)?,
         channel::<ImuSampleV1>(&bus, topic::IMU, qos::SENSOR)?,
         channel::<NavSolutionV1>(&bus, topic::NAV_SOLUTION, qos::NAVIGATION)?,
         channel::<AidDiagnosticsV1>(&bus, topic::NAV_AID_DIAGNOSTICS, qos::NAVIGATION)?,

@@ -176,6 +176,7 @@ pub fn campaign(
                 magnetometer_hz: 0,
                 gnss_hz: 1,
                 truth_hz: 1,
+                ctd_hz: 0,
             },
             legs: legs(kind, length_m, &mut rng),
             station: None,

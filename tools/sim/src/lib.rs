@@ -14,7 +14,7 @@ pub mod trajectory;
 
 use auvnav_core::earth::{self, Geodetic};
 use auvnav_log::{LogHeader, LogMessage, write_log_atomically};
-use auvnav_shm_schema::{TruthStateV1, topic};
+use auvnav_shm_schema::{SoundVelocityV1, TruthStateV1, topic};
 use effects::Effects;
 use nalgebra::Vector3;
 use scenario::Scenario;
@@ -169,6 +169,8 @@ pub struct SimSummary {
     pub depth: u64,
     pub magnetometer: u64,
     pub gnss: u64,
+    /// CTD sound-velocity readings (`rates.ctd_hz`).
+    pub sound_velocity: u64,
     pub truth: u64,
     /// Distance travelled over ground (m).
     pub distance_m: f64,
@@ -225,6 +227,7 @@ where
         divider(rates.imu_hz, rates.gnss_hz),
         divider(rates.imu_hz, rates.truth_hz),
     );
+    let ctd_div = divider(rates.imu_hz, rates.ctd_hz);
 
     let mut imu = ImuModel::new(e, cfg.seed, imu_hz);
     let mut dvl = DvlModel::new(e, cfg.seed, s.seabed_depth_m);
@@ -275,6 +278,18 @@ where
             history.pop_front();
         }
 
+        // Before the DVL: a reading at the same time as a ping is known when the ping arrives.
+        if ctd_div > 0 && k % ctd_div == 0 {
+            summary.sound_velocity += 1;
+            sink(&LogMessage::SoundVelocity(SoundVelocityV1 {
+                host_time_ns: (t * 1e9).round() as u64,
+                device_time_ns: (t * 1e9).round() as u64,
+                sequence: summary.sound_velocity,
+                sound_speed_m_s: e.dvl_sound_speed,
+                validity: SoundVelocityV1::VALID_SOUND_SPEED | SoundVelocityV1::VALID_DEVICE_TIME,
+                ..Default::default()
+            }))?;
+        }
         if dvl_div > 0 && k % dvl_div == 0 {
             let tv = t - dvl.time_offset;
             let truth = if dvl.time_offset == 0.0 {
@@ -385,6 +400,7 @@ pub fn simulate_to_log(cfg: &SimConfig, out: &Path) -> anyhow::Result<SimSummary
                 LogMessage::Depth(x) => w.write(topic::DEPTH, x)?,
                 LogMessage::Magnetometer(x) => w.write(topic::MAGNETOMETER, x)?,
                 LogMessage::Gnss(x) => w.write(topic::GNSS, x)?,
+                LogMessage::SoundVelocity(x) => w.write(topic::SOUND_VELOCITY, x)?,
                 LogMessage::Truth(x) => w.write(topic::TRUTH, x)?,
                 _ => {}
             }

@@ -77,6 +77,14 @@ pub struct Rates {
     pub gnss_hz: u32,
     /// Rate of the truth channel (Hz).
     pub truth_hz: u32,
+    /// Rate of a CTD's sound-velocity readings (Hz; 0, the default: no CTD). The reading is the
+    /// true sound speed (`dvl.sound_speed`).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub ctd_hz: u32,
+}
+
+fn is_zero(v: &u32) -> bool {
+    *v == 0
 }
 
 impl Default for Rates {
@@ -89,6 +97,7 @@ impl Default for Rates {
             magnetometer_hz: 10,
             gnss_hz: 1,
             truth_hz: 20,
+            ctd_hz: 0,
         }
     }
 }
@@ -239,6 +248,7 @@ impl Scenario {
             ("rates.magnetometer_hz", r.magnetometer_hz),
             ("rates.gnss_hz", r.gnss_hz),
             ("rates.truth_hz", r.truth_hz),
+            ("rates.ctd_hz", r.ctd_hz),
         ] {
             self.range_check(key, hz as f64, 0.0, r.imu_hz as f64)?;
             if hz != 0 && !r.imu_hz.is_multiple_of(hz) {

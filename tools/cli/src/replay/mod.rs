@@ -70,6 +70,8 @@ pub struct ReplayCounts {
     pub usbl: u64,
     /// Magnetometer readings (fused as headings with `[navigation.magnetometer]`).
     pub magnetometer: u64,
+    /// Sound-velocity readings (a CTD; used with `dvl_sound_speed_source = "topic"`).
+    pub sound_velocity: u64,
     pub truth: u64,
     /// Sensor messages before the initial state was known (skipped).
     pub before_start: u64,
@@ -413,6 +415,7 @@ impl Replay {
             SensorMessage::Gnss(_) => &mut self.counts.gnss,
             SensorMessage::Usbl(_) => &mut self.counts.usbl,
             SensorMessage::Magnetometer(_) => &mut self.counts.magnetometer,
+            SensorMessage::SoundVelocity(_) => &mut self.counts.sound_velocity,
         } += 1;
         let mut fwd = Self::forward(
             &mut self.prev_solution,
