@@ -336,6 +336,51 @@ pub fn pd0_velocity(
     Some(m)
 }
 
+/// The water-track velocity of a PD0 ensemble: its bottom-track block's water-mass reference
+/// layer (the water's velocity relative to the instrument, in the ensemble's coordinates and with
+/// bottom track's sign convention) as the vehicle's velocity relative to the water in the DVL
+/// frame, flagged `TRACK_WATER`; `None` without a usable layer (not computed, fewer than three
+/// beams, earth coordinates). Time of validity, sound speed and device time as
+/// [`pd0_velocity`]'s.
+pub fn pd0_water_track(
+    e: &Ensemble,
+    host_time_ns: u64,
+    latency_s: f64,
+    sequence: u64,
+) -> Option<DvlVelocityV1> {
+    let bt = e.bottom_track.as_ref()?;
+    let rl = &bt.reference_layer_velocity_m_s;
+    let fixed = e.fixed.as_ref();
+    let (r, error) = match fixed.map_or(CoordinateSystem::Beam, |f| f.coordinate_system) {
+        CoordinateSystem::Instrument | CoordinateSystem::Ship => ([rl[0]?, rl[1]?, rl[2]?], rl[3]),
+        CoordinateSystem::Beam => {
+            let convex = fixed.is_some_and(|f| f.system_configuration & PD0_CONVEX != 0);
+            crate::pd0::beam_to_instrument(rl, fixed?.beam_angle_deg?, convex)?
+        }
+        CoordinateSystem::Earth => return None,
+    };
+    if !r.iter().all(|x| x.is_finite() && x.abs() < 20.0) {
+        return None;
+    }
+    let mut m = dvl_message(host_time_ns, latency_s, sequence);
+    // The vehicle relative to the water is minus the water relative to the instrument; the DVL
+    // frame from the instrument's as for bottom track.
+    m.velocity_dvl_m_s = [-r[1], -r[0], r[2]];
+    m.validity |= DvlVelocityV1::VALID_VELOCITY | DvlVelocityV1::TRACK_WATER;
+    if let Some(err) = error {
+        m.figure_of_merit_m_s = err.abs();
+        m.validity |= DvlVelocityV1::VALID_FOM;
+    }
+    if let Some(v) = &e.variable {
+        set_sound_speed(&mut m, v.sound_speed_m_s);
+        if let Some(t) = pd0_rtc_ns(&v.rtc) {
+            m.device_time_ns = t;
+            m.validity |= DvlVelocityV1::VALID_DEVICE_TIME;
+        }
+    }
+    Some(m)
+}
+
 /// A Nortek DVL bottom-track record as a DVL message. The record's X, Y, Z is taken as the
 /// vehicle's velocity in the head frame (X along beam 1, Z out of the transducer face, right
 /// handed): with the head looking down and beam 1 forward that is the DVL frame (x forward,

@@ -294,6 +294,10 @@ impl DeviceDecoder {
                 Inner::Pd0(d) => match d.next_ensemble()? {
                     Ok(e) => {
                         if let Some(m) = convert::pd0_velocity(&e, host_time_ns, s.latency_s, 0) {
+                            // The water-mass reference layer of the same ping, next.
+                            self.pending =
+                                convert::pd0_water_track(&e, host_time_ns, s.latency_s, 0)
+                                    .map(Output::Dvl);
                             return Some(Output::Dvl(m));
                         }
                         self.counters.other_frames += 1;

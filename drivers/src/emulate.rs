@@ -205,6 +205,8 @@ fn pd0_from_dvl_in(m: &DvlVelocityV1, ensemble_number: u32, system: CoordinateSy
             evaluation_amplitude: [100; 4],
             percent_good: [if valid { 100 } else { 0 }; 4],
             max_depth_m: 200.0,
+            reference_layer_velocity_m_s: [None; 4],
+            reference_layer_percent_good: [0; 4],
         }),
         ..Default::default()
     };
@@ -510,6 +512,51 @@ mod tests {
                 | DvlVelocityV1::VALID_STD,
             ..Default::default()
         }
+    }
+
+    /// A PD0 ensemble whose bottom-track block carries the water-mass reference layer gives the
+    /// bottom track and then the water track of the same ping: the vehicle's velocity relative
+    /// to the water, flagged, in the DVL frame as bottom track is.
+    #[test]
+    fn a_pd0_reference_layer_is_published_as_water_track() {
+        let m = dvl();
+        let mut decoder = pd0::Pd0Decoder::new();
+        decoder.push(&pd0_from_dvl(&m, 3));
+        let mut e = decoder
+            .next_ensemble()
+            .expect("an ensemble")
+            .expect("a good ensemble");
+        let current_dvl = [0.2, -0.1, 0.0];
+        let bt = e.bottom_track.as_mut().expect("bottom track");
+        // The water relative to the instrument: the bottom's plus the current, in instrument
+        // axes (x, y, z) = (DVL y, DVL x, -DVL z) as the encoder writes them.
+        for k in 0..3 {
+            let bottom = bt.velocity_m_s[k].expect("bottom velocity");
+            let c = [current_dvl[1], current_dvl[0], -current_dvl[2]][k];
+            bt.reference_layer_velocity_m_s[k] = Some(bottom + c);
+            bt.reference_layer_percent_good[k] = 100;
+        }
+        bt.reference_layer_percent_good[3] = 100;
+        bt.reference_layer_velocity_m_s[3] = Some(0.0);
+        let mut d = DeviceDecoder::new(Protocol::Pd0, ProtocolSettings::default());
+        d.push(&pd0::encode_ensemble(&e));
+        let Some(Output::Dvl(bottom)) = d.next_output(5_000_000_000) else {
+            panic!("no bottom track")
+        };
+        let Some(Output::Dvl(water)) = d.next_output(5_000_000_000) else {
+            panic!("no water track")
+        };
+        assert!(d.next_output(5_000_000_000).is_none());
+        assert!(!bottom.is_water_track() && water.is_water_track());
+        for ((got, v), c) in water
+            .velocity_dvl_m_s
+            .iter()
+            .zip(m.velocity_dvl_m_s)
+            .zip(current_dvl)
+        {
+            assert!((got - (v - c)).abs() < 1.5e-3, "{water:?}");
+        }
+        assert_eq!(water.validity_time_ns, bottom.validity_time_ns);
     }
 
     #[test]

@@ -113,6 +113,12 @@ pub struct BottomTrack {
     pub percent_good: [u8; 4],
     /// Maximum tracking depth (m).
     pub max_depth_m: f64,
+    /// The water-mass reference layer's velocity relative to the instrument (m/s), in the same
+    /// coordinates and sign convention as `velocity_m_s`; `None` for -32768 or a beam whose
+    /// reference-layer percent good is 0 (a layer not computed).
+    pub reference_layer_velocity_m_s: [Option<f64>; 4],
+    /// Reference-layer percent good per beam.
+    pub reference_layer_percent_good: [u8; 4],
 }
 
 /// Bottom velocity relative to the instrument in instrument coordinates from beam velocities:
@@ -377,6 +383,11 @@ fn bottom_track(b: &[u8]) -> Option<BottomTrack> {
         evaluation_amplitude: four(|i| b.u8_at(36 + i))?,
         percent_good: four(|i| b.u8_at(40 + i))?,
         max_depth_m: b.u16_at(70).map(|d| f64::from(d) * 0.1).unwrap_or(f64::NAN),
+        reference_layer_velocity_m_s: four(|i| {
+            let good = b.u8_at(66 + i).unwrap_or(0) > 0;
+            Some(scaled_i16(b.i16_at(50 + 2 * i), 0.001).filter(|_| good))
+        })?,
+        reference_layer_percent_good: four(|i| Some(b.u8_at(66 + i).unwrap_or(0)))?,
     })
 }
 
@@ -770,6 +781,11 @@ pub fn encode_ensemble(e: &Ensemble) -> Vec<u8> {
             b[32 + i] = t.correlation[i];
             b[36 + i] = t.evaluation_amplitude[i];
             b[40 + i] = t.percent_good[i];
+            let rl = t.reference_layer_velocity_m_s[i]
+                .map(|v| (v * 1000.0).round().clamp(-32767.0, 32767.0) as i16)
+                .unwrap_or(BAD_VELOCITY);
+            b[50 + 2 * i..52 + 2 * i].copy_from_slice(&rl.to_le_bytes());
+            b[66 + i] = t.reference_layer_percent_good[i];
         }
         let max_depth = if t.max_depth_m.is_finite() {
             (t.max_depth_m * 10.0).round() as u16

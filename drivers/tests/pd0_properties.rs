@@ -101,6 +101,8 @@ prop_compose! {
             evaluation_amplitude: bytes.map(|b| b / 2),
             percent_good: bytes.map(|b| b / 3),
             max_depth_m: f64::from(max_depth) * 0.1,
+            reference_layer_velocity_m_s: [None; 4],
+            reference_layer_percent_good: [0; 4],
         }
     }
 }

@@ -398,6 +398,8 @@ fn decode_prints_one_json_object_per_frame_and_counts_garbage() {
                 evaluation_amplitude: [60; 4],
                 percent_good: [100; 4],
                 max_depth_m: 200.0,
+                reference_layer_velocity_m_s: [None; 4],
+                reference_layer_percent_good: [0; 4],
             }),
             ..Default::default()
         };

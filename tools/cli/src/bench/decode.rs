@@ -78,6 +78,8 @@ pub fn decode(repeat: usize, pty_seconds: f64, json: bool) -> anyhow::Result<()>
                 evaluation_amplitude: [60; 4],
                 percent_good: [100; 4],
                 max_depth_m: 200.0,
+                reference_layer_velocity_m_s: [None; 4],
+                reference_layer_percent_good: [0; 4],
             }),
             ..Default::default()
         };
