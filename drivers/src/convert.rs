@@ -326,14 +326,19 @@ pub fn pd0_velocity(
         }
     }
     set_altitude(&mut m, &vertical);
+    set_pd0_leader(&mut m, e);
+    Some(m)
+}
+
+/// The sound speed and the device time of a PD0 ensemble's variable leader, when it has one.
+fn set_pd0_leader(m: &mut DvlVelocityV1, e: &Ensemble) {
     if let Some(v) = &e.variable {
-        set_sound_speed(&mut m, v.sound_speed_m_s);
+        set_sound_speed(m, v.sound_speed_m_s);
         if let Some(t) = pd0_rtc_ns(&v.rtc) {
             m.device_time_ns = t;
             m.validity |= DvlVelocityV1::VALID_DEVICE_TIME;
         }
     }
-    Some(m)
 }
 
 /// The water-track velocity of a PD0 ensemble: its bottom-track block's water-mass reference
@@ -371,13 +376,7 @@ pub fn pd0_water_track(
         m.figure_of_merit_m_s = err.abs();
         m.validity |= DvlVelocityV1::VALID_FOM;
     }
-    if let Some(v) = &e.variable {
-        set_sound_speed(&mut m, v.sound_speed_m_s);
-        if let Some(t) = pd0_rtc_ns(&v.rtc) {
-            m.device_time_ns = t;
-            m.validity |= DvlVelocityV1::VALID_DEVICE_TIME;
-        }
-    }
+    set_pd0_leader(&mut m, e);
     Some(m)
 }
 

@@ -125,3 +125,51 @@ pub mod processes {
     /// `auvnav` program uses for its own processes.
     pub use auvnav_tools::process::ChildProcess as Proc;
 }
+
+/// Simulated voyages for the DVL-outage tests (water track, beams): a tactical-grade IMU, the
+/// filter told its grade, and the messages in memory.
+pub mod tactical {
+    use auvnav_log::LogMessage;
+    use auvnav_sim::SimConfig;
+    use auvnav_sim::effects::Effects;
+
+    /// A tactical-grade IMU (the built-in scenarios carry a navigation-grade FOG unit, on which
+    /// half a minute without the DVL costs little): gyro bias near 1 deg/h, accelerometer bias
+    /// near 250 ug.
+    pub const IMU: [(&str, &[f64]); 6] = [
+        ("imu.gyro_bias", &[1.0, -0.8, 1.2]),
+        ("imu.gyro_bias_instability", &[0.2]),
+        ("imu.angle_random_walk", &[0.05]),
+        ("imu.accel_bias", &[300.0, -200.0, 250.0]),
+        ("imu.accel_bias_instability", &[50.0]),
+        ("imu.velocity_random_walk", &[0.03]),
+    ];
+
+    /// Sets the tactical IMU's effects.
+    pub fn set_imu(effects: &mut Effects) {
+        for (name, value) in IMU {
+            effects.set(name, value).expect("IMU effect");
+        }
+    }
+
+    /// The navigation told the tactical IMU's grade (noise, bias walks, initial bias spreads).
+    pub fn configure(n: &mut auvnav_core::config::NavConfig) {
+        n.gyro_angle_random_walk_deg_sqrt_h = 0.06;
+        n.accel_velocity_random_walk_m_s_sqrt_h = 0.04;
+        n.gyro_bias_walk_deg_h_sqrt_h = 0.05;
+        n.accel_bias_walk_ug_sqrt_h = 20.0;
+        n.initial_gyro_bias_std_deg_h = 2.0;
+        n.initial_accel_bias_std_ug = 500.0;
+    }
+
+    /// The voyage's messages, in memory.
+    pub fn simulate(cfg: &SimConfig) -> Vec<LogMessage> {
+        let mut messages = Vec::new();
+        auvnav_sim::simulate(cfg, |m| {
+            messages.push(*m);
+            Ok(())
+        })
+        .expect("simulate");
+        messages
+    }
+}

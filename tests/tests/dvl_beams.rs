@@ -9,23 +9,13 @@ use auvnav_core::session::{Session, SessionOutput};
 use auvnav_log::LogMessage;
 use auvnav_shm_schema::{NavSolutionV1, TruthStateV1};
 use auvnav_sim::{SimConfig, scenario::Scenario};
+use auvnav_tests::tactical;
 use auvnav_tools::demo::{DemoStart, session_config};
-
-const TACTICAL: [(&str, &[f64]); 6] = [
-    ("imu.gyro_bias", &[1.0, -0.8, 1.2]),
-    ("imu.gyro_bias_instability", &[0.2]),
-    ("imu.angle_random_walk", &[0.05]),
-    ("imu.accel_bias", &[300.0, -200.0, 250.0]),
-    ("imu.accel_bias_instability", &[50.0]),
-    ("imu.velocity_random_walk", &[0.03]),
-];
 
 fn voyage(seed: u64, blocked_fraction: f64) -> (SimConfig, Vec<LogMessage>) {
     let scenario = Scenario::load("lawnmower").expect("scenario");
     let mut effects = scenario.effects().expect("effects");
-    for (name, value) in TACTICAL {
-        effects.set(name, value).expect("IMU effect");
-    }
+    tactical::set_imu(&mut effects);
     if blocked_fraction > 0.0 {
         effects.set("dvl.beam_blocked", &[2.0]).expect("beam");
         effects
@@ -38,12 +28,7 @@ fn voyage(seed: u64, blocked_fraction: f64) -> (SimConfig, Vec<LogMessage>) {
         seed,
         duration_s: Some(900.0),
     };
-    let mut messages = Vec::new();
-    auvnav_sim::simulate(&cfg, |m| {
-        messages.push(*m);
-        Ok(())
-    })
-    .expect("simulate");
+    let messages = tactical::simulate(&cfg);
     (cfg, messages)
 }
 
@@ -65,14 +50,8 @@ fn navigate(cfg: &SimConfig, messages: &[LogMessage], beam_fusion: bool) -> Outc
         })
         .expect("truth");
     let mut c = session_config(cfg, DemoStart::Known, false, &first);
-    let n = &mut c.navigation;
-    n.gyro_angle_random_walk_deg_sqrt_h = 0.06;
-    n.accel_velocity_random_walk_m_s_sqrt_h = 0.04;
-    n.gyro_bias_walk_deg_h_sqrt_h = 0.05;
-    n.accel_bias_walk_ug_sqrt_h = 20.0;
-    n.initial_gyro_bias_std_deg_h = 2.0;
-    n.initial_accel_bias_std_ug = 500.0;
-    n.dvl_beam_fusion = beam_fusion;
+    tactical::configure(&mut c.navigation);
+    c.navigation.dvl_beam_fusion = beam_fusion;
     let mut session = Session::new(&c);
     let mut last: Option<NavSolutionV1> = None;
     let (mut sum, mut epochs) = (0.0, 0u64);

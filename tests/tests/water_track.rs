@@ -11,21 +11,11 @@ use auvnav_core::session::{Session, SessionOutput};
 use auvnav_log::LogMessage;
 use auvnav_shm_schema::{DvlVelocityV1, NavSolutionV1, TruthStateV1};
 use auvnav_sim::{SimConfig, scenario::Scenario};
+use auvnav_tests::tactical;
 use auvnav_tools::demo::{DemoStart, session_config};
 
 /// North and east of the simulated current (|c| = 0.3 m/s).
 const CURRENT: [f64; 2] = [0.18, -0.24];
-
-/// A tactical-grade IMU (the lawnmower's own is a navigation-grade FOG unit, on which a minute
-/// without the DVL costs little): gyro bias near 1 deg/h, accelerometer bias near 250 ug.
-const TACTICAL: [(&str, &[f64]); 6] = [
-    ("imu.gyro_bias", &[1.0, -0.8, 1.2]),
-    ("imu.gyro_bias_instability", &[0.2]),
-    ("imu.angle_random_walk", &[0.05]),
-    ("imu.accel_bias", &[300.0, -200.0, 250.0]),
-    ("imu.accel_bias_instability", &[50.0]),
-    ("imu.velocity_random_walk", &[0.03]),
-];
 
 fn voyage(seed: u64, tactical: bool) -> (SimConfig, Vec<LogMessage>) {
     voyage_with(seed, tactical, 0.3 / (0.7 * 60.0))
@@ -35,9 +25,7 @@ fn voyage_with(seed: u64, tactical: bool, loss_rate: f64) -> (SimConfig, Vec<Log
     let scenario = Scenario::load("lawnmower").expect("scenario");
     let mut effects = scenario.effects().expect("effects");
     if tactical {
-        for (name, value) in TACTICAL {
-            effects.set(name, value).expect("IMU effect");
-        }
+        tactical::set_imu(&mut effects);
     }
     effects
         .set("water.current", &CURRENT)
@@ -59,12 +47,7 @@ fn voyage_with(seed: u64, tactical: bool, loss_rate: f64) -> (SimConfig, Vec<Log
         seed,
         duration_s: Some(900.0),
     };
-    let mut messages = Vec::new();
-    auvnav_sim::simulate(&cfg, |m| {
-        messages.push(*m);
-        Ok(())
-    })
-    .expect("simulate");
+    let messages = tactical::simulate(&cfg);
     (cfg, messages)
 }
 
@@ -108,14 +91,7 @@ fn navigate(cfg: &SimConfig, messages: &[LogMessage], current_std: f64, tactical
     let mut session_cfg = session_config(cfg, DemoStart::Known, false, &first);
     session_cfg.navigation.water_current_std_m_s = current_std;
     if tactical {
-        // The filter told the IMU's grade.
-        let n = &mut session_cfg.navigation;
-        n.gyro_angle_random_walk_deg_sqrt_h = 0.06;
-        n.accel_velocity_random_walk_m_s_sqrt_h = 0.04;
-        n.gyro_bias_walk_deg_h_sqrt_h = 0.05;
-        n.accel_bias_walk_ug_sqrt_h = 20.0;
-        n.initial_gyro_bias_std_deg_h = 2.0;
-        n.initial_accel_bias_std_ug = 500.0;
+        tactical::configure(&mut session_cfg.navigation);
     }
     let mut session = Session::new(&session_cfg);
     let mut run = Run::default();
