@@ -248,8 +248,9 @@ pub const PD0_CONVEX: u16 = 0x0008;
 /// `[x, y, z]_dvl = [y, x, -z]_rdi`. PD0 records the bottom's velocity relative to the
 /// instrument; the vehicle's is its negative. Beam coordinates: the beam velocities are
 /// published, and the velocity from them by RDI's beam-to-instrument transformation
-/// ([`crate::pd0::beam_to_instrument`]; three beams suffice). Earth-coordinate velocities are
-/// not rotated back here: their velocity is marked invalid. Ranges: PD0 gives vertical range per beam;
+/// ([`crate::pd0::beam_to_instrument`]; three beams suffice). Earth coordinates (east,
+/// north, up) are rotated back to the instrument with the ensemble's own heading, pitch, roll and
+/// EX bits ([`crate::pd0::earth_to_instrument`]), then taken as instrument coordinates. Ranges: PD0 gives vertical range per beam;
 /// the schema's slant range is vertical / cos(beam angle). PD0 carries no latency, so the time
 /// of validity is the read time minus `latency_s` from the driver configuration.
 pub fn pd0_velocity(
@@ -310,7 +311,23 @@ pub fn pd0_velocity(
                 }
             }
         }
-        CoordinateSystem::Earth => {}
+        CoordinateSystem::Earth => {
+            // Rotated back with the ensemble's heading, pitch, roll and EX bits, then as the
+            // instrument coordinates above (the error velocity stands as it is).
+            if let [Some(east), Some(north), Some(up), error] = bt.velocity_m_s
+                && let Some(r) = crate::pd0::earth_to_instrument(e, [east, north, up])
+                && r.iter().all(|x| x.abs() < 20.0)
+            {
+                m.velocity_dvl_m_s = [-r[1], -r[0], r[2]];
+                m.validity |= DvlVelocityV1::VALID_VELOCITY;
+                m.beams_used = 3;
+                if let Some(err) = error {
+                    m.figure_of_merit_m_s = err.abs();
+                    m.validity |= DvlVelocityV1::VALID_FOM;
+                    m.beams_used = 4;
+                }
+            }
+        }
     }
     let mut vertical = Vec::with_capacity(4);
     for (i, r) in bt.range_m.iter().enumerate() {
@@ -362,7 +379,10 @@ pub fn pd0_water_track(
             let convex = fixed.is_some_and(|f| f.system_configuration & PD0_CONVEX != 0);
             crate::pd0::beam_to_instrument(rl, fixed?.beam_angle_deg?, convex)?
         }
-        CoordinateSystem::Earth => return None,
+        CoordinateSystem::Earth => {
+            let r = crate::pd0::earth_to_instrument(e, [rl[0]?, rl[1]?, rl[2]?])?;
+            (r, rl[3])
+        }
     };
     if !r.iter().all(|x| x.is_finite() && x.abs() < 20.0) {
         return None;

@@ -100,14 +100,28 @@ pub fn nortek_from_dvl(m: &DvlVelocityV1) -> Vec<u8> {
 /// A DVL message as a PD0 ensemble (fixed leader, variable leader, bottom track) of an
 /// instrument-coordinate 4-beam DVL. Invalid velocity is written as PD0's -32768.
 pub fn pd0_from_dvl(m: &DvlVelocityV1, ensemble_number: u32) -> Vec<u8> {
-    pd0_from_dvl_in(m, ensemble_number, CoordinateSystem::Instrument)
+    pd0_from_dvl_in(m, ensemble_number, CoordinateSystem::Instrument, None)
+}
+
+/// EX command byte of the emulated PD0 DVL in earth coordinates: earth, tilts used.
+pub const PD0_EARTH_COORDINATE_TRANSFORM: u8 = 0x18 | pd0::EX_TILTS_USED;
+
+/// The same DVL in earth coordinates (EX 0x1C): the instrument-frame bottom velocity rotated to
+/// east, north, up with RDI's transformation ([`pd0::instrument_to_earth_matrix`]) for the
+/// instrument attitude `euler_rad` (roll, pitch, yaw; the vehicle's when the DVL is mounted along
+/// its axes), which the variable leader records as heading, tilt 1 and tilt 2 (tilt 1 is the
+/// recorded pitch whose gimbal pitch `atan(tan(tilt1) cos(tilt2))` is the attitude's pitch). The
+/// rotation uses the angles as recorded (0.01°), so decoding gives back the instrument velocity
+/// to the velocity's 1 mm/s resolution.
+pub fn pd0_earth_from_dvl(m: &DvlVelocityV1, ensemble_number: u32, euler_rad: [f64; 3]) -> Vec<u8> {
+    pd0_from_dvl_in(m, ensemble_number, CoordinateSystem::Earth, Some(euler_rad))
 }
 
 /// The same DVL in beam coordinates (EX 0x00): each beam's radial velocity of the bottom, the
 /// inverse of RDI's beam-to-instrument transformation for the 30° convex head with zero error
 /// velocity.
 pub fn pd0_beam_from_dvl(m: &DvlVelocityV1, ensemble_number: u32) -> Vec<u8> {
-    pd0_from_dvl_in(m, ensemble_number, CoordinateSystem::Beam)
+    pd0_from_dvl_in(m, ensemble_number, CoordinateSystem::Beam, None)
 }
 
 /// Beam velocities for an instrument-frame bottom velocity (x, y, z) with zero error velocity
@@ -124,11 +138,40 @@ fn pd0_beams(xyz: [f64; 3], beam_angle_deg: f64) -> [f64; 4] {
     ]
 }
 
-fn pd0_from_dvl_in(m: &DvlVelocityV1, ensemble_number: u32, system: CoordinateSystem) -> Vec<u8> {
+/// Heading, tilt 1 and tilt 2 (deg, at the leader's 0.01° resolution) as an RDI head records an
+/// attitude (roll, pitch, yaw in rad).
+fn pd0_recorded_attitude(euler_rad: [f64; 3]) -> (f64, f64, f64) {
+    let q = |deg: f64| (deg * 100.0).round() / 100.0;
+    let roll = euler_rad[0].to_degrees().clamp(-179.99, 179.99);
+    let pitch = euler_rad[1];
+    let tilt1 = (pitch.tan() / roll.to_radians().cos())
+        .atan()
+        .to_degrees()
+        .clamp(-89.99, 89.99);
+    let heading = q(euler_rad[2].to_degrees().rem_euclid(360.0));
+    (
+        if heading >= 360.0 { 0.0 } else { heading },
+        q(tilt1),
+        q(roll),
+    )
+}
+
+fn pd0_from_dvl_in(
+    m: &DvlVelocityV1,
+    ensemble_number: u32,
+    system: CoordinateSystem,
+    euler_rad: Option<[f64; 3]>,
+) -> Vec<u8> {
     let valid = m.validity & DvlVelocityV1::VALID_VELOCITY != 0;
     let v = m.velocity_dvl_m_s;
     // Schema [x fwd, y stbd, z down] (vehicle) -> RDI [x stbd, y fwd, z up] (bottom).
-    let rdi = [-v[1], -v[0], v[2]];
+    let mut rdi = [-v[1], -v[0], v[2]];
+    let (heading_deg, pitch_deg, roll_deg) =
+        euler_rad.map_or((0.0, 0.0, 0.0), pd0_recorded_attitude);
+    if system == CoordinateSystem::Earth {
+        let mm = pd0::instrument_to_earth_matrix(heading_deg, pitch_deg, roll_deg, true, false);
+        rdi = std::array::from_fn(|i| (0..3).map(|j| mm[i][j] * rdi[j]).sum::<f64>());
+    }
     let mut velocity = [None; 4];
     if valid && system == CoordinateSystem::Beam {
         velocity = pd0_beams(rdi, PD0_BEAM_ANGLE_DEG).map(Some);
@@ -162,10 +205,10 @@ fn pd0_from_dvl_in(m: &DvlVelocityV1, ensemble_number: u32, system: CoordinateSy
             pings_per_ensemble: 1,
             cell_size_m: 1.0,
             blank_m: 0.5,
-            coordinate_transform: if system == CoordinateSystem::Beam {
-                0x00
-            } else {
-                PD0_COORDINATE_TRANSFORM
+            coordinate_transform: match system {
+                CoordinateSystem::Beam => 0x00,
+                CoordinateSystem::Earth => PD0_EARTH_COORDINATE_TRANSFORM,
+                _ => PD0_COORDINATE_TRANSFORM,
             },
             coordinate_system: system,
             heading_alignment_deg: 0.0,
@@ -190,9 +233,9 @@ fn pd0_from_dvl_in(m: &DvlVelocityV1, ensemble_number: u32, system: CoordinateSy
                 1500.0
             },
             depth_m: 0.0,
-            heading_deg: 0.0,
-            pitch_deg: 0.0,
-            roll_deg: 0.0,
+            heading_deg,
+            pitch_deg,
+            roll_deg,
             salinity_ppt: 35.0,
             temperature_c: 10.0,
             pressure_pa: None,
@@ -638,6 +681,73 @@ mod tests {
         for i in 0..3 {
             // Four beams at 1 mm/s resolution through the transformation.
             assert!((back.velocity_dvl_m_s[i] - m.velocity_dvl_m_s[i]).abs() < 0.002);
+        }
+    }
+
+    /// Body FRD to NED for roll, pitch, yaw (ZYX).
+    fn body_to_ned(e: [f64; 3]) -> [[f64; 3]; 3] {
+        let (sr, cr) = e[0].sin_cos();
+        let (sp, cp) = e[1].sin_cos();
+        let (sy, cy) = e[2].sin_cos();
+        [
+            [cp * cy, sr * sp * cy - cr * sy, cr * sp * cy + sr * sy],
+            [cp * sy, sr * sp * sy + cr * cy, cr * sp * sy - sr * cy],
+            [-sp, sr * cp, cr * cp],
+        ]
+    }
+
+    /// RDI's instrument-to-earth matrix is the vehicle's attitude: for a DVL along the vehicle's
+    /// axes, the earth velocity the emulator writes is the body velocity rotated by the attitude
+    /// (in east, north, up), and the driver rotates it back to the velocity played.
+    #[test]
+    fn pd0_in_earth_coordinates_is_the_attitude_and_round_trips() {
+        let m = dvl();
+        for euler_deg in [
+            [0.0, 0.0, 90.0],
+            [3.0, -7.0, 213.0],
+            [-12.0, 15.0, 359.99],
+            [25.0, 30.0, 45.0],
+        ] {
+            let euler = euler_deg.map(|d: f64| d.to_radians());
+            let bytes = pd0_earth_from_dvl(&m, 4, euler);
+            let mut decoder = pd0::Pd0Decoder::new();
+            decoder.push(&bytes);
+            let e = decoder
+                .next_ensemble()
+                .expect("one ensemble")
+                .expect("valid");
+            assert_eq!(
+                e.fixed.as_ref().map(|f| f.coordinate_system),
+                Some(CoordinateSystem::Earth)
+            );
+            // The bottom's velocity in east, north, up against the body velocity rotated by the
+            // attitude (NED), negated.
+            let c = body_to_ned(euler);
+            let v = m.velocity_dvl_m_s;
+            let ned: [f64; 3] = std::array::from_fn(|i| (0..3).map(|j| c[i][j] * v[j]).sum());
+            let enu_bottom = [-ned[1], -ned[0], ned[2]];
+            let got = e.bottom_track.as_ref().expect("bottom track").velocity_m_s;
+            for i in 0..3 {
+                let g = got[i].expect("velocity");
+                // 0.01° angles and 1 mm/s.
+                assert!(
+                    (g - enu_bottom[i]).abs() < 0.002,
+                    "{euler_deg:?} {got:?} {enu_bottom:?}"
+                );
+            }
+            let Output::Dvl(back) = decode_one(Protocol::Pd0, ProtocolSettings::default(), &bytes)
+            else {
+                panic!("not a DVL message")
+            };
+            assert_ne!(back.validity & DvlVelocityV1::VALID_VELOCITY, 0);
+            for i in 0..3 {
+                assert!(
+                    (back.velocity_dvl_m_s[i] - m.velocity_dvl_m_s[i]).abs() < 0.002,
+                    "{euler_deg:?}: {:?} against {:?}",
+                    back.velocity_dvl_m_s,
+                    m.velocity_dvl_m_s
+                );
+            }
         }
     }
 

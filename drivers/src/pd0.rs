@@ -121,6 +121,62 @@ pub struct BottomTrack {
     pub reference_layer_percent_good: [u8; 4],
 }
 
+/// RDI's instrument-to-earth rotation `M` for heading `H`, pitch `P` and roll `R` (deg):
+/// `(E, N, U) = M (x, y, z)` with rows `[cH cR + sH sP sR, sH cP, cH sR − sH sP cR]`,
+/// `[−sH cR + cH sP sR, cH cP, −sH sR − cH sP cR]`, `[−cP sR, sP, cP cR]` (the coordinate
+/// transformation of RDI's manuals; it is the aerospace yaw–pitch–roll rotation of the
+/// instrument, y forward, x starboard, z up). The pitch used is the gimbal pitch computed from the
+/// recorded tilt, `P = atan(tan(tilt1) cos(tilt2))`; with the "tilts used" bit of EX clear, pitch
+/// and roll are 0; an upward-looking head adds 180° to the roll.
+pub fn instrument_to_earth_matrix(
+    heading_deg: f64,
+    tilt1_deg: f64,
+    tilt2_deg: f64,
+    tilts_used: bool,
+    upward_looking: bool,
+) -> [[f64; 3]; 3] {
+    let (mut p, mut r) = if tilts_used {
+        let r = tilt2_deg.to_radians();
+        ((tilt1_deg.to_radians().tan() * r.cos()).atan(), r)
+    } else {
+        (0.0, 0.0)
+    };
+    if upward_looking {
+        r += std::f64::consts::PI;
+    }
+    if !p.is_finite() {
+        p = 0.0;
+    }
+    let (sh, ch) = heading_deg.to_radians().sin_cos();
+    let (sp, cp) = p.sin_cos();
+    let (sr, cr) = r.sin_cos();
+    [
+        [ch * cr + sh * sp * sr, sh * cp, ch * sr - sh * sp * cr],
+        [-sh * cr + ch * sp * sr, ch * cp, -sh * sr - ch * sp * cr],
+        [-cp * sr, sp, cp * cr],
+    ]
+}
+
+/// EX bit 2: the device used its tilts in the coordinate transformation.
+pub const EX_TILTS_USED: u8 = 0x04;
+
+/// An earth-coordinate velocity (east, north, up) back in instrument coordinates, `Mᵀ v`, with
+/// the ensemble's own heading, pitch and roll and EX bits ([`instrument_to_earth_matrix`]);
+/// `None` without the leaders.
+pub fn earth_to_instrument(e: &Ensemble, enu: [f64; 3]) -> Option<[f64; 3]> {
+    let (f, v) = (e.fixed.as_ref()?, e.variable.as_ref()?);
+    let m = instrument_to_earth_matrix(
+        v.heading_deg,
+        v.pitch_deg,
+        v.roll_deg,
+        f.coordinate_transform & EX_TILTS_USED != 0,
+        f.upward_looking,
+    );
+    Some(std::array::from_fn(|j| {
+        (0..3).map(|i| m[i][j] * enu[i]).sum::<f64>()
+    }))
+}
+
 /// Bottom velocity relative to the instrument in instrument coordinates from beam velocities:
 /// RDI's transformation for a four-beam Janus head with beams `beam_angle_deg` from the
 /// vertical, convex or concave (`x = ±a (b1 − b2)`, `y = ±a (b4 − b3)`, `z = b Σ bᵢ`, error

@@ -30,6 +30,8 @@ struct Collected {
 }
 
 struct Played {
+    /// Every message of the log, in order.
+    messages: Vec<LogMessage>,
     imu: Vec<ImuSampleV1>,
     dvl: Vec<DvlVelocityV1>,
     usbl: Vec<UsblFixV1>,
@@ -37,10 +39,15 @@ struct Played {
 }
 
 fn simulate(dir: &Path) -> (PathBuf, Played) {
+    simulate_for(dir, SECONDS)
+}
+
+/// `seconds` of the docking scenario.
+fn simulate_for(dir: &Path, seconds: f64) -> (PathBuf, Played) {
     let log = dir.join("voyage.mcap");
     let out = Command::new(binary("auvnav"))
         .args(["sim", "--scenario", "docking", "--duration"])
-        .arg(SECONDS.to_string())
+        .arg(seconds.to_string())
         .arg("--out")
         .arg(&log)
         .output()
@@ -52,13 +59,16 @@ fn simulate(dir: &Path) -> (PathBuf, Played) {
     );
     let mut reader = LogReader::open(&log).expect("opening the log");
     let mut played = Played {
+        messages: vec![],
         imu: vec![],
         dvl: vec![],
         usbl: vec![],
         magnetometer: vec![],
     };
     while let Some(raw) = reader.next_message().expect("reading the log") {
-        match raw.decode_any().expect("decoding") {
+        let m = raw.decode_any().expect("decoding");
+        played.messages.push(m);
+        match m {
             LogMessage::Imu(m) => played.imu.push(m),
             LogMessage::Dvl(m) => played.dvl.push(m),
             LogMessage::Usbl(m) => played.usbl.push(m),
@@ -107,6 +117,17 @@ struct Outcome {
 /// Starts the drivers, then the emulator with `faults`, collects everything published until the
 /// emulator has finished, stops the drivers with SIGTERM and checks they exit cleanly.
 fn play(dir: &Path, log: &Path, devices: &[(&str, &str)], faults: &[&str]) -> Outcome {
+    play_at(dir, log, devices, faults, SPEED)
+}
+
+/// [`play`] at `speed` times real time.
+fn play_at(
+    dir: &Path,
+    log: &Path,
+    devices: &[(&str, &str)],
+    faults: &[&str],
+    speed: f64,
+) -> Outcome {
     let prefix = unique("pty");
     let bus = Bus::new(&unique("ptytest"), &prefix).expect("bus");
     let mut imu = bus
@@ -145,7 +166,7 @@ fn play(dir: &Path, log: &Path, devices: &[(&str, &str)], faults: &[&str]) -> Ou
         .arg(log)
         .args([
             "--speed",
-            &SPEED.to_string(),
+            &speed.to_string(),
             "--start-delay",
             "1.0",
             "--json",
@@ -509,51 +530,161 @@ fn a_nortek_dvl_on_a_pty_publishes_what_was_played() {
     }
 }
 
-/// The same voyage from an emulated PD0 DVL in instrument and in beam coordinates, through the
-/// real driver: the velocities from the beams (RDI's transformation in the driver) equal the
-/// instrument-coordinate ones within the beams' 1 mm/s resolution, and both equal what was
-/// played.
+/// Seconds of the voyage played in every PD0 coordinate system: a straight leg at 60°, a turn
+/// and a depth change (heading, pitch and roll all move).
+const COORDINATE_SECONDS: f64 = 150.0;
+/// Its playback speed.
+const COORDINATE_SPEED: f64 = 25.0;
+
+/// The same voyage from an emulated PD0 DVL in instrument, beam and earth coordinates, through the
+/// real driver: the velocities from the beams (RDI's beam transformation) and from east, north,
+/// up (rotated back with the heading, pitch and roll the ensemble records) equal the
+/// instrument-coordinate ones within the 1 mm/s resolution and equal what was played; and the
+/// voyage navigated on each (through the same `Session` the daemon runs, with the played IMU)
+/// ends where the instrument-coordinate one does, within what that resolution allows over the
+/// run.
 #[test]
-fn pd0_in_beam_coordinates_publishes_what_instrument_coordinates_do() {
-    let dir = TempDir::new("ptypd0beam");
-    let (log, played) = simulate(dir.path());
-    let instrument = play(dir.path(), &log, &[("dvl", "pd0")], &[]);
-    let beam = play(
-        dir.path(),
-        &log,
-        &[("dvl", "pd0")],
-        &["--pd0-coordinates", "beam"],
-    );
-    for (name, o) in [("instrument", &instrument), ("beam", &beam)] {
+fn pd0_in_beam_and_earth_coordinates_navigates_as_instrument_coordinates_do() {
+    let dir = TempDir::new("ptypd0coords");
+    let (log, played) = simulate_for(dir.path(), COORDINATE_SECONDS);
+    let runs: Vec<(&str, Outcome)> = ["instrument", "beam", "earth"]
+        .into_iter()
+        .map(|c| {
+            let o = play_at(
+                dir.path(),
+                &log,
+                &[("dvl", "pd0")],
+                &["--pd0-coordinates", c],
+                COORDINATE_SPEED,
+            );
+            (c, o)
+        })
+        .collect();
+    for (name, o) in &runs {
         assert_eq!(o.got.dvl.len(), played.dvl.len(), "{name}\n{}", o.stderr);
         let h = last_health(&o.got, "dvl");
         assert_eq!(h.checksum_errors + h.invalid + h.bytes_skipped, 0, "{name}");
     }
-    let mut valid = 0;
-    for ((i, b), p) in instrument
-        .got
-        .dvl
+    let instrument = &runs[0].1;
+    let flag = DvlVelocityV1::VALID_VELOCITY;
+    for (name, o) in &runs[1..] {
+        let mut valid = 0;
+        for ((i, g), p) in instrument.got.dvl.iter().zip(&o.got.dvl).zip(&played.dvl) {
+            assert_eq!(g.validity & flag, p.validity & flag, "{name}");
+            assert_eq!(i.validity & flag, p.validity & flag);
+            if p.validity & flag == 0 {
+                continue;
+            }
+            valid += 1;
+            for k in 0..3 {
+                assert!(
+                    close(g.velocity_dvl_m_s[k], i.velocity_dvl_m_s[k], 0.002),
+                    "{name} {:?} against instrument {:?}",
+                    g.velocity_dvl_m_s,
+                    i.velocity_dvl_m_s
+                );
+                assert!(close(g.velocity_dvl_m_s[k], p.velocity_dvl_m_s[k], 0.002));
+            }
+        }
+        assert!(valid > 100, "{name}: {valid}");
+    }
+    // Navigation on each: final position against the instrument-coordinate run's.
+    let ends: Vec<(&str, [f64; 3], f64)> = runs
         .iter()
-        .zip(&beam.got.dvl)
-        .zip(&played.dvl)
-    {
-        let flag = DvlVelocityV1::VALID_VELOCITY;
-        assert_eq!(b.validity & flag, p.validity & flag);
-        assert_eq!(i.validity & flag, p.validity & flag);
-        if p.validity & flag == 0 {
+        .map(|(name, o)| {
+            let (end, rms) = navigate(&played, &o.got.dvl);
+            eprintln!("{name}: end {end:?}, horizontal RMS error {rms:.3} m");
+            (*name, end, rms)
+        })
+        .collect();
+    // 1 mm/s of resolution over the run, on each of the two.
+    let bound = 2.0 * 0.001 * COORDINATE_SECONDS;
+    for (name, end, rms) in &ends[1..] {
+        let d = auvnav_core::earth::ned_offset(&geodetic(ends[0].1), &geodetic(*end));
+        let horizontal = d.x.hypot(d.y);
+        eprintln!("{name}: end {horizontal:.4} m from the instrument-coordinate run's");
+        assert!(
+            horizontal < bound,
+            "{name}: {horizontal} m (bound {bound} m)"
+        );
+        assert!(
+            (rms - ends[0].2).abs() < bound,
+            "{name}: RMS {rms} against {}",
+            ends[0].2
+        );
+    }
+}
+
+fn geodetic(p: [f64; 3]) -> auvnav_core::earth::Geodetic {
+    auvnav_core::earth::Geodetic {
+        latitude_rad: p[0],
+        longitude_rad: p[1],
+        height_m: p[2],
+    }
+}
+
+/// The played voyage navigated with its DVL readings replaced by what the driver published (at
+/// the played times, so that only the conversion differs): the final position (rad, rad, m) and
+/// the horizontal RMS error against the truth.
+fn navigate(played: &Played, dvl: &[DvlVelocityV1]) -> ([f64; 3], f64) {
+    use auvnav_core::feed::SensorMessage;
+    use auvnav_core::session::{Session, SessionOutput};
+    use auvnav_sim::{SimConfig, scenario::Scenario};
+    use auvnav_tools::demo::{DemoStart, session_config};
+    let first = played
+        .messages
+        .iter()
+        .find_map(|m| match m {
+            LogMessage::Truth(t) => Some(*t),
+            _ => None,
+        })
+        .expect("truth");
+    let scenario = Scenario::load("docking").expect("scenario");
+    let cfg = SimConfig {
+        effects: scenario.effects().expect("effects"),
+        scenario,
+        seed: 0,
+        duration_s: None,
+    };
+    let mut session = Session::new(&session_config(&cfg, DemoStart::Known, false, &first));
+    let mut received = dvl.iter();
+    let mut last = None;
+    let (mut sum, mut n) = (0.0, 0usize);
+    for m in &played.messages {
+        if let LogMessage::Truth(t) = m {
+            if let Some(s) = &last {
+                let s: &auvnav_shm_schema::NavSolutionV1 = s;
+                let d = auvnav_core::earth::ned_offset(
+                    &geodetic([t.latitude_rad, t.longitude_rad, t.height_m]),
+                    &geodetic([s.latitude_rad, s.longitude_rad, s.height_m]),
+                );
+                sum += d.x * d.x + d.y * d.y;
+                n += 1;
+            }
             continue;
         }
-        valid += 1;
-        assert_eq!(b.beams_used, 4);
-        for k in 0..3 {
-            assert!(
-                close(b.velocity_dvl_m_s[k], i.velocity_dvl_m_s[k], 0.002),
-                "beam {:?} against instrument {:?}",
-                b.velocity_dvl_m_s,
-                i.velocity_dvl_m_s
-            );
-            assert!(close(b.velocity_dvl_m_s[k], p.velocity_dvl_m_s[k], 0.002));
+        let Some(mut sensor) = m.sensor() else {
+            continue;
+        };
+        if let SensorMessage::Dvl(p) = &mut sensor {
+            let got = received.next().expect("a reading per played one");
+            let (host, validity) = (p.host_time_ns, p.validity_time_ns);
+            *p = *got;
+            p.host_time_ns = host;
+            p.validity_time_ns = validity;
         }
+        session
+            .feed(&sensor, &mut |o: SessionOutput| -> Result<(), ()> {
+                if let SessionOutput::Solution(s) = o {
+                    last = Some(*s);
+                }
+                Ok(())
+            })
+            .expect("feed");
     }
-    assert!(valid > 10, "{valid}");
+    let s = last.expect("a solution");
+    (
+        [s.latitude_rad, s.longitude_rad, s.height_m],
+        (sum / n.max(1) as f64).sqrt(),
+    )
 }

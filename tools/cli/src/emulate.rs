@@ -28,6 +28,7 @@ use std::time::{Duration, Instant};
 pub enum Pd0Coordinates {
     Instrument,
     Beam,
+    Earth,
 }
 
 #[derive(Debug, clap::Args)]
@@ -38,7 +39,8 @@ pub struct EmulateArgs {
     #[arg(long, value_parser = ["pd0", "wldvl", "nortek"])]
     pub dvl: Option<String>,
     /// The coordinate system of an emulated PD0 DVL's bottom track: instrument (x, y, z and
-    /// error velocity) or beam (the four radial velocities).
+    /// error velocity), beam (the four radial velocities) or earth (east, north, up, rotated
+    /// with the attitude the ensemble records: the log's truth, else its navigation solution).
     #[arg(long, value_enum, default_value_t = Pd0Coordinates::Instrument)]
     pub pd0_coordinates: Pd0Coordinates,
     /// Emulate the IMU in this protocol (kvh1750 or xsens).
@@ -117,6 +119,8 @@ pub struct DeviceSummary {
     /// records cannot carry them, and played as bottom track they would be a wrong velocity over
     /// the ground.
     pub water_track_skipped: u64,
+    /// DVL readings not sent in PD0 earth coordinates because the log had given no attitude yet.
+    pub no_attitude: u64,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -184,6 +188,9 @@ struct Device {
     counter: u32,
     kvh: KvhConfig,
     pd0_coordinates: Pd0Coordinates,
+    /// The latest attitude in the log (roll, pitch, yaw, rad): truth, else the navigation
+    /// solution's, for a PD0 DVL in earth coordinates.
+    attitude: Option<[f64; 3]>,
     summary: DeviceSummary,
 }
 
@@ -229,6 +236,13 @@ impl Device {
             (Protocol::Pd0, LogMessage::Dvl(d)) => match self.pd0_coordinates {
                 Pd0Coordinates::Instrument => enc::pd0_from_dvl(d, self.counter),
                 Pd0Coordinates::Beam => enc::pd0_beam_from_dvl(d, self.counter),
+                Pd0Coordinates::Earth => {
+                    let Some(euler) = self.attitude else {
+                        self.summary.no_attitude += 1;
+                        return None;
+                    };
+                    enc::pd0_earth_from_dvl(d, self.counter, euler)
+                }
             },
             (Protocol::Wldvl, LogMessage::Dvl(d)) => enc::wrz_from_dvl(d, 0.0),
             (Protocol::Nortek, LogMessage::Dvl(d)) => enc::nortek_from_dvl(d),
@@ -352,6 +366,7 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
                     temperature_centi: false,
                 },
                 pd0_coordinates: a.pd0_coordinates,
+                attitude: None,
                 summary: DeviceSummary {
                     device: class.name().to_string(),
                     protocol: protocol.name().to_string(),
@@ -403,8 +418,23 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
     let mut rng = Rng::new(a.seed, "emulate");
     let start = Instant::now();
     let mut first_ns: Option<u64> = None;
+    let mut truth_seen = false;
     while let Some(raw) = reader.next_message().context("reading the log")? {
         let m = raw.decode_any().context("decoding a log message")?;
+        // The attitude an earth-coordinate PD0 DVL records: the truth's, else the solution's.
+        let attitude = match &m {
+            LogMessage::Truth(t) => {
+                truth_seen = true;
+                Some(t.euler_rad)
+            }
+            LogMessage::NavSolution(s) if !truth_seen => Some(s.euler_rad),
+            _ => None,
+        };
+        if attitude.is_some() {
+            for d in &mut devices {
+                d.attitude = attitude;
+            }
+        }
         let (class, host_ns) = match &m {
             LogMessage::Imu(s) => (DeviceClass::Imu, s.host_time_ns),
             LogMessage::Dvl(s) => (DeviceClass::Dvl, s.host_time_ns),
@@ -530,6 +560,13 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
                     )
                 } else {
                     String::new()
+                } + &if s.no_attitude > 0 {
+                    format!(
+                        ", {} DVL readings not played before the log gave an attitude (PD0 earth coordinates)",
+                        s.no_attitude
+                    )
+                } else {
+                    String::new()
                 }
             );
         }
@@ -575,6 +612,7 @@ mod tests {
                 temperature_centi: false,
             },
             pd0_coordinates: Pd0Coordinates::Instrument,
+            attitude: None,
             summary: DeviceSummary::default(),
         };
         let bottom = DvlVelocityV1 {
