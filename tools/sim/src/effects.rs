@@ -215,6 +215,10 @@ effects! {
     dvl_beam_blocked: f64 = "dvl.beam_blocked", unit "1", range 0.0..=4.0, default [0.0];
     /// Fraction of the time the beam dvl.beam_blocked is blocked.
     dvl_beam_blocked_fraction: f64 = "dvl.beam_blocked_fraction", unit "1", range 0.0..=0.95, default [0.0];
+    /// Scale-factor error of each DVL beam (1..4) on its radial velocity: the device computes the velocity from the beams as if they were right, so one beam's error enters the velocity in proportion to its share of the least-squares solution.
+    dvl_beam_scale_factor: [f64; 4] = "dvl.beam_scale_factor", unit "ppm", range -100000.0..=100000.0, default [0.0, 0.0, 0.0, 0.0];
+    /// Angle error of each DVL beam (1..4): the beam points this much further from the DVL's z axis than the 30° the device assumes (same azimuth).
+    dvl_beam_angle_error: [f64; 4] = "dvl.beam_angle_error", unit "deg", range -5.0..=5.0, default [0.0, 0.0, 0.0, 0.0];
 
     /// The water current at the surface, north and east (the vehicle's velocity relative to the water is its velocity over the ground minus the current).
     water_current: [f64; 2] = "water.current", unit "m/s", range -5.0..=5.0, default [0.0, 0.0];

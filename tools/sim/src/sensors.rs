@@ -171,6 +171,20 @@ pub fn dvl_beam_directions() -> [Vector3<f64>; 4] {
     })
 }
 
+/// The four beams' radial velocities (m/s, along each beam from the transducer to the bottom)
+/// for the DVL-frame velocity `v_dvl`, with each beam's scale-factor error
+/// (`dvl.beam_scale_factor`) and angle error (`dvl.beam_angle_error`: the beam's true direction
+/// is that much further from z at the same azimuth), without noise. With both zero it is
+/// `dvl_beam_directions()[i] · v_dvl`.
+pub fn dvl_beam_readings(e: &Effects, v_dvl: &Vector3<f64>) -> [f64; 4] {
+    std::array::from_fn(|i| {
+        let (s, c) = (DVL_BEAM_ANGLE + e.dvl_beam_angle_error[i].to_radians()).sin_cos();
+        let az = (45.0 + 90.0 * i as f64).to_radians();
+        let b = Vector3::new(s * az.cos(), s * az.sin(), c);
+        b.dot(v_dvl) * (1.0 + e.dvl_beam_scale_factor[i] * 1e-6)
+    })
+}
+
 /// Standard deviation of each DVL-frame velocity component per unit of beam noise
 /// (`dvl.noise`): the square roots of the diagonal of (BᵀB)⁻¹ of the least-squares solution.
 pub fn dvl_velocity_std_per_beam_noise() -> Vector3<f64> {
@@ -243,6 +257,8 @@ pub struct DvlModel {
     blocked_beam: Option<(usize, f64)>,
     blocked_until: f64,
     blocked_rng: Rng,
+    /// The per-beam effects (`dvl.beam_scale_factor`, `dvl.beam_angle_error`).
+    beam_effects: Effects,
 }
 
 /// Length of one spell of a blocked beam (s).
@@ -282,6 +298,7 @@ impl DvlModel {
             ),
             blocked_until: f64::NEG_INFINITY,
             blocked_rng: Rng::new(seed, "dvl-beam-blocked"),
+            beam_effects: e.clone(),
         }
     }
 
@@ -366,8 +383,9 @@ impl DvlModel {
         );
         let c_dvl_to_ned = truth.c_body_to_ned * self.install.c_body_to_dvl.transpose();
         let mut y = nalgebra::Vector4::zeros();
+        let radial = dvl_beam_readings(&self.beam_effects, &v_dvl);
         for (i, b) in self.beams.iter().enumerate() {
-            y[i] = b.dot(&v_dvl) + self.rng.gauss(self.noise);
+            y[i] = radial[i] + self.rng.gauss(self.noise);
             m.beam_velocity_m_s[i] = y[i];
             let down = (c_dvl_to_ned * b).z;
             m.validity |= DvlVelocityV1::VALID_BEAM_VELOCITY << i;

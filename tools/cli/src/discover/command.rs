@@ -51,6 +51,11 @@ pub struct DiscoverArgs {
     /// after.
     #[arg(long)]
     pub no_navigation: bool,
+    /// Compare the DVL's four beam velocities with the reference instead of its velocity (the
+    /// `dvl_beams` channel; readings that carry all four beams): finds each beam's own scale and
+    /// angle error (`dvl.beam_scale_factor`, `dvl.beam_angle_error`) besides the installation.
+    #[arg(long)]
+    pub dvl_beams: bool,
 }
 
 /// An effect discovery keeps.
@@ -243,9 +248,18 @@ pub struct Collector {
     /// The IMU samples, compared with the reference over intervals once it is complete.
     imu: Vec<super::imu::ImuSample>,
     last_imu_time: Option<f64>,
+    /// The DVL is compared through its four beam velocities (the `dvl_beams` channel) instead of
+    /// its velocity.
+    dvl_beams: bool,
 }
 
 impl Collector {
+    /// Compare the DVL's beam velocities instead of its velocity (readings with all four beams).
+    pub fn with_dvl_beams(mut self, on: bool) -> Collector {
+        self.dvl_beams = on;
+        self
+    }
+
     pub fn new() -> Collector {
         Collector {
             truth: Vec::new(),
@@ -255,12 +269,23 @@ impl Collector {
             last_force: None,
             imu: Vec::new(),
             last_imu_time: None,
+            dvl_beams: false,
         }
     }
 
     pub fn add(&mut self, m: &LogMessage) {
         match m {
             LogMessage::Truth(t) => self.truth.push(*t),
+            LogMessage::Dvl(d) if self.dvl_beams => {
+                let c = &mut self.channels[7];
+                let all =
+                    (0..4).all(|i| d.validity & (DvlVelocityV1::VALID_BEAM_VELOCITY << i) != 0);
+                if all && !d.is_water_track() {
+                    c.push_beams(d.host_time_ns as f64 * 1e-9, d.beam_velocity_m_s);
+                } else {
+                    c.skipped += 1;
+                }
+            }
             LogMessage::Dvl(d) => {
                 let c = &mut self.channels[0];
                 // Bottom track: the velocity over the ground the model predicts.
@@ -393,7 +418,15 @@ pub fn discover_messages<'a>(messages: impl IntoIterator<Item = &'a LogMessage>)
 
 /// The channels and the reference of the logs, and the number of messages that did not decode.
 pub fn read_logs(paths: &[PathBuf]) -> anyhow::Result<(Vec<Channel>, Reference, usize)> {
-    let mut c = Collector::new();
+    read_logs_with(paths, Collector::new())
+}
+
+/// [`read_logs`] into a configured collector (e.g. [`Collector::with_dvl_beams`]).
+pub fn read_logs_with(
+    paths: &[PathBuf],
+    collector: Collector,
+) -> anyhow::Result<(Vec<Channel>, Reference, usize)> {
+    let mut c = collector;
     let mut undecodable = 0;
     for p in paths {
         let mut reader = LogReader::open(p)?;
@@ -483,6 +516,15 @@ pub fn discover(
             continue;
         }
         if ch.is_empty() {
+            let beams_mode = channels
+                .iter()
+                .any(|c| c.kind == ChannelKind::DvlBeams && (!c.is_empty() || c.skipped > 0));
+            if (kind == ChannelKind::Dvl && beams_mode)
+                || (kind == ChannelKind::DvlBeams && !beams_mode)
+            {
+                // The DVL is analysed through one of its two channels.
+                continue;
+            }
             if kind != ChannelKind::MagneticField {
                 r.notes
                     .push(format!("{}: no valid readings in the logs", kind.name()));
@@ -552,7 +594,11 @@ pub fn discover(
                 components: comps.clone(),
             });
         }
-        let (steps, base_mse) = fit::select(&p, sel, &sep);
+        let (steps, base_mse) = if kind == ChannelKind::DvlBeams {
+            fit::select_parsimonious(&p, sel, &sep)
+        } else {
+            fit::select(&p, sel, &sep)
+        };
         let set: Vec<usize> = steps.iter().map(|s| s.candidate).collect();
         let f = p.fit(&set, &p.epochs);
         let full = p.effects(&set, &f.theta);
@@ -1014,7 +1060,8 @@ pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
         let (name, values) = parse_setting(s)?;
         nominal.set(&name, &values)?;
     }
-    let (channels, reference, undecodable) = read_logs(&a.logs)?;
+    let (channels, reference, undecodable) =
+        read_logs_with(&a.logs, Collector::new().with_dvl_beams(a.dvl_beams))?;
     let mut r = discover(
         &channels,
         &reference,

@@ -46,6 +46,8 @@ pub fn noise_estimate(
                 / rms.len().max(1) as f64;
             ("dvl.noise", m.sqrt())
         }
+        // The beams' residual is the per-beam noise itself.
+        ChannelKind::DvlBeams => ("dvl.noise", rms_all),
         ChannelKind::Depth => ("depth.noise", rms.first().copied().unwrap_or(0.0)),
         ChannelKind::AcousticRanges => ("usbl.range_noise", rms_all),
         ChannelKind::Magnetometer | ChannelKind::MagneticField => ("mag.noise", rms_all),
@@ -91,8 +93,7 @@ pub fn navigator_tables(
     analysed: &[ChannelKind],
     source: &str,
 ) -> (Option<DvlInstallation>, Option<MagnetometerConfig>) {
-    let dvl = analysed
-        .contains(&ChannelKind::Dvl)
+    let dvl = (analysed.contains(&ChannelKind::Dvl) || analysed.contains(&ChannelKind::DvlBeams))
         .then(|| DvlInstallation {
             mount_deg: [e.dvl_mount_roll, e.dvl_mount_pitch, e.dvl_mount_yaw],
             // The simulator's velocity scale: the scale factor with the sound-speed error in it.
@@ -178,6 +179,13 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
         head.push_str(&format!(
             "# {} = {} {} found: the navigator estimates the IMU biases on line \
              (initial_*_bias_std_*) and corrects no scale factor or misalignment; not applied.\n",
+            e.name, e.value, e.unit
+        ));
+    }
+    for e in r.effects.iter().filter(|e| e.name.starts_with("dvl.beam_")) {
+        head.push_str(&format!(
+            "# {} = {} {} found: the navigator fuses the device's velocity and does not correct \
+             single beams; not applied (fix the beam, or have the device compute without it).\n",
             e.name, e.value, e.unit
         ));
     }

@@ -299,6 +299,132 @@ pub fn select(p: &Problem, sel: &Selection, separability: &Separability) -> (Vec
     (steps, base)
 }
 
+/// Most candidates [`select_parsimonious`] combines.
+pub const MAX_SUBSET: usize = 3;
+
+/// Best-subset selection on one channel, for candidates that alias each other on common motion
+/// (the DVL's beams: on a vehicle moving straight ahead, four per-beam scales reproduce any
+/// change of the four beam readings, a mounting error too). Every set of up to [`MAX_SUBSET`]
+/// candidates is scored held out; among the sets whose score is within `min_gain` of the best,
+/// the one with the fewest parameters is kept (then the lowest score), so that a mounting yaw and
+/// a scale factor (two numbers) are not reported as four beam scales, while a single beam's
+/// error, which no installation effect reproduces, still is. Members whose estimate is not
+/// `min_sigma` from nominal are dropped. The kept set is reported in steps of decreasing gain.
+pub fn select_parsimonious(
+    p: &Problem,
+    sel: &Selection,
+    separability: &Separability,
+) -> (Vec<Step>, f64) {
+    let candidates = p.candidates();
+    let base = p.held_out_mse(&[]);
+    let mut sets: Vec<Vec<usize>> = vec![Vec::new()];
+    for size in 1..=MAX_SUBSET.min(candidates.len()) {
+        let mut idx: Vec<usize> = (0..size).collect();
+        loop {
+            sets.push(idx.iter().map(|&i| candidates[i]).collect());
+            // Next combination of `size` indices out of candidates.len().
+            let n = candidates.len();
+            let Some(k) = (0..size).rev().find(|&k| idx[k] < n - size + k) else {
+                break;
+            };
+            idx[k] += 1;
+            for j in k + 1..size {
+                idx[j] = idx[j - 1] + 1;
+            }
+        }
+    }
+    let params = |set: &[usize]| steps(set).len();
+    let scored: Vec<(Vec<usize>, f64)> = sets
+        .into_iter()
+        .map(|s| {
+            let score = if s.is_empty() {
+                base
+            } else {
+                p.held_out_mse(&s)
+            };
+            (s, score)
+        })
+        .filter(|(_, score)| score.is_finite())
+        .collect();
+    let best = scored.iter().map(|(_, s)| *s).fold(base, f64::min);
+    let Some((mut chosen, _)) = scored
+        .iter()
+        .filter(|(_, s)| *s <= best * (1.0 + sel.min_gain))
+        .min_by(|a, b| params(&a.0).cmp(&params(&b.0)).then(a.1.total_cmp(&b.1)))
+        .cloned()
+    else {
+        return (Vec::new(), base);
+    };
+    // Drop members the data do not put min_sigma from nominal.
+    loop {
+        let f = p.fit(&chosen, &p.epochs);
+        let nominal = p.nominal_theta(&chosen);
+        let weak = chosen.iter().copied().find(|&c| {
+            let (off, len) = offset_of(&chosen, c);
+            !(off..off + len).any(|k| {
+                let s = f.std[k];
+                s.is_finite() && s > 0.0 && (f.theta[k] - nominal[k]).abs() >= sel.min_sigma * s
+            })
+        });
+        match weak {
+            Some(c) => chosen.retain(|&x| x != c),
+            None => break,
+        }
+    }
+    // Report in steps: each time the member whose addition lowers the score most.
+    let score_of = |set: &[usize]| {
+        let mut sorted = set.to_vec();
+        sorted.sort_unstable();
+        scored
+            .iter()
+            .find(|(s, _)| {
+                let mut t = s.clone();
+                t.sort_unstable();
+                t == sorted
+            })
+            .map_or_else(|| p.held_out_mse(set), |(_, v)| *v)
+    };
+    let (mut steps_out, mut so_far, mut current) = (Vec::new(), Vec::<usize>::new(), base);
+    let mut left = chosen;
+    while !left.is_empty() {
+        let options: Vec<(usize, f64)> = left
+            .iter()
+            .map(|&c| {
+                let mut s = so_far.clone();
+                s.push(c);
+                (c, score_of(&s))
+            })
+            .collect();
+        let Some(&(c, score)) = options.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+            break;
+        };
+        // Rivals: candidates outside the set that, in its place, score within 2 % and that the
+        // motion cannot separate from it.
+        let rivals = candidates
+            .iter()
+            .copied()
+            .filter(|&r| r != c && !so_far.contains(&r) && !left.contains(&r))
+            .filter_map(|r| {
+                let mut s = so_far.clone();
+                s.push(r);
+                let v = score_of(&s);
+                (v <= score * 1.02 && separability.correlation(c, r) > sel.max_correlation)
+                    .then(|| (r, separability.correlation(c, r)))
+            })
+            .collect();
+        steps_out.push(Step {
+            candidate: c,
+            mse_before: current,
+            mse_after: score,
+            rivals,
+        });
+        so_far.push(c);
+        left.retain(|&x| x != c);
+        current = score;
+    }
+    (steps_out, base)
+}
+
 /// Where a candidate's parameters sit in a set's vector: (offset, length).
 pub fn offset_of(set: &[usize], candidate: usize) -> (usize, usize) {
     let mut off = 0;

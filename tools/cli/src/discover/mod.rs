@@ -186,10 +186,14 @@ pub enum ChannelKind {
     /// The accelerometer's mean specific force over an interval (µg, 3 components), integrated
     /// in the level frame, against the reference's change of velocity with gravity and Coriolis.
     Accelerometer,
+    /// The DVL's four beam (radial) velocities (m/s), in place of its velocity (`discover
+    /// --dvl-beams`): each beam's own scale and angle can be told apart only here, since the
+    /// device's velocity mixes the beams.
+    DvlBeams,
 }
 
 impl ChannelKind {
-    pub const ALL: [ChannelKind; 7] = [
+    pub const ALL: [ChannelKind; 8] = [
         ChannelKind::Dvl,
         ChannelKind::Depth,
         ChannelKind::Magnetometer,
@@ -197,6 +201,7 @@ impl ChannelKind {
         ChannelKind::AcousticRanges,
         ChannelKind::Gyro,
         ChannelKind::Accelerometer,
+        ChannelKind::DvlBeams,
     ];
 
     pub fn name(self) -> &'static str {
@@ -208,6 +213,7 @@ impl ChannelKind {
             ChannelKind::AcousticRanges => "acoustic_ranges",
             ChannelKind::Gyro => "gyro",
             ChannelKind::Accelerometer => "accelerometer",
+            ChannelKind::DvlBeams => "dvl_beams",
         }
     }
 
@@ -221,6 +227,7 @@ impl ChannelKind {
             ChannelKind::Depth => &["depth"],
             ChannelKind::MagneticField => &["magnitude", "dip"],
             ChannelKind::AcousticRanges => &["r0", "r1", "r2", "r3"],
+            ChannelKind::DvlBeams => &["beam1", "beam2", "beam3", "beam4"],
             ChannelKind::Dvl
             | ChannelKind::Magnetometer
             | ChannelKind::Gyro
@@ -253,7 +260,7 @@ impl ChannelKind {
 
     pub fn unit(self) -> &'static str {
         match self {
-            ChannelKind::Dvl => "m/s",
+            ChannelKind::Dvl | ChannelKind::DvlBeams => "m/s",
             ChannelKind::Depth => "m",
             ChannelKind::Magnetometer | ChannelKind::MagneticField => "uT",
             ChannelKind::AcousticRanges => "m",
@@ -283,9 +290,10 @@ impl ChannelKind {
                 let r = reference.at(t_s)?;
                 Some(MagnetometerModel::reading(e, &r.c_body_to_ned).into())
             }
-            // Implicit, against the reading's own fix, or over intervals: see
+            // Implicit, against the reading's own fix, over intervals, or four components: see
             // [`Channel::residual`].
-            ChannelKind::MagneticField
+            ChannelKind::DvlBeams
+            | ChannelKind::MagneticField
             | ChannelKind::AcousticRanges
             | ChannelKind::Gyro
             | ChannelKind::Accelerometer => None,
@@ -398,6 +406,16 @@ impl Channel {
             let predicted = auvnav_sim::sensors::hydrophone_ranges(e, &nominal, &p);
             return Some(std::array::from_fn(|k| z[k] - predicted[k]));
         }
+        if self.kind == ChannelKind::DvlBeams {
+            let r = reference.at(self.times[i] - e.dvl_time_offset)?;
+            let v = DvlInstallation::from_effects(e).velocity(
+                &r.c_body_to_ned,
+                &r.velocity_ned,
+                &r.omega_eb_body,
+            );
+            let predicted = auvnav_sim::sensors::dvl_beam_readings(e, &v);
+            return Some(std::array::from_fn(|k| z[k] - predicted[k]));
+        }
         if matches!(self.kind, ChannelKind::Gyro | ChannelKind::Accelerometer) {
             let truth = Vector3::from(*self.auxiliary.get(i)?);
             let predicted = if self.kind == ChannelKind::Gyro {
@@ -429,6 +447,16 @@ impl Channel {
         }
         let p = self.kind.predict(e, reference, self.times[i])?;
         Some([z[0] - p[0], z[1] - p[1], z[2] - p[2], 0.0])
+    }
+
+    /// A DVL reading's four beam velocities (m/s).
+    pub fn push_beams(&mut self, t_s: f64, beams: [f64; 4]) {
+        if t_s.is_finite() && beams.iter().all(|x| x.is_finite()) {
+            self.times.push(t_s);
+            self.values.push(beams);
+        } else {
+            self.skipped += 1;
+        }
     }
 
     pub fn push(&mut self, t_s: f64, v: [f64; 3]) {
@@ -463,7 +491,8 @@ pub struct Candidate {
 /// as `dvl.scale_factor` does, reported under that name); noise, outlier and lock-loss effects
 /// are statistics of the residual, described rather than fitted; `mag.soft_iron` is calibrated by
 /// `auvnav calibrate mag`. Without a reference attitude (the magnetic-field channel)
-/// `mag.declination` does not act on the reading at all.
+/// `mag.declination` does not act on the reading at all. On the beams (`dvl_beams`) a scale
+/// common to the four beams is `dvl.scale_factor`; `dvl.beam_scale_factor` is each beam's own.
 pub const CANDIDATES: &[Candidate] = &[
     Candidate {
         name: "dvl.scale_factor",
@@ -494,6 +523,46 @@ pub const CANDIDATES: &[Candidate] = &[
         name: "dvl.time_offset",
         channel: ChannelKind::Dvl,
         step: 0.005,
+    },
+    Candidate {
+        name: "dvl.scale_factor",
+        channel: ChannelKind::DvlBeams,
+        step: 1e-4,
+    },
+    Candidate {
+        name: "dvl.mount_roll",
+        channel: ChannelKind::DvlBeams,
+        step: 0.01,
+    },
+    Candidate {
+        name: "dvl.mount_pitch",
+        channel: ChannelKind::DvlBeams,
+        step: 0.01,
+    },
+    Candidate {
+        name: "dvl.mount_yaw",
+        channel: ChannelKind::DvlBeams,
+        step: 0.01,
+    },
+    Candidate {
+        name: "dvl.lever_arm",
+        channel: ChannelKind::DvlBeams,
+        step: 0.01,
+    },
+    Candidate {
+        name: "dvl.time_offset",
+        channel: ChannelKind::DvlBeams,
+        step: 0.005,
+    },
+    Candidate {
+        name: "dvl.beam_scale_factor",
+        channel: ChannelKind::DvlBeams,
+        step: 100.0,
+    },
+    Candidate {
+        name: "dvl.beam_angle_error",
+        channel: ChannelKind::DvlBeams,
+        step: 0.01,
     },
     Candidate {
         name: "depth.bias",
