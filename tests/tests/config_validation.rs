@@ -95,4 +95,19 @@ fn the_dvl_installation_is_given_once_as_a_table_or_as_flat_keys() {
         .expect_err("range")
         .to_string();
     assert!(err.contains("navigation.dvl.scale_factor"), "{err}");
+    // Per-beam corrections: read, and refused out of the simulator's ranges.
+    let beams = format!(
+        "{start}[navigation.dvl]\nbeam_scale_factor_ppm = [0.0, 20000.0, 0.0, 0.0]\nbeam_angle_error_deg = [0.0, 0.0, 0.5, 0.0]\n"
+    );
+    let d = DaemonConfig::from_toml(&beams)
+        .expect("beams")
+        .navigation
+        .dvl_installation();
+    assert_eq!(d.beam_scale_factor_ppm, [0.0, 20000.0, 0.0, 0.0]);
+    assert!(d.corrects_beams());
+    let bad = format!("{start}[navigation.dvl]\nbeam_angle_error_deg = [0.0, 9.0, 0.0, 0.0]\n");
+    let err = DaemonConfig::from_toml(&bad)
+        .expect_err("range")
+        .to_string();
+    assert!(err.contains("navigation.dvl.beam_angle_error_deg"), "{err}");
 }

@@ -13,20 +13,37 @@ use auvnav_tests::tactical;
 use auvnav_tools::demo::{DemoStart, session_config};
 
 fn voyage(seed: u64, blocked_fraction: f64) -> (SimConfig, Vec<LogMessage>) {
-    let scenario = Scenario::load("lawnmower").expect("scenario");
-    let mut effects = scenario.effects().expect("effects");
-    tactical::set_imu(&mut effects);
     if blocked_fraction > 0.0 {
-        effects.set("dvl.beam_blocked", &[2.0]).expect("beam");
-        effects
-            .set("dvl.beam_blocked_fraction", &[blocked_fraction])
-            .expect("fraction");
+        voyage_with(
+            seed,
+            900.0,
+            &[
+                ("dvl.beam_blocked", &[2.0]),
+                ("dvl.beam_blocked_fraction", &[blocked_fraction]),
+            ],
+        )
+    } else {
+        voyage_with(seed, 900.0, &[])
+    }
+}
+
+/// The lawnmower with the tactical IMU and `effects`, `seconds` long.
+fn voyage_with(
+    seed: u64,
+    seconds: f64,
+    effects: &[(&str, &[f64])],
+) -> (SimConfig, Vec<LogMessage>) {
+    let scenario = Scenario::load("lawnmower").expect("scenario");
+    let mut e = scenario.effects().expect("effects");
+    tactical::set_imu(&mut e);
+    for (name, value) in effects {
+        e.set(name, value).expect("effect");
     }
     let cfg = SimConfig {
         scenario,
-        effects,
+        effects: e,
         seed,
-        duration_s: Some(900.0),
+        duration_s: Some(seconds),
     };
     let messages = tactical::simulate(&cfg);
     (cfg, messages)
@@ -39,9 +56,19 @@ struct Outcome {
     fused: u64,
     beams_rejected: u64,
     share_without_velocity: f64,
+    /// Readings solved again from their corrected beams.
+    corrected: u64,
 }
 
 fn navigate(cfg: &SimConfig, messages: &[LogMessage], beam_fusion: bool) -> Outcome {
+    navigate_with(cfg, messages, |n| n.dvl_beam_fusion = beam_fusion)
+}
+
+fn navigate_with(
+    cfg: &SimConfig,
+    messages: &[LogMessage],
+    configure: impl FnOnce(&mut auvnav_core::config::NavConfig),
+) -> Outcome {
     let first: TruthStateV1 = messages
         .iter()
         .find_map(|m| match m {
@@ -51,7 +78,7 @@ fn navigate(cfg: &SimConfig, messages: &[LogMessage], beam_fusion: bool) -> Outc
         .expect("truth");
     let mut c = session_config(cfg, DemoStart::Known, false, &first);
     tactical::configure(&mut c.navigation);
-    c.navigation.dvl_beam_fusion = beam_fusion;
+    configure(&mut c.navigation);
     let mut session = Session::new(&c);
     let mut last: Option<NavSolutionV1> = None;
     let (mut sum, mut epochs) = (0.0, 0u64);
@@ -101,6 +128,7 @@ fn navigate(cfg: &SimConfig, messages: &[LogMessage], beam_fusion: bool) -> Outc
         fused: c.dvl_beam_readings_fused,
         beams_rejected: c.dvl_beams_rejected,
         share_without_velocity: without_velocity as f64 / dvl.max(1) as f64,
+        corrected: c.dvl_beam_corrected,
     }
 }
 
@@ -160,4 +188,68 @@ fn three_beams_still_aid_while_one_is_blocked() {
         "beam fusion {e_beams} m against four beams {e_four} m"
     );
     assert!(e_coast > e_beams, "{e_coast} {e_beams}");
+}
+
+/// A 2 % scale error on beam 2 of a DVL that solves its velocity from its four beams: the device
+/// averages it into all three axes and the navigation drifts. `discover --dvl-beams` on a separate
+/// calibration voyage (its own seed, 500 s) estimates it; with the estimate in `[navigation.dvl]`
+/// the navigator solves each reading again from the corrected beams, and the survey's error
+/// returns to the clean survey's: at least 80 % of the error the beam adds is removed.
+#[test]
+fn a_beams_scale_error_is_estimated_and_corrected_not_averaged_in() {
+    use auvnav_tools::discover::command::{Collector, discover, values_of};
+    use auvnav_tools::discover::fit::Selection;
+    const HIDDEN: [f64; 4] = [0.0, 20_000.0, 0.0, 0.0];
+    let (_, calibration) = voyage_with(8821, 500.0, &[("dvl.beam_scale_factor", &HIDDEN)]);
+    let mut c = Collector::new().with_dvl_beams(true);
+    for m in &calibration {
+        c.add(m);
+    }
+    let (channels, reference) = c.finish();
+    let report = discover(
+        &channels,
+        &reference,
+        &auvnav_sim::effects::Effects::default(),
+        0.7,
+        &Selection::default(),
+    );
+    let found = report
+        .effects
+        .iter()
+        .find(|e| e.name == "dvl.beam_scale_factor")
+        .expect("the beam's scale found");
+    let v = values_of(&found.value).expect("values");
+    let estimate: [f64; 4] = std::array::from_fn(|i| v[i]);
+    let (clean_cfg, clean) = voyage_with(8822, 900.0, &[]);
+    let (cfg, spoiled) = voyage_with(8822, 900.0, &[("dvl.beam_scale_factor", &HIDDEN)]);
+    let e_clean = navigate(&clean_cfg, &clean, false).rms_m;
+    let e_spoiled = navigate(&cfg, &spoiled, false).rms_m;
+    let fixed = navigate_with(&cfg, &spoiled, |n| {
+        let mut d = n.dvl_installation();
+        d.beam_scale_factor_ppm = estimate;
+        n.set_dvl_installation(d);
+    });
+    eprintln!(
+        "beam 2 scale 20 000 ppm, estimated {estimate:.0?} ppm: horizontal error RMS {:.3} m \
+         corrected ({} readings), {e_spoiled:.3} m as the device averages it, {e_clean:.3} m clean",
+        fixed.rms_m, fixed.corrected
+    );
+    assert!(fixed.corrected > 1000, "{}", fixed.corrected);
+    assert!(
+        fixed.rms_m <= 1.2 * e_clean,
+        "corrected {} m against clean {e_clean} m",
+        fixed.rms_m
+    );
+    // On a lawnmower the legs run both ways, so much of a constant velocity error cancels in
+    // position: judged on the error the beam adds over the clean survey.
+    let removed = 1.0 - (fixed.rms_m - e_clean).max(0.0) / (e_spoiled - e_clean);
+    eprintln!(
+        "the correction removes {:.0} % of the error the beam adds",
+        100.0 * removed
+    );
+    assert!(
+        e_spoiled > 1.5 * e_clean,
+        "{e_spoiled} m against clean {e_clean} m"
+    );
+    assert!(removed >= 0.8, "{removed}");
 }

@@ -258,9 +258,30 @@ pub struct DvlInstallation {
     pub lever_arm_m: [f64; 3],
     /// The velocity stamped at t is the vehicle's at t - offset (s). Default 0.
     pub time_offset_s: f64,
+    /// Each beam's own scale-factor error (ppm, beams 1..4; the simulator's
+    /// `dvl.beam_scale_factor`): a reading that carries all four beam velocities is solved again
+    /// from its beams divided by `1 + s`, in place of the device's velocity. Default 0.
+    #[serde(skip_serializing_if = "all_zero")]
+    pub beam_scale_factor_ppm: [f64; 4],
+    /// Each beam's angle error (deg; `dvl.beam_angle_error`): the beam's true angle from the DVL's
+    /// z axis is `dvl_beam_angle_deg` plus this, at its configured azimuth; used as the scale
+    /// factor is. Default 0.
+    #[serde(skip_serializing_if = "all_zero")]
+    pub beam_angle_error_deg: [f64; 4],
     /// Where these values come from (free text, e.g. the calibration run). Default empty.
     #[serde(skip_serializing_if = "String::is_empty")]
     pub source: String,
+}
+
+fn all_zero(v: &[f64; 4]) -> bool {
+    v.iter().all(|x| *x == 0.0)
+}
+
+impl DvlInstallation {
+    /// Whether per-beam corrections are configured.
+    pub fn corrects_beams(&self) -> bool {
+        !all_zero(&self.beam_scale_factor_ppm) || !all_zero(&self.beam_angle_error_deg)
+    }
 }
 
 impl Default for DvlInstallation {
@@ -270,6 +291,8 @@ impl Default for DvlInstallation {
             scale_factor: 1.0,
             lever_arm_m: [0.0; 3],
             time_offset_s: 0.0,
+            beam_scale_factor_ppm: [0.0; 4],
+            beam_angle_error_deg: [0.0; 4],
             source: String::new(),
         }
     }
@@ -284,7 +307,7 @@ impl NavConfig {
             scale_factor: self.dvl_scale_factor,
             lever_arm_m: self.dvl_lever_arm_m,
             time_offset_s: self.dvl_time_offset_s,
-            source: String::new(),
+            ..DvlInstallation::default()
         })
     }
 
@@ -844,6 +867,18 @@ impl NavConfig {
             p.range("navigation.dvl.time_offset_s", d.time_offset_s, -5.0, 5.0);
             p.array("navigation.dvl.mount_deg", &d.mount_deg, -180.0, 180.0);
             p.array("navigation.dvl.lever_arm_m", &d.lever_arm_m, -50.0, 50.0);
+            p.array(
+                "navigation.dvl.beam_scale_factor_ppm",
+                &d.beam_scale_factor_ppm,
+                -100_000.0,
+                100_000.0,
+            );
+            p.array(
+                "navigation.dvl.beam_angle_error_deg",
+                &d.beam_angle_error_deg,
+                -5.0,
+                5.0,
+            );
             out.extend(p.0);
         }
         if let Some(u) = &self.usbl {

@@ -67,6 +67,9 @@ pub struct NavCounters {
     /// and beams refused by their own gate.
     pub dvl_beam_readings_fused: u64,
     pub dvl_beams_rejected: u64,
+    /// DVL readings whose velocity was solved again from their four beams with the configured
+    /// per-beam corrections.
+    pub dvl_beam_corrected: u64,
     /// Sound-velocity readings that set the DVL's sound-speed correction
     /// (`dvl_sound_speed_source = "topic"`), and readings ignored (another source configured, or
     /// out of 1375..1650 m/s).
@@ -218,6 +221,14 @@ impl Navigator {
                 );
             }
             dvl.water_current = true;
+        }
+        if d.corrects_beams() {
+            dvl.beam_correction = crate::aid::dvl::BeamCorrection::new(
+                cfg.dvl_beam_angle_deg,
+                cfg.dvl_beam_azimuths_deg,
+                d.beam_scale_factor_ppm,
+                d.beam_angle_error_deg,
+            );
         }
         if cfg.dvl_beam_fusion {
             dvl.beams = Some((
@@ -400,7 +411,7 @@ impl Navigator {
                 scale_factor: d.scale,
                 lever_arm_m: d.lever_arm_m.into(),
                 time_offset_s: d.time_offset_s,
-                source: String::new(),
+                ..Default::default()
             },
         }
     }
@@ -433,6 +444,10 @@ impl Navigator {
         let mut cfg = cfg;
         let mut d = cp.dvl.clone();
         d.source = "restored from a checkpoint".into();
+        // The per-beam corrections are configured, not estimated: the configuration's stand.
+        let configured = cfg.dvl_installation();
+        d.beam_scale_factor_ppm = configured.beam_scale_factor_ppm;
+        d.beam_angle_error_deg = configured.beam_angle_error_deg;
         cfg.set_dvl_installation(d);
         let mut nav = Navigator::new(cfg, state);
         nav.core.kf.p = ekf::Covariance::from_iterator(cp.covariance.iter().copied());
@@ -572,6 +587,7 @@ impl Navigator {
             dvl_bottom_lock_regained: self.dvl.bottom_lock_regained,
             dvl_beam_readings_fused: self.dvl.beam_readings_fused,
             dvl_beams_rejected: self.dvl.beams_rejected,
+            dvl_beam_corrected: self.dvl.beam_corrected,
             sound_velocity_used: self.sound_velocity_used,
             sound_velocity_ignored: self.sound_velocity_ignored,
             depth_fused: depth.fused,

@@ -16,6 +16,13 @@
 //! `b_i` its unit direction in the DVL frame and `h` the velocity model above; each beam is gated
 //! alone (χ², 1 dof), so one bad beam is refused by itself, and the accepted ones are fused
 //! together.
+//!
+//! **Per-beam corrections.** With a beam's scale or angle error configured
+//! (`[navigation.dvl]` `beam_scale_factor_ppm`, `beam_angle_error_deg`, as `auvnav discover
+//! --dvl-beams` finds them), a reading that carries its four beams gets its velocity solved again
+//! from the beams divided by their scales along their true directions, in place of the device's
+//! solution, which averages one beam's error into all three axes; beam fusion uses the corrected
+//! beams too.
 
 use super::{AidCounters, AidUpdate, NavCore};
 use crate::earth;
@@ -75,6 +82,59 @@ pub struct DvlAid {
     /// Readings fused from their beams, and beams refused by their own gate.
     pub beam_readings_fused: u64,
     pub beams_rejected: u64,
+    /// Per-beam corrections (`[navigation.dvl]` `beam_scale_factor_ppm`, `beam_angle_error_deg`).
+    pub beam_correction: Option<BeamCorrection>,
+    /// Readings whose velocity was solved again from their corrected beams.
+    pub beam_corrected: u64,
+}
+
+/// Each beam's scale (`1 + s`) and true direction, and the least-squares solution of a velocity
+/// from four beams along those directions.
+#[derive(Debug, Clone)]
+pub struct BeamCorrection {
+    pub scale: [f64; 4],
+    pub directions: [Vector3<f64>; 4],
+    solve: nalgebra::Matrix3x4<f64>,
+}
+
+impl BeamCorrection {
+    /// From the configured geometry (Janus angle and azimuths, deg) and each beam's scale error
+    /// (ppm) and angle error (deg); `None` when the four directions do not determine a velocity.
+    pub fn new(
+        angle_deg: f64,
+        azimuths_deg: [f64; 4],
+        scale_ppm: [f64; 4],
+        angle_error_deg: [f64; 4],
+    ) -> Option<BeamCorrection> {
+        let directions: [Vector3<f64>; 4] = std::array::from_fn(|i| {
+            let (s, c) = ((angle_deg + angle_error_deg[i]) * DEG).sin_cos();
+            let (sa, ca) = (azimuths_deg[i] * DEG).sin_cos();
+            Vector3::new(s * ca, s * sa, c)
+        });
+        let b = nalgebra::Matrix4x3::from_rows(&directions.map(|v| v.transpose()));
+        let solve = (b.transpose() * b).try_inverse()? * b.transpose();
+        Some(BeamCorrection {
+            scale: scale_ppm.map(|s| 1.0 + s * 1e-6),
+            directions,
+            solve,
+        })
+    }
+
+    /// The reading with its velocity solved again from its four corrected beams; `None` when it
+    /// does not carry all four.
+    pub fn apply(&self, m: &DvlVelocityV1) -> Option<DvlVelocityV1> {
+        let mut z = nalgebra::Vector4::zeros();
+        for i in 0..4 {
+            let v = m.beam_velocity_m_s[i];
+            if m.validity & (DvlVelocityV1::VALID_BEAM_VELOCITY << i) == 0 || !v.is_finite() {
+                return None;
+            }
+            z[i] = v / self.scale[i];
+        }
+        let mut out = *m;
+        out.velocity_dvl_m_s = (self.solve * z).into();
+        Some(out)
+    }
 }
 
 /// The unit direction of each beam in the DVL frame: `angle_deg` from z, azimuths from x about z.
@@ -141,17 +201,24 @@ impl DvlAid {
             beams: None,
             beam_readings_fused: 0,
             beams_rejected: 0,
+            beam_correction: None,
+            beam_corrected: 0,
         }
     }
 
     /// The beams of a reading that carries no instrument velocity, fused (see the module's
     /// documentation); `None` when beam fusion is off or the reading has no valid beam.
     fn fuse_beams(&mut self, core: &mut NavCore, m: &DvlVelocityV1) -> Option<AidUpdate> {
-        let (dirs, std) = self.beams?;
+        let (mut dirs, std) = self.beams?;
         let ratio = self.sound_speed.map_or(1.0, |c| c.ratio(m));
+        let mut scale = [1.0; 4];
+        if let Some(c) = &self.beam_correction {
+            dirs = c.directions;
+            scale = c.scale;
+        }
         let beams: Vec<(usize, f64)> = (0..4)
             .filter(|i| m.validity & (DvlVelocityV1::VALID_BEAM_VELOCITY << i) != 0)
-            .map(|i| (i, m.beam_velocity_m_s[i] * ratio))
+            .map(|i| (i, m.beam_velocity_m_s[i] * ratio / scale[i]))
             .filter(|(_, v)| v.is_finite() && v.abs() < 20.0)
             .collect();
         if beams.is_empty() {
@@ -350,6 +417,16 @@ impl DvlAid {
             _ => {}
         }
         self.bottom_locked = Some(locked);
+        // Per-beam corrections: the velocity solved again from the four corrected beams.
+        let corrected = self
+            .beam_correction
+            .as_ref()
+            .filter(|_| m.validity & DvlVelocityV1::VALID_VELOCITY != 0)
+            .and_then(|c| c.apply(m));
+        if corrected.is_some() {
+            self.beam_corrected += 1;
+        }
+        let m = corrected.as_ref().unwrap_or(m);
         if m.validity & DvlVelocityV1::VALID_VELOCITY == 0
             && let Some(u) = self.fuse_beams(core, m)
         {
@@ -504,4 +581,37 @@ pub fn dvl_model(
     h.fixed_view_mut::<3, 1>(0, ekf::DVL_TIME)
         .copy_from(&(-p.scale * c_bd * a_b));
     (predicted, h)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Beams read with a scale and an angle error give back the true velocity once corrected,
+    /// and the reading's other fields stay.
+    #[test]
+    fn corrected_beams_give_back_the_velocity() {
+        let azimuths = [45.0, 135.0, 225.0, 315.0];
+        let (scale, angle) = ([0.0, 20_000.0, -5_000.0, 0.0], [0.0, 0.0, 0.7, -0.3]);
+        let c = BeamCorrection::new(30.0, azimuths, scale, angle).expect("geometry");
+        let v = Vector3::new(1.7, -0.2, 0.05);
+        let mut m = DvlVelocityV1 {
+            velocity_dvl_m_s: [9.0; 3],
+            altitude_m: 12.0,
+            validity: DvlVelocityV1::VALID_VELOCITY | DvlVelocityV1::VALID_ALTITUDE,
+            ..Default::default()
+        };
+        for i in 0..4 {
+            m.beam_velocity_m_s[i] = c.directions[i].dot(&v) * c.scale[i];
+            m.validity |= DvlVelocityV1::VALID_BEAM_VELOCITY << i;
+        }
+        let out = c.apply(&m).expect("four beams");
+        for k in 0..3 {
+            assert!((out.velocity_dvl_m_s[k] - v[k]).abs() < 1e-12);
+        }
+        assert_eq!(out.altitude_m, 12.0);
+        // Without all four beams there is nothing to solve again.
+        m.validity &= !(DvlVelocityV1::VALID_BEAM_VELOCITY << 2);
+        assert!(c.apply(&m).is_none());
+    }
 }

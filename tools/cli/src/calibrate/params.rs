@@ -249,7 +249,7 @@ pub fn installation(x: &[f64; 8]) -> DvlInstallation {
         scale_factor: x[3],
         lever_arm_m: [x[4], x[5], x[6]],
         time_offset_s: x[7],
-        source: String::new(),
+        ..DvlInstallation::default()
     }
 }
 

@@ -100,6 +100,18 @@ pub fn navigator_tables(
             scale_factor: auvnav_sim::sensors::DvlInstallation::from_effects(e).scale,
             lever_arm_m: e.dvl_lever_arm,
             time_offset_s: e.dvl_time_offset,
+            // Per-beam effects only from the beams channel (the velocity channel does not see
+            // them apart).
+            beam_scale_factor_ppm: if analysed.contains(&ChannelKind::DvlBeams) {
+                e.dvl_beam_scale_factor
+            } else {
+                [0.0; 4]
+            },
+            beam_angle_error_deg: if analysed.contains(&ChannelKind::DvlBeams) {
+                e.dvl_beam_angle_error
+            } else {
+                [0.0; 4]
+            },
             source: source.into(),
         });
     let mag = if analysed.contains(&ChannelKind::Magnetometer) {
@@ -182,12 +194,12 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
             e.name, e.value, e.unit
         ));
     }
-    for e in r.effects.iter().filter(|e| e.name.starts_with("dvl.beam_")) {
-        head.push_str(&format!(
-            "# {} = {} {} found: the navigator fuses the device's velocity and does not correct \
-             single beams; not applied (fix the beam, or have the device compute without it).\n",
-            e.name, e.value, e.unit
-        ));
+    if r.effects.iter().any(|e| e.name.starts_with("dvl.beam_")) {
+        head.push_str(
+            "# Per-beam corrections found (beam_scale_factor_ppm, beam_angle_error_deg): the\n\
+             # navigator applies them to readings that carry all four beam velocities; a DVL\n\
+             # that sends only its velocity needs the beam fixed or the device reconfigured.\n",
+        );
     }
     for name in ["depth.bias", "depth.density"] {
         if let Some(e) = r.effects.iter().find(|e| e.name == name) {
