@@ -230,3 +230,52 @@ fn the_readme_demo_aligns_in_motion_then_homes_on_usbl_and_reproduces() {
     );
     assert!(!cfg.contains("[initial]"), "{cfg}");
 }
+
+/// The same voyage with the emulated PD0 DVL in instrument, beam and earth coordinates, through
+/// the whole chain (pty, `auvnav-dvl`, the daemon, the recorder): each navigates like the
+/// instrument-coordinate run, within what the velocity's 1 mm/s resolution allows over the run,
+/// and each reproduces from its recording.
+#[test]
+fn every_pd0_coordinate_system_navigates_alike_through_the_daemon() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    const SECONDS: f64 = 180.0;
+    let dir = TempDir::new("livepd0");
+    let runs: Vec<(&str, serde_json::Value)> = ["instrument", "beam", "earth"]
+        .into_iter()
+        .map(|c| {
+            let seconds = SECONDS.to_string();
+            let args = [
+                "--scenario",
+                "lawnmower",
+                "--start",
+                "known",
+                "--seconds",
+                &seconds,
+                "--speed",
+                "10",
+                "--pd0-coordinates",
+                c,
+            ];
+            let v = demo(&args, &dir.path().join(c));
+            assert_eq!(v["pd0_coordinates"], c, "{v}");
+            assert_eq!(v["replay_identical"], true, "{c}: {v}");
+            assert_eq!(v["clean_stop"], true, "{c}: {v}");
+            (c, v)
+        })
+        .collect();
+    let figure = |v: &serde_json::Value, k: &str| v["accuracy"][k].as_f64().expect(k);
+    let bound = 2.0 * 0.001 * SECONDS;
+    let reference = &runs[0].1;
+    for (c, v) in &runs {
+        eprintln!(
+            "{c}: final {:.3} m, RMS {:.3} m, heading RMS {:.4} deg",
+            figure(v, "horizontal_error_final_m"),
+            figure(v, "horizontal_error_rms_m"),
+            figure(v, "heading_error_rms_deg")
+        );
+        for k in ["horizontal_error_final_m", "horizontal_error_rms_m"] {
+            let d = (figure(v, k) - figure(reference, k)).abs();
+            assert!(d < bound, "{c}: {k} differs by {d} m (bound {bound} m)");
+        }
+    }
+}

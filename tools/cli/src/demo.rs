@@ -61,6 +61,11 @@ pub struct DemoArgs {
     #[arg(long, value_name = "PROTOCOL", num_args = 0..=1, default_missing_value = "nmea",
           value_parser = ["nmea", "ubx"])]
     pub gnss: Option<String>,
+    /// The coordinate system the emulated PD0 DVL records its bottom track in (processes only):
+    /// instrument (x, y, z), beam (the four radial velocities) or earth (east, north, up with
+    /// the attitude in the ensemble); `auvnav-dvl` converts each back.
+    #[arg(long, value_enum, default_value_t = crate::emulate::Pd0Coordinates::Instrument)]
+    pub pd0_coordinates: crate::emulate::Pd0Coordinates,
     /// Write the logs and solutions here (processes: voyage.mcap, record.mcap, live_nav.csv,
     /// replay_nav.csv and each process's log; in process: sim.mcap and nav.csv).
     #[arg(long)]
@@ -410,6 +415,7 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
         a.start,
         imu,
         gnss,
+        a.pd0_coordinates,
         a.seed,
         a.seconds,
         a.speed,

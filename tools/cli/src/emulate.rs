@@ -31,6 +31,17 @@ pub enum Pd0Coordinates {
     Earth,
 }
 
+impl Pd0Coordinates {
+    /// The name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Pd0Coordinates::Instrument => "instrument",
+            Pd0Coordinates::Beam => "beam",
+            Pd0Coordinates::Earth => "earth",
+        }
+    }
+}
+
 #[derive(Debug, clap::Args)]
 pub struct EmulateArgs {
     /// The log to play (MCAP, as written by `auvnav sim` or the recorder).

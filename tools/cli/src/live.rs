@@ -35,6 +35,8 @@ pub struct LiveResult {
     pub imu: String,
     /// The emulated GNSS receiver's protocol (`--gnss`), when one ran.
     pub gnss: Option<String>,
+    /// The coordinate system of the emulated PD0 DVL's bottom track.
+    pub pd0_coordinates: String,
     /// GNSS fixes the simulator made (at the surface) and fixes the recording holds (published
     /// by `auvnav-gnss` while the depth on the bus said the vehicle was at the surface).
     pub gnss_fixes_simulated: u64,
@@ -239,6 +241,7 @@ pub fn run_live(
     start_mode: DemoStart,
     imu: Protocol,
     gnss: Option<Protocol>,
+    pd0_coordinates: crate::emulate::Pd0Coordinates,
     seed: u64,
     seconds: Option<f64>,
     speed: f64,
@@ -432,7 +435,16 @@ pub fn run_live(
     }
     std::thread::sleep(Duration::from_millis(500));
     let start_delay = 1.5;
-    let mut emulated = vec!["--dvl", "pd0", "--imu", imu.name(), "--usbl", "seatrac"];
+    let mut emulated = vec![
+        "--dvl",
+        "pd0",
+        "--pd0-coordinates",
+        pd0_coordinates.name(),
+        "--imu",
+        imu.name(),
+        "--usbl",
+        "seatrac",
+    ];
     if let Some(p) = gnss {
         emulated.extend(["--gnss", p.name()]);
     }
@@ -538,6 +550,7 @@ pub fn run_live(
         speed,
         imu: imu.name().to_string(),
         gnss: gnss.map(|p| p.name().to_string()),
+        pd0_coordinates: pd0_coordinates.name().to_string(),
         gnss_fixes_simulated: simulated.gnss,
         gnss_fixes_recorded,
         directory: dir.display().to_string(),
