@@ -219,6 +219,10 @@ effects! {
     dvl_beam_scale_factor: [f64; 4] = "dvl.beam_scale_factor", unit "ppm", range -100000.0..=100000.0, default [0.0, 0.0, 0.0, 0.0];
     /// Angle error of each DVL beam (1..4): the beam points this much further from the DVL's z axis than the 30° the device assumes (same azimuth).
     dvl_beam_angle_error: [f64; 4] = "dvl.beam_angle_error", unit "deg", range -5.0..=5.0, default [0.0, 0.0, 0.0, 0.0];
+    /// Time-correlated DVL velocity error: one-sigma of a first-order Gauss-Markov error on each DVL-frame axis (correlation time dvl.velocity_error_correlation_time), as bottom returns from a patchy or moving bed, or a platform's own flow, give; it colours the residual where dvl.noise is white.
+    dvl_velocity_error_instability: f64 = "dvl.velocity_error_instability", unit "m/s", range 0.0..=1.0, default [0.0];
+    /// Correlation time of dvl.velocity_error_instability.
+    dvl_velocity_error_correlation_time: f64 = "dvl.velocity_error_correlation_time", unit "s", range 0.1..=1.0e5, default [60.0];
 
     /// The water current at the surface, north and east (the vehicle's velocity relative to the water is its velocity over the ground minus the current).
     water_current: [f64; 2] = "water.current", unit "m/s", range -5.0..=5.0, default [0.0, 0.0];

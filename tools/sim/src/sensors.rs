@@ -259,6 +259,12 @@ pub struct DvlModel {
     blocked_rng: Rng,
     /// The per-beam effects (`dvl.beam_scale_factor`, `dvl.beam_angle_error`).
     beam_effects: Effects,
+    /// The time-correlated velocity error (`dvl.velocity_error_instability`, DVL frame), its
+    /// one-sigma, correlation time and random stream (drawn from only when the sigma is above 0).
+    correlated: Option<Vector3<f64>>,
+    correlated_std: f64,
+    correlated_time: f64,
+    correlated_rng: Rng,
 }
 
 /// Length of one spell of a blocked beam (s).
@@ -299,6 +305,10 @@ impl DvlModel {
             blocked_until: f64::NEG_INFINITY,
             blocked_rng: Rng::new(seed, "dvl-beam-blocked"),
             beam_effects: e.clone(),
+            correlated: None,
+            correlated_std: e.dvl_velocity_error_instability,
+            correlated_time: e.dvl_velocity_error_correlation_time,
+            correlated_rng: Rng::new(seed, "dvl-velocity-error"),
         }
     }
 
@@ -371,16 +381,32 @@ impl DvlModel {
         {
             self.lost_until = t + self.loss_duration;
         }
+        if self.correlated_std > 0.0 {
+            // First-order Gauss-Markov, stationary from the first ping.
+            let s = self.correlated_std;
+            let next = match self.correlated {
+                None => Vector3::from_fn(|_, _| self.correlated_rng.gauss(s)),
+                Some(e) => {
+                    let phi = (-interval.max(0.0) / self.correlated_time).exp();
+                    let q = s * (1.0 - phi * phi).sqrt();
+                    e.map(|x| phi * x + self.correlated_rng.gauss(q))
+                }
+            };
+            self.correlated = Some(next);
+        }
         let locked = t >= self.lost_until && altitude > 0.5 && altitude <= self.max_altitude;
         if !locked {
             return m;
         }
         let blocked = self.beam_blocked(t, interval);
-        let v_dvl = self.install.velocity(
+        let mut v_dvl = self.install.velocity(
             &truth.c_body_to_ned,
             &truth.velocity_ned,
             &truth.omega_eb_body,
         );
+        if let Some(e) = self.correlated {
+            v_dvl += e;
+        }
         let c_dvl_to_ned = truth.c_body_to_ned * self.install.c_body_to_dvl.transpose();
         let mut y = nalgebra::Vector4::zeros();
         let radial = dvl_beam_readings(&self.beam_effects, &v_dvl);

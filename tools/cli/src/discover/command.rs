@@ -602,6 +602,19 @@ pub fn discover(
         let set: Vec<usize> = steps.iter().map(|s| s.candidate).collect();
         let f = p.fit(&set, &p.epochs);
         let full = p.effects(&set, &f.theta);
+        let lags = fit::correlation_lags(&p.residuals(&full, &p.epochs), d);
+        if lags > 0 {
+            r.notes.push(format!(
+                "{}: the residual with the effects found stays correlated over {lags} readings; \
+                 the standard deviations and the significance test allow for it (Newey–West){}",
+                kind.name(),
+                if set.is_empty() {
+                    String::new()
+                } else {
+                    format!(", {:.1}× wider than for white residuals", f.widening)
+                }
+            ));
+        }
         // Effects a group of other candidates mimics together, at the fitted model.
         let confounded = {
             let at_fit = Problem::new(ch, reference, full.clone());

@@ -143,21 +143,47 @@ impl<'a> Problem<'a> {
                 break;
             }
         }
-        // Parameter covariance σ²(JᵀJ)⁻¹ at the solution.
-        let dof = n.saturating_sub(theta.len()).max(1) as f64;
-        let sigma2 = sse / dof;
-        let std = if theta.is_empty() {
-            Vec::new()
+        // Parameter covariance at the solution: the sandwich (JᵀJ)⁻¹ S (JᵀJ)⁻¹ with S the
+        // Newey–West estimate of the scores' long-run covariance, which is σ²JᵀJ for white
+        // residuals and widens the deviations as much as the residuals' correlation in time
+        // (a slowly varying sensor error, a drifting bias) makes the readings fewer than they
+        // are.
+        let d = self.channel.kind.dims();
+        let (std, widening, lags) = if theta.is_empty() {
+            (Vec::new(), 1.0, 0)
         } else {
             let jtj = jac.transpose() * &jac;
             match jtj.clone().try_inverse() {
-                Some(inv) => (0..theta.len())
-                    .map(|i| (sigma2 * inv[(i, i)]).max(0.0).sqrt())
-                    .collect(),
-                None => vec![f64::INFINITY; theta.len()],
+                Some(inv) => {
+                    let dof = n.saturating_sub(theta.len()).max(1) as f64;
+                    let white: Vec<f64> = (0..theta.len())
+                        .map(|i| (sse / dof * inv[(i, i)]).max(0.0).sqrt())
+                        .collect();
+                    let lags = correlation_lags(&r, d);
+                    let s = long_run_scores(&jac, &r, d, lags) * (n as f64 / dof);
+                    let cov = &inv * s * &inv;
+                    let std: Vec<f64> = (0..theta.len())
+                        .map(|i| cov[(i, i)].max(0.0).sqrt().max(white[i]))
+                        .collect();
+                    let widening = std
+                        .iter()
+                        .zip(&white)
+                        .filter(|(_, w)| **w > 0.0 && w.is_finite())
+                        .map(|(s, w)| s / w)
+                        .fold(1.0, f64::max);
+                    (std, widening, lags)
+                }
+                None => (vec![f64::INFINITY; theta.len()], 1.0, 0),
             }
         };
-        Fit { theta, std, sse, n }
+        Fit {
+            theta,
+            std,
+            sse,
+            n,
+            widening,
+            lags,
+        }
     }
 
     /// The held-out score of a set: mean squared residual over the five time blocks, each
@@ -205,9 +231,62 @@ fn steps(set: &[usize]) -> Vec<f64> {
 #[derive(Debug, Clone)]
 pub struct Fit {
     pub theta: Vec<f64>,
+    /// Standard deviations allowing for the residuals' correlation in time (never below the
+    /// white-residual ones).
     pub std: Vec<f64>,
     pub sse: f64,
     pub n: usize,
+    /// The largest ratio of a standard deviation to the one white residuals would give.
+    pub widening: f64,
+    /// Readings over which the residuals are correlated (the Newey–West bandwidth).
+    pub lags: usize,
+}
+
+/// The residuals' correlation length in readings: twice the first lag at which the mean
+/// autocorrelation of the `d` components (readings in time order) falls below its 95 % bound for
+/// white noise (2/√m), at most a quarter of the readings; 0 for white residuals.
+pub fn correlation_lags(r: &[f64], d: usize) -> usize {
+    let m = r.len() / d.max(1);
+    if m < 8 {
+        return 0;
+    }
+    let var: Vec<f64> = (0..d)
+        .map(|k| (0..m).map(|t| r[t * d + k].powi(2)).sum::<f64>())
+        .collect();
+    let bound = 2.0 / (m as f64).sqrt();
+    let max = m / 4;
+    for lag in 1..=max {
+        let (mut sum, mut used) = (0.0, 0);
+        for k in 0..d {
+            if var[k] <= 0.0 {
+                continue;
+            }
+            let c: f64 = (lag..m).map(|t| r[t * d + k] * r[(t - lag) * d + k]).sum();
+            sum += c / var[k];
+            used += 1;
+        }
+        if used == 0 || sum / used as f64 <= bound {
+            return if lag == 1 { 0 } else { (2 * lag).min(max) };
+        }
+    }
+    max
+}
+
+/// Newey–West long-run covariance of the scores `g_t = Σ_k J[t·d+k]ᵀ r[t·d+k]` with Bartlett
+/// weights over `lags` readings.
+fn long_run_scores(j: &DMatrix<f64>, r: &[f64], d: usize, lags: usize) -> DMatrix<f64> {
+    let p = j.ncols();
+    let m = r.len() / d.max(1);
+    let g = DMatrix::from_fn(m, p, |t, c| {
+        (0..d).map(|k| j[(t * d + k, c)] * r[t * d + k]).sum()
+    });
+    let mut s = g.transpose() * &g;
+    for lag in 1..=lags.min(m.saturating_sub(1)) {
+        let w = 1.0 - lag as f64 / (lags as f64 + 1.0);
+        let a = g.rows(lag, m - lag).transpose() * g.rows(0, m - lag);
+        s += (&a + a.transpose()) * w;
+    }
+    s
 }
 
 /// Thresholds of the forward selection.
