@@ -447,3 +447,68 @@ fn coloured_dvl_noise_names_no_dvl_effect() {
         );
     }
 }
+
+/// What a log cannot show is said: a 0.37 s DVL time offset hidden in a docking run (seed 8803,
+/// whose accelerations sit in its last minutes, so that the held-out blocks cannot confirm an
+/// offset) is either named or reported with a floor above it. The floor is what the selection
+/// would name: on the same run a DVL scale error twice its scale floor is named, one at half of
+/// it is not.
+#[test]
+fn an_effect_below_the_floor_is_reported_as_such() {
+    use auvnav_sim::{SimConfig, scenario::Scenario};
+    use auvnav_tools::discover::command::{Collector, DiscoverReport};
+    let run = |hidden: &[(&str, f64)]| -> DiscoverReport {
+        let scenario = Scenario::load("docking").expect("scenario");
+        let mut effects = scenario.effects().expect("effects");
+        for (name, value) in hidden {
+            effects.set(name, &[*value]).expect("hidden");
+        }
+        let cfg = SimConfig {
+            scenario,
+            effects,
+            seed: 8803,
+            duration_s: None,
+        };
+        let mut c = Collector::new();
+        auvnav_sim::simulate(&cfg, |m| {
+            c.add(m);
+            Ok(())
+        })
+        .expect("simulate");
+        let (channels, reference) = c.finish();
+        discover(
+            &channels,
+            &reference,
+            &Effects::default(),
+            0.7,
+            &Selection::default(),
+        )
+    };
+    let floor_of = |r: &DiscoverReport, name: &str| {
+        r.floors
+            .iter()
+            .find(|f| f.name == name)
+            .and_then(|f| f.floor[0])
+    };
+    let named = |r: &DiscoverReport, name: &str| r.effects.iter().any(|e| e.name == name);
+    let small = run(&[("dvl.time_offset", 0.37)]);
+    let offset_floor = floor_of(&small, "dvl.time_offset");
+    println!(
+        "0.37 s: named {}, floor {offset_floor:?} s",
+        named(&small, "dvl.time_offset")
+    );
+    assert!(
+        named(&small, "dvl.time_offset") || offset_floor.is_some_and(|f| f > 0.37),
+        "{offset_floor:?}"
+    );
+    let scale_floor = floor_of(&small, "dvl.scale_factor").expect("a scale floor");
+    for (factor, expect) in [(2.0, true), (0.5, false)] {
+        let departure = factor * scale_floor;
+        let r = run(&[("dvl.scale_factor", 1.0 + departure)]);
+        println!(
+            "scale 1 + {departure:.5} ({factor} × the floor {scale_floor:.5}): named {}",
+            named(&r, "dvl.scale_factor")
+        );
+        assert_eq!(named(&r, "dvl.scale_factor"), expect, "{:#?}", r.effects);
+    }
+}

@@ -222,6 +222,9 @@ pub struct DiscoverReport {
     pub navigation: Vec<super::extend::NavigationGain>,
     /// What could not be analysed, and why.
     pub notes: Vec<String>,
+    /// For every candidate not named: the smallest size the data would have named, so that an
+    /// absent effect reads as "below the floor" or "not excited", never as silence.
+    pub floors: Vec<DetectionFloor>,
     pub wall_s: f64,
     /// The nominal effects.
     #[serde(skip)]
@@ -234,6 +237,66 @@ pub struct DiscoverReport {
     pub held_out_model: Effects,
     #[serde(skip)]
     pub residuals: Vec<ResidualSeries>,
+}
+
+/// How large a candidate must be for this motion and noise to name it.
+#[derive(Debug, Clone, Serialize)]
+pub struct DetectionFloor {
+    pub name: String,
+    pub channel: ChannelKind,
+    /// Per component: the smallest departure from the nominal value the selection would name
+    /// (the larger of `min_sigma` standard deviations of the candidate fitted with the effects
+    /// found, allowing for correlated residuals, and the size that lowers the held-out score by
+    /// `min_gain`), in the effect's unit; `None` where the motion does not excite the component.
+    pub floor: Vec<Option<f64>>,
+    pub unit: String,
+    /// The significance test's standard deviations (`min_sigma`).
+    pub sigmas: f64,
+}
+
+impl DetectionFloor {
+    /// The floor in words, e.g. `dvl.time_offset (dvl): would need about ±1.04 s to be named on
+    /// this motion (…); smaller is neither found nor excluded`.
+    pub fn describe(&self) -> String {
+        let min_sigma = self.sigmas;
+        let parts: Vec<String> = self
+            .floor
+            .iter()
+            .map(|f| match f {
+                Some(v) => format!("±{}", sig(*v)),
+                None => "not excited".into(),
+            })
+            .collect();
+        let text = if parts.len() == 1 {
+            parts[0].clone()
+        } else {
+            format!("[{}]", parts.join(", "))
+        };
+        if self.floor.iter().all(Option::is_none) {
+            format!(
+                "{} ({}): not excited by this motion",
+                self.name,
+                self.channel.name()
+            )
+        } else {
+            format!(
+                "{} ({}): would need about {text} {} to be named on this motion ({min_sigma}σ \
+                 and the held-out gain, linearised); smaller is neither found nor excluded",
+                self.name,
+                self.channel.name(),
+                self.unit
+            )
+        }
+    }
+}
+
+/// Three significant digits.
+fn sig(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let digits = (2 - v.abs().log10().floor() as i32).max(0) as usize;
+    format!("{v:.digits$}")
 }
 
 /// Collects the channels and the reference from log messages.
@@ -490,6 +553,7 @@ pub fn discover(
         noise: Vec::new(),
         navigation: Vec::new(),
         notes: Vec::new(),
+        floors: Vec::new(),
         wall_s: 0.0,
         nominal_model: nominal.clone(),
         model: nominal.clone(),
@@ -602,6 +666,39 @@ pub fn discover(
         let set: Vec<usize> = steps.iter().map(|s| s.candidate).collect();
         let f = p.fit(&set, &p.epochs);
         let full = p.effects(&set, &f.theta);
+        // The floor of every candidate not named: fitted with the effects found.
+        for c in p.candidates() {
+            if set.contains(&c) {
+                continue;
+            }
+            let mut with = set.clone();
+            with.push(c);
+            let fc = p.fit(&with, &p.epochs);
+            let (off, len) = fit::offset_of(&with, c);
+            let dead = sep
+                .unexcited
+                .iter()
+                .find(|(u, _)| *u == c)
+                .map(|(_, comps)| comps.clone())
+                .unwrap_or_default();
+            // Named takes both tests: min_sigma deviations, and a held-out score lower by
+            // min_gain.
+            let gain = p.gain_floor(&set, c, sel.min_gain);
+            let floor = (0..len)
+                .map(|k| {
+                    let s = fc.std[off + k];
+                    (!dead.contains(&k) && s.is_finite() && s > 0.0)
+                        .then(|| (sel.min_sigma * s).max(gain[k]))
+                })
+                .collect();
+            r.floors.push(DetectionFloor {
+                name: fit::name(c).into(),
+                channel: kind,
+                floor,
+                unit: spec(fit::name(c)).map_or("", |s| s.unit).into(),
+                sigmas: sel.min_sigma,
+            });
+        }
         let lags = fit::correlation_lags(&p.residuals(&full, &p.epochs), d);
         if lags > 0 {
             r.notes.push(format!(
@@ -1160,6 +1257,9 @@ fn print_text(r: &DiscoverReport) {
             "  not excited by this motion: {} components {:?}",
             u.name, u.components
         );
+    }
+    for f in &r.floors {
+        println!("  not named: {}", f.describe());
     }
     for u in &r.unexplained {
         println!(

@@ -106,24 +106,61 @@ impl<'a> Problem<'a> {
         j
     }
 
-    /// Fits the set on `epochs` by Gauss–Newton (with a little Levenberg damping so that a
-    /// direction the motion does not excite stays at its nominal value).
+    /// Fits the set on `epochs` by Gauss–Newton, with each effect held by a weak prior at its
+    /// nominal value whose standard deviation is half the effect's documented range: where the
+    /// readings excite an effect the prior is negligible; where they hardly do (a time offset
+    /// on a stretch without accelerations) the estimate stays plausible instead of wandering
+    /// outside the range and spoiling a held-out prediction.
     pub fn fit(&self, set: &[usize], epochs: &[usize]) -> Fit {
-        let mut theta = self.nominal_theta(set);
+        let theta0 = self.nominal_theta(set);
+        let prior_sd: Vec<f64> = set
+            .iter()
+            .flat_map(|&c| {
+                let s = spec(CANDIDATES[c].name);
+                let n = s.map_or(1, |s| s.components);
+                let sd = s.map_or(f64::INFINITY, |s| 0.5 * (s.max - s.min));
+                std::iter::repeat_n(sd, n)
+            })
+            .collect();
+        let mut theta = theta0.clone();
         let mut r = self.residuals(&self.effects(set, &theta), epochs);
         let mut sse: f64 = r.iter().map(|x| x * x).sum();
         let n = r.len();
+        // The prior's weight in Σr² units: the residual variance per reading over the prior's.
+        let weights = |sse: f64| -> Vec<f64> {
+            let s2 = sse / n.max(1) as f64;
+            prior_sd
+                .iter()
+                .map(|sd| {
+                    if sd.is_finite() && *sd > 0.0 {
+                        s2 / (sd * sd)
+                    } else {
+                        0.0
+                    }
+                })
+                .collect()
+        };
+        let penalty = |theta: &[f64], w: &[f64]| -> f64 {
+            theta
+                .iter()
+                .zip(&theta0)
+                .zip(w)
+                .map(|((t, t0), w)| w * (t - t0).powi(2))
+                .sum()
+        };
         let mut jac = DMatrix::zeros(n, theta.len());
         for _ in 0..8 {
             if theta.is_empty() {
                 break;
             }
             jac = self.jacobian(set, &theta, epochs, &r);
+            let w = weights(sse);
             let jtj = jac.transpose() * &jac;
-            let jtr = jac.transpose() * DVector::from_column_slice(&r);
+            let mut jtr = jac.transpose() * DVector::from_column_slice(&r);
             let mut a = jtj.clone();
             for i in 0..theta.len() {
-                a[(i, i)] += 1e-9 * jtj[(i, i)].max(1e-12) + 1e-12;
+                a[(i, i)] += w[i] + 1e-9 * jtj[(i, i)].max(1e-12) + 1e-12;
+                jtr[i] += w[i] * (theta[i] - theta0[i]);
             }
             let Some(step) = a.cholesky().map(|c| c.solve(&jtr)) else {
                 break;
@@ -132,10 +169,12 @@ impl<'a> Problem<'a> {
             let trial: Vec<f64> = theta.iter().zip(step.iter()).map(|(t, s)| t - s).collect();
             let rt = self.residuals(&self.effects(set, &trial), epochs);
             let st: f64 = rt.iter().map(|x| x * x).sum();
-            if !(st.is_finite() && st <= sse) {
+            let (objective, objective_trial) =
+                (sse + penalty(&theta, &w), st + penalty(&trial, &w));
+            if !(st.is_finite() && objective_trial <= objective) {
                 break;
             }
-            let done = sse - st <= 1e-10 * sse.max(1e-300);
+            let done = objective - objective_trial <= 1e-10 * objective.max(1e-300);
             theta = trial;
             r = rt;
             sse = st;
@@ -149,8 +188,8 @@ impl<'a> Problem<'a> {
         // (a slowly varying sensor error, a drifting bias) makes the readings fewer than they
         // are.
         let d = self.channel.kind.dims();
-        let (std, widening, lags) = if theta.is_empty() {
-            (Vec::new(), 1.0, 0)
+        let (std, std_white, widening, lags) = if theta.is_empty() {
+            (Vec::new(), Vec::new(), 1.0, 0)
         } else {
             let jtj = jac.transpose() * &jac;
             match jtj.clone().try_inverse() {
@@ -171,14 +210,20 @@ impl<'a> Problem<'a> {
                         .filter(|(_, w)| **w > 0.0 && w.is_finite())
                         .map(|(s, w)| s / w)
                         .fold(1.0, f64::max);
-                    (std, widening, lags)
+                    (std, white, widening, lags)
                 }
-                None => (vec![f64::INFINITY; theta.len()], 1.0, 0),
+                None => (
+                    vec![f64::INFINITY; theta.len()],
+                    vec![f64::INFINITY; theta.len()],
+                    1.0,
+                    0,
+                ),
             }
         };
         Fit {
             theta,
             std,
+            std_white,
             sse,
             n,
             widening,
@@ -204,6 +249,61 @@ impl<'a> Problem<'a> {
             count += r.len();
         }
         sum / count.max(1) as f64
+    }
+}
+
+impl Problem<'_> {
+    /// Per component of candidate `c` (fitted with `set`): the departure from nominal at which
+    /// the held-out score would fall by `min_gain`. Linearised: a departure `m` adds `J_c m` to
+    /// the residual; the fit on four blocks recovers the share of `m` those blocks determine
+    /// (their signal energy against the prior's weight), and the gain is the recovered signal's
+    /// energy in the held-out block, so an effect whose signature sits in one block (a time
+    /// offset seen only while the vehicle accelerates) gains little however significant it is.
+    pub fn gain_floor(&self, set: &[usize], c: usize, min_gain: f64) -> Vec<f64> {
+        let mut with = set.to_vec();
+        with.push(c);
+        let f = self.fit(&with, &self.epochs);
+        let r0 = self.residuals(&self.effects(&with, &f.theta), &self.epochs);
+        let j = self.jacobian(&with, &f.theta, &self.epochs, &r0);
+        let (off, len) = offset_of(&with, c);
+        let d = self.channel.kind.dims();
+        let m = self.epochs.len();
+        let s2 = f.sse / f.n.max(1) as f64;
+        let sd = spec(CANDIDATES[c].name).map_or(f64::INFINITY, |s| 0.5 * (s.max - s.min));
+        let w = if sd.is_finite() && sd > 0.0 {
+            s2 / (sd * sd)
+        } else {
+            0.0
+        };
+        (0..len)
+            .map(|k| {
+                let col = j.column(off + k);
+                let energy: Vec<f64> = (0..FOLDS)
+                    .map(|b| {
+                        (b * m / FOLDS * d..(b + 1) * m / FOLDS * d)
+                            .map(|row| col[row] * col[row])
+                            .sum()
+                    })
+                    .collect();
+                let total: f64 = energy.iter().sum();
+                let explained: f64 = energy
+                    .iter()
+                    .map(|e| {
+                        let train = total - e;
+                        if train + w > 0.0 {
+                            e * train / (train + w)
+                        } else {
+                            0.0
+                        }
+                    })
+                    .sum();
+                if explained > 0.0 {
+                    (min_gain * f.sse / explained).sqrt()
+                } else {
+                    f64::INFINITY
+                }
+            })
+            .collect()
     }
 }
 
@@ -234,6 +334,8 @@ pub struct Fit {
     /// Standard deviations allowing for the residuals' correlation in time (never below the
     /// white-residual ones).
     pub std: Vec<f64>,
+    /// The standard deviations white residuals would give, σ²(JᵀJ)⁻¹.
+    pub std_white: Vec<f64>,
     pub sse: f64,
     pub n: usize,
     /// The largest ratio of a standard deviation to the one white residuals would give.

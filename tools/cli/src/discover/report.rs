@@ -224,6 +224,18 @@ fn markdown(r: &DiscoverReport, figures: &[(ChannelKind, Vec<String>)]) -> Strin
         }
         let _ = writeln!(m);
     }
+    if !r.floors.is_empty() {
+        let _ = writeln!(
+            m,
+            "## What these logs cannot show\n\nEvery candidate not named, with the size it would need \
+             to be named on this motion (linearised): below it an effect is neither found nor \
+             excluded.\n"
+        );
+        for f in &r.floors {
+            let _ = writeln!(m, "- {}", f.describe());
+        }
+        let _ = writeln!(m);
+    }
     let _ = writeln!(m, "## Held-out gain\n");
     let _ = writeln!(
         m,
