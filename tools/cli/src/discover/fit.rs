@@ -21,6 +21,10 @@ pub struct Problem<'a> {
     pub nominal: Effects,
     /// Epochs the nominal model can predict (indices into the channel).
     pub epochs: Vec<usize>,
+    /// Readings over which the channel's noise stays correlated: of the residual with every
+    /// candidate fitted, so that an effect a set leaves out is not taken for correlated noise
+    /// (which would widen the deviations of the effects in the set and stop the selection).
+    pub noise_lags: usize,
 }
 
 impl<'a> Problem<'a> {
@@ -37,12 +41,20 @@ impl<'a> Problem<'a> {
                 })
             })
             .collect();
-        Problem {
+        let mut p = Problem {
             channel,
             reference,
             nominal,
             epochs,
+            noise_lags: 0,
+        };
+        let all = p.candidates();
+        if !all.is_empty() && p.epochs.len() >= 8 {
+            let f = p.fit(&all, &p.epochs);
+            let r = p.residuals(&p.effects(&all, &f.theta), &p.epochs);
+            p.noise_lags = correlation_lags(&r, d);
         }
+        p
     }
 
     /// This channel's candidates (indices into [`CANDIDATES`]).
@@ -198,7 +210,7 @@ impl<'a> Problem<'a> {
                     let white: Vec<f64> = (0..theta.len())
                         .map(|i| (sse / dof * inv[(i, i)]).max(0.0).sqrt())
                         .collect();
-                    let lags = correlation_lags(&r, d);
+                    let lags = self.noise_lags;
                     let s = long_run_scores(&jac, &r, d, lags) * (n as f64 / dof);
                     let cov = &inv * s * &inv;
                     let std: Vec<f64> = (0..theta.len())
