@@ -173,3 +173,36 @@ pub mod tactical {
         messages
     }
 }
+
+/// An industrial MEMS IMU for the DVL-outage tests (the class of the small vehicles' attitude
+/// units): gyro bias near 10 deg/h, accelerometer bias near 1 mg, with the filter told its
+/// grade. Its heading needs the magnetometer; half a minute without the DVL costs metres.
+pub mod mems {
+    use auvnav_sim::effects::Effects;
+
+    pub const IMU: [(&str, &[f64]); 6] = [
+        ("imu.gyro_bias", &[8.0, -10.0, 12.0]),
+        ("imu.gyro_bias_instability", &[3.0]),
+        ("imu.angle_random_walk", &[0.3]),
+        ("imu.accel_bias", &[1000.0, -800.0, 900.0]),
+        ("imu.accel_bias_instability", &[100.0]),
+        ("imu.velocity_random_walk", &[0.06]),
+    ];
+
+    /// Sets the MEMS IMU's effects.
+    pub fn set_imu(effects: &mut Effects) {
+        for (name, value) in IMU {
+            effects.set(name, value).expect("IMU effect");
+        }
+    }
+
+    /// The navigation told the MEMS IMU's grade.
+    pub fn configure(n: &mut auvnav_core::config::NavConfig) {
+        n.gyro_angle_random_walk_deg_sqrt_h = 0.35;
+        n.accel_velocity_random_walk_m_s_sqrt_h = 0.07;
+        n.gyro_bias_walk_deg_h_sqrt_h = 1.0;
+        n.accel_bias_walk_ug_sqrt_h = 60.0;
+        n.initial_gyro_bias_std_deg_h = 20.0;
+        n.initial_accel_bias_std_ug = 2000.0;
+    }
+}

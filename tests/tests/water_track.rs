@@ -11,21 +11,32 @@ use auvnav_core::session::{Session, SessionOutput};
 use auvnav_log::LogMessage;
 use auvnav_shm_schema::{DvlVelocityV1, NavSolutionV1, TruthStateV1};
 use auvnav_sim::{SimConfig, scenario::Scenario};
-use auvnav_tests::tactical;
+use auvnav_tests::{mems, tactical};
+
+/// The IMU a run carries: the lawnmower's own navigation-grade FOG, a tactical unit, or an
+/// industrial MEMS unit (with the magnetometer for its heading).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Imu {
+    Fog,
+    Tactical,
+    Mems,
+}
 use auvnav_tools::demo::{DemoStart, session_config};
 
 /// North and east of the simulated current (|c| = 0.3 m/s).
 const CURRENT: [f64; 2] = [0.18, -0.24];
 
-fn voyage(seed: u64, tactical: bool) -> (SimConfig, Vec<LogMessage>) {
-    voyage_with(seed, tactical, 0.3 / (0.7 * 60.0))
+fn voyage(seed: u64, imu: Imu) -> (SimConfig, Vec<LogMessage>) {
+    voyage_with(seed, imu, 0.3 / (0.7 * 60.0))
 }
 
-fn voyage_with(seed: u64, tactical: bool, loss_rate: f64) -> (SimConfig, Vec<LogMessage>) {
+fn voyage_with(seed: u64, imu: Imu, loss_rate: f64) -> (SimConfig, Vec<LogMessage>) {
     let scenario = Scenario::load("lawnmower").expect("scenario");
     let mut effects = scenario.effects().expect("effects");
-    if tactical {
-        tactical::set_imu(&mut effects);
+    match imu {
+        Imu::Fog => {}
+        Imu::Tactical => tactical::set_imu(&mut effects),
+        Imu::Mems => mems::set_imu(&mut effects),
     }
     effects
         .set("water.current", &CURRENT)
@@ -80,7 +91,7 @@ fn position(s: &NavSolutionV1) -> Geodetic {
     }
 }
 
-fn navigate(cfg: &SimConfig, messages: &[LogMessage], current_std: f64, tactical: bool) -> Run {
+fn navigate(cfg: &SimConfig, messages: &[LogMessage], current_std: f64, imu: Imu) -> Run {
     let first: TruthStateV1 = messages
         .iter()
         .find_map(|m| match m {
@@ -88,10 +99,12 @@ fn navigate(cfg: &SimConfig, messages: &[LogMessage], current_std: f64, tactical
             _ => None,
         })
         .expect("truth");
-    let mut session_cfg = session_config(cfg, DemoStart::Known, false, &first);
+    let mut session_cfg = session_config(cfg, DemoStart::Known, imu == Imu::Mems, &first);
     session_cfg.navigation.water_current_std_m_s = current_std;
-    if tactical {
-        tactical::configure(&mut session_cfg.navigation);
+    match imu {
+        Imu::Fog => {}
+        Imu::Tactical => tactical::configure(&mut session_cfg.navigation),
+        Imu::Mems => mems::configure(&mut session_cfg.navigation),
     }
     let mut session = Session::new(&session_cfg);
     let mut run = Run::default();
@@ -196,10 +209,10 @@ fn rms(v: &[f64]) -> f64 {
     (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
 }
 
-fn compare(seed: u64, tactical: bool) -> (Run, Run) {
-    let (cfg, messages) = voyage(seed, tactical);
-    let with = navigate(&cfg, &messages, 0.5, tactical);
-    let without = navigate(&cfg, &messages, 0.0, tactical);
+fn compare(seed: u64, imu: Imu) -> (Run, Run) {
+    let (cfg, messages) = voyage(seed, imu);
+    let with = navigate(&cfg, &messages, 0.5, imu);
+    let without = navigate(&cfg, &messages, 0.0, imu);
     let (e_with, e_without) = (rms(&with.errors_m), rms(&without.errors_m));
     let current_max = with
         .current_error_while_locked
@@ -217,10 +230,10 @@ fn compare(seed: u64, tactical: bool) -> (Run, Run) {
          added per loss {:.3} m with water track, {:.3} m without; \
          current error while locked max {current_max:.4} m/s; recovery steps max \
          {step_max:.2} sigma over {} recoveries; {} water-track velocities fused",
-        if tactical {
-            "tactical"
-        } else {
-            "navigation-grade"
+        match imu {
+            Imu::Fog => "navigation-grade",
+            Imu::Tactical => "tactical",
+            Imu::Mems => "MEMS",
         },
         100.0 * with.locked_fraction,
         with.lock_lost,
@@ -249,7 +262,7 @@ fn compare(seed: u64, tactical: bool) -> (Run, Run) {
 /// aid, so what a loss adds stays): with water track at most a third of the IMU's alone.
 #[test]
 fn water_track_carries_a_tactical_ins_through_lost_bottom_lock_in_a_current() {
-    let (with, without) = compare(7702, true);
+    let (with, without) = compare(7702, Imu::Tactical);
     let (g_with, g_without) = (loss_growth(&with), loss_growth(&without));
     assert!(with.loss_errors_m.len() >= 3, "{:?}", with.loss_errors_m);
     assert!(
@@ -262,11 +275,24 @@ fn water_track_carries_a_tactical_ins_through_lost_bottom_lock_in_a_current() {
 /// must not make it worse.
 #[test]
 fn water_track_does_not_degrade_a_navigation_grade_ins() {
-    let (with, without) = compare(7703, false);
+    let (with, without) = compare(7703, Imu::Fog);
     let (e_with, e_without) = (rms(&with.errors_m), rms(&without.errors_m));
     assert!(
         e_with <= 1.05 * e_without,
         "with water track {e_with} m, without {e_without} m"
     );
     assert!(loss_growth(&with) <= 1.1 * loss_growth(&without) + 0.05);
+}
+
+/// With an industrial MEMS IMU (heading from the magnetometer) a minute without the DVL costs
+/// metres: over the whole survey the horizontal error with water track is at most a third of the
+/// error without it.
+#[test]
+fn water_track_keeps_a_mems_ins_within_a_third_of_its_coasting_error() {
+    let (with, without) = compare(7704, Imu::Mems);
+    let (e_with, e_without) = (rms(&with.errors_m), rms(&without.errors_m));
+    assert!(
+        e_with <= e_without / 3.0,
+        "horizontal error RMS with water track {e_with} m, without {e_without} m"
+    );
 }
