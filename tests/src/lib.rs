@@ -126,41 +126,81 @@ pub mod processes {
     pub use auvnav_tools::process::ChildProcess as Proc;
 }
 
-/// Simulated voyages for the DVL-outage tests (water track, beams): a tactical-grade IMU, the
-/// filter told its grade, and the messages in memory.
-pub mod tactical {
+/// Simulated voyages for the DVL-outage tests (water track, beams): IMU grades below the
+/// built-in scenarios' navigation-grade FOG (on which half a minute without the DVL costs
+/// little), each with the filter told its grade, and the messages in memory.
+pub mod grade {
     use auvnav_log::LogMessage;
     use auvnav_sim::SimConfig;
     use auvnav_sim::effects::Effects;
 
-    /// A tactical-grade IMU (the built-in scenarios carry a navigation-grade FOG unit, on which
-    /// half a minute without the DVL costs little): gyro bias near 1 deg/h, accelerometer bias
-    /// near 250 ug.
-    pub const IMU: [(&str, &[f64]); 6] = [
-        ("imu.gyro_bias", &[1.0, -0.8, 1.2]),
-        ("imu.gyro_bias_instability", &[0.2]),
-        ("imu.angle_random_walk", &[0.05]),
-        ("imu.accel_bias", &[300.0, -200.0, 250.0]),
-        ("imu.accel_bias_instability", &[50.0]),
-        ("imu.velocity_random_walk", &[0.03]),
-    ];
+    /// An IMU's effects and the filter settings that describe it.
+    pub struct ImuGrade {
+        pub effects: &'static [(&'static str, &'static [f64])],
+        pub angle_random_walk_deg_sqrt_h: f64,
+        pub velocity_random_walk_m_s_sqrt_h: f64,
+        pub gyro_bias_walk_deg_h_sqrt_h: f64,
+        pub accel_bias_walk_ug_sqrt_h: f64,
+        pub initial_gyro_bias_std_deg_h: f64,
+        pub initial_accel_bias_std_ug: f64,
+    }
 
-    /// Sets the tactical IMU's effects.
-    pub fn set_imu(effects: &mut Effects) {
-        for (name, value) in IMU {
-            effects.set(name, value).expect("IMU effect");
+    impl ImuGrade {
+        /// Sets the IMU's effects.
+        pub fn set_imu(&self, effects: &mut Effects) {
+            for (name, value) in self.effects {
+                effects.set(name, value).expect("IMU effect");
+            }
+        }
+
+        /// The navigation told the grade (noise, bias walks, initial bias spreads).
+        pub fn configure(&self, n: &mut auvnav_core::config::NavConfig) {
+            n.gyro_angle_random_walk_deg_sqrt_h = self.angle_random_walk_deg_sqrt_h;
+            n.accel_velocity_random_walk_m_s_sqrt_h = self.velocity_random_walk_m_s_sqrt_h;
+            n.gyro_bias_walk_deg_h_sqrt_h = self.gyro_bias_walk_deg_h_sqrt_h;
+            n.accel_bias_walk_ug_sqrt_h = self.accel_bias_walk_ug_sqrt_h;
+            n.initial_gyro_bias_std_deg_h = self.initial_gyro_bias_std_deg_h;
+            n.initial_accel_bias_std_ug = self.initial_accel_bias_std_ug;
         }
     }
 
-    /// The navigation told the tactical IMU's grade (noise, bias walks, initial bias spreads).
-    pub fn configure(n: &mut auvnav_core::config::NavConfig) {
-        n.gyro_angle_random_walk_deg_sqrt_h = 0.06;
-        n.accel_velocity_random_walk_m_s_sqrt_h = 0.04;
-        n.gyro_bias_walk_deg_h_sqrt_h = 0.05;
-        n.accel_bias_walk_ug_sqrt_h = 20.0;
-        n.initial_gyro_bias_std_deg_h = 2.0;
-        n.initial_accel_bias_std_ug = 500.0;
-    }
+    /// A tactical-grade IMU: gyro bias near 1 deg/h, accelerometer bias near 250 ug.
+    pub const TACTICAL: ImuGrade = ImuGrade {
+        effects: &[
+            ("imu.gyro_bias", &[1.0, -0.8, 1.2]),
+            ("imu.gyro_bias_instability", &[0.2]),
+            ("imu.angle_random_walk", &[0.05]),
+            ("imu.accel_bias", &[300.0, -200.0, 250.0]),
+            ("imu.accel_bias_instability", &[50.0]),
+            ("imu.velocity_random_walk", &[0.03]),
+        ],
+        angle_random_walk_deg_sqrt_h: 0.06,
+        velocity_random_walk_m_s_sqrt_h: 0.04,
+        gyro_bias_walk_deg_h_sqrt_h: 0.05,
+        accel_bias_walk_ug_sqrt_h: 20.0,
+        initial_gyro_bias_std_deg_h: 2.0,
+        initial_accel_bias_std_ug: 500.0,
+    };
+
+    /// An industrial MEMS IMU (the class of small vehicles' attitude units): gyro bias near
+    /// 10 deg/h, accelerometer bias near 1 mg. Its heading needs the magnetometer; half a
+    /// minute without the DVL costs metres.
+    pub const MEMS: ImuGrade = ImuGrade {
+        effects: &[
+            ("imu.gyro_bias", &[8.0, -10.0, 12.0]),
+            ("imu.gyro_bias_instability", &[3.0]),
+            ("imu.angle_random_walk", &[0.3]),
+            ("imu.accel_bias", &[1000.0, -800.0, 900.0]),
+            ("imu.accel_bias_instability", &[100.0]),
+            ("imu.velocity_random_walk", &[0.06]),
+        ],
+        angle_random_walk_deg_sqrt_h: 0.35,
+        velocity_random_walk_m_s_sqrt_h: 0.07,
+        gyro_bias_walk_deg_h_sqrt_h: 1.0,
+        accel_bias_walk_ug_sqrt_h: 60.0,
+        initial_gyro_bias_std_deg_h: 20.0,
+        initial_accel_bias_std_ug: 2000.0,
+    };
 
     /// The voyage's messages, in memory.
     pub fn simulate(cfg: &SimConfig) -> Vec<LogMessage> {
@@ -171,38 +211,5 @@ pub mod tactical {
         })
         .expect("simulate");
         messages
-    }
-}
-
-/// An industrial MEMS IMU for the DVL-outage tests (the class of the small vehicles' attitude
-/// units): gyro bias near 10 deg/h, accelerometer bias near 1 mg, with the filter told its
-/// grade. Its heading needs the magnetometer; half a minute without the DVL costs metres.
-pub mod mems {
-    use auvnav_sim::effects::Effects;
-
-    pub const IMU: [(&str, &[f64]); 6] = [
-        ("imu.gyro_bias", &[8.0, -10.0, 12.0]),
-        ("imu.gyro_bias_instability", &[3.0]),
-        ("imu.angle_random_walk", &[0.3]),
-        ("imu.accel_bias", &[1000.0, -800.0, 900.0]),
-        ("imu.accel_bias_instability", &[100.0]),
-        ("imu.velocity_random_walk", &[0.06]),
-    ];
-
-    /// Sets the MEMS IMU's effects.
-    pub fn set_imu(effects: &mut Effects) {
-        for (name, value) in IMU {
-            effects.set(name, value).expect("IMU effect");
-        }
-    }
-
-    /// The navigation told the MEMS IMU's grade.
-    pub fn configure(n: &mut auvnav_core::config::NavConfig) {
-        n.gyro_angle_random_walk_deg_sqrt_h = 0.35;
-        n.accel_velocity_random_walk_m_s_sqrt_h = 0.07;
-        n.gyro_bias_walk_deg_h_sqrt_h = 1.0;
-        n.accel_bias_walk_ug_sqrt_h = 60.0;
-        n.initial_gyro_bias_std_deg_h = 20.0;
-        n.initial_accel_bias_std_ug = 2000.0;
     }
 }

@@ -5,11 +5,9 @@
 //! four readings, so the selection keeps the set with the fewest parameters that explains the
 //! data); a clean voyage gives no DVL effect. Seeds and magnitudes are the tests' own.
 
-use auvnav_log::LogMessage;
-use auvnav_sim::effects::Effects;
 use auvnav_sim::{SimConfig, scenario::Scenario};
-use auvnav_tools::discover::command::{Collector, DiscoverReport, discover};
-use auvnav_tools::discover::fit::Selection;
+use auvnav_tests::grade;
+use auvnav_tools::discover::command::{Collector, DiscoverReport, discover_messages_with};
 
 fn run(seed: u64, scenario: &str, hidden: &[(&str, &[f64])]) -> DiscoverReport {
     let scenario = Scenario::load(scenario).expect("scenario");
@@ -24,20 +22,8 @@ fn run(seed: u64, scenario: &str, hidden: &[(&str, &[f64])]) -> DiscoverReport {
         seed,
         duration_s: Some(500.0),
     };
-    let mut c = Collector::new().with_dvl_beams(true);
-    auvnav_sim::simulate(&cfg, |m: &LogMessage| {
-        c.add(m);
-        Ok(())
-    })
-    .expect("simulate");
-    let (channels, reference) = c.finish();
-    discover(
-        &channels,
-        &reference,
-        &Effects::default(),
-        0.7,
-        &Selection::default(),
-    )
+    let messages = grade::simulate(&cfg);
+    discover_messages_with(Collector::new().with_dvl_beams(true), &messages)
 }
 
 fn dvl_effects(r: &DiscoverReport) -> Vec<(String, Vec<f64>, Vec<f64>)> {

@@ -400,7 +400,7 @@ fn imu_errors_are_found_against_the_reference_motion() {
 #[test]
 fn coloured_dvl_noise_names_no_dvl_effect() {
     use auvnav_sim::{SimConfig, scenario::Scenario};
-    use auvnav_tools::discover::command::Collector;
+    use auvnav_tools::discover::command::discover_messages;
     for seed in [9511u64, 9512, 9513] {
         let scenario = Scenario::load("lawnmower").expect("scenario");
         let mut effects = scenario.effects().expect("effects");
@@ -416,20 +416,7 @@ fn coloured_dvl_noise_names_no_dvl_effect() {
             seed,
             duration_s: Some(900.0),
         };
-        let mut c = Collector::new();
-        auvnav_sim::simulate(&cfg, |m| {
-            c.add(m);
-            Ok(())
-        })
-        .expect("simulate");
-        let (channels, reference) = c.finish();
-        let r = discover(
-            &channels,
-            &reference,
-            &Effects::default(),
-            0.7,
-            &Selection::default(),
-        );
+        let r = discover_messages(&auvnav_tests::grade::simulate(&cfg));
         let dvl: Vec<&str> = r
             .effects
             .iter()
@@ -456,7 +443,7 @@ fn coloured_dvl_noise_names_no_dvl_effect() {
 #[test]
 fn an_effect_below_the_floor_is_reported_as_such() {
     use auvnav_sim::{SimConfig, scenario::Scenario};
-    use auvnav_tools::discover::command::{Collector, DiscoverReport};
+    use auvnav_tools::discover::command::{DiscoverReport, discover_messages};
     let run = |hidden: &[(&str, f64)]| -> DiscoverReport {
         let scenario = Scenario::load("docking").expect("scenario");
         let mut effects = scenario.effects().expect("effects");
@@ -469,20 +456,7 @@ fn an_effect_below_the_floor_is_reported_as_such() {
             seed: 8803,
             duration_s: None,
         };
-        let mut c = Collector::new();
-        auvnav_sim::simulate(&cfg, |m| {
-            c.add(m);
-            Ok(())
-        })
-        .expect("simulate");
-        let (channels, reference) = c.finish();
-        discover(
-            &channels,
-            &reference,
-            &Effects::default(),
-            0.7,
-            &Selection::default(),
-        )
+        discover_messages(&auvnav_tests::grade::simulate(&cfg))
     };
     let floor_of = |r: &DiscoverReport, name: &str| {
         r.floors

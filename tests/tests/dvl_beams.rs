@@ -9,7 +9,7 @@ use auvnav_core::session::{Session, SessionOutput};
 use auvnav_log::LogMessage;
 use auvnav_shm_schema::{NavSolutionV1, TruthStateV1};
 use auvnav_sim::{SimConfig, scenario::Scenario};
-use auvnav_tests::tactical;
+use auvnav_tests::grade::{self, TACTICAL};
 use auvnav_tools::demo::{DemoStart, session_config};
 
 fn voyage(seed: u64, blocked_fraction: f64) -> (SimConfig, Vec<LogMessage>) {
@@ -35,7 +35,7 @@ fn voyage_with(
 ) -> (SimConfig, Vec<LogMessage>) {
     let scenario = Scenario::load("lawnmower").expect("scenario");
     let mut e = scenario.effects().expect("effects");
-    tactical::set_imu(&mut e);
+    TACTICAL.set_imu(&mut e);
     for (name, value) in effects {
         e.set(name, value).expect("effect");
     }
@@ -45,7 +45,7 @@ fn voyage_with(
         seed,
         duration_s: Some(seconds),
     };
-    let messages = tactical::simulate(&cfg);
+    let messages = grade::simulate(&cfg);
     (cfg, messages)
 }
 
@@ -77,7 +77,7 @@ fn navigate_with(
         })
         .expect("truth");
     let mut c = session_config(cfg, DemoStart::Known, false, &first);
-    tactical::configure(&mut c.navigation);
+    TACTICAL.configure(&mut c.navigation);
     configure(&mut c.navigation);
     let mut session = Session::new(&c);
     let mut last: Option<NavSolutionV1> = None;
@@ -197,22 +197,10 @@ fn three_beams_still_aid_while_one_is_blocked() {
 /// returns to the clean survey's: at least 80 % of the error the beam adds is removed.
 #[test]
 fn a_beams_scale_error_is_estimated_and_corrected_not_averaged_in() {
-    use auvnav_tools::discover::command::{Collector, discover, values_of};
-    use auvnav_tools::discover::fit::Selection;
+    use auvnav_tools::discover::command::{Collector, discover_messages_with, values_of};
     const HIDDEN: [f64; 4] = [0.0, 20_000.0, 0.0, 0.0];
     let (_, calibration) = voyage_with(8821, 500.0, &[("dvl.beam_scale_factor", &HIDDEN)]);
-    let mut c = Collector::new().with_dvl_beams(true);
-    for m in &calibration {
-        c.add(m);
-    }
-    let (channels, reference) = c.finish();
-    let report = discover(
-        &channels,
-        &reference,
-        &auvnav_sim::effects::Effects::default(),
-        0.7,
-        &Selection::default(),
-    );
+    let report = discover_messages_with(Collector::new().with_dvl_beams(true), &calibration);
     let found = report
         .effects
         .iter()

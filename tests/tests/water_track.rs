@@ -11,7 +11,7 @@ use auvnav_core::session::{Session, SessionOutput};
 use auvnav_log::LogMessage;
 use auvnav_shm_schema::{DvlVelocityV1, NavSolutionV1, TruthStateV1};
 use auvnav_sim::{SimConfig, scenario::Scenario};
-use auvnav_tests::{mems, tactical};
+use auvnav_tests::grade::{self, MEMS, TACTICAL};
 
 /// The IMU a run carries: the lawnmower's own navigation-grade FOG, a tactical unit, or an
 /// industrial MEMS unit (with the magnetometer for its heading).
@@ -35,8 +35,8 @@ fn voyage_with(seed: u64, imu: Imu, loss_rate: f64) -> (SimConfig, Vec<LogMessag
     let mut effects = scenario.effects().expect("effects");
     match imu {
         Imu::Fog => {}
-        Imu::Tactical => tactical::set_imu(&mut effects),
-        Imu::Mems => mems::set_imu(&mut effects),
+        Imu::Tactical => TACTICAL.set_imu(&mut effects),
+        Imu::Mems => MEMS.set_imu(&mut effects),
     }
     effects
         .set("water.current", &CURRENT)
@@ -58,7 +58,7 @@ fn voyage_with(seed: u64, imu: Imu, loss_rate: f64) -> (SimConfig, Vec<LogMessag
         seed,
         duration_s: Some(900.0),
     };
-    let messages = tactical::simulate(&cfg);
+    let messages = grade::simulate(&cfg);
     (cfg, messages)
 }
 
@@ -103,8 +103,8 @@ fn navigate(cfg: &SimConfig, messages: &[LogMessage], current_std: f64, imu: Imu
     session_cfg.navigation.water_current_std_m_s = current_std;
     match imu {
         Imu::Fog => {}
-        Imu::Tactical => tactical::configure(&mut session_cfg.navigation),
-        Imu::Mems => mems::configure(&mut session_cfg.navigation),
+        Imu::Tactical => TACTICAL.configure(&mut session_cfg.navigation),
+        Imu::Mems => MEMS.configure(&mut session_cfg.navigation),
     }
     let mut session = Session::new(&session_cfg);
     let mut run = Run::default();

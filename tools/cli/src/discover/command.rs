@@ -465,7 +465,15 @@ impl Collector {
 /// Discovery with the default nominal model and selection on messages already in memory (an
 /// importer's output).
 pub fn discover_messages<'a>(messages: impl IntoIterator<Item = &'a LogMessage>) -> DiscoverReport {
-    let mut c = Collector::new();
+    discover_messages_with(Collector::new(), messages)
+}
+
+/// [`discover_messages`] into a configured collector (e.g. [`Collector::with_dvl_beams`]).
+pub fn discover_messages_with<'a>(
+    collector: Collector,
+    messages: impl IntoIterator<Item = &'a LogMessage>,
+) -> DiscoverReport {
+    let mut c = collector;
     for m in messages {
         c.add(m);
     }
