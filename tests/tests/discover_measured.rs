@@ -360,3 +360,73 @@ fn ugps_receiver_geometry_and_multipath_are_found() {
         .expect("outliers counted");
     assert!((0.005..0.05).contains(&outliers), "{outliers}");
 }
+
+/// `--write-config` writes the installation found only where it does not make the navigation
+/// worse: Snapir segment 11, whose lever arm and lag against the reference make the replay end
+/// further off (the reference is not the IMU's motion), keeps the nominal DVL table with a
+/// comment saying why; a simulated voyage with a hidden mounting yaw gets the yaw written.
+#[test]
+fn write_config_keeps_the_nominal_installation_when_the_navigation_gets_worse() {
+    use auvnav_tests::processes::{TempDir, binary};
+    let Some(dir) = auvnav_tests::measured_data("snapir-auv", "imu_01.csv") else {
+        return;
+    };
+    let tmp = TempDir::new("discover-writeconfig");
+    let auvnav = |args: &[&str]| {
+        let o = std::process::Command::new(binary("auvnav"))
+            .args(args)
+            .output()
+            .expect("auvnav");
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    let path = |name: &str| tmp.path().join(name).display().to_string();
+    let table = |text: &str| -> auvnav_core::config::DvlInstallation {
+        let v: toml::Value = toml::from_str(text).expect("toml");
+        v["navigation"]["dvl"]
+            .clone()
+            .try_into()
+            .expect("dvl table")
+    };
+    auvnav(&[
+        "import",
+        "snapir",
+        &dir.display().to_string(),
+        "--segment",
+        "11",
+        "--out",
+        &path("s11.mcap"),
+    ]);
+    auvnav(&[
+        "discover",
+        &path("s11.mcap"),
+        "--write-config",
+        &path("s11.toml"),
+    ]);
+    let text = std::fs::read_to_string(path("s11.toml")).expect("config");
+    assert!(text.contains("NOT APPLIED"), "{text}");
+    let d = table(&text);
+    assert_eq!((d.lever_arm_m, d.time_offset_s), ([0.0; 3], 0.0), "{text}");
+    auvnav(&[
+        "sim",
+        "--scenario",
+        "lawnmower",
+        "--duration",
+        "300",
+        "--seed",
+        "4711",
+        "--effect",
+        "dvl.mount_yaw=1.0",
+        "--out",
+        &path("yaw.mcap"),
+    ]);
+    auvnav(&[
+        "discover",
+        &path("yaw.mcap"),
+        "--write-config",
+        &path("yaw.toml"),
+    ]);
+    let text = std::fs::read_to_string(path("yaw.toml")).expect("config");
+    assert!(!text.contains("NOT APPLIED"), "{text}");
+    let d = table(&text);
+    assert!((d.mount_deg[2] - 1.0).abs() < 0.05, "{text}");
+}

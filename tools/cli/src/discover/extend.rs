@@ -153,7 +153,24 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
         navigation: Navigation,
     }
     let source = format!("auvnav discover on {}", r.inputs.join(", "));
-    let (dvl, magnetometer) = navigator_tables(&r.model, &analysed(r), &source);
+    // The installation found is written only where it does not make the navigation worse: a
+    // log whose replay with the effects ends further off and with a larger error per distance
+    // keeps the nominal tables.
+    let worse: Vec<&NavigationGain> = r
+        .navigation
+        .iter()
+        .filter(|g| {
+            g.after.horizontal_error_final_m > g.before.horizontal_error_final_m
+                && g.after.error_per_distance_cep50_percent
+                    > g.before.error_per_distance_cep50_percent
+        })
+        .collect();
+    let model = if worse.is_empty() {
+        &r.model
+    } else {
+        &r.nominal_model
+    };
+    let (dvl, magnetometer) = navigator_tables(model, &analysed(r), &source);
     let body = toml::to_string(&File {
         navigation: Navigation { dvl, magnetometer },
     })?;
@@ -167,6 +184,18 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
             "# The magnetometer was analysed without a reference attitude: the declination is not\n\
              # determined; add `model_date` (or `declination_deg`) to [navigation.magnetometer].\n",
         );
+    }
+    for g in &worse {
+        head.push_str(&format!(
+            "# NOT APPLIED: with the effects found the navigation of {} got worse (end {:.2} -> \
+             {:.2} m, CEP50 {:.3} -> {:.3} %): the tables below are the nominal installation; the \
+             effects found are in the report.\n",
+            g.log,
+            g.before.horizontal_error_final_m,
+            g.after.horizontal_error_final_m,
+            g.before.error_per_distance_cep50_percent,
+            g.after.error_per_distance_cep50_percent
+        ));
     }
     for u in &r.unseparable {
         head.push_str(&format!(
