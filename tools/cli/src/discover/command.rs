@@ -56,6 +56,12 @@ pub struct DiscoverArgs {
     /// angle error (`dvl.beam_scale_factor`, `dvl.beam_angle_error`) besides the installation.
     #[arg(long)]
     pub dvl_beams: bool,
+    /// The logs are pieces of one voyage (one recording split into files): read them as one
+    /// series against one reference. By default each log is a voyage of its own: its own
+    /// reference, time base and held-out blocks, with the installation effects shared by the
+    /// voyages and tested for agreement.
+    #[arg(long)]
+    pub one_voyage: bool,
 }
 
 /// An effect discovery keeps.
@@ -225,6 +231,10 @@ pub struct DiscoverReport {
     /// For every candidate not named: the smallest size the data would have named, so that an
     /// absent effect reads as "below the floor" or "not excited", never as silence.
     pub floors: Vec<DetectionFloor>,
+    /// Several logs given as voyages: each one's own discovery, the installation effects the
+    /// voyages share and whether they agree (absent for one log or `--one-voyage`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub voyages: Option<Box<super::voyages::Voyages>>,
     pub wall_s: f64,
     /// The nominal effects.
     #[serde(skip)]
@@ -529,7 +539,7 @@ fn component(res: &[f64], d: usize, k: usize) -> Vec<f64> {
     res.iter().skip(k).step_by(d).copied().collect()
 }
 
-fn json_of(v: &[f64]) -> serde_json::Value {
+pub(crate) fn json_of(v: &[f64]) -> serde_json::Value {
     let num = |x: f64| {
         serde_json::Number::from_f64(x).map_or(serde_json::Value::Null, serde_json::Value::Number)
     };
@@ -562,6 +572,7 @@ pub fn discover(
         navigation: Vec::new(),
         notes: Vec::new(),
         floors: Vec::new(),
+        voyages: None,
         wall_s: 0.0,
         nominal_model: nominal.clone(),
         model: nominal.clone(),
@@ -991,7 +1002,7 @@ pub const OUTLIER_SIGMAS: f64 = 5.0;
 /// deviations of that component are set aside (NaN); the count, their sizes and the outlier
 /// fraction (`usbl.outlier_fraction`, for the effect set) go into the report. A least-squares fit
 /// of the geometry would otherwise follow a few multipath ranges tens of metres long.
-fn screen_outliers(
+pub(crate) fn screen_outliers(
     ch: &Channel,
     reference: &Reference,
     nominal: &Effects,
@@ -1178,15 +1189,41 @@ pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
         let (name, values) = parse_setting(s)?;
         nominal.set(&name, &values)?;
     }
-    let (channels, reference, undecodable) =
-        read_logs_with(&a.logs, Collector::new().with_dvl_beams(a.dvl_beams))?;
-    let mut r = discover(
-        &channels,
-        &reference,
-        &nominal,
-        a.fit_fraction,
-        &Selection::default(),
-    );
+    let voyages = a.logs.len() > 1 && !a.one_voyage;
+    let (mut r, undecodable) = if voyages {
+        let mut data = Vec::with_capacity(a.logs.len());
+        let mut undecodable = 0;
+        for log in &a.logs {
+            let (channels, reference, u) = read_logs_with(
+                std::slice::from_ref(log),
+                Collector::new().with_dvl_beams(a.dvl_beams),
+            )?;
+            undecodable += u;
+            data.push(super::voyages::VoyageData {
+                log: log.display().to_string(),
+                channels,
+                reference,
+            });
+        }
+        let r = super::voyages::discover_voyages(
+            &data,
+            &nominal,
+            a.fit_fraction,
+            &Selection::default(),
+        );
+        (r, undecodable)
+    } else {
+        let (channels, reference, undecodable) =
+            read_logs_with(&a.logs, Collector::new().with_dvl_beams(a.dvl_beams))?;
+        let r = discover(
+            &channels,
+            &reference,
+            &nominal,
+            a.fit_fraction,
+            &Selection::default(),
+        );
+        (r, undecodable)
+    };
     if undecodable > 0 {
         r.notes.push(format!(
             "{undecodable} messages in the logs did not decode and were left out"
@@ -1233,7 +1270,63 @@ fn print_text(r: &DiscoverReport) {
             c.held_out_mse_selected
         );
     }
-    if r.channels.is_empty() {
+    if let Some(v) = &r.voyages {
+        println!("  {} voyages, each analysed alone:", v.voyages.len());
+        for x in &v.voyages {
+            let named: Vec<String> = x
+                .effects
+                .iter()
+                .map(|e| format!("{} = {}", e.name, e.value))
+                .collect();
+            println!(
+                "    {}: {}",
+                x.inputs.join(", "),
+                if named.is_empty() {
+                    "nothing named".into()
+                } else {
+                    named.join("; ")
+                }
+            );
+        }
+        for s in &v.scores {
+            println!(
+                "  {} over {} voyages, each predicted from the others: mean squared residual \
+                 {:.4e} nominal, {:.4e} with the shared effects",
+                s.channel.name(),
+                s.voyages,
+                s.mse_nominal,
+                s.mse_shared
+            );
+        }
+        for s in &v.inconsistent {
+            println!(
+                "  inconsistent: {} ({}): χ² {:.1} > {:.1} ({} dof) across the voyages: {}",
+                s.name,
+                s.channel.name(),
+                s.chi2,
+                s.chi2_limit,
+                s.dof,
+                s.verdict
+            );
+            for e in &s.voyages {
+                println!("      {}: {} ± {} {}", e.log, e.value, e.std, s.unit);
+            }
+        }
+        for p in &v.per_voyage {
+            println!(
+                "  per voyage: {} ({}) named in {} voyages: {}",
+                p.name,
+                p.channel.name(),
+                p.voyages.len(),
+                p.voyages
+                    .iter()
+                    .map(|e| format!("{} {}", e.log, e.value))
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            );
+        }
+    }
+    if r.channels.is_empty() && r.voyages.is_none() {
         println!("  nothing analysed (see the notes)");
     } else if r.effects.is_empty() {
         println!("  effects found: none (the nominal model explains the data)");

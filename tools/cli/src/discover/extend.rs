@@ -133,8 +133,19 @@ pub fn navigator_tables(
     (dvl, mag)
 }
 
+/// The channels analysed (in any voyage).
 fn analysed(r: &DiscoverReport) -> Vec<ChannelKind> {
-    r.channels.iter().map(|c| c.channel).collect()
+    let mut kinds: Vec<ChannelKind> = r.channels.iter().map(|c| c.channel).collect();
+    if let Some(v) = &r.voyages {
+        kinds.extend(
+            v.voyages
+                .iter()
+                .flat_map(|x| x.channels.iter().map(|c| c.channel)),
+        );
+    }
+    kinds.sort();
+    kinds.dedup();
+    kinds
 }
 
 /// The navigator configuration file's text (`[navigation.dvl]`, `[navigation.magnetometer]`),
@@ -264,8 +275,14 @@ pub fn navigation_gain(logs: &[PathBuf], r: &mut DiscoverReport) {
     if !kinds.contains(&ChannelKind::Dvl) && !kinds.contains(&ChannelKind::Magnetometer) {
         return;
     }
-    for log in logs {
-        match navigation_of(log, r, &kinds) {
+    for (i, log) in logs.iter().enumerate() {
+        // Several voyages: each is replayed with the installation fitted on the others (held
+        // out); one voyage: with the effects fitted on the first part of each channel.
+        let after = match &r.voyages {
+            Some(v) => v.held_out_models.get(i).unwrap_or(&r.model),
+            None => &r.held_out_model,
+        };
+        match navigation_of(log, &r.nominal_model, after, &kinds) {
             Ok(Some(g)) => {
                 let (b, a) = (&g.before, &g.after);
                 if a.horizontal_error_final_m > b.horizontal_error_final_m
@@ -300,7 +317,8 @@ pub fn navigation_gain(logs: &[PathBuf], r: &mut DiscoverReport) {
 
 fn navigation_of(
     log: &Path,
-    r: &DiscoverReport,
+    nominal: &Effects,
+    after: &Effects,
     kinds: &[ChannelKind],
 ) -> anyhow::Result<Option<NavigationGain>> {
     let args = ReplayArgs {
@@ -345,10 +363,10 @@ fn navigation_of(
             .filter(|a| a.epochs > 0)
             .map(|a| (a, c.dvl_fused, c.dvl_rejected)))
     };
-    let Some((before, fb, rb)) = run(&with(&r.nominal_model))? else {
+    let Some((before, fb, rb)) = run(&with(nominal))? else {
         return Ok(None);
     };
-    let Some((after, fa, ra)) = run(&with(&r.held_out_model))? else {
+    let Some((after, fa, ra)) = run(&with(after))? else {
         return Ok(None);
     };
     Ok(Some(NavigationGain {

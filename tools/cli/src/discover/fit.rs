@@ -200,8 +200,8 @@ impl<'a> Problem<'a> {
         // (a slowly varying sensor error, a drifting bias) makes the readings fewer than they
         // are.
         let d = self.channel.kind.dims();
-        let (std, std_white, widening, lags) = if theta.is_empty() {
-            (Vec::new(), Vec::new(), 1.0, 0)
+        let (std, std_white, widening, lags, cov) = if theta.is_empty() {
+            (Vec::new(), Vec::new(), 1.0, 0, DMatrix::zeros(0, 0))
         } else {
             let jtj = jac.transpose() * &jac;
             match jtj.clone().try_inverse() {
@@ -222,13 +222,29 @@ impl<'a> Problem<'a> {
                         .filter(|(_, w)| **w > 0.0 && w.is_finite())
                         .map(|(s, w)| s / w)
                         .fold(1.0, f64::max);
-                    (std, white, widening, lags)
+                    // The covariance with its diagonal raised to the deviations (the
+                    // correlations of the sandwich kept).
+                    let scale: Vec<f64> = (0..theta.len())
+                        .map(|i| {
+                            let c = cov[(i, i)].max(0.0).sqrt();
+                            if c > 0.0 { std[i] / c } else { 0.0 }
+                        })
+                        .collect();
+                    let cov = DMatrix::from_fn(theta.len(), theta.len(), |i, j| {
+                        if i == j {
+                            std[i] * std[i]
+                        } else {
+                            cov[(i, j)] * scale[i] * scale[j]
+                        }
+                    });
+                    (std, white, widening, lags, cov)
                 }
                 None => (
                     vec![f64::INFINITY; theta.len()],
                     vec![f64::INFINITY; theta.len()],
                     1.0,
                     0,
+                    DMatrix::from_diagonal_element(theta.len(), theta.len(), f64::INFINITY),
                 ),
             }
         };
@@ -240,6 +256,7 @@ impl<'a> Problem<'a> {
             n,
             widening,
             lags,
+            cov,
         }
     }
 
@@ -354,6 +371,8 @@ pub struct Fit {
     pub widening: f64,
     /// Readings over which the residuals are correlated (the Newey–West bandwidth).
     pub lags: usize,
+    /// The parameters' covariance: the sandwich's, with its diagonal the squares of `std`.
+    pub cov: DMatrix<f64>,
 }
 
 /// The residuals' correlation length in readings: twice the first lag at which the mean

@@ -16,6 +16,7 @@ pub mod fit;
 pub mod hidden;
 pub mod imu;
 pub mod report;
+pub mod voyages;
 
 use auvnav_core::earth;
 use auvnav_shm_schema::TruthStateV1;

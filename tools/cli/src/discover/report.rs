@@ -363,6 +363,154 @@ pub fn write_report_dir(dir: &Path, r: &DiscoverReport) -> anyhow::Result<()> {
         }
         figures.push((s.channel, files));
     }
-    write_atomically(&dir.join("report.md"), &markdown(r, &figures))?;
+    let mut md = markdown(r, &figures);
+    if let Some(v) = &r.voyages {
+        md.push_str(&voyages_markdown(dir, v)?);
+        for (i, x) in v.voyages.iter().enumerate() {
+            write_report_dir(&dir.join(format!("voyage-{:02}", i + 1)), x)?;
+        }
+    }
+    write_atomically(&dir.join("report.md"), &md)?;
     Ok(())
+}
+
+/// The voyages' section: each installation effect tested together, the voyages' own estimates
+/// (plotted with ±2σ), and where each voyage's own report is.
+fn voyages_markdown(dir: &Path, v: &super::voyages::Voyages) -> anyhow::Result<String> {
+    use super::command::values_of;
+    let mut m = String::new();
+    let _ = writeln!(
+        m,
+        "## Voyages
+
+Each log is a voyage of its own, analysed against its own reference \
+         (`voyage-NN/report.md`). Installation effects are tested on all voyages together, each \
+         voyage predicted from the others; an effect on which the voyages disagree beyond their \
+         uncertainties (χ² at 1 %) is inconsistent, not a finding.\n"
+    );
+    let _ = writeln!(m, "| voyage | report | named alone |\n|---|---|---|");
+    for (i, x) in v.voyages.iter().enumerate() {
+        let named: Vec<String> = x.effects.iter().map(|e| format!("`{}`", e.name)).collect();
+        let _ = writeln!(
+            m,
+            "| {} | [voyage-{:02}](voyage-{:02}/report.md) | {} |",
+            x.inputs.join(", "),
+            i + 1,
+            i + 1,
+            if named.is_empty() {
+                "nothing".into()
+            } else {
+                named.join(", ")
+            }
+        );
+    }
+    let _ = writeln!(
+        m,
+        "\n| channel | voyages | held-out mean square, nominal | with the shared effects |\n|---|---|---|---|"
+    );
+    for s in &v.scores {
+        let _ = writeln!(
+            m,
+            "| {} | {} | {:.4e} | {:.4e} |",
+            s.channel.name(),
+            s.voyages,
+            s.mse_nominal,
+            s.mse_shared
+        );
+    }
+    let _ = writeln!(
+        m,
+        "\n| effect | verdict | value | std | χ² / limit (dof) | per voyage |\n|---|---|---|---|---|---|"
+    );
+    for (s, shared) in v
+        .shared
+        .iter()
+        .map(|s| (s, true))
+        .chain(v.inconsistent.iter().map(|s| (s, false)))
+    {
+        let file = format!(
+            "voyages_{}_{}.svg",
+            s.channel.name(),
+            s.name.replace('.', "_")
+        );
+        let values: Vec<Vec<f64>> = s
+            .voyages
+            .iter()
+            .map(|e| values_of(&e.value).unwrap_or_default())
+            .collect();
+        let stds: Vec<Vec<f64>> = s
+            .voyages
+            .iter()
+            .map(|e| values_of(&e.std).unwrap_or_default())
+            .collect();
+        let dims = values.first().map_or(0, Vec::len);
+        let mut series = Vec::new();
+        for k in 0..dims {
+            let pts = |f: f64| -> Vec<(f64, f64)> {
+                values
+                    .iter()
+                    .zip(&stds)
+                    .enumerate()
+                    .filter_map(|(i, (v, sd))| {
+                        let (x, e) = (*v.get(k)?, *sd.get(k)?);
+                        (x + f * e)
+                            .is_finite()
+                            .then_some(((i + 1) as f64, x + f * e))
+                    })
+                    .collect()
+            };
+            let color = PALETTE[k % PALETTE.len()];
+            let label = if dims > 1 {
+                format!(" [{k}]")
+            } else {
+                String::new()
+            };
+            series.push(line(format!("estimate{label}"), pts(0.0), color, true));
+            let mut band = line(format!("±2σ{label}"), pts(2.0), color, true);
+            band.dashed = true;
+            series.push(band);
+            let mut low = line(String::new(), pts(-2.0), color, true);
+            low.dashed = true;
+            series.push(low);
+        }
+        let svg = plot(
+            &format!("{}: each voyage's estimate", s.name),
+            "voyage",
+            &format!("{} ({})", s.name, s.unit),
+            &series,
+            false,
+        );
+        write_atomically(&dir.join(&file), &svg)?;
+        let _ = writeln!(
+            m,
+            "| `{}` | {} | {} | {} | {:.1} / {:.1} ({}) | ![]({file}) |",
+            s.name,
+            if shared {
+                "shared".to_string()
+            } else {
+                format!("**inconsistent**: {}", s.verdict)
+            },
+            short(&s.value),
+            short(&s.std),
+            s.chi2,
+            s.chi2_limit,
+            s.dof
+        );
+    }
+    for p in &v.per_voyage {
+        let _ = writeln!(
+            m,
+            "\nPer voyage, `{}` ({}) named in {} of {} voyages: {}",
+            p.name,
+            p.channel.name(),
+            p.voyages.len(),
+            v.voyages.len(),
+            p.voyages
+                .iter()
+                .map(|e| format!("{} {}", e.log, short(&e.value)))
+                .collect::<Vec<_>>()
+                .join("; ")
+        );
+    }
+    Ok(m)
 }

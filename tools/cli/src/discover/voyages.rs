@@ -1,0 +1,897 @@
+//! Several logs as several voyages. Each log is analysed alone, against its own reference, time
+//! base and held-out blocks (its own discovery, as for one log). The installation effects are the
+//! vehicle's and shared by its voyages: they are selected on all voyages together, with each
+//! voyage left out in turn as the held-out test (the shared values fitted on the other voyages
+//! predict the one left out), and combined as the information-weighted mean of each voyage's
+//! estimate. A cross-voyage χ² tests whether the voyages agree within their own uncertainties
+//! (Newey–West, so correlated residuals widen them): an effect on which they disagree is reported
+//! as inconsistent, never as a finding. The effects of one voyage — an IMU bias realisation, the
+//! water's density, the sound speed of the acoustic link, the local field — stay each voyage's
+//! own, fitted in every voyage where its own discovery named them.
+
+use super::command::{
+    DiscoverReport, FoundEffect, NoiseEstimate, Unseparable, discover, json_of, screen_outliers,
+};
+use super::fit::{self, Fit, Problem, Selection};
+use super::{CANDIDATES, Channel, ChannelKind, Reference, spec};
+use auvnav_sim::effects::Effects;
+use nalgebra::{DMatrix, DVector};
+use serde::Serialize;
+
+/// The standard normal quantile of the agreement test (one-sided 1 %): voyages whose spread
+/// exceeds the χ² quantile at this level disagree.
+pub const AGREEMENT_Z: f64 = 2.326_348;
+
+/// Effects that belong to one voyage rather than to the vehicle's installation: a turn-on bias,
+/// the water, the acoustic path, the place.
+pub fn per_voyage(name: &str) -> bool {
+    matches!(
+        name,
+        "imu.gyro_bias"
+            | "imu.accel_bias"
+            | "depth.density"
+            | "dvl.sound_speed"
+            | "usbl.sound_speed"
+            | "mag.declination"
+            | "mag.inclination"
+            | "mag.intensity"
+    )
+}
+
+/// One log: its channels and its reference motion.
+pub struct VoyageData {
+    pub log: String,
+    pub channels: Vec<Channel>,
+    pub reference: Reference,
+}
+
+/// One voyage's estimate of an effect.
+#[derive(Debug, Clone, Serialize)]
+pub struct VoyageEstimate {
+    pub log: String,
+    pub value: serde_json::Value,
+    /// One sigma (null where this voyage's motion does not determine the component).
+    pub std: serde_json::Value,
+}
+
+/// An installation effect the voyages were tested on together.
+#[derive(Debug, Clone, Serialize)]
+pub struct SharedEffect {
+    pub name: String,
+    pub channel: ChannelKind,
+    pub unit: String,
+    /// The information-weighted mean of the voyages' estimates.
+    pub value: serde_json::Value,
+    pub std: serde_json::Value,
+    pub nominal: serde_json::Value,
+    /// Each voyage's estimate, fitted with the other effects of the shared set and its own.
+    pub voyages: Vec<VoyageEstimate>,
+    /// Σ over voyages of (estimate − mean)ᵀ C⁻¹ (estimate − mean).
+    pub chi2: f64,
+    pub dof: usize,
+    /// The χ² at which the voyages are taken to disagree (1 %).
+    pub chi2_limit: f64,
+    /// Relative drop of the leave-one-voyage-out mean squared residual when the effect was added.
+    pub held_out_gain: f64,
+    pub verdict: String,
+    /// For voyages that disagree: the largest set of voyages (at least half) that agree, found
+    /// by setting aside the most departing voyage in turn; for the engineer to look at the
+    /// voyages left out, never a finding by itself.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub agreeing: Option<Agreeing>,
+}
+
+/// Voyages that agree once the most departing ones are set aside.
+#[derive(Debug, Clone, Serialize)]
+pub struct Agreeing {
+    pub left_out: Vec<String>,
+    pub voyages: usize,
+    pub value: serde_json::Value,
+    pub std: serde_json::Value,
+}
+
+/// An effect named by voyages alone: per-voyage effects, or installation effects the voyages
+/// together did not confirm.
+#[derive(Debug, Clone, Serialize)]
+pub struct NamedAlone {
+    pub name: String,
+    pub channel: ChannelKind,
+    pub unit: String,
+    pub voyages: Vec<VoyageEstimate>,
+}
+
+/// One channel's leave-one-voyage-out score.
+#[derive(Debug, Clone, Serialize)]
+pub struct VoyageScore {
+    pub channel: ChannelKind,
+    pub voyages: usize,
+    /// Mean squared residual over all voyages, each predicted with the nominal installation (its
+    /// own per-voyage effects fitted).
+    pub mse_nominal: f64,
+    /// The same with the shared effects fitted on the other voyages.
+    pub mse_shared: f64,
+}
+
+/// What several voyages say together (`voyages` in the report).
+#[derive(Debug, Clone, Serialize)]
+pub struct Voyages {
+    /// Each voyage's own discovery.
+    pub voyages: Vec<DiscoverReport>,
+    /// Installation effects the voyages agree on, significant together.
+    pub shared: Vec<SharedEffect>,
+    /// Installation effects the voyages disagree on beyond their uncertainties.
+    pub inconsistent: Vec<SharedEffect>,
+    /// Effects of one voyage (biases, water, place), where each voyage named them.
+    pub per_voyage: Vec<NamedAlone>,
+    /// Installation effects some voyages named alone that the voyages together do not.
+    pub not_confirmed: Vec<NamedAlone>,
+    pub scores: Vec<VoyageScore>,
+    /// Per voyage: the nominal model with the shared effects fitted on the other voyages (the
+    /// held-out model its navigation is replayed with).
+    #[serde(skip)]
+    pub held_out_models: Vec<Effects>,
+}
+
+/// An estimate in deviations from nominal with its information (pseudo-inverse of the
+/// covariance; a component without a finite variance carries none).
+#[derive(Clone)]
+struct Estimate {
+    delta: DVector<f64>,
+    info: DMatrix<f64>,
+    rank: usize,
+}
+
+fn pseudo_inverse(m: &DMatrix<f64>) -> (DMatrix<f64>, usize) {
+    let n = m.nrows();
+    if n == 0 {
+        return (DMatrix::zeros(0, 0), 0);
+    }
+    let sym = (m + m.transpose()) * 0.5;
+    let e = sym.symmetric_eigen();
+    let max = e.eigenvalues.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+    let mut inv = DMatrix::zeros(n, n);
+    let mut rank = 0;
+    for k in 0..n {
+        let l = e.eigenvalues[k];
+        if max > 0.0 && l > 1e-10 * max {
+            let v = e.eigenvectors.column(k);
+            inv += (v * v.transpose()) / l;
+            rank += 1;
+        }
+    }
+    (inv, rank)
+}
+
+impl Estimate {
+    fn new(theta: &[f64], nominal: &[f64], cov: &DMatrix<f64>) -> Estimate {
+        let n = theta.len();
+        let finite: Vec<usize> = (0..n)
+            .filter(|&i| {
+                cov[(i, i)].is_finite()
+                    && cov[(i, i)] > 0.0
+                    && (0..n).all(|j| cov[(i, j)].is_finite())
+            })
+            .collect();
+        let sub = DMatrix::from_fn(finite.len(), finite.len(), |i, j| {
+            cov[(finite[i], finite[j])]
+        });
+        let (inv, rank) = pseudo_inverse(&sub);
+        let mut info = DMatrix::zeros(n, n);
+        for (a, &i) in finite.iter().enumerate() {
+            for (b, &j) in finite.iter().enumerate() {
+                info[(i, j)] = inv[(a, b)];
+            }
+        }
+        let delta = DVector::from_iterator(n, theta.iter().zip(nominal).map(|(t, n)| t - n));
+        Estimate { delta, info, rank }
+    }
+
+    fn block(&self, off: usize, len: usize) -> Estimate {
+        // The marginal of a block: invert the information back to a covariance first.
+        let (cov, _) = pseudo_inverse(&self.info);
+        let sub = cov.view((off, off), (len, len)).into_owned();
+        let det: Vec<bool> = (0..len)
+            .map(|k| self.info[(off + k, off + k)] > 0.0)
+            .collect();
+        let sub = DMatrix::from_fn(len, len, |i, j| {
+            if det[i] && det[j] {
+                sub[(i, j)]
+            } else if i == j {
+                f64::INFINITY
+            } else {
+                0.0
+            }
+        });
+        let zero = vec![0.0; len];
+        let theta: Vec<f64> = self.delta.rows(off, len).iter().copied().collect();
+        Estimate::new(&theta, &zero, &sub)
+    }
+}
+
+/// The combination of several estimates of the same parameters.
+struct Combined {
+    delta: DVector<f64>,
+    /// Per component: its standard deviation (infinite where no voyage determines it).
+    std: Vec<f64>,
+    chi2: f64,
+    dof: usize,
+}
+
+fn combine(es: &[&Estimate], n: usize) -> Combined {
+    let mut info = DMatrix::zeros(n, n);
+    let mut b = DVector::zeros(n);
+    let mut ranks = 0;
+    for e in es {
+        info += &e.info;
+        b += &e.info * &e.delta;
+        ranks += e.rank;
+    }
+    let (cov, rank) = pseudo_inverse(&info);
+    let delta = &cov * b;
+    let std = (0..n)
+        .map(|k| {
+            if info[(k, k)] > 0.0 {
+                cov[(k, k)].max(0.0).sqrt()
+            } else {
+                f64::INFINITY
+            }
+        })
+        .collect();
+    let chi2 = es
+        .iter()
+        .map(|e| {
+            let d = &e.delta - &delta;
+            (d.transpose() * &e.info * &d)[(0, 0)]
+        })
+        .sum();
+    Combined {
+        delta,
+        std,
+        chi2,
+        dof: ranks.saturating_sub(rank),
+    }
+}
+
+/// One voyage's data for one channel.
+struct ChannelVoyage<'a> {
+    voyage: usize,
+    p: Problem<'a>,
+    /// The per-voyage effects this voyage's own discovery named on the channel, and the
+    /// installation effects the voyages disagree on (each voyage's own value).
+    own: Vec<usize>,
+}
+
+fn offset_in(set: &[usize], c: usize) -> (usize, usize) {
+    fit::offset_of(set, c)
+}
+
+fn components(set: &[usize]) -> usize {
+    set.iter()
+        .map(|&c| spec(CANDIDATES[c].name).map_or(1, |s| s.components))
+        .sum()
+}
+
+/// A voyage's set (the shared effects first, then its own) and its fit.
+type VoyageFit = (Vec<usize>, Fit);
+
+/// Each voyage's fit of the shared set with its own effects (the shared set first).
+fn fit_voyages(cv: &[ChannelVoyage], shared: &[usize]) -> Vec<VoyageFit> {
+    cv.iter()
+        .map(|v| {
+            let mut set = shared.to_vec();
+            set.extend(v.own.iter().copied());
+            let f = v.p.fit(&set, &v.p.epochs);
+            (set, f)
+        })
+        .collect()
+}
+
+/// Each voyage's estimate of the shared set (its first components).
+fn shared_estimates(cv: &[ChannelVoyage], shared: &[usize], fits: &[VoyageFit]) -> Vec<Estimate> {
+    let n = components(shared);
+    fits.iter()
+        .zip(cv)
+        .map(|((_, f), v)| {
+            let nominal = v.p.nominal_theta(shared);
+            let all_nominal = {
+                let mut x = nominal.clone();
+                x.extend(std::iter::repeat_n(0.0, f.theta.len() - n));
+                x
+            };
+            let full = Estimate::new(&f.theta, &all_nominal, &f.cov);
+            full.block(0, n)
+        })
+        .collect()
+}
+
+/// The leave-one-voyage-out mean squared residual of a shared set, and each voyage's held-out
+/// shared parameters.
+fn held_out(
+    cv: &[ChannelVoyage],
+    shared: &[usize],
+    estimates: &[Estimate],
+) -> (f64, Vec<Vec<f64>>) {
+    let n = components(shared);
+    let (mut sse, mut count) = (0.0, 0usize);
+    let mut thetas = Vec::with_capacity(cv.len());
+    for (k, v) in cv.iter().enumerate() {
+        let others: Vec<&Estimate> = estimates
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| *j != k)
+            .map(|(_, e)| e)
+            .collect();
+        let c = combine(&others, n);
+        let theta: Vec<f64> =
+            v.p.nominal_theta(shared)
+                .iter()
+                .zip(c.delta.iter())
+                .map(|(a, b)| a + b)
+                .collect();
+        let q = Problem {
+            channel: v.p.channel,
+            reference: v.p.reference,
+            nominal: v.p.effects(shared, &theta),
+            epochs: v.p.epochs.clone(),
+            noise_lags: v.p.noise_lags,
+        };
+        let r = if v.own.is_empty() {
+            q.residuals(&q.nominal, &q.epochs)
+        } else {
+            let f = q.fit(&v.own, &q.epochs);
+            q.residuals(&q.effects(&v.own, &f.theta), &q.epochs)
+        };
+        sse += r.iter().map(|x| x * x).sum::<f64>();
+        count += r.len();
+        thetas.push(theta);
+    }
+    (sse / count.max(1) as f64, thetas)
+}
+
+fn finite_json(v: &[f64]) -> serde_json::Value {
+    json_of(v)
+}
+
+/// Discovery on several voyages (see the module's text): each voyage's own report, the shared
+/// installation effects and their agreement, in one report whose `effects` are the shared
+/// effects the voyages agree on.
+pub fn discover_voyages(
+    data: &[VoyageData],
+    nominal: &Effects,
+    fit_fraction: f64,
+    sel: &Selection,
+) -> DiscoverReport {
+    let start = std::time::Instant::now();
+    let reports: Vec<DiscoverReport> = data
+        .iter()
+        .map(|d| {
+            let mut r = discover(&d.channels, &d.reference, nominal, fit_fraction, sel);
+            r.inputs = vec![d.log.clone()];
+            r
+        })
+        .collect();
+    let mut out = discover(&[], &Reference::default(), nominal, fit_fraction, sel);
+    out.notes.clear();
+    out.inputs = data.iter().map(|d| d.log.clone()).collect();
+    let mut v = Voyages {
+        voyages: Vec::new(),
+        shared: Vec::new(),
+        inconsistent: Vec::new(),
+        per_voyage: Vec::new(),
+        not_confirmed: Vec::new(),
+        scores: Vec::new(),
+        held_out_models: vec![nominal.clone(); data.len()],
+    };
+    let mut model = nominal.clone();
+    for kind in ChannelKind::ALL {
+        let analysed: Vec<usize> = (0..data.len())
+            .filter(|&i| reports[i].channels.iter().any(|c| c.channel == kind))
+            .collect();
+        if analysed.is_empty() {
+            continue;
+        }
+        // Per-voyage effects named by each voyage alone.
+        let named = |i: usize, name: &str| {
+            reports[i]
+                .effects
+                .iter()
+                .find(|e| e.channel == kind && e.name == name)
+        };
+        let candidates: Vec<usize> = (0..CANDIDATES.len())
+            .filter(|&c| CANDIDATES[c].channel == kind)
+            .collect();
+        for &c in &candidates {
+            let name = CANDIDATES[c].name;
+            let by: Vec<VoyageEstimate> = analysed
+                .iter()
+                .filter_map(|&i| {
+                    named(i, name).map(|e| VoyageEstimate {
+                        log: data[i].log.clone(),
+                        value: e.value.clone(),
+                        std: e.std.clone(),
+                    })
+                })
+                .collect();
+            if per_voyage(name) && !by.is_empty() {
+                v.per_voyage.push(NamedAlone {
+                    name: name.into(),
+                    channel: kind,
+                    unit: spec(name).map_or("", |s| s.unit).into(),
+                    voyages: by,
+                });
+            }
+        }
+        if analysed.len() < 2 {
+            out.notes.push(format!(
+                "{}: analysed in one voyage only ({}): its effects are that voyage's own",
+                kind.name(),
+                data[analysed[0]].log
+            ));
+            continue;
+        }
+        let mut scratch = discover(&[], &Reference::default(), nominal, fit_fraction, sel);
+        let prepared: Vec<(usize, Channel)> = analysed
+            .iter()
+            .filter_map(|&i| {
+                let ch = data[i].channels.iter().find(|c| c.kind == kind)?;
+                let ch = if kind.partial() {
+                    screen_outliers(ch, &data[i].reference, nominal, &mut scratch)
+                } else {
+                    ch.clone()
+                };
+                Some((i, ch))
+            })
+            .collect();
+        let mut cv: Vec<ChannelVoyage> = prepared
+            .iter()
+            .map(|(i, ch)| {
+                let p = Problem::new(ch, &data[*i].reference, nominal.clone());
+                let own = candidates
+                    .iter()
+                    .copied()
+                    .filter(|&c| {
+                        per_voyage(CANDIDATES[c].name) && named(*i, CANDIDATES[c].name).is_some()
+                    })
+                    .collect();
+                ChannelVoyage { voyage: *i, p, own }
+            })
+            .filter(|c| c.p.epochs.len() >= 10 * fit::FOLDS)
+            .collect();
+        if cv.len() < 2 {
+            continue;
+        }
+        let installation: Vec<usize> = candidates
+            .iter()
+            .copied()
+            .filter(|&c| !per_voyage(CANDIDATES[c].name))
+            .collect();
+        // Forward selection with the voyages as the held-out folds.
+        let mut shared: Vec<usize> = Vec::new();
+        let mut gains: Vec<f64> = Vec::new();
+        let base = {
+            let fits = fit_voyages(&cv, &shared);
+            held_out(&cv, &shared, &shared_estimates(&cv, &shared, &fits)).0
+        };
+        let mut current = base;
+        let mut rejected: Vec<usize> = Vec::new();
+        loop {
+            let mut trials: Vec<(usize, f64, Vec<VoyageFit>)> = installation
+                .iter()
+                .copied()
+                .filter(|c| !shared.contains(c) && !rejected.contains(c))
+                .map(|c| {
+                    let mut set = shared.clone();
+                    set.push(c);
+                    let fits = fit_voyages(&cv, &set);
+                    let (score, _) = held_out(&cv, &set, &shared_estimates(&cv, &set, &fits));
+                    (c, score, fits)
+                })
+                .collect();
+            trials.sort_by(|a, b| a.1.total_cmp(&b.1));
+            let mut added = false;
+            for (c, score, fits) in trials {
+                if !(score.is_finite() && 1.0 - score / current >= sel.min_gain) {
+                    break;
+                }
+                let mut set = shared.clone();
+                set.push(c);
+                let (off, len) = offset_in(&set, c);
+                let ests = shared_estimates(&cv, &set, &fits);
+                let joint = combine(&ests.iter().collect::<Vec<_>>(), components(&set));
+                let significant = (0..len).any(|k| {
+                    let s = joint.std[off + k];
+                    s.is_finite() && joint.delta[off + k].abs() >= sel.min_sigma * s
+                });
+                if !significant {
+                    continue;
+                }
+                let alone: Vec<Estimate> = ests.iter().map(|e| e.block(off, len)).collect();
+                let agreement = combine(&alone.iter().collect::<Vec<_>>(), len);
+                let limit =
+                    crate::montecarlo::chi2_quantile(agreement.dof.max(1) as f64, AGREEMENT_Z);
+                if agreement.dof > 0 && agreement.chi2 > limit {
+                    let (verdict, agreeing) = disagreement(&cv, data, c, &alone, &agreement);
+                    v.inconsistent.push(SharedEffect {
+                        agreeing,
+                        ..shared_effect(
+                            &cv,
+                            data,
+                            &set,
+                            c,
+                            &fits,
+                            &agreement,
+                            1.0 - score / current,
+                            verdict,
+                        )
+                    });
+                    // Still in the data: each voyage fits its own value, so that it does not
+                    // bias the effects the voyages do share.
+                    rejected.push(c);
+                    for x in cv.iter_mut() {
+                        x.own.push(c);
+                    }
+                    let fits = fit_voyages(&cv, &shared);
+                    current = held_out(&cv, &shared, &shared_estimates(&cv, &shared, &fits)).0;
+                    added = true;
+                    break;
+                }
+                shared.push(c);
+                gains.push(1.0 - score / current);
+                current = score;
+                added = true;
+                break;
+            }
+            if !added {
+                break;
+            }
+        }
+        // The shared set on all voyages, and each voyage's held-out values.
+        let fits = fit_voyages(&cv, &shared);
+        let ests = shared_estimates(&cv, &shared, &fits);
+        let joint = combine(&ests.iter().collect::<Vec<_>>(), components(&shared));
+        let (score, held_thetas) = held_out(&cv, &shared, &ests);
+        // Against the nominal installation with the same per-voyage effects.
+        let base = held_out(
+            &cv,
+            &[],
+            &shared_estimates(&cv, &[], &fit_voyages(&cv, &[])),
+        )
+        .0;
+        v.scores.push(VoyageScore {
+            channel: kind,
+            voyages: cv.len(),
+            mse_nominal: base,
+            mse_shared: score,
+        });
+        let nominal_theta = nominal_theta(nominal, &shared);
+        let theta_all: Vec<f64> = nominal_theta
+            .iter()
+            .zip(joint.delta.iter())
+            .map(|(a, b)| a + b)
+            .collect();
+        let at = cv[0].p.effects(&shared, &theta_all);
+        for (k, c) in cv.iter().enumerate() {
+            let e = c.p.effects(&shared, &held_thetas[k]);
+            set_all(&mut v.held_out_models[c.voyage], &e, &shared);
+        }
+        // Voyages without this channel take the values of all voyages.
+        for (i, m) in v.held_out_models.iter_mut().enumerate() {
+            if !cv.iter().any(|c| c.voyage == i) {
+                set_all(m, &at, &shared);
+            }
+        }
+        set_all(&mut model, &at, &shared);
+        for (n, &c) in shared.iter().enumerate() {
+            let (off, len) = offset_in(&shared, c);
+            let alone: Vec<Estimate> = ests.iter().map(|e| e.block(off, len)).collect();
+            let agreement = combine(&alone.iter().collect::<Vec<_>>(), len);
+            let limit = crate::montecarlo::chi2_quantile(agreement.dof.max(1) as f64, AGREEMENT_Z);
+            let name = CANDIDATES[c].name;
+            let value = at.get(name).unwrap_or_default();
+            let std = &joint.std[off..off + len];
+            let mut s = shared_effect(
+                &cv,
+                data,
+                &shared,
+                c,
+                &fits,
+                &agreement,
+                gains[n],
+                format!(
+                    "shared by {} voyages; they agree (χ² {:.1} ≤ {limit:.1}, {} dof)",
+                    cv.len(),
+                    agreement.chi2,
+                    agreement.dof
+                ),
+            );
+            s.value = finite_json(&value);
+            s.std = finite_json(std);
+            out.effects.push(FoundEffect {
+                name: name.into(),
+                value: s.value.clone(),
+                std: s.std.clone(),
+                nominal: json_of(&nominal.get(name).unwrap_or_default()),
+                unit: spec(name).map_or("", |s| s.unit).into(),
+                channel: kind,
+                evidence: format!(
+                    "{}; leave-one-voyage-out mean squared residual {:.1} % lower",
+                    s.verdict,
+                    100.0 * gains[n]
+                ),
+                gain: gains[n],
+                equivalent: None,
+            });
+            v.shared.push(s);
+        }
+        // Installation effects voyages named alone that the voyages together do not confirm:
+        // disagreement or too little held-out gain.
+        for &c in &installation {
+            if shared.contains(&c) {
+                continue;
+            }
+            let name = CANDIDATES[c].name;
+            let alone_count = cv
+                .iter()
+                .filter(|x| named(x.voyage, name).is_some())
+                .count();
+            if alone_count > 0 && !v.inconsistent.iter().any(|s| s.name == name) {
+                let mut set = shared.clone();
+                set.push(c);
+                let fits = fit_voyages(&cv, &set);
+                let (off, len) = offset_in(&set, c);
+                let alone: Vec<Estimate> = shared_estimates(&cv, &set, &fits)
+                    .iter()
+                    .map(|e| e.block(off, len))
+                    .collect();
+                let agreement = combine(&alone.iter().collect::<Vec<_>>(), len);
+                let limit =
+                    crate::montecarlo::chi2_quantile(agreement.dof.max(1) as f64, AGREEMENT_Z);
+                if agreement.dof > 0 && agreement.chi2 > limit {
+                    let (verdict, agreeing) = disagreement(&cv, data, c, &alone, &agreement);
+                    v.inconsistent.push(SharedEffect {
+                        agreeing,
+                        ..shared_effect(&cv, data, &set, c, &fits, &agreement, 0.0, verdict)
+                    });
+                }
+            }
+            let by: Vec<VoyageEstimate> = cv
+                .iter()
+                .filter_map(|x| {
+                    named(x.voyage, name).map(|e| VoyageEstimate {
+                        log: data[x.voyage].log.clone(),
+                        value: e.value.clone(),
+                        std: e.std.clone(),
+                    })
+                })
+                .collect();
+            if !by.is_empty() {
+                let inconsistent = v.inconsistent.iter().any(|s| s.name == name);
+                out.notes.push(format!(
+                    "{name} ({}): named by {} of {} voyages alone, not by the voyages together \
+                     ({})",
+                    kind.name(),
+                    by.len(),
+                    cv.len(),
+                    if inconsistent {
+                        "they disagree"
+                    } else {
+                        "not significant or no held-out gain across voyages"
+                    }
+                ));
+                v.not_confirmed.push(NamedAlone {
+                    name: name.into(),
+                    channel: kind,
+                    unit: spec(name).map_or("", |s| s.unit).into(),
+                    voyages: by,
+                });
+            }
+        }
+        // Pairs no voyage's motion separates.
+        let mut pairs: Option<Vec<Unseparable>> = None;
+        for c in &cv {
+            let mine: Vec<Unseparable> = reports[c.voyage]
+                .unseparable
+                .iter()
+                .filter(|u| {
+                    u.effects.iter().all(|n| {
+                        CANDIDATES
+                            .iter()
+                            .any(|x| x.channel == kind && x.name == n.as_str())
+                    })
+                })
+                .cloned()
+                .collect();
+            pairs = Some(match pairs {
+                None => mine,
+                Some(p) => p
+                    .into_iter()
+                    .filter(|u| mine.iter().any(|m| same_effects(m, u)))
+                    .collect(),
+            });
+        }
+        out.unseparable.extend(pairs.unwrap_or_default());
+    }
+    // Each channel's noise over the voyages (RMS of the voyages' values).
+    let mut noise: Vec<(NoiseEstimate, f64, usize)> = Vec::new();
+    for r in &reports {
+        for n in &r.noise {
+            match noise
+                .iter_mut()
+                .find(|(m, _, _)| m.name == n.name && m.channel == n.channel)
+            {
+                Some((_, sum, count)) => {
+                    *sum += n.value * n.value;
+                    *count += 1;
+                }
+                None => noise.push((n.clone(), n.value * n.value, 1)),
+            }
+        }
+    }
+    out.noise = noise
+        .into_iter()
+        .map(|(mut n, sum, count)| {
+            n.value = (sum / count as f64).sqrt();
+            n.note = format!("RMS over {count} voyages of: {}", n.note);
+            n
+        })
+        .collect();
+    for r in &reports {
+        for n in &r.notes {
+            out.notes.push(format!("{}: {n}", r.inputs.join(", ")));
+        }
+    }
+    out.model = model;
+    out.held_out_model = nominal.clone();
+    v.voyages = reports;
+    out.voyages = Some(Box::new(v));
+    out.wall_s = start.elapsed().as_secs_f64();
+    out
+}
+
+/// The verdict on voyages that disagree: which voyages depart most, and what the others agree
+/// on when at most half of the voyages are set aside (for the engineer to look at those voyages;
+/// never a finding by itself).
+fn disagreement(
+    cv: &[ChannelVoyage],
+    data: &[VoyageData],
+    c: usize,
+    alone: &[Estimate],
+    all: &Combined,
+) -> (String, Option<Agreeing>) {
+    let name = CANDIDATES[c].name;
+    let len = spec(name).map_or(1, |s| s.components);
+    let nominal = cv[0].p.nominal.get(name).unwrap_or_default();
+    let mut text = format!(
+        "the voyages disagree beyond their uncertainties (χ² {:.1}, {} dof): not a finding (an \
+         effect of each voyage, or of the reference, rather than of the installation)",
+        all.chi2, all.dof
+    );
+    if name == "dvl.scale_factor" {
+        text.push_str(
+            "; a velocity scale that changes between voyages is what a change of the water's \
+             sound speed does (dvl.sound_speed is each voyage's own): measure it on each voyage",
+        );
+    }
+    let mut kept: Vec<usize> = (0..alone.len()).collect();
+    let mut left: Vec<usize> = Vec::new();
+    while kept.len() > alone.len().div_ceil(2).max(2) {
+        let es: Vec<&Estimate> = kept.iter().map(|&k| &alone[k]).collect();
+        let c = combine(&es, len);
+        let limit = crate::montecarlo::chi2_quantile(c.dof.max(1) as f64, AGREEMENT_Z);
+        if c.dof == 0 || c.chi2 <= limit {
+            let value: Vec<String> = c
+                .delta
+                .iter()
+                .zip(&c.std)
+                .map(|(d, s)| format!("{d:+.4} ± {s:.4}"))
+                .collect();
+            let left_out: Vec<String> = left
+                .iter()
+                .map(|&k| data[cv[k].voyage].log.clone())
+                .collect();
+            text.push_str(&format!(
+                "; without {} the other {} voyages agree on a change of [{}] from nominal",
+                left_out.join(", "),
+                kept.len(),
+                value.join(", ")
+            ));
+            let v: Vec<f64> = nominal
+                .iter()
+                .zip(c.delta.iter())
+                .map(|(a, b)| a + b)
+                .collect();
+            return (
+                text,
+                Some(Agreeing {
+                    left_out,
+                    voyages: kept.len(),
+                    value: json_of(&v),
+                    std: json_of(&c.std),
+                }),
+            );
+        }
+        // Set aside the voyage that departs most from the others' mean.
+        let worst = kept
+            .iter()
+            .copied()
+            .max_by(|&a, &b| {
+                let part = |k: usize| {
+                    let d = &alone[k].delta - &c.delta;
+                    (d.transpose() * &alone[k].info * &d)[(0, 0)]
+                };
+                part(a).total_cmp(&part(b))
+            })
+            .expect("voyages left");
+        kept.retain(|&k| k != worst);
+        left.push(worst);
+    }
+    (text, None)
+}
+
+fn same_effects(a: &Unseparable, b: &Unseparable) -> bool {
+    let (mut x, mut y) = (a.effects.clone(), b.effects.clone());
+    x.sort();
+    y.sort();
+    x == y
+}
+
+fn nominal_theta(nominal: &Effects, set: &[usize]) -> Vec<f64> {
+    set.iter()
+        .flat_map(|&c| nominal.get(CANDIDATES[c].name).unwrap_or_default())
+        .collect()
+}
+
+/// Copies the set's effects from `from` into `to`.
+fn set_all(to: &mut Effects, from: &Effects, set: &[usize]) {
+    for &c in set {
+        let name = CANDIDATES[c].name;
+        if let Some(v) = from.get(name) {
+            // In range: `Problem::effects` clamps to the effect's range.
+            let _ = to.set(name, &v);
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn shared_effect(
+    cv: &[ChannelVoyage],
+    data: &[VoyageData],
+    set: &[usize],
+    c: usize,
+    fits: &[VoyageFit],
+    agreement: &Combined,
+    gain: f64,
+    verdict: String,
+) -> SharedEffect {
+    let name = CANDIDATES[c].name;
+    let (off, len) = offset_in(set, c);
+    let nominal = cv[0].p.nominal.get(name).unwrap_or_default();
+    let value: Vec<f64> = nominal
+        .iter()
+        .zip(agreement.delta.iter())
+        .map(|(a, b)| a + b)
+        .collect();
+    SharedEffect {
+        name: name.into(),
+        channel: CANDIDATES[c].channel,
+        unit: spec(name).map_or("", |s| s.unit).into(),
+        value: json_of(&value),
+        std: json_of(&agreement.std),
+        nominal: json_of(&nominal),
+        voyages: cv
+            .iter()
+            .zip(fits)
+            .map(|(x, (_, f))| VoyageEstimate {
+                log: data[x.voyage].log.clone(),
+                value: json_of(&f.theta[off..off + len]),
+                std: json_of(&f.std[off..off + len]),
+            })
+            .collect(),
+        chi2: agreement.chi2,
+        dof: agreement.dof,
+        chi2_limit: crate::montecarlo::chi2_quantile(agreement.dof.max(1) as f64, AGREEMENT_Z),
+        held_out_gain: gain,
+        verdict,
+        agreeing: None,
+    }
+}
