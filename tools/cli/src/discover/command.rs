@@ -17,8 +17,12 @@ pub struct DiscoverArgs {
     /// reference motion.
     #[arg(required = true)]
     pub logs: Vec<PathBuf>,
-    /// The reference motion: `truth` (the simulated truth topic).
-    #[arg(long, default_value = "truth", value_parser = ["truth"])]
+    /// The reference motion: `truth` (the log's truth topic: simulated truth or an imported
+    /// reference solution) or `smoothed` (each log smoothed with `auvnav smooth`, the DVL
+    /// installation as filter states: the vehicle's own motion, so that an effect describes the
+    /// sensor against the IMU; the IMU channels are then not compared, and a log's own reference
+    /// is compared with the smoothed motion to say what separates them).
+    #[arg(long, default_value = "truth", value_parser = ["truth", "smoothed"])]
     pub reference: String,
     /// The nominal model's effects, NAME=VALUE (repeatable; default: every effect off, the
     /// simulator's defaults).
@@ -235,6 +239,10 @@ pub struct DiscoverReport {
     /// voyages share and whether they agree (absent for one log or `--one-voyage`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub voyages: Option<Box<super::voyages::Voyages>>,
+    /// `--reference smoothed` on logs that also carry a reference: what separates that
+    /// reference from the smoothed (IMU) motion.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub reference_against_imu: Vec<super::smoothed::ReferenceAgainstImu>,
     pub wall_s: f64,
     /// The nominal effects.
     #[serde(skip)]
@@ -573,6 +581,7 @@ pub fn discover(
         notes: Vec::new(),
         floors: Vec::new(),
         voyages: None,
+        reference_against_imu: Vec::new(),
         wall_s: 0.0,
         nominal_model: nominal.clone(),
         model: nominal.clone(),
@@ -1172,10 +1181,11 @@ pub fn nominal_from_report(nominal: &mut Effects, path: &std::path::Path) -> any
 
 /// `auvnav discover`.
 pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
-    if a.reference != "truth" {
+    let smoothed = a.reference == "smoothed";
+    if smoothed && a.one_voyage && a.logs.len() > 1 {
         bail!(
-            "--reference {:?}: only `truth` (the simulated truth topic) is supported so far",
-            a.reference
+            "--reference smoothed smooths each log on its own: give the pieces of one voyage as \
+             one log, or leave out --one-voyage"
         );
     }
     if !(a.fit_fraction > 0.0 && a.fit_fraction < 1.0) {
@@ -1190,14 +1200,41 @@ pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
         nominal.set(&name, &values)?;
     }
     let voyages = a.logs.len() > 1 && !a.one_voyage;
+    let mut against = Vec::new();
+    // One log's channels against its reference (the smoothed motion with --reference smoothed).
+    let mut read_one = |log: &PathBuf| -> anyhow::Result<(Vec<Channel>, Reference, usize)> {
+        let (mut channels, reference, u) = read_logs_with(
+            std::slice::from_ref(log),
+            Collector::new().with_dvl_beams(a.dvl_beams),
+        )?;
+        if !smoothed {
+            return Ok((channels, reference, u));
+        }
+        let work = std::env::temp_dir().join(format!(
+            "auvnav-discover-smooth-{}-{}",
+            std::process::id(),
+            against.len()
+        ));
+        let s = super::smoothed::smooth(log, &work);
+        let _ = std::fs::remove_dir_all(&work);
+        let s = s?;
+        let motion = s.reference();
+        if reference.len() >= 2 {
+            against.push(super::smoothed::reference_against_imu(
+                &log.display().to_string(),
+                &reference,
+                &motion,
+                s.installation,
+            ));
+        }
+        channels.retain(|c| !matches!(c.kind, ChannelKind::Gyro | ChannelKind::Accelerometer));
+        Ok((channels, motion, u))
+    };
     let (mut r, undecodable) = if voyages {
         let mut data = Vec::with_capacity(a.logs.len());
         let mut undecodable = 0;
         for log in &a.logs {
-            let (channels, reference, u) = read_logs_with(
-                std::slice::from_ref(log),
-                Collector::new().with_dvl_beams(a.dvl_beams),
-            )?;
+            let (channels, reference, u) = read_one(log)?;
             undecodable += u;
             data.push(super::voyages::VoyageData {
                 log: log.display().to_string(),
@@ -1213,8 +1250,11 @@ pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
         );
         (r, undecodable)
     } else {
-        let (channels, reference, undecodable) =
-            read_logs_with(&a.logs, Collector::new().with_dvl_beams(a.dvl_beams))?;
+        let (channels, reference, undecodable) = if smoothed {
+            read_one(&a.logs[0])?
+        } else {
+            read_logs_with(&a.logs, Collector::new().with_dvl_beams(a.dvl_beams))?
+        };
         let r = discover(
             &channels,
             &reference,
@@ -1231,6 +1271,18 @@ pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
     }
     r.inputs = a.logs.iter().map(|p| p.display().to_string()).collect();
     r.reference = a.reference.clone();
+    if smoothed {
+        r.notes.push(
+            "reference: each log's smoothed motion (IMU, DVL with its installation as filter \
+             states, depth, fixes): the effects describe the sensors against the IMU; the IMU \
+             channels are not compared with their own motion"
+                .into(),
+        );
+        for x in &against {
+            r.notes.push(super::smoothed::describe(x));
+        }
+        r.reference_against_imu = against;
+    }
     if !a.no_navigation {
         let start = std::time::Instant::now();
         super::extend::navigation_gain(&a.logs, &mut r);

@@ -248,6 +248,22 @@ impl<'a> Problem<'a> {
                 ),
             }
         };
+        // The reference's own uncertainty of an effect (a smoothed motion's installation states).
+        let (mut std, mut cov) = (std, cov);
+        let mut k = 0;
+        for &c in set {
+            let name = CANDIDATES[c].name;
+            let n = spec(name).map_or(1, |s| s.components);
+            if let Some((_, floor)) = self.reference.effect_std.iter().find(|(e, _)| e == name) {
+                for (j, f) in floor.iter().enumerate().take(n) {
+                    if f.is_finite() && *f > 0.0 && k + j < std.len() {
+                        std[k + j] = std[k + j].hypot(*f);
+                        cov[(k + j, k + j)] += f * f;
+                    }
+                }
+            }
+            k += n;
+        }
         Fit {
             theta,
             std,

@@ -16,6 +16,7 @@ pub mod fit;
 pub mod hidden;
 pub mod imu;
 pub mod report;
+pub mod smoothed;
 pub mod voyages;
 
 use auvnav_core::earth;
@@ -44,6 +45,11 @@ pub struct RefState {
 #[derive(Debug, Clone, Default)]
 pub struct Reference {
     samples: Vec<(f64, UnitQuaternion<f64>, RefState)>,
+    /// The reference's own uncertainty in the vocabulary, per effect and component: a motion
+    /// estimated with the DVL installation as filter states (`--reference smoothed`) is only as
+    /// sure of the DVL's mounting, scale, lever arm and lag as the filter was, so an effect
+    /// fitted against it is never more certain than that (added in quadrature to its deviation).
+    pub effect_std: Vec<(String, Vec<f64>)>,
 }
 
 impl Reference {
@@ -112,7 +118,10 @@ impl Reference {
                 Vector3::zeros()
             };
         }
-        Reference { samples }
+        Reference {
+            samples,
+            effect_std: Vec::new(),
+        }
     }
 
     pub fn len(&self) -> usize {

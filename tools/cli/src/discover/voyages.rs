@@ -545,6 +545,50 @@ pub fn discover_voyages(
                 break;
             }
         }
+        // Effects set aside as each voyage's own change the others' estimates: the shared set
+        // must still agree at the end; the one that departs most goes to the inconsistent ones
+        // until the rest agree.
+        loop {
+            let fits = fit_voyages(&cv, &shared);
+            let ests = shared_estimates(&cv, &shared, &fits);
+            let worst = shared
+                .iter()
+                .enumerate()
+                .map(|(n, &c)| {
+                    let (off, len) = offset_in(&shared, c);
+                    let alone: Vec<Estimate> = ests.iter().map(|e| e.block(off, len)).collect();
+                    let a = combine(&alone.iter().collect::<Vec<_>>(), len);
+                    let limit = crate::montecarlo::chi2_quantile(a.dof.max(1) as f64, AGREEMENT_Z);
+                    let ratio = if a.dof > 0 { a.chi2 / limit } else { 0.0 };
+                    (n, c, ratio, a, alone)
+                })
+                .filter(|x| x.2 > 1.0)
+                .max_by(|a, b| a.2.total_cmp(&b.2));
+            let Some((n, c, _, agreement, alone)) = worst else {
+                break;
+            };
+            let (verdict, agreeing) = disagreement(&cv, data, c, &alone, &agreement);
+            v.inconsistent.push(SharedEffect {
+                agreeing,
+                ..shared_effect(
+                    &cv,
+                    data,
+                    &shared,
+                    c,
+                    &fits,
+                    &agreement,
+                    gains[n],
+                    format!(
+                        "{verdict} (once the effects the voyages disagree on are each voyage's own)"
+                    ),
+                )
+            });
+            shared.remove(n);
+            gains.remove(n);
+            for x in cv.iter_mut() {
+                x.own.push(c);
+            }
+        }
         // The shared set on all voyages, and each voyage's held-out values.
         let fits = fit_voyages(&cv, &shared);
         let ests = shared_estimates(&cv, &shared, &fits);

@@ -358,7 +358,19 @@ pub fn smooth_log(
     log: &Path,
     fix_file: Option<&fixes::FixFile>,
 ) -> anyhow::Result<LogSmoothReport> {
-    let (cfg, configuration) = replay_config(&replay_args(a, log))?;
+    smooth_log_with(a, log, fix_file, &|_| {})
+}
+
+/// [`smooth_log`] with the replay configuration adjusted first (e.g. installation states
+/// switched on).
+pub fn smooth_log_with(
+    a: &SmoothArgs,
+    log: &Path,
+    fix_file: Option<&fixes::FixFile>,
+    adjust: &dyn Fn(&mut crate::replay::ReplayConfig),
+) -> anyhow::Result<LogSmoothReport> {
+    let (mut cfg, configuration) = replay_config(&replay_args(a, log))?;
+    adjust(&mut cfg);
     let name = stem(log);
     let spill_dir = a.spill_dir.clone().unwrap_or_else(|| a.out.clone());
     // The fixes inside the log's time span (from a quick read before the passes), fed in both
