@@ -230,6 +230,10 @@ enum BenchWhat {
         /// magnitudes (0: skip; at most 100).
         #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u64).range(0..=100))]
         floor: u64,
+        /// Trials with coloured DVL noise (a Gauss–Markov velocity error): half with nothing
+        /// hidden, half with one effect hidden.
+        #[arg(long, default_value_t = 100)]
+        coloured: usize,
         /// The measured data directory (`../shared/data`): also time discovery on each data set.
         #[arg(long, value_name = "DIR")]
         data: Option<PathBuf>,
@@ -723,6 +727,7 @@ fn main() -> std::process::ExitCode {
                 null,
                 pairs,
                 floor,
+                coloured,
                 data,
                 json,
             } => auvnav_tools::bench::discover(&auvnav_tools::bench::DiscoverBench {
@@ -730,6 +735,7 @@ fn main() -> std::process::ExitCode {
                 null,
                 pairs,
                 floor: floor as usize,
+                coloured,
                 data,
                 json,
             }),

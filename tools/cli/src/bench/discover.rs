@@ -6,7 +6,8 @@
 
 use crate::calibrate::Progress;
 use crate::discover::hidden::{
-    HIDDEN, SetTrial, Trial, draw, draw_of, draw_pair, scaled, trial, trial_set,
+    HIDDEN, SetTrial, Trial, coloured, draw, draw_of, draw_pair, scaled, trial, trial_set,
+    trial_set_with,
 };
 use crate::parallel::{default_threads, map_runs};
 use serde::Serialize;
@@ -45,6 +46,17 @@ struct Summary {
     /// Per effect and magnitude fraction: how often the name was reported, and how often it was
     /// right within 10 % with nothing else.
     floor: Vec<FloorRow>,
+    /// Trials with coloured DVL noise (a Gauss–Markov velocity error): nothing hidden, and one
+    /// effect hidden.
+    coloured_null_trials: usize,
+    coloured_null_false_discoveries: usize,
+    coloured_null_false_discovery_rate: f64,
+    coloured_hidden_trials: usize,
+    coloured_hidden_correct: usize,
+    coloured_hidden_correct_rate: f64,
+    /// Coloured hidden trials where an effect that was not hidden was reported.
+    coloured_hidden_false_discoveries: usize,
+    coloured: Vec<SetTrial>,
     /// Discovery on the measured data sets (import in memory and discovery, per item).
     measured: Vec<MeasuredTiming>,
     wall_s: f64,
@@ -84,6 +96,8 @@ pub struct DiscoverBench {
     pub pairs: usize,
     /// Trials per effect and magnitude fraction of the detection floor (0: none).
     pub floor: usize,
+    /// Trials with coloured DVL noise: half with nothing hidden, half with one effect hidden.
+    pub coloured: usize,
     /// `../shared/data` (or another copy): time discovery on the measured data sets in it.
     pub data: Option<std::path::PathBuf>,
     pub json: bool,
@@ -148,8 +162,9 @@ fn measured_timings(data: &std::path::Path) -> anyhow::Result<Vec<MeasuredTiming
 }
 
 /// Runs `hidden` trials (seeds 1..=hidden), `null` trials (seeds 100 001..), `pairs` trials with
-/// two effects (seeds 200 001..) and the detection floor (seeds 300 000 + 1000 × effect + 100 ×
-/// fraction + k; at most 100 per fraction) on
+/// two effects (seeds 200 001..), the detection floor (seeds 300 000 + 1000 × effect + 100 ×
+/// fraction + k; at most 100 per fraction) and the coloured-noise trials (null: seeds 400 001..,
+/// hidden: 410 001..) on
 /// all cores, then the measured data sets one at a time.
 pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
     let (hidden, null, json) = (o.hidden, o.null, o.json);
@@ -169,7 +184,8 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
                 })
         })
         .collect();
-    let extra = o.pairs + floor_jobs.len();
+    let (coloured_null, coloured_hidden) = (o.coloured / 2, o.coloured - o.coloured / 2);
+    let extra = o.pairs + floor_jobs.len() + o.coloured;
     let total = hidden + null;
     let progress = Mutex::new((Progress::new(!json), 0usize));
     let results = map_runs(total, threads, |k| {
@@ -190,14 +206,20 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
     });
     let results = results?;
     let set_results = map_runs(extra, threads, |k| {
-        let (seed, h) = if k < o.pairs {
+        let floor_end = o.pairs + floor_jobs.len();
+        let t = if k < o.pairs {
             let seed = 200_001 + k as u64;
-            (seed, draw_pair(seed).to_vec())
-        } else {
+            trial_set(seed, &draw_pair(seed), &dir)?.0
+        } else if k < floor_end {
             let (e, f, seed) = floor_jobs[k - o.pairs];
-            (seed, vec![scaled(&draw_of(seed, e), f)])
+            trial_set(seed, &[scaled(&draw_of(seed, e), f)], &dir)?.0
+        } else if k < floor_end + coloured_null {
+            let seed = 400_001 + (k - floor_end) as u64;
+            trial_set_with(seed, &[], &coloured(seed), &dir)?.0
+        } else {
+            let seed = 410_001 + (k - floor_end - coloured_null) as u64;
+            trial_set_with(seed, &[draw(seed)], &coloured(seed), &dir)?.0
         };
-        let (t, _) = trial_set(seed, &h, &dir)?;
         if let Ok(mut p) = progress.lock() {
             p.1 += 1;
             let done = p.1;
@@ -207,7 +229,11 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
     });
     let _ = std::fs::remove_dir_all(&dir);
     let set_results = set_results?;
-    let (pairs, floor_trials) = set_results.split_at(o.pairs);
+    let (pairs, rest) = set_results.split_at(o.pairs);
+    let (floor_trials, coloured_trials) = rest.split_at(floor_jobs.len());
+    let (c_null, c_hidden) = coloured_trials.split_at(coloured_null);
+    let c_null_fd = c_null.iter().filter(|t| t.false_discovery).count();
+    let c_hidden_correct = c_hidden.iter().filter(|t| t.correct).count();
     let mut floor = Vec::new();
     for (e, (name, lo, hi)) in HIDDEN.iter().enumerate() {
         for &f in &FLOOR_FRACTIONS {
@@ -289,6 +315,14 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
             / pairs.len().max(1) as f64,
         pairs_false_discoveries: pairs.iter().filter(|t| t.false_discovery).count(),
         floor,
+        coloured_null_trials: c_null.len(),
+        coloured_null_false_discoveries: c_null_fd,
+        coloured_null_false_discovery_rate: c_null_fd as f64 / c_null.len().max(1) as f64,
+        coloured_hidden_trials: coloured_hidden,
+        coloured_hidden_correct: c_hidden_correct,
+        coloured_hidden_correct_rate: c_hidden_correct as f64 / coloured_hidden.max(1) as f64,
+        coloured_hidden_false_discoveries: c_hidden.iter().filter(|t| t.false_discovery).count(),
+        coloured: coloured_trials.to_vec(),
         measured,
         wall_s: start.elapsed().as_secs_f64(),
         threads,
@@ -346,6 +380,28 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
                 t.hidden.iter().map(|h| &h.name).collect::<Vec<_>>(),
                 t.found,
                 t.relative_errors
+            );
+        }
+    }
+    if s.coloured_null_trials + s.coloured_hidden_trials > 0 {
+        println!(
+            "coloured DVL noise (Gauss-Markov velocity error): null {}/{} with a false discovery \
+             ({:.1} %); hidden {}/{} right name within 10 % and nothing else ({:.1} %), {} with \
+             another effect reported",
+            s.coloured_null_false_discoveries,
+            s.coloured_null_trials,
+            100.0 * s.coloured_null_false_discovery_rate,
+            s.coloured_hidden_correct,
+            s.coloured_hidden_trials,
+            100.0 * s.coloured_hidden_correct_rate,
+            s.coloured_hidden_false_discoveries
+        );
+        for t in s.coloured.iter().filter(|t| !t.correct) {
+            println!(
+                "  seed {}: hidden {:?}, found {:?}",
+                t.seed,
+                t.hidden.iter().map(|h| &h.name).collect::<Vec<_>>(),
+                t.found
             );
         }
     }

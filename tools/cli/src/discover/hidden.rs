@@ -173,16 +173,38 @@ pub struct SetTrial {
     pub false_discovery: bool,
 }
 
+/// Coloured noise for trial `seed`, on top of the trial's white noise: a Gauss–Markov DVL
+/// velocity error (instability 5–15 mm/s per axis, correlation time 30–120 s, drawn per seed) —
+/// the slowly varying disagreement between a DVL and the vehicle's motion that measured logs show
+/// and white-noise trials do not.
+pub fn coloured(seed: u64) -> Vec<(String, Vec<f64>)> {
+    let mut rng = Rng::new(seed, "discover.coloured");
+    let instability = 0.005 + 0.01 * rng.uniform();
+    let tau = 30.0 + 90.0 * rng.uniform();
+    vec![
+        ("dvl.velocity_error_instability".into(), vec![instability]),
+        ("dvl.velocity_error_correlation_time".into(), vec![tau]),
+    ]
+}
+
 /// Runs one trial with the effects `hidden` (none: a null trial) in `dir`.
 pub fn trial_set(
     seed: u64,
     hidden: &[Hidden],
     dir: &Path,
 ) -> anyhow::Result<(SetTrial, DiscoverReport)> {
-    let settings: Vec<(String, Vec<f64>)> = hidden
-        .iter()
-        .map(|h| (h.name.clone(), h.value.clone()))
-        .collect();
+    trial_set_with(seed, hidden, &[], dir)
+}
+
+/// [`trial_set`] with further noise settings (e.g. [`coloured`]) that are not effects to find.
+pub fn trial_set_with(
+    seed: u64,
+    hidden: &[Hidden],
+    noise: &[(String, Vec<f64>)],
+    dir: &Path,
+) -> anyhow::Result<(SetTrial, DiscoverReport)> {
+    let mut settings: Vec<(String, Vec<f64>)> = noise.to_vec();
+    settings.extend(hidden.iter().map(|h| (h.name.clone(), h.value.clone())));
     let log = simulate(seed, &settings, dir)?;
     let read = read_logs(std::slice::from_ref(&log));
     let _ = std::fs::remove_file(&log);
