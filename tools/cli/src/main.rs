@@ -234,6 +234,10 @@ enum BenchWhat {
         /// hidden, half with one effect hidden.
         #[arg(long, default_value_t = 100)]
         coloured: usize,
+        /// Trials of three voyages with coloured DVL noise discovered together: half with
+        /// nothing hidden, half with one installation effect hidden in all three.
+        #[arg(long, default_value_t = 40)]
+        coloured_voyages: usize,
         /// The measured data directory (`../shared/data`): also time discovery on each data set.
         #[arg(long, value_name = "DIR")]
         data: Option<PathBuf>,
@@ -728,6 +732,7 @@ fn main() -> std::process::ExitCode {
                 pairs,
                 floor,
                 coloured,
+                coloured_voyages,
                 data,
                 json,
             } => auvnav_tools::bench::discover(&auvnav_tools::bench::DiscoverBench {
@@ -736,6 +741,7 @@ fn main() -> std::process::ExitCode {
                 pairs,
                 floor: floor as usize,
                 coloured,
+                coloured_voyages,
                 data,
                 json,
             }),

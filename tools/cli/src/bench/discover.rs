@@ -6,8 +6,8 @@
 
 use crate::calibrate::Progress;
 use crate::discover::hidden::{
-    HIDDEN, SetTrial, Trial, coloured, draw, draw_of, draw_pair, scaled, trial, trial_set,
-    trial_set_with,
+    HIDDEN, SetTrial, Trial, coloured, draw, draw_of, draw_pair, installation_effects, scaled,
+    trial, trial_set, trial_set_with, trial_voyages,
 };
 use crate::parallel::{default_threads, map_runs};
 use serde::Serialize;
@@ -57,6 +57,14 @@ struct Summary {
     /// Coloured hidden trials where an effect that was not hidden was reported.
     coloured_hidden_false_discoveries: usize,
     coloured: Vec<SetTrial>,
+    /// The same noise over three voyages of one vehicle discovered together (each voyage its
+    /// own noise realisation; an installation effect hidden in all three, or nothing).
+    voyages_null_trials: usize,
+    voyages_null_false_discoveries: usize,
+    voyages_hidden_trials: usize,
+    voyages_hidden_correct: usize,
+    voyages_hidden_false_discoveries: usize,
+    voyages: Vec<SetTrial>,
     /// Discovery on the measured data sets (import in memory and discovery, per item).
     measured: Vec<MeasuredTiming>,
     wall_s: f64,
@@ -98,6 +106,9 @@ pub struct DiscoverBench {
     pub floor: usize,
     /// Trials with coloured DVL noise: half with nothing hidden, half with one effect hidden.
     pub coloured: usize,
+    /// The same over three voyages discovered together (half null, half one installation
+    /// effect hidden in all three).
+    pub coloured_voyages: usize,
     /// `../shared/data` (or another copy): time discovery on the measured data sets in it.
     pub data: Option<std::path::PathBuf>,
     pub json: bool,
@@ -163,8 +174,9 @@ fn measured_timings(data: &std::path::Path) -> anyhow::Result<Vec<MeasuredTiming
 
 /// Runs `hidden` trials (seeds 1..=hidden), `null` trials (seeds 100 001..), `pairs` trials with
 /// two effects (seeds 200 001..), the detection floor (seeds 300 000 + 1000 × effect + 100 ×
-/// fraction + k; at most 100 per fraction) and the coloured-noise trials (null: seeds 400 001..,
-/// hidden: 410 001..) on
+/// fraction + k; at most 100 per fraction), the coloured-noise trials (null: seeds 400 001..,
+/// hidden: 410 001..) and the coloured three-voyage trials (null: 420 001.., hidden: 430 001..;
+/// voyage i of trial s simulated with seed 16 s + i) on
 /// all cores, then the measured data sets one at a time.
 pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
     let (hidden, null, json) = (o.hidden, o.null, o.json);
@@ -185,7 +197,12 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
         })
         .collect();
     let (coloured_null, coloured_hidden) = (o.coloured / 2, o.coloured - o.coloured / 2);
-    let extra = o.pairs + floor_jobs.len() + o.coloured;
+    let (voyages_null, voyages_hidden) = (
+        o.coloured_voyages / 2,
+        o.coloured_voyages - o.coloured_voyages / 2,
+    );
+    let extra = o.pairs + floor_jobs.len() + o.coloured + o.coloured_voyages;
+    let installation = installation_effects();
     let total = hidden + null;
     let progress = Mutex::new((Progress::new(!json), 0usize));
     let results = map_runs(total, threads, |k| {
@@ -216,9 +233,16 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
         } else if k < floor_end + coloured_null {
             let seed = 400_001 + (k - floor_end) as u64;
             trial_set_with(seed, &[], &coloured(seed), &dir)?.0
-        } else {
+        } else if k < floor_end + o.coloured {
             let seed = 410_001 + (k - floor_end - coloured_null) as u64;
             trial_set_with(seed, &[draw(seed)], &coloured(seed), &dir)?.0
+        } else if k < floor_end + o.coloured + voyages_null {
+            let seed = 420_001 + (k - floor_end - o.coloured) as u64;
+            trial_voyages(seed, &[], 3, &dir)?
+        } else {
+            let seed = 430_001 + (k - floor_end - o.coloured - voyages_null) as u64;
+            let e = installation[(seed as usize) % installation.len()];
+            trial_voyages(seed, &[draw_of(seed, e)], 3, &dir)?
         };
         if let Ok(mut p) = progress.lock() {
             p.1 += 1;
@@ -230,7 +254,9 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
     let _ = std::fs::remove_dir_all(&dir);
     let set_results = set_results?;
     let (pairs, rest) = set_results.split_at(o.pairs);
-    let (floor_trials, coloured_trials) = rest.split_at(floor_jobs.len());
+    let (floor_trials, rest) = rest.split_at(floor_jobs.len());
+    let (coloured_trials, voyage_trials) = rest.split_at(o.coloured);
+    let (v_null, v_hidden) = voyage_trials.split_at(voyages_null);
     let (c_null, c_hidden) = coloured_trials.split_at(coloured_null);
     let c_null_fd = c_null.iter().filter(|t| t.false_discovery).count();
     let c_hidden_correct = c_hidden.iter().filter(|t| t.correct).count();
@@ -323,6 +349,12 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
         coloured_hidden_correct_rate: c_hidden_correct as f64 / coloured_hidden.max(1) as f64,
         coloured_hidden_false_discoveries: c_hidden.iter().filter(|t| t.false_discovery).count(),
         coloured: coloured_trials.to_vec(),
+        voyages_null_trials: v_null.len(),
+        voyages_null_false_discoveries: v_null.iter().filter(|t| t.false_discovery).count(),
+        voyages_hidden_trials: voyages_hidden,
+        voyages_hidden_correct: v_hidden.iter().filter(|t| t.correct).count(),
+        voyages_hidden_false_discoveries: v_hidden.iter().filter(|t| t.false_discovery).count(),
+        voyages: voyage_trials.to_vec(),
         measured,
         wall_s: start.elapsed().as_secs_f64(),
         threads,
@@ -402,6 +434,27 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
                 t.seed,
                 t.hidden.iter().map(|h| &h.name).collect::<Vec<_>>(),
                 t.found
+            );
+        }
+    }
+    if s.voyages_null_trials + s.voyages_hidden_trials > 0 {
+        println!(
+            "coloured DVL noise, three voyages discovered together: null {}/{} with a false \
+             discovery; an installation effect hidden in all three: {}/{} right name within 10 % \
+             and nothing else, {} with another effect reported",
+            s.voyages_null_false_discoveries,
+            s.voyages_null_trials,
+            s.voyages_hidden_correct,
+            s.voyages_hidden_trials,
+            s.voyages_hidden_false_discoveries
+        );
+        for t in s.voyages.iter().filter(|t| !t.correct) {
+            println!(
+                "  seed {}: hidden {:?}, found {:?}, relative errors {:?}",
+                t.seed,
+                t.hidden.iter().map(|h| &h.name).collect::<Vec<_>>(),
+                t.found,
+                t.relative_errors
             );
         }
     }

@@ -212,7 +212,8 @@ impl<'a> Problem<'a> {
                         .collect();
                     let lags = self.noise_lags;
                     let s = long_run_scores(&jac, &r, d, lags) * (n as f64 / dof);
-                    let cov = &inv * s * &inv;
+                    let b = fixed_b_factor(lags, n / d.max(1));
+                    let cov = &inv * s * &inv * (b * b);
                     let std: Vec<f64> = (0..theta.len())
                         .map(|i| cov[(i, i)].max(0.0).sqrt().max(white[i]))
                         .collect();
@@ -419,6 +420,20 @@ pub fn correlation_lags(r: &[f64], d: usize) -> usize {
         }
     }
     max
+}
+
+/// How much wider a Newey–West deviation must be taken when its window is a sizeable fraction
+/// of the series (`lags` of `m` readings): with few independent stretches of a slowly varying
+/// error the estimate of its long-run variance is itself uncertain, and the test statistic has
+/// heavier tails than a normal one. Fixed-b asymptotics (Kiefer & Vogelsang 2005, Bartlett
+/// kernel) give the two-sided 5 % critical value 1.96 + 2.9694 b + 0.4160 b² − 0.5324 b³ for
+/// b = lags / m; the factor is its ratio to 1.96 (1 for white residuals).
+pub fn fixed_b_factor(lags: usize, m: usize) -> f64 {
+    if lags == 0 || m == 0 {
+        return 1.0;
+    }
+    let b = (lags as f64 / m as f64).min(1.0);
+    (1.96 + 2.9694 * b + 0.4160 * b * b - 0.5324 * b * b * b) / 1.96
 }
 
 /// Newey–West long-run covariance of the scores `g_t = Σ_k J[t·d+k]ᵀ r[t·d+k]` with Bartlett

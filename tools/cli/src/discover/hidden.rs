@@ -317,3 +317,85 @@ pub fn trial(
         report,
     ))
 }
+
+/// Installation effects of [`HIDDEN`] (shared by a vehicle's voyages; see
+/// `voyages::per_voyage`), for the trials over several voyages.
+pub fn installation_effects() -> Vec<usize> {
+    (0..HIDDEN.len())
+        .filter(|&k| !super::voyages::per_voyage(HIDDEN[k].0))
+        .collect()
+}
+
+/// A trial over `voyages` voyages of the same vehicle (trajectories and noise of seeds
+/// `seed × 16 + i`), each with its own coloured DVL noise ([`coloured`]) and the same hidden
+/// installation (none: a null trial), discovered together as voyages. Correct: every hidden
+/// effect named as shared within 10 %, and nothing else named (shared or per voyage).
+pub fn trial_voyages(
+    seed: u64,
+    hidden: &[Hidden],
+    voyages: usize,
+    dir: &Path,
+) -> anyhow::Result<SetTrial> {
+    let settings: Vec<(String, Vec<f64>)> = hidden
+        .iter()
+        .map(|h| (h.name.clone(), h.value.clone()))
+        .collect();
+    let mut data = Vec::with_capacity(voyages);
+    for i in 0..voyages {
+        let s = seed * 16 + i as u64;
+        let mut all = coloured(s);
+        all.extend(settings.iter().cloned());
+        let log = simulate(s, &all, dir)?;
+        let read = read_logs(std::slice::from_ref(&log));
+        let _ = std::fs::remove_file(&log);
+        let (channels, reference, _) = read?;
+        data.push(super::voyages::VoyageData {
+            log: format!("voyage {}", i + 1),
+            channels,
+            reference,
+        });
+    }
+    let report =
+        super::voyages::discover_voyages(&data, &Effects::default(), 0.7, &Selection::default());
+    let mut found: Vec<String> = report.effects.iter().map(|e| e.name.clone()).collect();
+    if let Some(v) = &report.voyages {
+        for p in &v.per_voyage {
+            found.push(format!("{} (per voyage)", p.name));
+        }
+    }
+    let norm = |a: &[f64], b: &[f64]| -> f64 {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
+    let (mut estimates, mut relative_errors) = (Vec::new(), Vec::new());
+    for h in hidden {
+        match report.effects.iter().find(|e| e.name == h.name) {
+            Some(e) => {
+                let est = values_of(&e.value).unwrap_or_else(|| vec![f64::NAN; h.value.len()]);
+                let nominal = Effects::default().get(&h.name).unwrap_or_default();
+                relative_errors.push(Some(norm(&est, &h.value) / norm(&h.value, &nominal)));
+                estimates.push(Some(est));
+            }
+            None => {
+                relative_errors.push(None);
+                estimates.push(None);
+            }
+        }
+    }
+    let false_discovery = found.iter().any(|n| !hidden.iter().any(|h| &h.name == n));
+    let correct = !false_discovery
+        && found.len() == hidden.len()
+        && relative_errors.iter().all(|r| r.is_some_and(|r| r <= 0.1));
+    Ok(SetTrial {
+        seed,
+        hidden: hidden.to_vec(),
+        found,
+        estimates,
+        relative_errors,
+        correct,
+        false_discovery,
+    })
+}

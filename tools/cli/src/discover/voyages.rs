@@ -498,15 +498,19 @@ pub fn discover_voyages(
                 let (off, len) = offset_in(&set, c);
                 let ests = shared_estimates(&cv, &set, &fits);
                 let joint = combine(&ests.iter().collect::<Vec<_>>(), components(&set));
+                let alone: Vec<Estimate> = ests.iter().map(|e| e.block(off, len)).collect();
+                let agreement = combine(&alone.iter().collect::<Vec<_>>(), len);
+                // The voyages' own scatter, when larger than their deviations say (the Birge
+                // ratio), widens the combined deviation: a slowly varying error gives each voyage
+                // an estimate of its own sign that its deviation does not cover.
+                let birge = birge_ratio(&agreement);
                 let significant = (0..len).any(|k| {
-                    let s = joint.std[off + k];
+                    let s = joint.std[off + k] * birge;
                     s.is_finite() && joint.delta[off + k].abs() >= sel.min_sigma * s
                 });
                 if !significant {
                     continue;
                 }
-                let alone: Vec<Estimate> = ests.iter().map(|e| e.block(off, len)).collect();
-                let agreement = combine(&alone.iter().collect::<Vec<_>>(), len);
                 let limit =
                     crate::montecarlo::chi2_quantile(agreement.dof.max(1) as f64, AGREEMENT_Z);
                 if agreement.dof > 0 && agreement.chi2 > limit {
@@ -648,8 +652,15 @@ pub fn discover_voyages(
                     agreement.dof
                 ),
             );
+            let birge = birge_ratio(&agreement);
+            let std: Vec<f64> = std.iter().map(|x| x * birge).collect();
             s.value = finite_json(&value);
-            s.std = finite_json(std);
+            s.std = finite_json(&std);
+            if birge > 1.0 {
+                s.verdict.push_str(&format!(
+                    "; deviation widened ×{birge:.2} to the voyages' scatter (Birge ratio)"
+                ));
+            }
             out.effects.push(FoundEffect {
                 name: name.into(),
                 value: s.value.clone(),
@@ -870,6 +881,15 @@ fn disagreement(
         left.push(worst);
     }
     (text, None)
+}
+
+/// sqrt(χ² / dof) of the voyages' agreement, at least 1.
+fn birge_ratio(a: &Combined) -> f64 {
+    if a.dof == 0 {
+        1.0
+    } else {
+        (a.chi2 / a.dof as f64).sqrt().max(1.0)
+    }
 }
 
 fn same_effects(a: &Unseparable, b: &Unseparable) -> bool {
