@@ -288,12 +288,23 @@ pub fn navigation_gain(logs: &[PathBuf], r: &mut DiscoverReport) {
                 if a.horizontal_error_final_m > b.horizontal_error_final_m
                     && a.error_per_distance_cep50_percent > b.error_per_distance_cep50_percent
                 {
+                    let why = if r.reference == "smoothed" && after.dvl_time_offset.abs() > 0.3 {
+                        "they describe the sensors against the IMU's own (smoothed) motion, so \
+                         what does not carry over is the navigator's use of them: it applies a \
+                         DVL time offset to first order, v(t - τ) ≈ v(t) - τa, which a lag of \
+                         this size outgrows"
+                    } else if r.reference == "smoothed" {
+                        "they describe the sensors against the IMU's own (smoothed) motion, yet \
+                         the navigator does not gain from them on this log"
+                    } else {
+                        "they describe the sensors against the reference, and the reference is \
+                         not the IMU's motion (its velocity at another point or time; compare \
+                         with --reference smoothed)"
+                    };
                     r.notes.push(format!(
                         "{}: the navigation error grows with the effects found (end {:.2} -> {:.2} m, \
-                         CEP50 {:.3} -> {:.3} %): they describe the sensors against the reference, \
-                         and the reference is not the IMU's motion (its velocity at another point \
-                         or time). Check against the navigator's own estimates (estimate_dvl_* in \
-                         [navigation]) before using navigation.toml",
+                         CEP50 {:.3} -> {:.3} %): {why}. Check against the navigator's own \
+                         estimates (estimate_dvl_* in [navigation]) before using navigation.toml",
                         g.log,
                         b.horizontal_error_final_m,
                         a.horizontal_error_final_m,
