@@ -290,9 +290,9 @@ pub fn navigation_gain(logs: &[PathBuf], r: &mut DiscoverReport) {
                 {
                     let why = if r.reference == "smoothed" && after.dvl_time_offset.abs() > 0.3 {
                         "they describe the sensors against the IMU's own (smoothed) motion, so \
-                         what does not carry over is the navigator's use of them: it applies a \
-                         DVL time offset to first order, v(t - τ) ≈ v(t) - τa, which a lag of \
-                         this size outgrows"
+                         what does not carry over is likely the navigator's use of them: it \
+                         applies a DVL time offset to first order, v(t - τ) ≈ v(t) - τa, which a \
+                         lag of this size may outgrow"
                     } else if r.reference == "smoothed" {
                         "they describe the sensors against the IMU's own (smoothed) motion, yet \
                          the navigator does not gain from them on this log"
