@@ -82,6 +82,9 @@ pub struct NavConfig {
     /// deviation exceeds this (m, 1..1e7). Default 1000.
     pub position_unknown_std_m: f64,
     /// DVL time offset: the velocity stamped at t is the vehicle's at t - offset (s). Default 0.
+    /// A negative offset (a reading stamped before the motion it describes) is applied by
+    /// holding each reading until the filter reaches that moment; a positive one to first order
+    /// (v(t - offset) ≈ v(t) - offset·a).
     pub dvl_time_offset_s: f64,
     /// Estimate the DVL mounting angles (parameter states). Default false.
     pub estimate_dvl_mounting: bool,

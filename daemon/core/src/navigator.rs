@@ -211,6 +211,7 @@ impl Navigator {
             cfg.dvl_reset_after_s,
             initial.time_s,
         );
+        dvl.retimed_s = dvl_retime_s(&cfg);
         dvl.sound_speed = sound_speed_correction(&cfg);
         if cfg.water_current_std_m_s > 0.0 {
             for k in 0..2 {
@@ -690,3 +691,12 @@ pub struct Checkpoint {
 
 /// The initial state from a geodetic position, NED velocity and Euler angles (in `strapdown`).
 pub use crate::strapdown::initial_state;
+
+/// The DVL time offset applied by retiming the readings (s, ≤ 0): a negative configured offset
+/// means a reading stamped t describes the motion at t − offset, later than its stamp, so the
+/// session holds it until the filter reaches that moment instead of extrapolating the velocity
+/// to first order over the offset. A positive offset (a reading describing the past) stays in
+/// the first-order model.
+pub fn dvl_retime_s(cfg: &NavConfig) -> f64 {
+    cfg.dvl_installation().time_offset_s.min(0.0)
+}

@@ -94,6 +94,9 @@ pub struct Session {
     nav: Option<Navigator>,
     initial: Option<InitialReport>,
     aid_delay_ns: u64,
+    /// DVL readings are held this long (their stamp moved to the moment they describe): a
+    /// negative configured DVL time offset (`navigator::dvl_retime_s`).
+    dvl_retime_ns: u64,
     pending: std::collections::BinaryHeap<Pending>,
     last_imu_ns: u64,
     /// Sensor messages before the initial state was known (skipped).
@@ -142,6 +145,7 @@ impl Session {
             nav: None,
             initial: None,
             aid_delay_ns: (cfg.aid_delay_s.clamp(0.0, 1.0) * 1e9).round() as u64,
+            dvl_retime_ns: (-crate::navigator::dvl_retime_s(&cfg.navigation) * 1e9).round() as u64,
             pending: std::collections::BinaryHeap::new(),
             last_imu_ns: 0,
             before_start: 0,
@@ -896,6 +900,14 @@ impl Session {
     /// Queues an aid message (applied before the first IMU sample stamped after its time + the
     /// aid delay); counted as late when the IMU has already passed that point.
     fn queue(&mut self, aid: SensorMessage) {
+        let aid = match aid {
+            SensorMessage::Dvl(mut m) if self.dvl_retime_ns > 0 => {
+                m.host_time_ns = m.host_time_ns.saturating_add(self.dvl_retime_ns);
+                m.validity_time_ns = m.validity_time_ns.saturating_add(self.dvl_retime_ns);
+                SensorMessage::Dvl(m)
+            }
+            other => other,
+        };
         let late = aid_key(&aid).0.saturating_add(self.aid_delay_ns) < self.last_imu_ns;
         if late {
             self.late_aids += 1;

@@ -49,6 +49,10 @@ pub struct DvlEstimation {
 pub struct DvlAid {
     /// The installation (estimated when its parameter states are switched on).
     pub params: DvlParameters,
+    /// The part of the time offset applied by holding each reading until the filter reaches the
+    /// moment it describes (a negative configured offset: the reading is stamped before its
+    /// motion; `Session` delays it); only the rest is modelled to first order. 0: none.
+    pub retimed_s: f64,
     /// Velocity noise per axis when the device gives none (m/s).
     pub velocity_std_m_s: f64,
     /// χ² gate (3 dof).
@@ -171,6 +175,15 @@ impl SoundSpeed {
 }
 
 impl DvlAid {
+    /// The installation as the measurement model takes it: the time offset less the part the
+    /// readings' retiming already applies.
+    pub fn model_params(&self) -> DvlParameters {
+        DvlParameters {
+            time_offset_s: self.params.time_offset_s - self.retimed_s,
+            ..self.params
+        }
+    }
+
     /// The aid with the installation `params`, velocity noise `velocity_std_m_s` (m/s) when the
     /// device gives none, χ² gate `gate_chi2` (3 dof), covariance re-opening after
     /// `reset_after_s` (s, 0 = never), and `start_s` as the time of the last fused velocity.
@@ -183,6 +196,7 @@ impl DvlAid {
     ) -> DvlAid {
         DvlAid {
             params,
+            retimed_s: 0.0,
             velocity_std_m_s,
             gate_chi2,
             reset_after_s,
@@ -238,7 +252,7 @@ impl DvlAid {
             core.state(),
             &core.last_omega_ib,
             &core.last_f_body,
-            &self.params,
+            &self.model_params(),
         );
         // Each beam against its own gate.
         let mut accepted: Vec<(f64, f64, SMatrix<f64, 1, { ekf::N }>)> = Vec::new();
@@ -393,7 +407,7 @@ impl DvlAid {
             core.state(),
             &core.last_omega_ib,
             &core.last_f_body,
-            &self.params,
+            &self.model_params(),
             current,
         );
         let result = core.kf.update(&(predicted - z), &h, &r, self.gate_chi2);
@@ -444,7 +458,7 @@ impl DvlAid {
             core.state(),
             &core.last_omega_ib,
             &core.last_f_body,
-            &self.params,
+            &self.model_params(),
         );
         let y = predicted - z;
         let t = t_ns as f64 * 1e-9;
@@ -460,7 +474,7 @@ impl DvlAid {
                 core.state(),
                 &core.last_omega_ib,
                 &core.last_f_body,
-                &self.params,
+                &self.model_params(),
             );
             result = core.kf.update(&(predicted - z), &h, &r, f64::INFINITY);
         }

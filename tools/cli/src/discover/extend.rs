@@ -288,14 +288,11 @@ pub fn navigation_gain(logs: &[PathBuf], r: &mut DiscoverReport) {
                 if a.horizontal_error_final_m > b.horizontal_error_final_m
                     && a.error_per_distance_cep50_percent > b.error_per_distance_cep50_percent
                 {
-                    let why = if r.reference == "smoothed" && after.dvl_time_offset.abs() > 0.3 {
-                        "they describe the sensors against the IMU's own (smoothed) motion, so \
-                         what does not carry over is likely the navigator's use of them: it \
-                         applies a DVL time offset to first order, v(t - τ) ≈ v(t) - τa, which a \
-                         lag of this size may outgrow"
-                    } else if r.reference == "smoothed" {
+                    let why = if r.reference == "smoothed" {
                         "they describe the sensors against the IMU's own (smoothed) motion, yet \
-                         the navigator does not gain from them on this log"
+                         the navigation does not gain from them on this log (its error is taken \
+                         against the log's reference, which may sit at another point of the \
+                         vehicle)"
                     } else {
                         "they describe the sensors against the reference, and the reference is \
                          not the IMU's motion (its velocity at another point or time; compare \
