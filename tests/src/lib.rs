@@ -82,6 +82,21 @@ pub mod processes {
         dir.join(name)
     }
 
+    /// Runs `auvnav ARGS…` to success and returns what it printed as JSON (`Null` when it
+    /// printed no JSON, e.g. a command without `--json`).
+    pub fn auvnav_json(args: &[&str]) -> serde_json::Value {
+        let o = Command::new(binary("auvnav"))
+            .args(args)
+            .output()
+            .expect("running auvnav");
+        assert!(
+            o.status.success(),
+            "auvnav {args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        serde_json::from_slice(&o.stdout).unwrap_or(serde_json::Value::Null)
+    }
+
     /// A name unique to this test process and call, for service prefixes and directories.
     pub fn unique(tag: &str) -> String {
         static N: AtomicU32 = AtomicU32::new(0);

@@ -7,16 +7,9 @@
 //! motion, must show no installation of its own (it is the IMU's motion). Seeds and magnitudes
 //! are the tests' own.
 
-use auvnav_tests::processes::{TempDir, binary};
+use auvnav_tests::processes::TempDir;
 
-fn auvnav(args: &[&str]) -> serde_json::Value {
-    let o = std::process::Command::new(binary("auvnav"))
-        .args(args)
-        .output()
-        .expect("auvnav");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    serde_json::from_slice(&o.stdout).unwrap_or(serde_json::Value::Null)
-}
+use auvnav_tests::processes::auvnav_json as auvnav;
 
 fn effect(r: &serde_json::Value, name: &str) -> Option<(Vec<f64>, Vec<f64>)> {
     let e = r["effects"]

@@ -5,16 +5,9 @@
 //! (turns, climbs, speed changes) with a hidden −1.0 s offset, configuring it must lower the
 //! horizontal RMS error and the DVL rejections against leaving it out. Seeds are the test's own.
 
-use auvnav_tests::processes::{TempDir, binary};
+use auvnav_tests::processes::TempDir;
 
-fn auvnav(args: &[&str]) -> serde_json::Value {
-    let o = std::process::Command::new(binary("auvnav"))
-        .args(args)
-        .output()
-        .expect("auvnav");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    serde_json::from_slice(&o.stdout).unwrap_or(serde_json::Value::Null)
-}
+use auvnav_tests::processes::auvnav_json as auvnav;
 
 #[test]
 fn a_dvl_stamped_a_second_early_is_retimed_not_extrapolated() {

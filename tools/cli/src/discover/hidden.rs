@@ -217,45 +217,7 @@ pub fn trial_set_with(
         &Selection::default(),
     );
     let found: Vec<String> = report.effects.iter().map(|e| e.name.clone()).collect();
-    let norm = |a: &[f64], b: &[f64]| -> f64 {
-        a.iter()
-            .zip(b)
-            .map(|(x, y)| (x - y).powi(2))
-            .sum::<f64>()
-            .sqrt()
-    };
-    let (mut estimates, mut relative_errors) = (Vec::new(), Vec::new());
-    for h in hidden {
-        match report.effects.iter().find(|e| e.name == h.name) {
-            Some(e) => {
-                // A component that is not a number makes the error NaN: not correct.
-                let est = values_of(&e.value).unwrap_or_else(|| vec![f64::NAN; h.value.len()]);
-                let nominal = Effects::default().get(&h.name).unwrap_or_default();
-                relative_errors.push(Some(norm(&est, &h.value) / norm(&h.value, &nominal)));
-                estimates.push(Some(est));
-            }
-            None => {
-                relative_errors.push(None);
-                estimates.push(None);
-            }
-        }
-    }
-    let false_discovery = found.iter().any(|n| !hidden.iter().any(|h| &h.name == n));
-    let correct = !false_discovery
-        && found.len() == hidden.len()
-        && relative_errors.iter().all(|r| r.is_some_and(|r| r <= 0.1));
-    Ok((
-        SetTrial {
-            seed,
-            hidden: hidden.to_vec(),
-            found,
-            estimates,
-            relative_errors,
-            correct,
-            false_discovery,
-        },
-        report,
-    ))
+    Ok((score(seed, hidden, found, &report), report))
 }
 
 /// What one trial gave.
@@ -363,6 +325,13 @@ pub fn trial_voyages(
             found.push(format!("{} (per voyage)", p.name));
         }
     }
+    Ok(score(seed, hidden, found, &report))
+}
+
+/// A trial's score: each hidden effect's estimate and relative error |estimate − hidden| /
+/// |hidden − nominal| (vector norms) where `report` names it; correct when every hidden effect
+/// is named within 10 % and nothing else is in `found`.
+fn score(seed: u64, hidden: &[Hidden], found: Vec<String>, report: &DiscoverReport) -> SetTrial {
     let norm = |a: &[f64], b: &[f64]| -> f64 {
         a.iter()
             .zip(b)
@@ -374,6 +343,7 @@ pub fn trial_voyages(
     for h in hidden {
         match report.effects.iter().find(|e| e.name == h.name) {
             Some(e) => {
+                // A component that is not a number makes the error NaN: not correct.
                 let est = values_of(&e.value).unwrap_or_else(|| vec![f64::NAN; h.value.len()]);
                 let nominal = Effects::default().get(&h.name).unwrap_or_default();
                 relative_errors.push(Some(norm(&est, &h.value) / norm(&h.value, &nominal)));
@@ -389,7 +359,7 @@ pub fn trial_voyages(
     let correct = !false_discovery
         && found.len() == hidden.len()
         && relative_errors.iter().all(|r| r.is_some_and(|r| r <= 0.1));
-    Ok(SetTrial {
+    SetTrial {
         seed,
         hidden: hidden.to_vec(),
         found,
@@ -397,5 +367,5 @@ pub fn trial_voyages(
         relative_errors,
         correct,
         false_discovery,
-    })
+    }
 }

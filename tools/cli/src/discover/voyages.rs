@@ -252,6 +252,25 @@ fn combine(es: &[&Estimate], n: usize) -> Combined {
     }
 }
 
+impl Combined {
+    /// The χ² above which the estimates disagree (1 %, [`AGREEMENT_Z`]).
+    fn limit(&self) -> f64 {
+        crate::montecarlo::chi2_quantile(self.dof.max(1) as f64, AGREEMENT_Z)
+    }
+
+    /// The estimates disagree beyond their uncertainties.
+    fn disagrees(&self) -> bool {
+        self.dof > 0 && self.chi2 > self.limit()
+    }
+}
+
+/// Each voyage's marginal estimate of the block `off..off + len` and their combination.
+fn agreement_of(ests: &[Estimate], off: usize, len: usize) -> (Vec<Estimate>, Combined) {
+    let alone: Vec<Estimate> = ests.iter().map(|e| e.block(off, len)).collect();
+    let c = combine(&alone.iter().collect::<Vec<_>>(), len);
+    (alone, c)
+}
+
 /// One voyage's data for one channel.
 struct ChannelVoyage<'a> {
     voyage: usize,
@@ -498,8 +517,7 @@ pub fn discover_voyages(
                 let (off, len) = offset_in(&set, c);
                 let ests = shared_estimates(&cv, &set, &fits);
                 let joint = combine(&ests.iter().collect::<Vec<_>>(), components(&set));
-                let alone: Vec<Estimate> = ests.iter().map(|e| e.block(off, len)).collect();
-                let agreement = combine(&alone.iter().collect::<Vec<_>>(), len);
+                let (alone, agreement) = agreement_of(&ests, off, len);
                 // The voyages' own scatter, when larger than their deviations say (the Birge
                 // ratio), widens the combined deviation: a slowly varying error gives each voyage
                 // an estimate of its own sign that its deviation does not cover.
@@ -511,9 +529,7 @@ pub fn discover_voyages(
                 if !significant {
                     continue;
                 }
-                let limit =
-                    crate::montecarlo::chi2_quantile(agreement.dof.max(1) as f64, AGREEMENT_Z);
-                if agreement.dof > 0 && agreement.chi2 > limit {
+                if agreement.disagrees() {
                     let (verdict, agreeing) = disagreement(&cv, data, c, &alone, &agreement);
                     v.inconsistent.push(SharedEffect {
                         agreeing,
@@ -560,10 +576,8 @@ pub fn discover_voyages(
                 .enumerate()
                 .map(|(n, &c)| {
                     let (off, len) = offset_in(&shared, c);
-                    let alone: Vec<Estimate> = ests.iter().map(|e| e.block(off, len)).collect();
-                    let a = combine(&alone.iter().collect::<Vec<_>>(), len);
-                    let limit = crate::montecarlo::chi2_quantile(a.dof.max(1) as f64, AGREEMENT_Z);
-                    let ratio = if a.dof > 0 { a.chi2 / limit } else { 0.0 };
+                    let (alone, a) = agreement_of(&ests, off, len);
+                    let ratio = if a.dof > 0 { a.chi2 / a.limit() } else { 0.0 };
                     (n, c, ratio, a, alone)
                 })
                 .filter(|x| x.2 > 1.0)
@@ -631,9 +645,8 @@ pub fn discover_voyages(
         set_all(&mut model, &at, &shared);
         for (n, &c) in shared.iter().enumerate() {
             let (off, len) = offset_in(&shared, c);
-            let alone: Vec<Estimate> = ests.iter().map(|e| e.block(off, len)).collect();
-            let agreement = combine(&alone.iter().collect::<Vec<_>>(), len);
-            let limit = crate::montecarlo::chi2_quantile(agreement.dof.max(1) as f64, AGREEMENT_Z);
+            let (_, agreement) = agreement_of(&ests, off, len);
+            let limit = agreement.limit();
             let name = CANDIDATES[c].name;
             let value = at.get(name).unwrap_or_default();
             let std = &joint.std[off..off + len];
@@ -694,14 +707,9 @@ pub fn discover_voyages(
                 set.push(c);
                 let fits = fit_voyages(&cv, &set);
                 let (off, len) = offset_in(&set, c);
-                let alone: Vec<Estimate> = shared_estimates(&cv, &set, &fits)
-                    .iter()
-                    .map(|e| e.block(off, len))
-                    .collect();
-                let agreement = combine(&alone.iter().collect::<Vec<_>>(), len);
-                let limit =
-                    crate::montecarlo::chi2_quantile(agreement.dof.max(1) as f64, AGREEMENT_Z);
-                if agreement.dof > 0 && agreement.chi2 > limit {
+                let (alone, agreement) =
+                    agreement_of(&shared_estimates(&cv, &set, &fits), off, len);
+                if agreement.disagrees() {
                     let (verdict, agreeing) = disagreement(&cv, data, c, &alone, &agreement);
                     v.inconsistent.push(SharedEffect {
                         agreeing,
@@ -832,8 +840,7 @@ fn disagreement(
     while kept.len() > alone.len().div_ceil(2).max(2) {
         let es: Vec<&Estimate> = kept.iter().map(|&k| &alone[k]).collect();
         let c = combine(&es, len);
-        let limit = crate::montecarlo::chi2_quantile(c.dof.max(1) as f64, AGREEMENT_Z);
-        if c.dof == 0 || c.chi2 <= limit {
+        if !c.disagrees() {
             let value: Vec<String> = c
                 .delta
                 .iter()
@@ -953,7 +960,7 @@ fn shared_effect(
             .collect(),
         chi2: agreement.chi2,
         dof: agreement.dof,
-        chi2_limit: crate::montecarlo::chi2_quantile(agreement.dof.max(1) as f64, AGREEMENT_Z),
+        chi2_limit: agreement.limit(),
         held_out_gain: gain,
         verdict,
         agreeing: None,
