@@ -257,6 +257,33 @@ pub struct DiscoverReport {
     pub residuals: Vec<ResidualSeries>,
 }
 
+impl DiscoverReport {
+    /// A report with nothing in it yet, on the nominal model `nominal`.
+    pub fn new(nominal: &Effects) -> DiscoverReport {
+        DiscoverReport {
+            inputs: Vec::new(),
+            reference: String::new(),
+            channels: Vec::new(),
+            effects: Vec::new(),
+            unseparable: Vec::new(),
+            unobservable: Vec::new(),
+            unexplained: Vec::new(),
+            gain: Vec::new(),
+            noise: Vec::new(),
+            navigation: Vec::new(),
+            notes: Vec::new(),
+            floors: Vec::new(),
+            voyages: None,
+            reference_against_imu: Vec::new(),
+            wall_s: 0.0,
+            nominal_model: nominal.clone(),
+            model: nominal.clone(),
+            held_out_model: nominal.clone(),
+            residuals: Vec::new(),
+        }
+    }
+}
+
 /// How large a candidate must be for this motion and noise to name it.
 #[derive(Debug, Clone, Serialize)]
 pub struct DetectionFloor {
@@ -567,27 +594,7 @@ pub fn discover(
     sel: &Selection,
 ) -> DiscoverReport {
     let start = std::time::Instant::now();
-    let mut r = DiscoverReport {
-        inputs: Vec::new(),
-        reference: String::new(),
-        channels: Vec::new(),
-        effects: Vec::new(),
-        unseparable: Vec::new(),
-        unobservable: Vec::new(),
-        unexplained: Vec::new(),
-        gain: Vec::new(),
-        noise: Vec::new(),
-        navigation: Vec::new(),
-        notes: Vec::new(),
-        floors: Vec::new(),
-        voyages: None,
-        reference_against_imu: Vec::new(),
-        wall_s: 0.0,
-        nominal_model: nominal.clone(),
-        model: nominal.clone(),
-        held_out_model: nominal.clone(),
-        residuals: Vec::new(),
-    };
+    let mut r = DiscoverReport::new(nominal);
     let no_reference = reference.len() < 2;
     if no_reference {
         r.notes.push(
@@ -1201,6 +1208,7 @@ pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
     }
     let voyages = a.logs.len() > 1 && !a.one_voyage;
     let mut against = Vec::new();
+    let mut smoothed_logs = 0;
     // One log's channels against its reference (the smoothed motion with --reference smoothed).
     let mut read_one = |log: &PathBuf| -> anyhow::Result<(Vec<Channel>, Reference, usize)> {
         let (mut channels, reference, u) = read_logs_with(
@@ -1210,10 +1218,10 @@ pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
         if !smoothed {
             return Ok((channels, reference, u));
         }
+        smoothed_logs += 1;
         let work = std::env::temp_dir().join(format!(
-            "auvnav-discover-smooth-{}-{}",
-            std::process::id(),
-            against.len()
+            "auvnav-discover-smooth-{}-{smoothed_logs}",
+            std::process::id()
         ));
         let s = super::smoothed::smooth(log, &work);
         let _ = std::fs::remove_dir_all(&work);

@@ -367,10 +367,6 @@ fn held_out(
     (sse / count.max(1) as f64, thetas)
 }
 
-fn finite_json(v: &[f64]) -> serde_json::Value {
-    json_of(v)
-}
-
 /// Discovery on several voyages (see the module's text): each voyage's own report, the shared
 /// installation effects and their agreement, in one report whose `effects` are the shared
 /// effects the voyages agree on.
@@ -389,8 +385,7 @@ pub fn discover_voyages(
             r
         })
         .collect();
-    let mut out = discover(&[], &Reference::default(), nominal, fit_fraction, sel);
-    out.notes.clear();
+    let mut out = DiscoverReport::new(nominal);
     out.inputs = data.iter().map(|d| d.log.clone()).collect();
     let mut v = Voyages {
         voyages: Vec::new(),
@@ -448,7 +443,8 @@ pub fn discover_voyages(
             ));
             continue;
         }
-        let mut scratch = discover(&[], &Reference::default(), nominal, fit_fraction, sel);
+        // The notes of the outlier screening are in each voyage's own report.
+        let mut scratch = DiscoverReport::new(nominal);
         let prepared: Vec<(usize, Channel)> = analysed
             .iter()
             .filter_map(|&i| {
@@ -667,8 +663,8 @@ pub fn discover_voyages(
             );
             let birge = birge_ratio(&agreement);
             let std: Vec<f64> = std.iter().map(|x| x * birge).collect();
-            s.value = finite_json(&value);
-            s.std = finite_json(&std);
+            s.value = json_of(&value);
+            s.std = json_of(&std);
             if birge > 1.0 {
                 s.verdict.push_str(&format!(
                     "; deviation widened ×{birge:.2} to the voyages' scatter (Birge ratio)"
