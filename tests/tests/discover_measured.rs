@@ -10,6 +10,21 @@ use auvnav_tools::discover::command::{discover, discover_messages, values_of};
 use auvnav_tools::discover::fit::Selection;
 use auvnav_tools::import::{GpsVelocity, TimeBase, pd0_messages, snapir_messages};
 
+/// `auvnav import snapir DIR --segment N --out OUT`.
+fn import_snapir(dir: &std::path::Path, segment: u32, out: &std::path::Path) {
+    let dir = dir.display().to_string();
+    let out = out.display().to_string();
+    auvnav_tests::processes::auvnav_json(&[
+        "import",
+        "snapir",
+        &dir,
+        "--segment",
+        &segment.to_string(),
+        "--out",
+        &out,
+    ]);
+}
+
 #[test]
 fn snapir_dvl_lever_arm_and_lag_are_found_without_being_asked() {
     let Some(dir) = auvnav_tests::measured_data("snapir-auv", "imu_01.csv") else {
@@ -66,18 +81,7 @@ fn effects_hidden_in_measured_data_are_found_on_top_of_what_it_contains() {
     let (yaw, scale) = (1.5, 0.996);
     for segment in [3u32, 8] {
         let base = tmp.join(format!("s{segment}.mcap"));
-        let out = std::process::Command::new(auvnav_tests::processes::binary("auvnav"))
-            .args(["import", "snapir"])
-            .arg(&dir)
-            .args(["--segment", &segment.to_string(), "--out"])
-            .arg(&base)
-            .output()
-            .expect("running auvnav import");
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        import_snapir(&dir, segment, &base);
         let perturbed = tmp.join(format!("s{segment}p.mcap"));
         let p = Perturbation::parse(
             &[
@@ -442,7 +446,7 @@ fn write_config_keeps_the_nominal_installation_when_the_navigation_gets_worse() 
 #[test]
 fn a_hidden_installation_is_found_across_measured_voyages() {
     use auvnav_sim::perturb::{Perturbation, perturb_log};
-    use auvnav_tests::processes::{TempDir, binary};
+    use auvnav_tests::processes::TempDir;
     use auvnav_tools::discover::command::read_logs;
     use auvnav_tools::discover::voyages::{VoyageData, discover_voyages};
     let Some(dir) = auvnav_tests::measured_data("snapir-auv", "imu_01.csv") else {
@@ -461,18 +465,7 @@ fn a_hidden_installation_is_found_across_measured_voyages() {
     let (mut recorded, mut perturbed) = (Vec::new(), Vec::new());
     for segment in [1u32, 3, 4, 6, 8, 9] {
         let base = tmp.path().join(format!("s{segment}.mcap"));
-        let out = std::process::Command::new(binary("auvnav"))
-            .args(["import", "snapir"])
-            .arg(&dir)
-            .args(["--segment", &segment.to_string(), "--out"])
-            .arg(&base)
-            .output()
-            .expect("running auvnav import");
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        import_snapir(&dir, segment, &base);
         let hidden = tmp.path().join(format!("p{segment}.mcap"));
         perturb_log(&base, &hidden, &p).expect("perturb");
         for (path, to) in [(base, &mut recorded), (hidden, &mut perturbed)] {
