@@ -69,6 +69,37 @@ pub struct AxisConsistency {
     pub fraction_inside: f64,
     pub fraction_above: f64,
     pub fraction_below: f64,
+    /// 95 % interval of `mean_anees` from resampling whole runs (percentile bootstrap): it
+    /// carries the correlation between the epochs of one run. Consistent when it holds 1.
+    pub run_interval_95: [f64; 2],
+}
+
+impl AxisConsistency {
+    /// True when the runs' interval holds 1.
+    pub fn consistent(&self) -> bool {
+        (self.run_interval_95[0]..=self.run_interval_95[1]).contains(&1.0)
+    }
+}
+
+/// The 95 % percentile-bootstrap interval of the mean of `per_run` (2 000 resamples of whole
+/// runs, a fixed random stream so that a report repeats).
+fn run_interval(per_run: &[f64]) -> [f64; 2] {
+    const RESAMPLES: usize = 2000;
+    let n = per_run.len();
+    let mut rng = Rng::new(n as u64, "montecarlo.smoother.bootstrap");
+    let mut means: Vec<f64> = (0..RESAMPLES)
+        .map(|_| {
+            (0..n)
+                .map(|_| per_run[((rng.uniform() * n as f64) as usize).min(n - 1)])
+                .sum::<f64>()
+                / n as f64
+        })
+        .collect();
+    means.sort_by(f64::total_cmp);
+    [
+        means[(0.025 * RESAMPLES as f64) as usize],
+        means[(0.975 * RESAMPLES as f64) as usize - 1],
+    ]
 }
 
 /// Forward or smoothed: consistency per axis and the error.
@@ -317,6 +348,10 @@ pub fn smoother_monte_carlo(
         .collect();
     let axis = |c: usize| {
         let m = averaged.len() as f64;
+        let per_run: Vec<f64> = results
+            .iter()
+            .map(|r| r.rows[..epochs].iter().map(|row| row[c]).sum::<f64>() / m)
+            .collect();
         let above = averaged.iter().filter(|r| r[c] > upper).count() as f64 / m;
         let below = averaged.iter().filter(|r| r[c] < lower).count() as f64 / m;
         AxisConsistency {
@@ -324,6 +359,7 @@ pub fn smoother_monte_carlo(
             fraction_inside: 1.0 - above - below,
             fraction_above: above,
             fraction_below: below,
+            run_interval_95: run_interval(&per_run),
         }
     };
     let rms =
@@ -387,15 +423,26 @@ pub fn run(a: &SmootherMonteCarloArgs) -> anyhow::Result<()> {
         r.wall_s
     );
     for (name, f) in [("forward", &r.forward), ("smoothed", &r.smoothed)] {
+        let axis = |a: &AxisConsistency| {
+            format!(
+                "{:.2} [{:.2}, {:.2}] / {:.0} % ({})",
+                a.mean_anees,
+                a.run_interval_95[0],
+                a.run_interval_95[1],
+                100.0 * a.fraction_inside,
+                if a.consistent() {
+                    "consistent"
+                } else {
+                    "NOT consistent"
+                }
+            )
+        };
         println!(
-            "  {name:8} horizontal RMS {:.2} m; per-axis mean ANEES (1 expected) / inside the bounds: north {:.2} / {:.0} %, east {:.2} / {:.0} %, down {:.2} / {:.0} %",
+            "  {name:8} horizontal RMS {:.2} m; per-axis mean ANEES (1 expected) [95 % interval over runs] / epochs inside the bounds: north {}, east {}, down {}",
             f.horizontal_error_rms_m,
-            f.north.mean_anees,
-            100.0 * f.north.fraction_inside,
-            f.east.mean_anees,
-            100.0 * f.east.fraction_inside,
-            f.down.mean_anees,
-            100.0 * f.down.fraction_inside
+            axis(&f.north),
+            axis(&f.east),
+            axis(&f.down)
         );
     }
     println!("  smoothed / forward horizontal RMS: {:.2}", r.rms_ratio);
