@@ -68,6 +68,7 @@ fn args(out: &Path, fixes: Option<PathBuf>) -> SmoothArgs {
         fixes,
         usbl: None,
         export_rate: 1.0,
+        solution_rate: None,
         unix_time_of_log_zero: None,
         memory_budget_mib: 1024,
         spill_dir: None,
@@ -248,6 +249,74 @@ fn bad_input_gives_a_clear_error_or_a_stated_result() {
     w.finish().expect("finish");
     let e = smooth_log(&args(&dir, None), &no_imu, None).expect_err("no IMU");
     assert!(format!("{e:#}").contains("no IMU"), "{e:#}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `--solution-rate` writes fewer solutions, each the same row the full-rate output has at that
+/// time, the forward and smoothed channels alike; the figures are those of every solution.
+#[test]
+fn a_solution_rate_writes_the_same_solutions_at_that_rate() {
+    let dir = scratch("rate");
+    let log = simulate(&dir, "straight", 7302, Some(60.0));
+    for sub in ["full", "rate"] {
+        std::fs::create_dir_all(dir.join(sub)).expect("output folder");
+    }
+    let full = smooth_log(&args(&dir.join("full"), None), &log, None).expect("smooth");
+    let mut a = args(&dir.join("rate"), None);
+    a.solution_rate = Some(10.0);
+    let every_tenth = smooth_log(&a, &log, None).expect("smooth at 10 Hz");
+    let rows = |path: &str| -> Vec<String> {
+        std::fs::read_to_string(path)
+            .expect("read")
+            .lines()
+            .skip(1)
+            .map(str::to_string)
+            .collect()
+    };
+    let (all, kept) = (
+        rows(&full.outputs.smoothed_csv),
+        rows(&every_tenth.outputs.smoothed_csv),
+    );
+    let time = |row: &String| {
+        row.split(',')
+            .next()
+            .unwrap_or("")
+            .parse::<u64>()
+            .expect("time")
+    };
+    let span_s = (time(all.last().expect("rows")) - time(&all[0])) as f64 * 1e-9;
+    assert!(
+        (kept.len() as f64 - 10.0 * span_s).abs() <= 2.0,
+        "{} rows at 10 Hz over {span_s} s",
+        kept.len()
+    );
+    let by_time: std::collections::HashMap<u64, &String> =
+        all.iter().map(|r| (time(r), r)).collect();
+    for row in &kept {
+        assert_eq!(by_time.get(&time(row)), Some(&row), "{row}");
+    }
+    let mut periods: Vec<u64> = kept.iter().map(|r| time(r) / 100_000_000).collect();
+    periods.dedup();
+    assert_eq!(periods.len(), kept.len(), "one solution per 0.1 s period");
+    let channels = |path: &str| {
+        let mut n = (0, 0);
+        let mut r = auvnav_log::LogReader::open(Path::new(path)).expect("open");
+        r.read_header().expect("header");
+        while let Some(m) = r.next_message().expect("read") {
+            match &*m.topic {
+                auvnav_shm_schema::topic::NAV_SOLUTION => n.0 += 1,
+                auvnav_tools::smooth::NAV_SOLUTION_SMOOTHED => n.1 += 1,
+                _ => {}
+            }
+        }
+        n
+    };
+    assert_eq!(
+        channels(&every_tenth.outputs.mcap),
+        (kept.len(), kept.len())
+    );
+    assert_eq!(channels(&full.outputs.mcap), (all.len(), all.len()));
+    assert_eq!(full.against_reference, every_tenth.against_reference);
     let _ = std::fs::remove_dir_all(&dir);
 }
 

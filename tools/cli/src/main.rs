@@ -318,6 +318,9 @@ enum BenchWhat {
         /// `auvnav smooth --memory-budget-mib` for the runs.
         #[arg(long, default_value_t = 1024)]
         memory_budget_mib: usize,
+        /// `auvnav smooth --solution-rate` for the runs (default: every solution written).
+        #[arg(long)]
+        solution_rate: Option<f64>,
         #[arg(long)]
         json: bool,
     },
@@ -778,8 +781,16 @@ fn main() -> std::process::ExitCode {
                 repeat,
                 long_hours,
                 memory_budget_mib,
+                solution_rate,
                 json,
-            } => auvnav_tools::bench::smooth(hours, repeat, long_hours, memory_budget_mib, json),
+            } => auvnav_tools::bench::smooth(
+                hours,
+                repeat,
+                long_hours,
+                memory_budget_mib,
+                solution_rate,
+                json,
+            ),
         },
     };
     match result {

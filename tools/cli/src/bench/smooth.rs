@@ -39,6 +39,8 @@ pub struct SmoothLogBench {
     /// The largest peak memory of the runs (MiB).
     pub peak_memory_mib: Option<f64>,
     pub memory_budget_mib: usize,
+    /// `auvnav smooth --solution-rate` of the runs (none: every solution written).
+    pub solution_rate_hz: Option<f64>,
 }
 
 /// The benchmark's output.
@@ -58,16 +60,22 @@ fn smooth_child(
     log: &std::path::Path,
     out: &std::path::Path,
     memory_budget_mib: usize,
+    solution_rate: Option<f64>,
 ) -> anyhow::Result<(LogFigures, SmoothRun)> {
     let started = std::time::Instant::now();
-    let output = std::process::Command::new(exe)
+    let mut command = std::process::Command::new(exe);
+    command
         .arg("smooth")
         .arg(log)
         .arg("--out")
         .arg(out)
         .arg("--memory-budget-mib")
         .arg(memory_budget_mib.to_string())
-        .arg("--json")
+        .arg("--json");
+    if let Some(hz) = solution_rate {
+        command.arg("--solution-rate").arg(hz.to_string());
+    }
+    let output = command
         .output()
         .with_context(|| format!("running {} smooth", exe.display()))?;
     let process_wall_s = started.elapsed().as_secs_f64();
@@ -111,6 +119,7 @@ fn bench_log(
     hours: f64,
     repeat: usize,
     memory_budget_mib: usize,
+    solution_rate: Option<f64>,
     dir: &std::path::Path,
     label: &str,
 ) -> anyhow::Result<SmoothLogBench> {
@@ -129,7 +138,7 @@ fn bench_log(
             k + 1,
             repeat.max(1)
         );
-        let (l, r) = smooth_child(&exe, &path, &out, memory_budget_mib)?;
+        let (l, r) = smooth_child(&exe, &path, &out, memory_budget_mib, solution_rate)?;
         info = Some(l);
         runs.push(r);
         let _ = std::fs::remove_dir_all(&out);
@@ -156,6 +165,7 @@ fn bench_log(
             .filter_map(|r| r.peak_memory_mib)
             .reduce(f64::max),
         memory_budget_mib,
+        solution_rate_hz: solution_rate,
         runs,
     })
 }
@@ -167,6 +177,7 @@ pub fn smooth(
     repeat: usize,
     long_hours: f64,
     memory_budget_mib: usize,
+    solution_rate: Option<f64>,
     json: bool,
 ) -> anyhow::Result<()> {
     if !(hours > 0.0 && hours.is_finite() && long_hours >= 0.0 && long_hours.is_finite()) {
@@ -175,9 +186,23 @@ pub fn smooth(
     let dir = std::env::temp_dir().join(format!("auvnav-bench-smooth-{}", std::process::id()));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let result = (|| -> anyhow::Result<SmoothBenchReport> {
-        let hour_log = bench_log(hours, repeat, memory_budget_mib, &dir, "hour")?;
+        let hour_log = bench_log(
+            hours,
+            repeat,
+            memory_budget_mib,
+            solution_rate,
+            &dir,
+            "hour",
+        )?;
         let long_voyage = if long_hours > 0.0 {
-            Some(bench_log(long_hours, 1, memory_budget_mib, &dir, "long")?)
+            Some(bench_log(
+                long_hours,
+                1,
+                memory_budget_mib,
+                solution_rate,
+                &dir,
+                "long",
+            )?)
         } else {
             None
         };
@@ -200,7 +225,7 @@ pub fn smooth(
         ] {
             let Some(b) = b else { continue };
             println!(
-                "smooth, {name}: {:.2} h of {} Hz IMU ({} covariance epochs): median {:.2} s for the three passes (real-time factor {:.0}; forward + backward alone {:.0}), peak memory {} with a {} MiB budget, {} MiB spilled; {} run(s)",
+                "smooth, {name}: {:.2} h of {} Hz IMU ({} covariance epochs): median {:.2} s for the three passes (real-time factor {:.0}; forward + backward alone {:.0}), peak memory {} with a {} MiB budget, {} MiB spilled; solutions written {}; {} run(s)",
                 b.log_hours,
                 b.imu_hz,
                 b.covariance_epochs,
@@ -212,6 +237,9 @@ pub fn smooth(
                     .unwrap_or_else(|| "unknown".into()),
                 b.memory_budget_mib,
                 b.runs.iter().map(|r| r.spilled_bytes).max().unwrap_or(0) / (1 << 20),
+                b.solution_rate_hz
+                    .map(|hz| format!("at {hz} Hz"))
+                    .unwrap_or_else(|| "all".into()),
                 b.runs.len()
             );
         }

@@ -57,6 +57,7 @@ pub fn smooth(log: &Path, work: &Path) -> anyhow::Result<Smoothed> {
         fixes: None,
         usbl: None,
         export_rate: 1.0,
+        solution_rate: None,
         unix_time_of_log_zero: None,
         memory_budget_mib: 1024,
         spill_dir: None,
