@@ -28,6 +28,7 @@ pub mod bus;
 pub mod clock;
 pub mod logging;
 pub mod qos;
+pub mod sensor;
 pub mod stage_times;
 pub mod topic;
 

@@ -36,6 +36,21 @@ pub fn key_value(s: &str) -> Result<String, String> {
     }
 }
 
+/// A parser for a configuration enum of the core (which has no clap): one of `names`, parsed by
+/// the type's `FromStr`, with the names listed in `--help` and in the error.
+pub fn config_enum<T>(
+    names: &'static [&'static str],
+) -> impl clap::builder::TypedValueParser<Value = T>
+where
+    T: std::str::FromStr + Clone + Send + Sync + 'static,
+{
+    use clap::builder::TypedValueParser as _;
+    clap::builder::PossibleValuesParser::new(names).map(|s| {
+        s.parse::<T>()
+            .unwrap_or_else(|_| unreachable!("{s} is one of the names the parser accepts"))
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -26,10 +26,10 @@ use serde::Serialize;
 #[derive(Debug, Clone, clap::Args)]
 pub struct UsblArgs {
     /// loose (the device's position fix) or tight (slant range and range differences).
-    #[arg(long, value_enum, default_value = "tight")]
+    #[arg(long, default_value = "tight", value_parser = crate::args::config_enum::<Coupling>(Coupling::NAMES))]
     pub coupling: Coupling,
     /// ukf (fixed noise), akf (adaptive, linearised) or aukf (adaptive unscented).
-    #[arg(long, value_enum, default_value = "aukf")]
+    #[arg(long, default_value = "aukf", value_parser = crate::args::config_enum::<UsblFilter>(UsblFilter::NAMES))]
     pub filter: UsblFilter,
     /// Fraction of USBL fixes hit by a multipath outlier (10–50 m added to the range).
     #[arg(long, default_value_t = 0.0)]

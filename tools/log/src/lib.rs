@@ -466,8 +466,8 @@ pub enum LogMessage {
 
 impl LogMessage {
     /// The message as an input of the navigation session (the feed path), when it is one.
-    pub fn sensor(&self) -> Option<auvnav_core::feed::SensorMessage> {
-        use auvnav_core::feed::SensorMessage as S;
+    pub fn sensor(&self) -> Option<auvnav_shm_schema::sensor::SensorMessage> {
+        use auvnav_shm_schema::sensor::SensorMessage as S;
         Some(match self {
             LogMessage::Imu(x) => S::Imu(*x),
             LogMessage::Dvl(x) => S::Dvl(*x),

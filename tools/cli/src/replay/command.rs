@@ -25,7 +25,7 @@ pub struct ReplayArgs {
     /// Fuse the USBL fixes with this coupling (loose or tight; adaptive unscented filter): the
     /// configuration's `[navigation.usbl]`, or else the station survey in the log header of a
     /// simulated voyage.
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = crate::args::config_enum::<auvnav_core::aid::usbl::Coupling>(auvnav_core::aid::usbl::Coupling::NAMES))]
     pub usbl: Option<auvnav_core::aid::usbl::Coupling>,
     /// Compare the solutions with those the log recorded on `nav/solution` (the daemon's live
     /// output in a recording): report the first that differs, exit with status 3 unless every

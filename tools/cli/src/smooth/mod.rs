@@ -46,7 +46,7 @@ pub struct SmoothArgs {
     #[arg(long)]
     pub fixes: Option<PathBuf>,
     /// Fuse the log's USBL fixes with this coupling (as `auvnav replay --usbl`).
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = crate::args::config_enum::<auvnav_core::aid::usbl::Coupling>(auvnav_core::aid::usbl::Coupling::NAMES))]
     pub usbl: Option<auvnav_core::aid::usbl::Coupling>,
     /// Points per second in the GeoJSON, KML and plain CSV exports.
     #[arg(long, default_value_t = 1.0)]

@@ -4,7 +4,7 @@ use crate::ekf::unscented::UnscentedParams;
 use serde::{Deserialize, Serialize};
 
 /// How USBL measurements enter the filter.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Coupling {
     /// The device's position fix (conventional).
@@ -15,7 +15,7 @@ pub enum Coupling {
 }
 
 /// Which filter fuses the USBL measurements.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum UsblFilter {
     /// Unscented update with the configured (fixed) noise and innovation gating.
@@ -26,6 +26,39 @@ pub enum UsblFilter {
     /// Adaptive unscented update: unscented update, noise learnt on line, gating.
     #[default]
     Aukf,
+}
+
+impl Coupling {
+    /// The names in configuration files and on command lines.
+    pub const NAMES: &'static [&'static str] = &["loose", "tight"];
+}
+
+impl std::str::FromStr for Coupling {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "loose" => Ok(Coupling::Loose),
+            "tight" => Ok(Coupling::Tight),
+            _ => Err(format!("unknown USBL coupling {s:?} (loose or tight)")),
+        }
+    }
+}
+
+impl UsblFilter {
+    /// The names in configuration files and on command lines.
+    pub const NAMES: &'static [&'static str] = &["ukf", "akf", "aukf"];
+}
+
+impl std::str::FromStr for UsblFilter {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "ukf" => Ok(UsblFilter::Ukf),
+            "akf" => Ok(UsblFilter::Akf),
+            "aukf" => Ok(UsblFilter::Aukf),
+            _ => Err(format!("unknown USBL filter {s:?} (ukf, akf or aukf)")),
+        }
+    }
 }
 
 /// The `[navigation.usbl]` configuration: the station's array as surveyed, the responder on the
@@ -233,5 +266,31 @@ impl UsblConfig {
             "must be in (0, 1]",
         );
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The command-line names are the configuration file's (serde) names, both ways.
+    #[test]
+    fn names_parse_to_what_the_configuration_spells() {
+        fn check<T>(names: &[&str])
+        where
+            T: std::str::FromStr + Serialize + PartialEq + std::fmt::Debug,
+            T::Err: std::fmt::Debug,
+        {
+            for name in names {
+                let v: T = name.parse().expect("listed name");
+                assert_eq!(
+                    toml::Value::try_from(&v).expect("serialise"),
+                    toml::Value::String(name.to_string())
+                );
+            }
+            assert!("nonsense".parse::<T>().is_err());
+        }
+        check::<Coupling>(Coupling::NAMES);
+        check::<UsblFilter>(UsblFilter::NAMES);
     }
 }

@@ -1,0 +1,117 @@
+//! The crates depend on each other only as `docs/architecture.md` ("What each crate may depend
+//! on") allows: every workspace member has a row, uses no workspace crate its row does not name,
+//! and none of the outside crates its row forbids.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("the workspace root")
+        .to_path_buf()
+}
+
+fn read_toml(path: &Path) -> toml::Table {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    text.parse()
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// The crate names in back-ticks of one table cell.
+fn names(cell: &str) -> BTreeSet<String> {
+    cell.split('`')
+        .skip(1)
+        .step_by(2)
+        .map(str::to_string)
+        .collect()
+}
+
+struct Rule {
+    allowed: Option<BTreeSet<String>>,
+    never: BTreeSet<String>,
+}
+
+/// The table's rows: crate → what it may use (None: any crate) and what it must not.
+fn rules() -> BTreeMap<String, Rule> {
+    let doc = std::fs::read_to_string(root().join("docs/architecture.md")).expect("architecture");
+    let section = doc
+        .split("### What each crate may depend on")
+        .nth(1)
+        .expect("the dependency section of docs/architecture.md");
+    let mut rules = BTreeMap::new();
+    for line in section.lines().skip_while(|l| !l.starts_with('|')) {
+        if !line.starts_with('|') {
+            break;
+        }
+        let cells: Vec<&str> = line.trim_matches('|').split('|').map(str::trim).collect();
+        let [name, allowed, never] = cells[..] else {
+            panic!("a row of three cells: {line}");
+        };
+        let Some(name) = names(name).into_iter().next() else {
+            continue; // the header and its rule
+        };
+        let allowed = (!allowed.starts_with("every")).then(|| names(allowed));
+        rules.insert(
+            name,
+            Rule {
+                allowed,
+                never: names(never),
+            },
+        );
+    }
+    rules
+}
+
+#[test]
+fn crates_depend_only_on_what_the_architecture_allows() {
+    let rules = rules();
+    let workspace = read_toml(&root().join("Cargo.toml"));
+    let members: Vec<String> = workspace["workspace"]["members"]
+        .as_array()
+        .expect("members")
+        .iter()
+        .map(|m| m.as_str().expect("member path").to_string())
+        .collect();
+    let mut crates = BTreeMap::new();
+    for m in &members {
+        let manifest = read_toml(&root().join(m).join("Cargo.toml"));
+        let name = manifest["package"]["name"]
+            .as_str()
+            .expect("name")
+            .to_string();
+        let deps: BTreeSet<String> = manifest
+            .get("dependencies")
+            .and_then(|d| d.as_table())
+            .map(|d| d.keys().cloned().collect())
+            .unwrap_or_default();
+        crates.insert(name, deps);
+    }
+    let workspace_names: BTreeSet<String> = crates.keys().cloned().collect();
+    let mut problems = Vec::new();
+    for (name, deps) in &crates {
+        let Some(rule) = rules.get(name) else {
+            problems.push(format!("{name}: no row in docs/architecture.md"));
+            continue;
+        };
+        for d in deps {
+            let inside = workspace_names.contains(d);
+            if inside && rule.allowed.as_ref().is_some_and(|a| !a.contains(d)) {
+                problems.push(format!(
+                    "{name} depends on {d}, which its row does not allow"
+                ));
+            }
+            if rule.never.contains(d) {
+                problems.push(format!("{name} depends on {d}, which its row forbids"));
+            }
+        }
+    }
+    for name in rules.keys() {
+        if !crates.contains_key(name) {
+            problems.push(format!(
+                "docs/architecture.md names {name}, not a workspace member"
+            ));
+        }
+    }
+    assert!(problems.is_empty(), "{}", problems.join("\n"));
+}
