@@ -1,5 +1,6 @@
-//! The command line of `auvnavd` (the daemon itself is the binary), shared with `auvnav man` and
-//! `auvnav completions`.
+//! `auvnavd`, the fusion daemon, as a library: its loop apart from the bus (`service`, driven
+//! by a test from canned messages), the loop on iceoryx2 (`bus_io`), checkpoints, and the
+//! command line (shared with `auvnav man` and `auvnav completions`). `main.rs` only wires them.
 
 #[derive(clap::Parser)]
 #[command(name = "auvnavd", about = "auvnav fusion daemon", version = auvnav_version::LONG)]
@@ -12,4 +13,6 @@ pub struct Args {
     pub check_config: Option<String>,
 }
 
+pub mod bus_io;
 pub mod checkpoint;
+pub mod service;

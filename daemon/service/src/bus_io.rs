@@ -1,0 +1,197 @@
+//! The daemon's loop on the iceoryx2 bus: a subscriber and a listener per sensor topic, one
+//! WaitSet with a 50 ms tick, and the publishers of the solution, diagnostics, late-aid records
+//! and health (`crate::service` is the loop itself).
+
+use crate::service::{Batch, Inputs, Outputs, Wake};
+use auvnav_shm_schema::bus::{Bus, BusError, BusPublisher, BusSubscriber, Sequenced};
+use auvnav_shm_schema::clock::monotonic_ns;
+use auvnav_shm_schema::{
+    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1, MagnetometerV1,
+    Message, NavSolutionV1, ProcessHealthV1, SoundVelocityV1, UsblFixV1, qos, topic,
+};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::prelude::*;
+use iceoryx2::waitset::{WaitSet, WaitSetGuard, WaitSetRunResult};
+use std::time::Duration;
+
+/// The sensor topics, in the order of the listeners.
+const TOPICS: [&str; 7] = [
+    topic::IMU,
+    topic::DVL,
+    topic::DEPTH,
+    topic::GNSS,
+    topic::USBL,
+    topic::MAGNETOMETER,
+    topic::SOUND_VELOCITY,
+];
+
+fn drain<T: Message + Sequenced>(
+    sub: &mut BusSubscriber<T>,
+    into: &mut Vec<T>,
+) -> Result<(), BusError> {
+    while let Some(m) = sub.receive()? {
+        into.push(m);
+    }
+    Ok(())
+}
+
+/// The sensor subscribers.
+struct Subscribers {
+    imu: BusSubscriber<ImuSampleV1>,
+    dvl: BusSubscriber<DvlVelocityV1>,
+    depth: BusSubscriber<DepthV1>,
+    gnss: BusSubscriber<GnssFixV1>,
+    usbl: BusSubscriber<UsblFixV1>,
+    magnetometer: BusSubscriber<MagnetometerV1>,
+    sound_velocity: BusSubscriber<SoundVelocityV1>,
+}
+
+/// Runs the daemon's loop on the bus of `cfg` until SIGTERM or SIGINT.
+pub fn run(cfg: &auvnav_core::config::DaemonConfig) -> Result<crate::service::Summary, String> {
+    let e = |x: BusError| x.to_string();
+    let bus = Bus::new(&cfg.name, &cfg.prefix).map_err(e)?;
+    // Resources left by a killed predecessor (or killed drivers) are removed before opening.
+    bus.cleanup_dead_nodes();
+    let subs = Subscribers {
+        imu: bus.subscriber(topic::IMU, qos::SENSOR).map_err(e)?,
+        dvl: bus.subscriber(topic::DVL, qos::SENSOR).map_err(e)?,
+        depth: bus.subscriber(topic::DEPTH, qos::SENSOR).map_err(e)?,
+        gnss: bus.subscriber(topic::GNSS, qos::SENSOR).map_err(e)?,
+        usbl: bus.subscriber(topic::USBL, qos::SENSOR).map_err(e)?,
+        magnetometer: bus
+            .subscriber(topic::MAGNETOMETER, qos::SENSOR)
+            .map_err(e)?,
+        sound_velocity: bus
+            .subscriber(topic::SOUND_VELOCITY, qos::SENSOR)
+            .map_err(e)?,
+    };
+    let listeners = TOPICS
+        .iter()
+        .map(|t| bus.listener(t))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(e)?;
+    let mut outputs = BusOutputs {
+        solution: bus
+            .publisher(topic::NAV_SOLUTION, qos::NAVIGATION)
+            .map_err(e)?,
+        diagnostics: bus
+            .publisher(topic::NAV_AID_DIAGNOSTICS, qos::NAVIGATION)
+            .map_err(e)?,
+        late_aids: bus
+            .publisher(topic::NAV_LATE_AIDS, qos::NAVIGATION)
+            .map_err(e)?,
+        health: bus.publisher(topic::HEALTH, qos::HEALTH).map_err(e)?,
+    };
+    let waitset = WaitSetBuilder::new()
+        .create::<ipc::Service>()
+        .map_err(|x| format!("creating the WaitSet: {x:?}"))?;
+    let guards = listeners
+        .iter()
+        .map(|l| waitset.attach_notification(l))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|x| format!("attaching a listener: {x:?}"))?;
+    let _tick = waitset
+        .attach_interval(Duration::from_millis(50))
+        .map_err(|x| format!("attaching the tick: {x:?}"))?;
+    let mut inputs = BusInputs {
+        bus: &bus,
+        subs,
+        listeners: &listeners,
+        waitset: &waitset,
+        guards: &guards,
+        notified: [false; TOPICS.len()],
+    };
+    crate::service::run(cfg, &mut inputs, &mut outputs)
+}
+
+struct BusInputs<'a, 'g> {
+    bus: &'a Bus,
+    subs: Subscribers,
+    listeners: &'a [Listener<ipc::Service>],
+    waitset: &'a WaitSet<ipc::Service>,
+    guards: &'g [WaitSetGuard<'a, 'a, ipc::Service>],
+    /// Which topics notified at the last wake-up.
+    notified: [bool; TOPICS.len()],
+}
+
+impl Inputs for BusInputs<'_, '_> {
+    fn wait(&mut self) -> Result<Wake, String> {
+        loop {
+            // Which topics notified: only their listeners are read (one system call each, plus
+            // the one that finds them empty), not all of them on every wake-up.
+            let mut notified = [false; TOPICS.len()];
+            let r = self.waitset.wait_and_process_once(|id| {
+                for (n, g) in notified.iter_mut().zip(self.guards) {
+                    *n |= id.has_event_from(g);
+                }
+                CallbackProgression::Continue
+            });
+            self.notified = notified;
+            return match r {
+                Ok(WaitSetRunResult::TerminationRequest) => Ok(Wake::Stop),
+                // Another signal (SIGCONT after a stop, a debugger's) interrupted the wait: not
+                // a request to stop (SIGTERM/SIGINT are reported by the next wait).
+                Ok(WaitSetRunResult::Interrupt) => continue,
+                Ok(_) => Ok(Wake::Run),
+                Err(x) => Err(format!("waiting: {x:?}")),
+            };
+        }
+    }
+
+    fn take(&mut self, batch: &mut Batch) -> Result<(), String> {
+        for (l, _) in self.listeners.iter().zip(self.notified).filter(|(_, n)| *n) {
+            let _ = l.try_wait(|_| {});
+        }
+        // Aids first, so that IMU samples arriving in the same wake-up find them queued.
+        let s = &mut self.subs;
+        (|| -> Result<(), BusError> {
+            drain(&mut s.dvl, &mut batch.dvl)?;
+            drain(&mut s.depth, &mut batch.depth)?;
+            drain(&mut s.gnss, &mut batch.gnss)?;
+            drain(&mut s.usbl, &mut batch.usbl)?;
+            drain(&mut s.magnetometer, &mut batch.magnetometer)?;
+            drain(&mut s.sound_velocity, &mut batch.sound_velocity)?;
+            drain(&mut s.imu, &mut batch.imu)?;
+            Ok(())
+        })()
+        .map_err(|x| x.to_string())
+    }
+
+    fn now_ns(&self) -> u64 {
+        monotonic_ns()
+    }
+
+    fn gaps(&self) -> u64 {
+        let s = &self.subs;
+        s.imu.gaps() + s.dvl.gaps() + s.depth.gaps() + s.gnss.gaps()
+    }
+
+    fn housekeeping(&mut self) {
+        self.bus.cleanup_dead_nodes();
+    }
+}
+
+struct BusOutputs {
+    solution: BusPublisher<NavSolutionV1>,
+    diagnostics: BusPublisher<AidDiagnosticsV1>,
+    late_aids: BusPublisher<LateAidV1>,
+    health: BusPublisher<ProcessHealthV1>,
+}
+
+impl Outputs for BusOutputs {
+    fn solution(&mut self, s: &NavSolutionV1) -> bool {
+        self.solution.publish(*s).is_ok()
+    }
+    fn diagnostics(&mut self, d: &AidDiagnosticsV1) -> bool {
+        self.diagnostics.publish(*d).is_ok()
+    }
+    fn late_aid(&mut self, r: &LateAidV1) -> bool {
+        self.late_aids.publish(*r).is_ok()
+    }
+    fn health(&mut self, h: &ProcessHealthV1) -> Result<(), String> {
+        self.health
+            .publish(*h)
+            .map(|_| ())
+            .map_err(|x| x.to_string())
+    }
+}
