@@ -22,6 +22,7 @@
 //! the source). Every change of mode and of the fused sensors is one `STATUSTEXT` (e.g.
 //! `auvnav: degraded, DVL lost`). `HEARTBEAT` once a second (an onboard controller, system
 //! status standby, active, critical or emergency by the same mode).
+#![forbid(unsafe_code)]
 
 use auvnav_core::earth::{self, Geodetic};
 use auvnav_shm_schema::{NavMode, NavSolutionV1};

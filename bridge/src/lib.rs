@@ -17,6 +17,7 @@
 //! The bridge only reads the local bus for export and only publishes imported topics under
 //! their own prefix: nothing from the network reaches the daemon's inputs unless an operator
 //! imports under the vehicle's own prefix, which the configuration refuses.
+#![forbid(unsafe_code)]
 
 use auvnav_shm_schema::bus::{Bus, BusError, BusPublisher, BusSubscriber, Sequenced};
 use auvnav_shm_schema::qos::{self, ServiceQos};

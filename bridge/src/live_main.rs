@@ -1,5 +1,6 @@
 //! `auvnav-live`: the live view, a read-only Foxglove WebSocket server fed from this host's bus
 //! (see `auvnav_bridge::live`).
+#![forbid(unsafe_code)]
 
 use auvnav_bridge::live::{LOCATION_TOPIC, LiveConfig, SlowClientReports, WallClock};
 use auvnav_bridge::{ExportPort, RateLimit, TopicKind};

@@ -1,4 +1,5 @@
 //! `auvnav-bridge`: see the library's documentation (`auvnav_bridge`).
+#![forbid(unsafe_code)]
 
 use auvnav_bridge::ros2::{self, Ros2Config, RosType};
 use auvnav_bridge::{

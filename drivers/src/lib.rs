@@ -1,21 +1,13 @@
-//! auvnav device drivers: pure protocol decoders and encoders (bytes in, frames out; no I/O, no
-//! clock), and the driver processes built on them.
+//! auvnav device drivers: the driver processes (serial and TCP devices, CAN) built on the pure
+//! protocol decoders and encoders of `auvnav-protocols`, re-exported here under their names.
+#![forbid(unsafe_code)]
+
+pub use auvnav_protocols::{
+    convert, device, emulate, framing, gnss, kvh, nmea, nortek, pd0, seatrac, ubx, wldvl,
+    wldvl_json, xsens,
+};
 
 pub mod can;
 pub mod can_driver;
 pub mod clock;
-pub mod convert;
-pub mod device;
-pub mod emulate;
-pub mod framing;
-pub mod gnss;
-pub mod kvh;
-pub mod nmea;
-pub mod nortek;
-pub mod pd0;
-pub mod seatrac;
 pub mod serial_driver;
-pub mod ubx;
-pub mod wldvl;
-pub mod wldvl_json;
-pub mod xsens;

@@ -1,5 +1,6 @@
 //! Helpers shared by the end-to-end tests: the workspace's binaries, child processes that are
 //! killed when a test fails, and per-test names so concurrent tests never share topics or files.
+#![forbid(unsafe_code)]
 
 pub mod shared;
 

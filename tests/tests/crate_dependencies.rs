@@ -1,6 +1,7 @@
 //! The crates depend on each other only as `docs/architecture.md` ("What each crate may depend
 //! on") allows: every workspace member has a row, uses no workspace crate its row does not name,
-//! and none of the outside crates its row forbids.
+//! and none of the outside crates its row forbids. And every crate root forbids unsafe code but
+//! the two that say why they need it.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -114,4 +115,70 @@ fn crates_depend_only_on_what_the_architecture_allows() {
         }
     }
     assert!(problems.is_empty(), "{}", problems.join("\n"));
+}
+
+/// The crates whose roots may not forbid unsafe code, and why.
+const UNSAFE_WITH_A_REASON: [(&str, &str); 2] = [
+    (
+        "shm-schema",
+        "iceoryx2's zero-copy derive emits `unsafe impl`; SIGHUP is ignored through libc",
+    ),
+    (
+        "daemon/core",
+        "the covariance propagation's AVX2 path (`#![deny(unsafe_code)]`, one `allow`)",
+    ),
+];
+
+#[test]
+fn every_crate_root_forbids_unsafe_code_unless_it_says_why() {
+    let workspace = read_toml(&root().join("Cargo.toml"));
+    let mut missing = Vec::new();
+    for m in workspace["workspace"]["members"]
+        .as_array()
+        .expect("members")
+        .iter()
+        .map(|m| m.as_str().expect("member path"))
+    {
+        let dir = root().join(m);
+        let manifest = read_toml(&dir.join("Cargo.toml"));
+        let mut roots: Vec<PathBuf> = ["src/lib.rs", "src/main.rs"]
+            .iter()
+            .map(|f| dir.join(f))
+            .filter(|p| p.exists())
+            .collect();
+        if let Ok(bins) = std::fs::read_dir(dir.join("src/bin")) {
+            roots.extend(bins.filter_map(|e| e.ok()).map(|e| e.path()));
+        }
+        for bin in manifest
+            .get("bin")
+            .and_then(|b| b.as_array())
+            .into_iter()
+            .flatten()
+        {
+            if let Some(path) = bin.get("path").and_then(|p| p.as_str()) {
+                roots.push(dir.join(path));
+            }
+        }
+        roots.sort();
+        roots.dedup();
+        let reason = UNSAFE_WITH_A_REASON.iter().find(|(d, _)| *d == m);
+        for r in roots {
+            let text = std::fs::read_to_string(&r).expect("crate root");
+            let forbids = text.contains("#![forbid(unsafe_code)]");
+            match reason {
+                None if !forbids => missing.push(r.display().to_string()),
+                Some((_, why)) if forbids => {
+                    panic!(
+                        "{}: forbids unsafe code, but is listed as needing it ({why})",
+                        r.display()
+                    )
+                }
+                _ => {}
+            }
+        }
+    }
+    assert!(
+        missing.is_empty(),
+        "crate roots without #![forbid(unsafe_code)]: {missing:?}"
+    );
 }

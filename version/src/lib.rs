@@ -1,5 +1,6 @@
 //! The version every auvnav binary reports (`--version`) and writes into the logs it records:
 //! the workspace version and the commit it was built from.
+#![forbid(unsafe_code)]
 
 /// The workspace version, e.g. `0.1.0`.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

@@ -3,6 +3,7 @@
 //!
 //! The solution topic is polled at four times the output rate, without a listener: the daemon's
 //! publish then costs no notification for this process, and only the latest solution matters.
+#![forbid(unsafe_code)]
 
 use auvnav_mavlink::{Link, MavlinkConfig};
 use auvnav_shm_schema::bus::Bus;

@@ -2,6 +2,7 @@
 //! navigation session in real time, publishes the solution, per-aid diagnostics and its health.
 //! The loop is `auvnavd::service` (on the bus: `auvnavd::bus_io`); this file reads the command
 //! line and the configuration and wires them.
+#![forbid(unsafe_code)]
 
 use auvnav_core::config::DaemonConfig;
 use auvnavd::Args;

@@ -1,4 +1,5 @@
 //! `auvnav-imu`: the IMU serial driver process. See `auvnav_drivers::serial_driver`.
+#![forbid(unsafe_code)]
 
 fn main() -> std::process::ExitCode {
     auvnav_drivers::serial_driver::main_for(auvnav_drivers::device::DeviceClass::Imu)

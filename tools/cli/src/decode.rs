@@ -13,7 +13,7 @@ pub use auvnav_drivers::device::Protocol;
 #[derive(clap::Args, Debug, Clone)]
 pub struct DecodeArgs {
     /// Protocol of the capture.
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = crate::args::config_enum::<Protocol>(&Protocol::NAMES))]
     pub protocol: Protocol,
     /// The captured bytes.
     pub file: PathBuf,

@@ -1,3 +1,4 @@
+#![forbid(unsafe_code)]
 pub mod accuracy;
 pub mod align;
 pub mod args;

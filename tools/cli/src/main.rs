@@ -1,5 +1,6 @@
 //! `auvnav`: the offline tools. `main` only parses arguments and dispatches; the work is done by
 //! library functions that tests drive directly.
+#![forbid(unsafe_code)]
 
 use anyhow::{Context, bail};
 use auvnav_sim::{self as sim, SimConfig, effects, scenario::Scenario};

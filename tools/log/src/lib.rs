@@ -26,6 +26,7 @@
 //! its last complete chunk; the reader then reports [`LogError::Truncated`]. A chunk that fails
 //! its CRC (or does not decompress) in the middle of a file is skipped, counted with its time
 //! span in [`Corruption`], and the reader goes on with the next chunk it can frame (`framing`).
+#![forbid(unsafe_code)]
 
 use auvnav_shm_schema::{
     AcousticRangesV1, AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1,

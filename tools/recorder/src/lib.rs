@@ -7,6 +7,7 @@
 //! rewrites it as a complete, indexed log. Losses on the bus show as sequence gaps and are
 //! counted per topic. A write error (a full disk) stops the recorder with a report; what was
 //! flushed before stays readable.
+#![forbid(unsafe_code)]
 
 use anyhow::{Context, bail};
 use auvnav_log::{Corruption, LogError, LogHeader, LogReader, LogWriter, write_log_atomically};

@@ -3,6 +3,7 @@
 //! The simulation is a pure function of (scenario, effects, seed): it reads no clock, draws from
 //! seeded per-sensor random streams, and writes messages in time order, so the same inputs give
 //! the same log bytes.
+#![forbid(unsafe_code)]
 
 pub mod campaign;
 pub mod effects;

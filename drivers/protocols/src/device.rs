@@ -18,7 +18,7 @@ use auvnav_shm_schema::{DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, U
 use serde::{Deserialize, Serialize};
 
 /// A serial protocol the drivers speak.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Protocol {
     /// Teledyne RDI PD0 (binary ensembles).
@@ -35,7 +35,6 @@ pub enum Protocol {
     Nortek,
     /// Water Linked DVL JSON reports from its TCP service (`[tcp]`, port 16171).
     #[serde(rename = "wldvl-json")]
-    #[value(name = "wldvl-json")]
     WldvlJson,
     /// NMEA 0183 from a GNSS receiver (GGA, RMC, VTG, GST, ZDA, HDT).
     Nmea,
@@ -75,6 +74,19 @@ impl Protocol {
         Protocol::ALL.into_iter().find(|p| p.name() == name)
     }
 
+    /// Every protocol's name, in the order of [`Protocol::ALL`].
+    pub const NAMES: [&'static str; 9] = [
+        "pd0",
+        "wldvl",
+        "kvh1750",
+        "xsens",
+        "seatrac",
+        "nortek",
+        "wldvl-json",
+        "nmea",
+        "ubx",
+    ];
+
     /// The class of device that speaks it.
     /// Whether the device also sends the magnetic field (published on the magnetometer topic).
     pub fn carries_magnetic_field(self) -> bool {
@@ -90,6 +102,14 @@ impl Protocol {
             Protocol::Seatrac => DeviceClass::Usbl,
             Protocol::Nmea | Protocol::Ubx => DeviceClass::Gnss,
         }
+    }
+}
+
+impl std::str::FromStr for Protocol {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Protocol::from_name(s)
+            .ok_or_else(|| format!("unknown protocol {s:?} ({})", Protocol::NAMES.join(", ")))
     }
 }
 
@@ -421,5 +441,24 @@ impl DeviceDecoder {
                 },
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The list of names, each protocol's own name and its configuration spelling agree.
+    #[test]
+    fn protocol_names_agree_everywhere() {
+        for (p, name) in Protocol::ALL.into_iter().zip(Protocol::NAMES) {
+            assert_eq!(p.name(), name);
+            assert_eq!(name.parse::<Protocol>(), Ok(p));
+            let spelled: String =
+                serde_json::from_value(serde_json::to_value(p).expect("serialise"))
+                    .expect("a string");
+            assert_eq!(spelled, name);
+        }
+        assert!("rs232".parse::<Protocol>().is_err());
     }
 }
