@@ -1,5 +1,5 @@
 #![forbid(unsafe_code)]
-pub mod accuracy;
+pub use auvnav_replay::accuracy;
 pub mod align;
 pub mod args;
 pub mod bench;

@@ -463,22 +463,7 @@ pub fn config_toml(r: &CalibrationReport) -> anyhow::Result<String> {
     ))
 }
 
-/// Writes `text` to `path` atomically (a temporary file beside it, then a rename).
-pub fn write_atomically(path: &Path, text: &str) -> anyhow::Result<()> {
-    let tmp = crate::replay::partial_path(path);
-    let result = (|| -> anyhow::Result<()> {
-        use std::io::Write;
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(text.as_bytes())?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)?;
-        Ok(())
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result.with_context(|| format!("writing {}", path.display()))
-}
+pub use auvnav_replay::write_atomically;
 
 pub fn write_config(path: &Path, r: &CalibrationReport) -> anyhow::Result<()> {
     write_atomically(path, &config_toml(r)?)

@@ -10,12 +10,17 @@
 //! truth channel, the solution is compared with it at every truth epoch (linear interpolation
 //! between the two solutions around the epoch).
 //!
-//! This module is the replay itself ([`Replay`]); [`command`] is the `auvnav replay` command
-//! around it (arguments, configuration, outputs, report).
+//! The crate is the replay itself ([`Replay`]), its feed order ([`order`]), the accuracy against
+//! a truth or reference channel ([`accuracy`]), and a whole replay as one call ([`replay`]: the
+//! configuration, the outputs, the report), with what the other offline tools share: the
+//! configuration file ([`load_config`]), [`interpolate`], [`run_log`] and atomic outputs
+//! ([`partial_path`], [`write_atomically`]). It neither parses arguments nor prints.
+#![forbid(unsafe_code)]
 
-mod command;
+pub mod accuracy;
 pub mod order;
-pub use command::*;
+mod run;
+pub use run::*;
 
 use crate::accuracy::{Accuracy, AccuracyTracker, SolutionPoint};
 use anyhow::{Context, bail};

@@ -1,0 +1,58 @@
+//! Replay as a library, without the command line: a simulated log replayed with options, a typed
+//! report, and the outputs written atomically.
+
+use auvnav_replay::{ReplayOptions, replay};
+use auvnav_sim::{SimConfig, scenario::Scenario};
+
+#[test]
+fn a_log_replays_through_the_library_with_a_typed_report() {
+    let dir = std::env::temp_dir().join(format!("auvnav-replay-lib-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("scratch folder");
+    let log = dir.join("straight.mcap");
+    let scenario = Scenario::load("straight").expect("scenario");
+    let effects = scenario.effects().expect("effects");
+    auvnav_sim::simulate_to_log(
+        &SimConfig {
+            scenario,
+            effects,
+            seed: 4501,
+            duration_s: Some(60.0),
+        },
+        &log,
+    )
+    .expect("simulation");
+
+    let csv = dir.join("nav.csv");
+    let report = replay(&ReplayOptions {
+        out: Some(csv.clone()),
+        decimate: 10,
+        ..ReplayOptions::new(&log)
+    })
+    .expect("replay");
+    assert_eq!(report.configuration, "defaults");
+    assert!(report.samples_processed > 5000, "{report:?}");
+    let accuracy = report.accuracy.expect("the log has a truth channel");
+    assert!(accuracy.horizontal_error_final_m < 5.0, "{accuracy:?}");
+    assert!(report.log_error.is_none());
+    let rows = std::fs::read_to_string(&csv).expect("CSV").lines().count() - 1;
+    // Every tenth solution (one per IMU sample, and the initial state's).
+    let expected = report.samples_processed.div_ceil(10);
+    assert!(
+        (expected..=expected + 1).contains(&(rows as u64)),
+        "{rows} rows for {} samples",
+        report.samples_processed
+    );
+    assert!(dir.join("nav.diagnostics.csv").exists());
+    assert!(!auvnav_replay::partial_path(&csv).exists());
+
+    // A configuration that does not parse is an error naming the file, not a panic.
+    let bad = dir.join("bad.toml");
+    auvnav_replay::write_atomically(&bad, "[navigation]\ngyro = 'fast'\n").expect("write");
+    let e = replay(&ReplayOptions {
+        config: Some(bad.clone()),
+        ..ReplayOptions::new(&log)
+    })
+    .expect_err("a bad configuration");
+    assert!(format!("{e:#}").contains("bad.toml"), "{e:#}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
