@@ -9,7 +9,7 @@ pub mod decode;
 pub mod demo;
 pub mod discover;
 pub mod emulate;
-pub mod import;
+pub use auvnav_import as import;
 pub mod info;
 pub mod json;
 pub mod live;

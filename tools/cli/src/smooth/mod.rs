@@ -10,7 +10,7 @@
 //! reference epoch.
 
 pub mod export;
-pub mod fixes;
+pub use auvnav_import::fixes;
 pub mod montecarlo;
 pub mod report;
 

@@ -20,17 +20,7 @@
 use auvnav_sim::rng::Rng;
 use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, SVector, Vector3};
 
-/// One magnetometer sample: the reading (µT, sensor axes) and, when recorded, the specific force
-/// at the same time (any unit: only its direction is used).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct MagSample {
-    pub time_s: f64,
-    pub field_ut: Vector3<f64>,
-    pub specific_force: Option<Vector3<f64>>,
-    /// The true roll, pitch, yaw (rad) when the recording has a reference attitude (simulated
-    /// truth): used only to measure heading errors, never by a fit.
-    pub truth_rpy: Option<Vector3<f64>>,
-}
+pub use auvnav_import::mag::MagSample;
 
 /// A calibration `B = K (h − b)`.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -8,7 +8,7 @@
 
 pub mod command;
 pub mod fit;
-pub mod input;
+pub use auvnav_import::mag as input;
 pub mod report;
 pub mod simulated;
 

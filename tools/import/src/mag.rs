@@ -2,12 +2,23 @@
 //! averaged over each magnetometer interval and, in simulated logs, the true attitude) and from
 //! CSV files (columns named by options or recognised from the header).
 
-use super::fit::MagSample;
 use anyhow::{Context, bail};
 use auvnav_log::{LogMessage, LogReader};
 use auvnav_shm_schema::{ImuSampleV1, MagnetometerV1};
 use nalgebra::Vector3;
 use std::path::Path;
+
+/// One magnetometer sample: the reading (µT, sensor axes) and, when recorded, the specific force
+/// at the same time (any unit: only its direction is used).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MagSample {
+    pub time_s: f64,
+    pub field_ut: Vector3<f64>,
+    pub specific_force: Option<Vector3<f64>>,
+    /// The true roll, pitch, yaw (rad) when the recording has a reference attitude (simulated
+    /// truth): used only to measure heading errors, never by a fit.
+    pub truth_rpy: Option<Vector3<f64>>,
+}
 
 /// Where a recording was made, when it says so (first GNSS fix or truth record).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -153,19 +164,20 @@ pub struct CsvColumns {
 
 /// The command-line options that choose a CSV file's columns (`auvnav calibrate mag`,
 /// `auvnav import mag-csv`).
-#[derive(clap::Args, Debug, Clone, Default)]
+#[derive(Debug, Clone, Default)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct CsvColumnArgs {
     /// CSV: the time column (seconds or ISO-8601 UTC); default: the first column named `time…`.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub time_column: Option<String>,
     /// CSV: the three magnetometer columns X,Y,Z; default: the first three named `…mag…`.
-    #[arg(long, value_delimiter = ',')]
+    #[cfg_attr(feature = "clap", arg(long, value_delimiter = ','))]
     pub mag_columns: Option<Vec<String>>,
     /// CSV: the three accelerometer columns X,Y,Z; default: the first three named `…acc…`.
-    #[arg(long, value_delimiter = ',')]
+    #[cfg_attr(feature = "clap", arg(long, value_delimiter = ','))]
     pub accel_columns: Option<Vec<String>>,
     /// CSV: the field unit (T, uT, nT, gauss); default: decided from the readings' magnitude.
-    #[arg(long, ignore_case = true, value_parser = ["T", "uT", "nT", "gauss"])]
+    #[cfg_attr(feature = "clap", arg(long, ignore_case = true, value_parser = ["T", "uT", "nT", "gauss"]))]
     pub mag_unit: Option<String>,
 }
 

@@ -1,0 +1,418 @@
+//! A PD0 file with GPS.
+
+#[allow(unused_imports)]
+use super::*;
+
+/// How the GPS velocity of `auvnav import pd0` is formed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "snake_case")]
+pub enum GpsVelocity {
+    /// VTG course and speed over ground when the file has them, otherwise GGA positions.
+    Auto,
+    /// VTG course and speed over ground (interpolated to the ensemble).
+    Vtg,
+    /// A straight line through the GGA positions within ±1 s of the ensemble.
+    Gga,
+}
+
+/// Command-line arguments of `auvnav import pd0`.
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
+pub struct Pd0Args {
+    /// A Teledyne RDI PD0 file with bottom track and GPS in WinRiver NMEA blocks (GGA, VTG).
+    pub file: PathBuf,
+    /// Output log (written atomically).
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub out: PathBuf,
+    /// Where the reference velocity comes from.
+    #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = GpsVelocity::Auto))]
+    pub velocity: GpsVelocity,
+    /// Position fixes logged elsewhere (a glider's or an AUV's surface fixes): CSV `time_s,
+    /// latitude_deg, longitude_deg, depth_m, std_m` with time in seconds from the first ensemble
+    /// (the format of `auvnav smooth --fixes`), written as GNSS fixes for `auvnav calibrate dvl`
+    /// and `auvnav smooth`.
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub fixes: Option<PathBuf>,
+    /// Print the summary as JSON.
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub json: bool,
+}
+
+/// What `auvnav import pd0` read and wrote.
+#[derive(Debug, Clone, Serialize)]
+pub struct Pd0Summary {
+    pub ensembles: u64,
+    /// Ensembles with a bottom-track velocity in ship or instrument coordinates.
+    pub bottom_track_velocity: u64,
+    /// Ensembles dropped: no real-time clock, or time going backwards.
+    pub bad_time: u64,
+    pub coordinate_system: String,
+    pub gga: u64,
+    pub vtg: u64,
+    /// GGA sentences without a fix (left out).
+    pub gga_no_fix: u64,
+    pub velocity: GpsVelocity,
+    /// Reference records written (ensembles with GPS on both sides).
+    pub reference: u64,
+    pub duration_s: f64,
+    /// Bytes the decoder skipped or could not decode (checksum errors, bad blocks).
+    pub decoder_errors: u64,
+    /// Fixes from `--fixes` written as GNSS fixes, and those outside the file's time span (left
+    /// out).
+    pub fixes_written: u64,
+    pub fixes_outside: u64,
+    /// Lines of the fix file that did not parse (left out).
+    pub fixes_unparsable_lines: u64,
+}
+
+/// A GPS sample on the ensemble clock: time (s), north and east (m from the first fix), or
+/// north and east velocity (m/s).
+type GpsSample = (f64, f64, f64);
+
+/// Linear interpolation of `s` at `t` between samples at most `max_gap` s apart.
+fn interpolate_gps(s: &[GpsSample], t: f64, max_gap: f64) -> Option<(f64, f64)> {
+    let i = s.partition_point(|x| x.0 <= t);
+    let (a, b) = (s.get(i.checked_sub(1)?)?, s.get(i)?);
+    if b.0 - a.0 > max_gap || b.0 <= a.0 {
+        return None;
+    }
+    let f = (t - a.0) / (b.0 - a.0);
+    Some((a.1 + (b.1 - a.1) * f, a.2 + (b.2 - a.2) * f))
+}
+
+/// Velocity from positions: least-squares line through the samples within ±`half` s of `t`
+/// (at least three, spanning at least `half`).
+fn velocity_from_positions(s: &[GpsSample], t: f64, half: f64) -> Option<(f64, f64)> {
+    let lo = s.partition_point(|x| x.0 < t - half);
+    let hi = s.partition_point(|x| x.0 <= t + half);
+    let w = &s[lo..hi];
+    if w.len() < 3 || w[w.len() - 1].0 - w[0].0 < half {
+        return None;
+    }
+    let n = w.len() as f64;
+    let mt = w.iter().map(|x| x.0).sum::<f64>() / n;
+    let stt: f64 = w.iter().map(|x| (x.0 - mt).powi(2)).sum();
+    let slope = |k: usize| {
+        let m = w
+            .iter()
+            .map(|x| if k == 1 { x.1 } else { x.2 })
+            .sum::<f64>()
+            / n;
+        w.iter()
+            .map(|x| (x.0 - mt) * (if k == 1 { x.1 } else { x.2 } - m))
+            .sum::<f64>()
+            / stt
+    };
+    Some((slope(1), slope(2)))
+}
+
+/// The messages of a PD0 file with GPS: the DVL channel (bottom track, as the DVL driver
+/// converts it) and a reference at each ensemble from the GPS (position, velocity over ground)
+/// with the DVL's own heading, pitch and roll as attitude.
+pub fn pd0_messages(
+    bytes: &[u8],
+    velocity: GpsVelocity,
+) -> anyhow::Result<(Vec<(&'static str, LogMessage)>, Pd0Summary)> {
+    use auvnav_protocols::convert::{pd0_rtc_ns, pd0_velocity};
+    use auvnav_protocols::pd0::{NmeaBlock, decode_all};
+    let (ensembles, stats) = decode_all(bytes);
+    let mut s = Pd0Summary {
+        ensembles: ensembles.len() as u64,
+        bottom_track_velocity: 0,
+        bad_time: 0,
+        coordinate_system: String::new(),
+        gga: 0,
+        vtg: 0,
+        gga_no_fix: 0,
+        velocity,
+        reference: 0,
+        duration_s: 0.0,
+        decoder_errors: stats.checksum_errors + stats.malformed,
+        fixes_written: 0,
+        fixes_outside: 0,
+        fixes_unparsable_lines: 0,
+    };
+    if let Some(f) = ensembles.iter().find_map(|e| e.fixed.as_ref()) {
+        s.coordinate_system = format!("{:?}", f.coordinate_system).to_lowercase();
+    }
+    // Ensemble times on the DVL's clock, seconds from the first ensemble.
+    let mut t0: Option<u64> = None;
+    let mut last = f64::NEG_INFINITY;
+    let mut timed = Vec::new();
+    for e in &ensembles {
+        let Some(ns) = e.variable.as_ref().and_then(|v| pd0_rtc_ns(&v.rtc)) else {
+            s.bad_time += 1;
+            continue;
+        };
+        let t = (ns as i128 - *t0.get_or_insert(ns) as i128) as f64 * 1e-9;
+        if t <= last {
+            s.bad_time += 1;
+            continue;
+        }
+        last = t;
+        timed.push((t, e));
+    }
+    // GPS samples on the same clock: sentence time = ensemble time − WinRiver's delta.
+    // GGA fixes: (time, latitude deg, longitude deg, altitude m).
+    let mut fixes: Vec<(f64, f64, f64, f64)> = Vec::new();
+    let mut vtg: Vec<GpsSample> = Vec::new();
+    let mut seen_utc = std::collections::HashSet::new();
+    for (t, e) in &timed {
+        for n in &e.nmea {
+            match n {
+                NmeaBlock::Gga {
+                    delta_time_s,
+                    utc,
+                    latitude_deg,
+                    longitude_deg,
+                    fix_quality,
+                    altitude_m,
+                    ..
+                } => {
+                    if *fix_quality == 0 || !latitude_deg.is_finite() {
+                        s.gga_no_fix += 1;
+                    } else if seen_utc.insert(utc.clone()) {
+                        s.gga += 1;
+                        fixes.push((
+                            t - delta_time_s,
+                            *latitude_deg,
+                            *longitude_deg,
+                            f64::from(*altitude_m),
+                        ));
+                    }
+                }
+                NmeaBlock::Vtg {
+                    delta_time_s,
+                    true_track_deg,
+                    speed_over_ground_m_s,
+                } => {
+                    let c = f64::from(*true_track_deg).to_radians();
+                    if c.is_finite() && speed_over_ground_m_s.is_finite() {
+                        s.vtg += 1;
+                        vtg.push((
+                            t - delta_time_s,
+                            speed_over_ground_m_s * c.cos(),
+                            speed_over_ground_m_s * c.sin(),
+                        ));
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+    fixes.sort_by(|a, b| a.0.total_cmp(&b.0));
+    vtg.sort_by(|a, b| a.0.total_cmp(&b.0));
+    vtg.dedup_by(|a, b| a.0 == b.0);
+    let use_vtg = match velocity {
+        GpsVelocity::Vtg => true,
+        GpsVelocity::Gga => false,
+        GpsVelocity::Auto => vtg.len() >= 2,
+    };
+    if use_vtg && vtg.len() < 2 {
+        bail!("--velocity vtg: the file has {} VTG sentences", vtg.len());
+    }
+    // Local north/east (m) of the fixes around the first one.
+    let origin = fixes.first().map(|f| (f.1.to_radians(), f.2.to_radians()));
+    let positions: Vec<GpsSample> = match origin {
+        Some((lat0, lon0)) => {
+            let (rm, rn) = (
+                auvnav_core::earth::meridian_radius(lat0),
+                auvnav_core::earth::A,
+            );
+            fixes
+                .iter()
+                .map(|f| {
+                    (
+                        f.0,
+                        (f.1.to_radians() - lat0) * rm,
+                        (f.2.to_radians() - lon0) * rn * lat0.cos(),
+                    )
+                })
+                .collect()
+        }
+        None => Vec::new(),
+    };
+    let heights: Vec<GpsSample> = fixes.iter().map(|f| (f.0, f.3, 0.0)).collect();
+    let mut out = Vec::new();
+    for (seq, (t, e)) in timed.iter().enumerate() {
+        let host = ns(*t);
+        if let Some(d) = pd0_velocity(e, host, 0.0, seq as u64) {
+            if d.validity & DvlVelocityV1::VALID_VELOCITY != 0 {
+                s.bottom_track_velocity += 1;
+            }
+            out.push((host, 1u8, topic::DVL, LogMessage::Dvl(d)));
+        }
+        let Some(v) = e.variable.as_ref() else {
+            continue;
+        };
+        let vel = if use_vtg {
+            interpolate_gps(&vtg, *t, 1.5)
+        } else {
+            velocity_from_positions(&positions, *t, 1.0)
+        };
+        let (Some((vn, ve)), Some(_), Some((h, _))) = (
+            vel,
+            interpolate_gps(&positions, *t, 1.5),
+            interpolate_gps(&heights, *t, 1.5),
+        ) else {
+            continue;
+        };
+        let (lat, lon) = {
+            // Interpolated in degrees between the bracketing fixes.
+            let i = fixes.partition_point(|f| f.0 <= *t);
+            let (a, b) = (&fixes[i - 1], &fixes[i]);
+            let f = (t - a.0) / (b.0 - a.0);
+            (a.1 + (b.1 - a.1) * f, a.2 + (b.2 - a.2) * f)
+        };
+        let euler = [
+            v.roll_deg.to_radians(),
+            v.pitch_deg.to_radians(),
+            v.heading_deg.to_radians(),
+        ];
+        let q = UnitQuaternion::from_euler_angles(euler[0], euler[1], euler[2]);
+        let truth = TruthStateV1 {
+            host_time_ns: host,
+            sequence: s.reference,
+            latitude_rad: lat.to_radians(),
+            longitude_rad: lon.to_radians(),
+            height_m: h,
+            velocity_ned_m_s: [vn, ve, 0.0],
+            quaternion_body_to_ned: [q.w, q.i, q.j, q.k],
+            euler_rad: euler,
+            angular_rate_rad_s: [f64::NAN; 3],
+            specific_force_m_s2: [f64::NAN; 3],
+        };
+        s.reference += 1;
+        out.push((host, 0, topic::TRUTH, LogMessage::Truth(truth)));
+    }
+    out.sort_by_key(|&(t, order, _, _)| (t, order));
+    s.duration_s = timed.last().map_or(0.0, |x| x.0);
+    Ok((out.into_iter().map(|(_, _, t, m)| (t, m)).collect(), s))
+}
+
+/// Imports a PD0 file with GPS into a log at `out` (written atomically).
+pub fn pd0(a: &Pd0Args) -> anyhow::Result<Pd0Summary> {
+    let bytes = std::fs::read(&a.file).with_context(|| format!("reading {}", a.file.display()))?;
+    let (messages, mut summary) = pd0_messages(&bytes, a.velocity)?;
+    let fix_file = a.fixes.as_deref().map(crate::fixes::read).transpose()?;
+    let mut gnss = Vec::new();
+    if let Some(f) = &fix_file {
+        summary.fixes_unparsable_lines = f.unparsable_lines as u64;
+        for fix in &f.fixes {
+            if (0.0..=summary.duration_s).contains(&fix.time_s) {
+                gnss.push(fix.to_gnss(gnss.len() as u64));
+            } else {
+                summary.fixes_outside += 1;
+            }
+        }
+        summary.fixes_written = gnss.len() as u64;
+    }
+    if summary.reference == 0 && gnss.is_empty() {
+        bail!(
+            "{}: no ensemble has GPS on both sides ({} GGA fixes, {} VTG) and no --fixes inside \
+             its time span: nothing to compare the bottom track with",
+            a.file.display(),
+            summary.gga,
+            summary.vtg
+        );
+    }
+    let mut header = LogHeader::new("auvnav import pd0", "");
+    header
+        .notes
+        .insert("source".into(), a.file.display().to_string());
+    header.notes.insert(
+        "source.description".into(),
+        "Teledyne RDI PD0 bottom track with GPS (WinRiver NMEA blocks); time 0 = first ensemble \
+         on the DVL's clock"
+            .into(),
+    );
+    header
+        .notes
+        .insert("import.counts".into(), serde_json::to_string(&summary)?);
+    write_log_atomically(&a.out, &header, |w: &mut LogWriter<_>| {
+        w.declare::<DvlVelocityV1>(
+            topic::DVL,
+            &note(&[(
+                "source",
+                "PD0 bottom track converted as the DVL driver does (ship/instrument coordinates to x forward, y starboard, z down; the vehicle's velocity)",
+            )]),
+        )?;
+        w.declare::<TruthStateV1>(
+            topic::TRUTH,
+            &note(&[(
+                "source",
+                "reference from GPS: GGA position and VTG course/speed over ground (or GGA position differences), interpolated to the ensemble; attitude is the DVL's own heading, pitch and roll (its compass, not independent); vertical velocity 0 (surface vessel); rates unknown (NaN)",
+            )]),
+        )?;
+        if !gnss.is_empty() {
+            w.declare::<GnssFixV1>(
+                topic::GNSS,
+                &note(&[(
+                    "source",
+                    "position fixes from --fixes (logged elsewhere), on the ensemble clock",
+                )]),
+            )?;
+        }
+        // The fixes in time order among the ensemble's messages.
+        let mut next_fix = gnss.iter().peekable();
+        for (t, m) in &messages {
+            let t_ns = match m {
+                LogMessage::Dvl(x) => x.host_time_ns,
+                LogMessage::Truth(x) => x.host_time_ns,
+                _ => 0,
+            };
+            while let Some(f) = next_fix.next_if(|f| f.host_time_ns <= t_ns) {
+                w.write(topic::GNSS, f)?;
+            }
+            match m {
+                LogMessage::Dvl(x) => w.write(t, x)?,
+                LogMessage::Truth(x) => w.write(t, x)?,
+                _ => {}
+            }
+        }
+        for f in next_fix {
+            w.write(topic::GNSS, f)?;
+        }
+        Ok(())
+    })
+    .with_context(|| format!("writing {}", a.out.display()))?;
+    Ok(summary)
+}
+
+#[cfg(test)]
+mod pd0_tests {
+    use super::*;
+
+    #[test]
+    fn gps_velocity_from_positions_and_interpolation() {
+        // 1 m/s north, 0.5 m/s east, sampled at 5 Hz.
+        let s: Vec<GpsSample> = (0..20)
+            .map(|i| {
+                let t = i as f64 * 0.2;
+                (t, t, 0.5 * t)
+            })
+            .collect();
+        let (vn, ve) = velocity_from_positions(&s, 2.0, 1.0).expect("velocity");
+        assert!((vn - 1.0).abs() < 1e-12 && (ve - 0.5).abs() < 1e-12);
+        assert!(velocity_from_positions(&s, 10.0, 1.0).is_none());
+        let (n, e) = interpolate_gps(&s, 1.1, 1.5).expect("inside");
+        assert!((n - 1.1).abs() < 1e-12 && (e - 0.55).abs() < 1e-12);
+        assert!(interpolate_gps(&s, -0.1, 1.5).is_none());
+        assert!(interpolate_gps(&[(0.0, 0.0, 0.0), (3.0, 1.0, 1.0)], 1.0, 1.5).is_none());
+    }
+
+    #[test]
+    fn bytes_without_ensembles_give_nothing_and_no_panic() {
+        for bytes in [
+            &b""[..],
+            &[0x7f, 0x7f, 0xff, 0xff, 0, 0][..],
+            &[0x55; 4096][..],
+        ] {
+            let (m, s) = pd0_messages(bytes, GpsVelocity::Auto).expect("no error");
+            assert!(m.is_empty());
+            assert_eq!(s.reference, 0);
+        }
+        assert!(pd0_messages(b"", GpsVelocity::Vtg).is_err());
+    }
+}
