@@ -1,7 +1,7 @@
 #![forbid(unsafe_code)]
 pub use auvnav_replay::accuracy;
 pub mod align;
-pub mod args;
+pub use auvnav_studies::args;
 pub mod bench;
 pub mod calibrate;
 pub mod csv;
@@ -14,13 +14,13 @@ pub mod info;
 pub mod json;
 pub mod live;
 pub mod montecarlo;
-pub mod parallel;
+pub use auvnav_studies::parallel;
 pub mod phases;
 pub mod process;
-pub mod progress;
+pub use auvnav_studies::progress;
 pub mod replay;
 pub mod smooth;
-pub mod study;
+pub use auvnav_studies::study;
 pub mod usbl;
 
 /// Why `auvnav` failed, for its exit status (docs/operations.md): 0 success, 1 a runtime failure

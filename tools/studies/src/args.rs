@@ -1,4 +1,5 @@
-//! clap value parsers shared by the commands. A value is checked when the command line is
+//! Value parsers shared by the commands' options (and by the option structs of the libraries,
+//! with their `clap` feature). A value is checked when the command line is
 //! parsed, so a malformed one is a usage error (exit status 2) named by its option before
 //! anything runs; the commands keep their own checks for values that arrive other ways (files,
 //! tests). The parsers return the text unchanged, for the commands' own parsing.
@@ -36,6 +37,7 @@ pub fn key_value(s: &str) -> Result<String, String> {
     }
 }
 
+#[cfg(feature = "clap")]
 /// A parser for a configuration enum of the core (which has no clap): one of `names`, parsed by
 /// the type's `FromStr`, with the names listed in `--help` and in the error.
 pub fn config_enum<T>(
