@@ -3,7 +3,7 @@ pub use auvnav_replay::accuracy;
 pub mod align;
 pub use auvnav_studies::args;
 pub mod bench;
-pub mod calibrate;
+pub use auvnav_calibrate as calibrate;
 pub mod csv;
 pub mod decode;
 pub mod demo;
@@ -23,16 +23,7 @@ pub mod smooth;
 pub use auvnav_studies::study;
 pub mod usbl;
 
-/// Why `auvnav` failed, for its exit status (docs/operations.md): 0 success, 1 a runtime failure
-/// (I/O, a device, the bus), 2 a usage or configuration error (clap's own errors are 2 as well),
-/// 3 a check that ran and failed (a replay that does not reproduce, a demo that did not).
-#[derive(Debug, thiserror::Error)]
-pub enum Failure {
-    #[error("{0}")]
-    Usage(String),
-    #[error("{0}")]
-    CheckFailed(String),
-}
+pub use auvnav_replay::Failure;
 
 /// The exit status for an error: the first [`Failure`] in its chain, a configuration file that
 /// does not parse (2), otherwise a runtime failure (1).

@@ -18,6 +18,7 @@
 #![forbid(unsafe_code)]
 
 pub mod accuracy;
+pub mod json;
 pub mod order;
 mod run;
 pub use run::*;
@@ -35,6 +36,17 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 pub use auvnav_core::session::{InitialReport, InitialState};
+
+/// Why an offline tool failed, for the `auvnav` exit status (docs/operations.md): 0 success, 1 a runtime failure
+/// (I/O, a device, the bus), 2 a usage or configuration error (clap's own errors are 2 as well),
+/// 3 a check that ran and failed (a replay that does not reproduce, a demo that did not).
+#[derive(Debug, thiserror::Error)]
+pub enum Failure {
+    #[error("{0}")]
+    Usage(String),
+    #[error("{0}")]
+    CheckFailed(String),
+}
 
 /// The replay configuration file: `[navigation]` (the core's `NavConfig`) and an optional
 /// `[initial]` state — the same file the daemon's `[navigation]`/`[initial]` tables hold.

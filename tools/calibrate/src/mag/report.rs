@@ -3,8 +3,8 @@
 
 use super::command::MagReport;
 use super::fit::MagSample;
-use crate::calibrate::report::write_atomically;
-use crate::calibrate::svg::{PALETTE, Series, plot};
+use crate::report::write_atomically;
+use crate::svg::{PALETTE, Series, plot};
 use anyhow::Context;
 use auvnav_core::aid::magnetometer::MagnetometerConfig;
 use std::fmt::Write as _;
@@ -144,7 +144,10 @@ fn thin(samples: &[MagSample], max: usize) -> impl Iterator<Item = &MagSample> {
 /// norm_histogram.svg.
 pub fn write_report_dir(dir: &Path, r: &MagReport, samples: &[MagSample]) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    write_atomically(&dir.join("report.json"), &crate::json::to_string_pretty(r)?)?;
+    write_atomically(
+        &dir.join("report.json"),
+        &auvnav_replay::json::to_string_pretty(r)?,
+    )?;
     write_atomically(&dir.join("calibration.toml"), &config_toml(r)?)?;
     let c = &r.calibration;
     let radius = r.reference.intensity_ut;

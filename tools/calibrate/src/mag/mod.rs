@@ -19,7 +19,8 @@ use serde::Serialize;
 pub use command::{CalibrateMagArgs, calibrate_mag};
 
 /// The calibration methods (`--method`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum MagMethod {
     /// The 10-coefficient ellipsoid fit, K by Cholesky (the seed's baseline).

@@ -7,8 +7,11 @@
 //! installation ([`params::ParameterSet`]): [`two_point`] (the seed's formulas), [`seed`] (Latin
 //! hypercube → response surface → particle swarm), [`fast`] (Gauss–Newton with replay
 //! sensitivities, the default) and [`smoother`] (the installation states of the filter, smoothed
-//! over each voyage and fused across them). [`command`] is `auvnav calibrate dvl`; [`report`] writes JSON,
-//! the `[navigation.dvl]` table and the report directory.
+//! over each voyage and fused across them). [`command`] is `auvnav calibrate dvl` as a function
+//! (options in, a typed report out); [`report`] writes JSON, the `[navigation.dvl]` table and the
+//! report directory. [`mag`] calibrates a magnetometer. With the `clap` feature, the option
+//! structs are also the command line's; the library never prints.
+#![forbid(unsafe_code)]
 
 pub mod command;
 pub mod fast;
@@ -24,8 +27,8 @@ pub mod voyage;
 
 pub use command::*;
 
-use crate::parallel::map_runs;
 use auvnav_core::config::NavConfig;
+use auvnav_studies::parallel::map_runs;
 use objective::{Record, VoyageRun, run_voyage};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use voyage::Voyage;

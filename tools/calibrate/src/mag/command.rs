@@ -5,12 +5,12 @@ use super::fit::{self, Calibration, MagSample, Model, SwarmSettings};
 use super::input::{self, CsvColumnArgs, Recording};
 use super::{Coverage, MagMethod, ReferenceField, Spreads, Thresholds};
 use anyhow::{Context, bail};
-use clap::Args;
 use serde::Serialize;
 use std::path::PathBuf;
 
 /// Model choice of the `lm` method.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum ModelChoice {
     /// The richest model the attitude coverage determines.
     Auto,
@@ -20,64 +20,73 @@ pub enum ModelChoice {
     Plane,
 }
 
-#[derive(Debug, Clone, Args)]
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct CalibrateMagArgs {
     /// Recordings: auvnav logs (.mcap; the magnetometer topic, the IMU for gravity) or CSV files.
-    #[arg(required = true)]
+    #[cfg_attr(feature = "clap", arg(required = true))]
     pub inputs: Vec<PathBuf>,
-    #[arg(long, value_enum, default_value_t = MagMethod::Lm)]
+    #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = MagMethod::Lm))]
     pub method: MagMethod,
     /// Model of the lm method.
-    #[arg(long, value_enum, default_value_t = ModelChoice::Auto)]
+    #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = ModelChoice::Auto))]
     pub model: ModelChoice,
     /// Fraction of each recording (from its start) used for the fit; the rest evaluates it.
-    #[arg(long, default_value_t = 0.5)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 0.5))]
     pub fit_fraction: f64,
     /// Local field intensity (µT), instead of the field model.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub field_ut: Option<f64>,
     /// Local inclination (deg, positive down), instead of the field model.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub dip_deg: Option<f64>,
     /// Position for the field model (deg), when the recording does not carry one.
-    #[arg(long, allow_hyphen_values = true)]
+    #[cfg_attr(feature = "clap", arg(long, allow_hyphen_values = true))]
     pub latitude: Option<f64>,
-    #[arg(long, allow_hyphen_values = true)]
+    #[cfg_attr(feature = "clap", arg(long, allow_hyphen_values = true))]
     pub longitude: Option<f64>,
     /// Date for the field model (decimal year, e.g. 2026.9), when the recording has none.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub date: Option<f64>,
     /// Seed of the particle swarm (seed method).
-    #[arg(long, default_value_t = 1)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 1))]
     pub seed: u64,
     /// Swarm iterations (seed method; 100 particles).
-    #[arg(long, default_value_t = 150)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 150))]
     pub iterations: usize,
-    #[command(flatten)]
+    #[cfg_attr(feature = "clap", command(flatten))]
     pub columns: CsvColumnArgs,
     /// Print the report as JSON.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub json: bool,
     /// Write the `[navigation.magnetometer]` table (atomically) to this file.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub write_config: Option<PathBuf>,
     /// Write report.md, report.json, calibration.toml and SVG plots into this directory.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub report: Option<PathBuf>,
 }
 
 impl CalibrateMagArgs {
     /// The defaults, on `inputs`.
     pub fn new(inputs: Vec<PathBuf>) -> Self {
-        use clap::Parser;
-        #[derive(Parser)]
-        struct P {
-            #[command(flatten)]
-            a: CalibrateMagArgs,
+        CalibrateMagArgs {
+            inputs,
+            method: MagMethod::Lm,
+            model: ModelChoice::Auto,
+            fit_fraction: 0.5,
+            field_ut: None,
+            dip_deg: None,
+            latitude: None,
+            longitude: None,
+            date: None,
+            seed: 1,
+            iterations: 150,
+            columns: CsvColumnArgs::default(),
+            json: false,
+            write_config: None,
+            report: None,
         }
-        let mut a = P::parse_from(["x", "unused"]).a;
-        a.inputs = inputs;
-        a
     }
 }
 
@@ -195,8 +204,8 @@ pub fn heading_check(samples: &[MagSample], c: &Calibration) -> Option<HeadingCh
         let t = s.truth_rpy?;
         let hb = fit::magnetic_heading(&s.field_ut, t.x, t.y);
         let ha = fit::magnetic_heading(&c.apply(&s.field_ut), t.x, t.y);
-        offs_b.push(crate::accuracy::wrap(hb - t.z));
-        offs_a.push(crate::accuracy::wrap(ha - t.z));
+        offs_b.push(auvnav_replay::accuracy::wrap(hb - t.z));
+        offs_a.push(auvnav_replay::accuracy::wrap(ha - t.z));
         n += 1;
     }
     if n == 0 {
@@ -210,8 +219,8 @@ pub fn heading_check(samples: &[MagSample], c: &Calibration) -> Option<HeadingCh
     };
     let (mb, ma) = (circ_mean(&offs_b), circ_mean(&offs_a));
     for (b, a) in offs_b.iter().zip(&offs_a) {
-        before += crate::accuracy::wrap(b - mb).powi(2);
-        after += crate::accuracy::wrap(a - ma).powi(2);
+        before += auvnav_replay::accuracy::wrap(b - mb).powi(2);
+        after += auvnav_replay::accuracy::wrap(a - ma).powi(2);
     }
     Some(HeadingCheck {
         before_rms_deg: (before / n as f64).sqrt().to_degrees(),

@@ -20,8 +20,8 @@
 
 use super::objective::VoyageRun;
 use super::voyage::Voyage;
-use crate::accuracy::wrap;
 use auvnav_core::earth;
+use auvnav_replay::accuracy::wrap;
 use serde::Serialize;
 
 /// The two formulas on one voyage, in the seed's terms and ours.

@@ -810,7 +810,10 @@ mod tests {
         for (r, p, y) in [(0.1, -0.2, 1.0), (-0.3, 0.25, -2.5), (0.0, 0.0, 3.0)] {
             let bb = rot(r, p, y).transpose() * field;
             let h = magnetic_heading(&bb, r, p);
-            assert!((crate::accuracy::wrap(h - y)).abs() < 1e-12, "{h} {y}");
+            assert!(
+                (auvnav_replay::accuracy::wrap(h - y)).abs() < 1e-12,
+                "{h} {y}"
+            );
             let f = rot(r, p, y).transpose() * Vector3::new(0.0, 0.0, -9.8);
             let (rr, pp) = tilt_from_specific_force(&f);
             assert!((rr - r).abs() < 1e-12 && (pp - p).abs() < 1e-12);

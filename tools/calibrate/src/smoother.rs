@@ -13,14 +13,14 @@ use super::fast::DETERMINED_RATIO;
 use super::params::{NAMES, ParameterSet, installation};
 use super::voyage::{DistanceSource, Voyage};
 use super::{MethodResult, Problem};
-use crate::montecarlo::chi2_quantile;
-use crate::parallel::map_runs;
 use anyhow::{Context, bail};
 use auvnav_core::config::NavConfig;
 use auvnav_core::feed::SensorMessage;
 use auvnav_core::session::{Session, SessionConfig, SessionOutput};
 use auvnav_core::smoother::{SmoothedParameters, SmoothedValue, SmootherLog};
 use auvnav_shm_schema::GnssFixV1;
+use auvnav_studies::nees::chi2_quantile;
+use auvnav_studies::parallel::map_runs;
 use std::sync::atomic::Ordering;
 
 /// Re-linearisations at most (one replay of every voyage each).

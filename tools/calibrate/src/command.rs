@@ -11,12 +11,12 @@ use super::voyage::{DistanceSource, FixSource, Voyage, VoyageSpec};
 use super::{Evaluation, MethodResult, Problem};
 use anyhow::{Context, bail};
 use auvnav_core::session::SessionConfig;
-use clap::{Args, ValueEnum};
 use std::path::PathBuf;
 use std::time::Instant;
 
 /// The calibration methods.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum Method {
     /// Gauss–Newton with replay sensitivities, priors and an observability test (ours).
@@ -31,7 +31,8 @@ pub enum Method {
 }
 
 /// Hold-out evaluation.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum Holdout {
     /// Leave-one-voyage-out when there are at least 3 voyages, else none.
@@ -41,62 +42,63 @@ pub enum Holdout {
     None,
 }
 
-#[derive(Debug, Clone, Args)]
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct CalibrateDvlArgs {
     /// Voyages: logs, or time windows of one as LOG@START..END (seconds from its first message).
-    #[arg(required = true)]
+    #[cfg_attr(feature = "clap", arg(required = true))]
     pub voyages: Vec<VoyageSpec>,
     /// Where the fixes come from: the GNSS channel, or the truth / reference channel.
-    #[arg(long, default_value = "gnss")]
+    #[cfg_attr(feature = "clap", arg(long, default_value = "gnss"))]
     pub fixes: FixSource,
-    #[arg(long, value_enum, default_value_t = Method::Fast)]
+    #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = Method::Fast))]
     pub method: Method,
     /// Only fixes at least this far along the track score (m; S-CAL: 5 km).
-    #[arg(long, default_value_t = 5000.0)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 5000.0))]
     pub threshold: f64,
     /// Navigation configuration (the daemon's or replay's file: [navigation], [initial]); its
     /// DVL installation is the starting point and the default prior.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub config: Option<PathBuf>,
     /// Parameters to estimate, comma-separated (dvl.mount_roll, dvl.mount_pitch, dvl.mount_yaw,
     /// dvl.scale_factor, dvl.lever_arm[.x|.y|.z], dvl.time_offset, dvl.mounting); default: the
     /// seed's four.
-    #[arg(long, value_delimiter = ',')]
+    #[cfg_attr(feature = "clap", arg(long, value_delimiter = ','))]
     pub params: Vec<String>,
     /// Bounds of a parameter: NAME=MIN,MAX (repeatable).
-    #[arg(long = "bound", value_name = "NAME=MIN,MAX", value_parser = crate::args::name_and_two_numbers)]
+    #[cfg_attr(feature = "clap", arg(long = "bound", value_name = "NAME=MIN,MAX", value_parser = auvnav_studies::args::name_and_two_numbers))]
     pub bounds: Vec<String>,
     /// Prior of a parameter: NAME=MEAN,STD (repeatable).
-    #[arg(long = "prior", value_name = "NAME=MEAN,STD", value_parser = crate::args::name_and_two_numbers)]
+    #[cfg_attr(feature = "clap", arg(long = "prior", value_name = "NAME=MEAN,STD", value_parser = auvnav_studies::args::name_and_two_numbers))]
     pub priors: Vec<String>,
     /// TOML file with one table per parameter: estimate, min, max, prior, prior_std.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub limits: Option<PathBuf>,
     /// Seed of the seed method's Latin hypercube and swarm.
-    #[arg(long, default_value_t = 1)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 1))]
     pub seed: u64,
     /// Latin-hypercube samples (seed method).
-    #[arg(long, default_value_t = 100)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 100))]
     pub lhs_samples: usize,
     /// Swarm size (seed method).
-    #[arg(long, default_value_t = 20)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 20))]
     pub particles: usize,
     /// Swarm iterations at most (seed method).
-    #[arg(long, default_value_t = 20)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 20))]
     pub iterations: usize,
-    #[arg(long, value_enum, default_value_t = Holdout::Auto)]
+    #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = Holdout::Auto))]
     pub holdout: Holdout,
     /// Worker threads (default: the available cores).
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub threads: Option<usize>,
     /// Print the result as JSON.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub json: bool,
     /// Write the calibrated [navigation.dvl] table to this file (atomically).
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub write_config: Option<PathBuf>,
     /// Write a report (Markdown, SVG plots, JSON) into this directory.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub report: Option<PathBuf>,
 }
 
@@ -126,7 +128,7 @@ impl CalibrateDvlArgs {
     }
 }
 
-pub use crate::progress::Progress;
+pub use auvnav_studies::progress::Progress;
 
 /// The navigation configuration: `--config`, or, for a recording, the daemon's configuration
 /// embedded in its header (as `auvnav replay` takes it), or the defaults.
@@ -135,14 +137,14 @@ fn load_session_config(
     first_voyage: Option<&std::path::Path>,
 ) -> anyhow::Result<SessionConfig> {
     if let Some(p) = path {
-        return crate::replay::load_config(p);
+        return auvnav_replay::load_config(p);
     }
     if let Some(log) = first_voyage {
         let header = auvnav_log::LogReader::open(log)?
             .read_header()
             .with_context(|| format!("reading {}", log.display()))?;
         if header.producer == "auvnav record" && !header.config.trim().is_empty() {
-            return crate::replay::session_config_from_toml(&header.config)
+            return auvnav_replay::session_config_from_toml(&header.config)
                 .with_context(|| format!("{}", log.display()));
         }
     }
@@ -216,7 +218,7 @@ pub fn calibrate_dvl(args: &CalibrateDvlArgs) -> anyhow::Result<CalibrationRepor
     let params = parameter_set(args, &cfg)?;
     let threads = args
         .threads
-        .unwrap_or_else(crate::parallel::default_threads)
+        .unwrap_or_else(auvnav_studies::parallel::default_threads)
         .max(1);
     let mut voyages = load_voyages(&args.voyages, args.fixes, &cfg)?;
     let mut progress = Progress::new(!args.json);

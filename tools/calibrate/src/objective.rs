@@ -100,7 +100,7 @@ impl Tracker<'_> {
                 let pos = if f.time_ns <= p.host_time_ns {
                     position(&p)
                 } else {
-                    position(&crate::replay::interpolate(&p, sol, f.time_ns))
+                    position(&auvnav_replay::interpolate(&p, sol, f.time_ns))
                 };
                 let o = earth::ned_offset(&f.position, &pos);
                 run.errors_ne.push([o.x, o.y]);

@@ -490,7 +490,10 @@ pub fn write_report_dir(
     result: &MethodResult,
 ) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    write_atomically(&dir.join("report.json"), &crate::json::to_string_pretty(r)?)?;
+    write_atomically(
+        &dir.join("report.json"),
+        &auvnav_replay::json::to_string_pretty(r)?,
+    )?;
     write_atomically(&dir.join("calibration.toml"), &config_toml(r)?)?;
     let mut figures = Vec::new();
     for (k, v) in voyages.iter().enumerate() {
