@@ -8,17 +8,21 @@
 //! the log (GNSS, USBL) and from a fix file (`--fixes`, [`fixes`]) aid both runs. Against the log's
 //! truth or reference channel the forward and smoothed horizontal errors are compared at every
 //! reference epoch.
+//!
+//! A library: options in, typed reports and the output files out; it never prints (with the
+//! `clap` feature, the option structs are also the command line's).
+#![forbid(unsafe_code)]
 
 pub mod export;
 pub use auvnav_import::fixes;
 pub mod montecarlo;
 pub mod report;
 
-use crate::replay::{Output, Replay, ReplayArgs, replay_config, run_log};
 use anyhow::{Context, bail};
 use auvnav_core::ekf;
 use auvnav_core::smoother::{SmoothedParameters, SmoothedTrack, SmoothedValue, SmootherLog};
 use auvnav_log::{LogHeader, LogMessage, write_log_atomically};
+use auvnav_replay::{Output, Replay, ReplayOptions, replay_config, run_log};
 use auvnav_shm_schema::{AidDiagnosticsV1, AidSource, NavSolutionV1, TruthStateV1, topic};
 use serde::Serialize;
 use std::io::Write;
@@ -28,51 +32,52 @@ use std::path::{Path, PathBuf};
 pub const NAV_SOLUTION_SMOOTHED: &str = "nav/solution_smoothed";
 
 /// Command-line arguments of `auvnav smooth`.
-#[derive(clap::Args, Debug, Clone)]
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct SmoothArgs {
     /// The logs to smooth (MCAP written by the recorder, `auvnav import` or `auvnav sim`); each
     /// is smoothed on its own.
-    #[arg(required = true)]
+    #[cfg_attr(feature = "clap", arg(required = true))]
     pub logs: Vec<PathBuf>,
     /// Folder for the outputs (created): per log `<name>.smoothed.csv`, `<name>.smoothed.mcap`,
     /// `<name>.parameters.json`, `<name>.geojson`, `<name>.kml`, `<name>.track.csv`.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub out: PathBuf,
     /// Configuration TOML (`[navigation]`, `[initial]`), as for `auvnav replay`.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub config: Option<PathBuf>,
     /// Position fixes: CSV `time_s, latitude_deg, longitude_deg, depth_m, std_m` on the log's
     /// clock (e.g. surface fixes before and after a dive); fused as GNSS positions.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub fixes: Option<PathBuf>,
     /// Fuse the log's USBL fixes with this coupling (as `auvnav replay --usbl`).
-    #[arg(long, value_parser = crate::args::config_enum::<auvnav_core::aid::usbl::Coupling>(auvnav_core::aid::usbl::Coupling::NAMES))]
+    #[cfg_attr(feature = "clap", arg(long, value_parser = auvnav_studies::args::config_enum::<auvnav_core::aid::usbl::Coupling>(auvnav_core::aid::usbl::Coupling::NAMES)))]
     pub usbl: Option<auvnav_core::aid::usbl::Coupling>,
     /// Points per second in the GeoJSON, KML and plain CSV exports.
-    #[arg(long, default_value_t = 1.0)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 1.0))]
     pub export_rate: f64,
     /// Solutions per second in `<name>.smoothed.csv` and `<name>.smoothed.mcap` (the first
     /// solution of each period, forward and smoothed alike); default: every solution (the IMU
     /// rate, about 200 MB of CSV per hour at 200 Hz). The figures and the report use every
     /// solution either way.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub solution_rate: Option<f64>,
     /// Unix time (s) of the log's time 0, for the UTC column of the plain CSV; otherwise taken
     /// from the first GNSS fix with a valid GNSS time, else the column stays empty.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub unix_time_of_log_zero: Option<f64>,
     /// Keep at most this many MiB of the smoother's epochs in memory; the rest goes to a
     /// temporary file in `--spill-dir` (default: the output folder).
-    #[arg(long, default_value_t = 1024)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 1024))]
     pub memory_budget_mib: usize,
     /// Folder for the smoother's spill file.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub spill_dir: Option<PathBuf>,
     /// Write a report (Markdown, SVG figures, JSON) into this folder.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub report: Option<PathBuf>,
     /// Print the result as JSON.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub json: bool,
 }
 
@@ -263,8 +268,8 @@ impl Comparison {
                 if truth.host_time_ns <= pf.host_time_ns {
                     continue;
                 }
-                let f = crate::replay::interpolate(&pf, fwd, truth.host_time_ns);
-                let s = crate::replay::interpolate(&ps, sm, truth.host_time_ns);
+                let f = auvnav_replay::interpolate(&pf, fwd, truth.host_time_ns);
+                let s = auvnav_replay::interpolate(&ps, sm, truth.host_time_ns);
                 let (ef, es) = (horizontal_error(&f, truth), horizontal_error(&s, truth));
                 self.forward.push(ef.xy().norm());
                 self.smoothed.push(es.xy().norm());
@@ -309,16 +314,11 @@ fn stem(log: &Path) -> String {
         .unwrap_or_else(|| "log".into())
 }
 
-fn replay_args(a: &SmoothArgs, log: &Path) -> ReplayArgs {
-    ReplayArgs {
-        log: log.to_path_buf(),
+fn replay_options(a: &SmoothArgs, log: &Path) -> ReplayOptions {
+    ReplayOptions {
         config: a.config.clone(),
-        out: None,
-        decimate: 1,
-        min_distance: 100.0,
         usbl: a.usbl,
-        compare_recorded: false,
-        json: false,
+        ..ReplayOptions::new(log)
     }
 }
 
@@ -373,9 +373,9 @@ pub fn smooth_log_with(
     a: &SmoothArgs,
     log: &Path,
     fix_file: Option<&fixes::FixFile>,
-    adjust: &dyn Fn(&mut crate::replay::ReplayConfig),
+    adjust: &dyn Fn(&mut auvnav_replay::ReplayConfig),
 ) -> anyhow::Result<LogSmoothReport> {
-    let (mut cfg, configuration) = replay_config(&replay_args(a, log))?;
+    let (mut cfg, configuration) = replay_config(&replay_options(a, log))?;
     adjust(&mut cfg);
     let name = stem(log);
     let spill_dir = a.spill_dir.clone().unwrap_or_else(|| a.out.clone());
@@ -460,12 +460,12 @@ pub fn smooth_log_with(
     let (mut first_smoothed, mut last_smoothed) = (None, None);
     let csv_path = a.out.join(format!("{name}.smoothed.csv"));
     let mcap_path = a.out.join(format!("{name}.smoothed.mcap"));
-    let csv_partial = crate::replay::partial_path(&csv_path);
+    let csv_partial = auvnav_replay::partial_path(&csv_path);
     let mut csv = std::io::BufWriter::new(
         std::fs::File::create(&csv_partial)
             .with_context(|| format!("creating {}", csv_partial.display()))?,
     );
-    writeln!(csv, "{}", crate::csv::NAV_HEADER)?;
+    writeln!(csv, "{}", auvnav_core::csv::NAV_HEADER)?;
     let mut header = LogHeader::new("auvnav smooth", &toml::to_string(&cfg).unwrap_or_default());
     header
         .notes
@@ -482,7 +482,7 @@ pub fn smooth_log_with(
                         written_period = period;
                         w.write(topic::NAV_SOLUTION, s)?;
                         w.write(NAV_SOLUTION_SMOOTHED, &sm)?;
-                        crate::csv::write_nav_row(&mut csv, &sm)?;
+                        auvnav_core::csv::write_nav_row(&mut csv, &sm)?;
                     }
                     let filtering = track
                         .epochs
@@ -557,7 +557,7 @@ pub fn smooth_log_with(
             .display()
             .to_string(),
     };
-    let write = crate::calibrate::report::write_atomically;
+    let write = auvnav_calibrate::report::write_atomically;
     write(
         Path::new(&outputs.geojson),
         &export::geojson(&name, &points, unix_offset),
@@ -673,7 +673,7 @@ fn fix_innovation(d: &AidDiagnosticsV1) -> Option<FixInnovation> {
 /// Runs `auvnav smooth`.
 pub fn run(a: &SmoothArgs) -> anyhow::Result<SmoothReport> {
     if !(a.export_rate.is_finite() && a.export_rate > 0.0) {
-        return Err(crate::Failure::Usage(format!(
+        return Err(auvnav_replay::Failure::Usage(format!(
             "--export-rate {}: must be > 0 points per second",
             a.export_rate
         ))
@@ -682,7 +682,7 @@ pub fn run(a: &SmoothArgs) -> anyhow::Result<SmoothReport> {
     if let Some(hz) = a.solution_rate
         && !(hz.is_finite() && hz > 0.0)
     {
-        return Err(crate::Failure::Usage(format!(
+        return Err(auvnav_replay::Failure::Usage(format!(
             "--solution-rate {hz}: must be > 0 solutions per second"
         ))
         .into());
@@ -690,7 +690,7 @@ pub fn run(a: &SmoothArgs) -> anyhow::Result<SmoothReport> {
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let fix_file = a.fixes.as_deref().map(fixes::read).transpose()?;
     let mut logs = Vec::new();
-    let mut progress = crate::progress::Progress::new(!a.json);
+    let mut progress = auvnav_studies::progress::Progress::new(!a.json);
     for (i, log) in a.logs.iter().enumerate() {
         progress.update("smoothing logs", i, a.logs.len());
         logs.push(smooth_log(a, log, fix_file.as_ref())?);
@@ -705,75 +705,4 @@ pub fn run(a: &SmoothArgs) -> anyhow::Result<SmoothReport> {
         report::write(dir, &r)?;
     }
     Ok(r)
-}
-
-/// Prints a smoothing report for people.
-pub fn print_report(r: &SmoothReport) {
-    if let Some(f) = &r.fix_file {
-        println!(
-            "auvnav smooth: {} fixes from {}{}",
-            f.fixes.len(),
-            f.path,
-            match &f.first_unparsable {
-                Some((line, why)) => format!(
-                    "; {} lines not used (first: line {line}, {why})",
-                    f.unparsable_lines
-                ),
-                None => String::new(),
-            }
-        );
-    }
-    for l in &r.logs {
-        println!("auvnav smooth: {}", l.log);
-        println!(
-            "  {:.0} s of log, {} IMU samples, {} covariance epochs in {} chain(s); forward {:.2} s, backward {:.2} s, second pass {:.2} s (real-time factor {:.0})",
-            l.log_duration_s,
-            l.imu_samples,
-            l.epochs,
-            l.chains,
-            l.forward_wall_s,
-            l.backward_wall_s,
-            l.second_pass_wall_s,
-            l.real_time_factor
-        );
-        let f = &l.fixes;
-        println!(
-            "  fixes: {} from the file ({} outside the log, not used); GNSS {} fused / {} rejected; USBL {} fused / {} rejected",
-            f.from_file,
-            f.from_file_outside_log,
-            f.gnss_fused,
-            f.gnss_rejected,
-            f.usbl_fused,
-            f.usbl_rejected
-        );
-        if let Some(c) = &l.against_reference {
-            println!(
-                "  against the reference ({} epochs): forward RMS {:.2} m, max {:.2} m, final {:.2} m; smoothed RMS {:.2} m, max {:.2} m, final {:.2} m",
-                c.epochs,
-                c.forward.horizontal_error_rms_m,
-                c.forward.horizontal_error_max_m,
-                c.forward.horizontal_error_final_m,
-                c.smoothed.horizontal_error_rms_m,
-                c.smoothed.horizontal_error_max_m,
-                c.smoothed.horizontal_error_final_m
-            );
-            println!(
-                "  horizontal NEES (2 when honest): forward {:.2}, smoothed {:.2}",
-                c.forward_nees_horizontal_mean, c.smoothed_nees_horizontal_mean
-            );
-        }
-        if l.epochs_smoothed_variance_above_filtered > 0 {
-            println!(
-                "  warning: {} epochs with a smoothed variance above the filtered one",
-                l.epochs_smoothed_variance_above_filtered
-            );
-        }
-        if let Some(e) = &l.log_error {
-            println!("  the log was not read whole: {e}");
-        }
-        println!(
-            "  smoothed track: {} (and .mcap, .geojson, .kml, .track.csv, .parameters.json); UTC: {}",
-            l.outputs.smoothed_csv, l.utc_source
-        );
-    }
 }

@@ -1,7 +1,7 @@
 //! `auvnav montecarlo smoother`: the smoother's consistency and gain by Monte Carlo.
 //!
 //! Each run simulates the scenario with sensor errors drawn from the statistics the filter
-//! assumes (`crate::montecarlo::matched_effects`), starts the navigator from the truth perturbed
+//! assumes (`auvnav_studies::nees::matched_effects`), starts the navigator from the truth perturbed
 //! by a draw of its initial covariance (the start fix), adds one position fix at the end of the
 //! run (the truth plus a draw of `--end-fix-std`, fed with that std), and smooths the run: the
 //! first pass records, the backward pass smooths, the second pass maps each solution. At every
@@ -11,8 +11,6 @@
 //! the correlation between the axes. The smoother keeps per-epoch variances, not the full
 //! covariance, so per-axis NEES is the test it can give exactly.
 
-use crate::montecarlo::{chi2_quantile, matched_effects};
-use crate::parallel::map_runs_with_progress;
 use anyhow::{Context, bail};
 use auvnav_core::earth;
 use auvnav_core::feed::SensorMessage;
@@ -23,40 +21,43 @@ use auvnav_core::strapdown::truth_position;
 use auvnav_log::LogMessage;
 use auvnav_shm_schema::{GnssFixV1, NavSolutionV1, TruthStateV1};
 use auvnav_sim::{self as sim, SimConfig, rng::Rng, scenario::Scenario};
+use auvnav_studies::nees::{chi2_quantile, matched_effects};
+use auvnav_studies::parallel::map_runs_with_progress;
 use serde::Serialize;
 
-#[derive(clap::Args, Debug, Clone)]
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct SmootherMonteCarloArgs {
     /// Number of Monte Carlo runs.
-    #[arg(long, default_value_t = 50)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 50))]
     pub runs: usize,
     /// Built-in scenario or scenario file (default: the 6 km survey, DVL and depth only).
-    #[arg(long, default_value = "survey")]
+    #[cfg_attr(feature = "clap", arg(long, default_value = "survey"))]
     pub scenario: String,
     /// Simulated seconds per run (default: the whole scenario).
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub seconds: Option<f64>,
     /// First seed; run k uses seed + k.
-    #[arg(long, default_value_t = 1)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 1))]
     pub seed: u64,
     /// DVL beam noise (m/s).
-    #[arg(long, default_value_t = 0.01)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 0.01))]
     pub dvl_beam_noise: f64,
     /// One-sigma of the fix at the end of the run (m, horizontal and vertical).
-    #[arg(long, default_value_t = 3.0)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 3.0))]
     pub end_fix_std: f64,
     /// Configuration TOML with a `[navigation]` table (the filter and the simulated errors both
     /// follow it).
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub config: Option<std::path::PathBuf>,
     /// Write the run-averaged values per truth epoch to this CSV: time, forward and smoothed
     /// per-axis NEES (north, east, down), forward and smoothed squared horizontal error (m²).
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub series: Option<std::path::PathBuf>,
     /// Worker threads (default: the available cores).
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub threads: Option<usize>,
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub json: bool,
 }
 
@@ -240,7 +241,7 @@ fn one_run(
     let (Some(first), Some(last)) = (truths.first(), truths.last()) else {
         bail!("run {k}: the simulation has no truth records");
     };
-    let start = crate::study::perturbed_start(cfg, first, &mut rng);
+    let start = auvnav_studies::study::perturbed_start(cfg, first, &mut rng);
     let end = truth_position(last);
     let std = a.end_fix_std;
     let (dn, de, dd) = (rng.gauss(std), rng.gauss(std), rng.gauss(std));
@@ -321,9 +322,9 @@ pub fn smoother_monte_carlo(
     let scenario = Scenario::load(&a.scenario)?;
     let threads = a
         .threads
-        .unwrap_or_else(crate::parallel::default_threads)
+        .unwrap_or_else(auvnav_studies::parallel::default_threads)
         .max(1);
-    let mut progress = crate::progress::Progress::new(!a.json);
+    let mut progress = auvnav_studies::progress::Progress::new(!a.json);
     let bar = progress.runs("smoothed runs", a.runs);
     let results = map_runs_with_progress(a.runs, threads, &bar, |k| one_run(a, &scenario, cfg, k))?;
     bar.finish_and_clear();
@@ -386,65 +387,4 @@ pub fn smoother_monte_carlo(
         wall_s: started.elapsed().as_secs_f64(),
         series: averaged,
     })
-}
-
-/// Runs `auvnav montecarlo smoother` and prints the report.
-pub fn run(a: &SmootherMonteCarloArgs) -> anyhow::Result<()> {
-    let cfg = match &a.config {
-        Some(p) => crate::replay::load_config(p)?.navigation,
-        None => NavConfig::default(),
-    };
-    let r = smoother_monte_carlo(a, &cfg)?;
-    if let Some(path) = &a.series {
-        let mut text = String::from(
-            "time_s,forward_anees_north,forward_anees_east,forward_anees_down,smoothed_anees_north,smoothed_anees_east,smoothed_anees_down,forward_horizontal_error_sq_m2,smoothed_horizontal_error_sq_m2\n",
-        );
-        for row in &r.series {
-            let cells: Vec<String> = row.iter().map(|v| v.to_string()).collect();
-            text.push_str(&cells.join(","));
-            text.push('\n');
-        }
-        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
-    }
-    if a.json {
-        crate::json::print(&r)?;
-        return Ok(());
-    }
-    println!(
-        "smoother Monte Carlo: scenario {}, {} runs of {:.0} s, {} truth epochs, end fix {} m ({} runs refused it); 95 % bounds of the run-averaged per-axis NEES [{:.3}, {:.3}] ({:.1} s wall)",
-        r.scenario,
-        r.runs,
-        r.run_duration_s,
-        r.epochs,
-        r.end_fix_std_m,
-        r.runs_end_fix_rejected,
-        r.lower_bound,
-        r.upper_bound,
-        r.wall_s
-    );
-    for (name, f) in [("forward", &r.forward), ("smoothed", &r.smoothed)] {
-        let axis = |a: &AxisConsistency| {
-            format!(
-                "{:.2} [{:.2}, {:.2}] / {:.0} % ({})",
-                a.mean_anees,
-                a.run_interval_95[0],
-                a.run_interval_95[1],
-                100.0 * a.fraction_inside,
-                if a.consistent() {
-                    "consistent"
-                } else {
-                    "NOT consistent"
-                }
-            )
-        };
-        println!(
-            "  {name:8} horizontal RMS {:.2} m; per-axis mean ANEES (1 expected) [95 % interval over runs] / epochs inside the bounds: north {}, east {}, down {}",
-            f.horizontal_error_rms_m,
-            axis(&f.north),
-            axis(&f.east),
-            axis(&f.down)
-        );
-    }
-    println!("  smoothed / forward horizontal RMS: {:.2}", r.rms_ratio);
-    Ok(())
 }
