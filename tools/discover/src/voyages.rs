@@ -255,7 +255,7 @@ fn combine(es: &[&Estimate], n: usize) -> Combined {
 impl Combined {
     /// The χ² above which the estimates disagree (1 %, [`AGREEMENT_Z`]).
     fn limit(&self) -> f64 {
-        crate::montecarlo::chi2_quantile(self.dof.max(1) as f64, AGREEMENT_Z)
+        auvnav_studies::nees::chi2_quantile(self.dof.max(1) as f64, AGREEMENT_Z)
     }
 
     /// The estimates disagree beyond their uncertainties.

@@ -14,11 +14,11 @@
 use super::command::{DiscoverReport, discover, json_of};
 use super::fit::Selection;
 use super::{Channel, ChannelKind, Reference};
-use crate::smooth::{NAV_SOLUTION_SMOOTHED, SmoothArgs, smooth_log_with};
 use anyhow::Context;
 use auvnav_log::LogReader;
 use auvnav_shm_schema::{NavMode, NavSolutionV1, TruthStateV1};
 use auvnav_sim::effects::Effects;
+use auvnav_smooth::{NAV_SOLUTION_SMOOTHED, SmoothArgs, smooth_log_with};
 use serde::Serialize;
 use std::path::Path;
 

@@ -6,9 +6,9 @@ use super::ChannelKind;
 use super::command::{DiscoverReport, ResidualSeries};
 use super::describe::{periodogram_nyquist, periodogram_up_to};
 use super::extend;
-use crate::calibrate::report::write_atomically;
-use crate::calibrate::svg::{PALETTE, Series, plot};
 use anyhow::Context;
+use auvnav_calibrate::report::write_atomically;
+use auvnav_calibrate::svg::{PALETTE, Series, plot};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -342,7 +342,10 @@ fn markdown(r: &DiscoverReport, figures: &[(ChannelKind, Vec<String>)]) -> Strin
 /// Writes the report directory.
 pub fn write_report_dir(dir: &Path, r: &DiscoverReport) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    write_atomically(&dir.join("report.json"), &crate::json::to_string_pretty(r)?)?;
+    write_atomically(
+        &dir.join("report.json"),
+        &auvnav_replay::json::to_string_pretty(r)?,
+    )?;
     write_atomically(&dir.join("effects.toml"), &extend::effect_set_toml(r))?;
     write_atomically(&dir.join("navigation.toml"), &extend::navigator_toml(r)?)?;
     let mut figures = Vec::new();

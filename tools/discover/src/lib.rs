@@ -7,7 +7,10 @@
 //! (`auvnav sim --list-effects`), in their units and sign conventions; [`fit`] estimates them,
 //! selects them greedily by time-block cross-validation and checks which ones the motion can
 //! separate; [`describe`] characterises what is left (whiteness, spectrum, correlation with the
-//! motion). [`command`] is `auvnav discover`.
+//! motion). [`command`] is `auvnav discover` as a function: options in, a typed report (and the
+//! files it asks for) out; the library never prints. With the `clap` feature the option structs
+//! are also the command line's.
+#![forbid(unsafe_code)]
 
 pub mod command;
 pub mod describe;

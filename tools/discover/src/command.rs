@@ -3,68 +3,69 @@
 use super::describe::{Description, describe};
 use super::fit::{self, Problem, Selection};
 use super::{Channel, ChannelKind, Reference, spec};
-use crate::calibrate::report::write_atomically;
 use anyhow::{Context, bail};
+use auvnav_calibrate::report::write_atomically;
 use auvnav_log::{LogMessage, LogReader};
 use auvnav_shm_schema::{AcousticRangesV1, DepthV1, DvlVelocityV1, ImuSampleV1, MagnetometerV1};
 use auvnav_sim::effects::{Effects, parse_setting};
 use serde::Serialize;
 use std::path::PathBuf;
 
-#[derive(clap::Args, Debug, Clone)]
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct DiscoverArgs {
     /// Logs (MCAP, as written by `auvnav sim` or the recorder) with the sensor channels and the
     /// reference motion.
-    #[arg(required = true)]
+    #[cfg_attr(feature = "clap", arg(required = true))]
     pub logs: Vec<PathBuf>,
     /// The reference motion: `truth` (the log's truth topic: simulated truth or an imported
     /// reference solution) or `smoothed` (each log smoothed with `auvnav smooth`, the DVL
     /// installation as filter states: the vehicle's own motion, so that an effect describes the
     /// sensor against the IMU; the IMU channels are then not compared, and a log's own reference
     /// is compared with the smoothed motion to say what separates them).
-    #[arg(long, default_value = "truth", value_parser = ["truth", "smoothed"])]
+    #[cfg_attr(feature = "clap", arg(long, default_value = "truth", value_parser = ["truth", "smoothed"]))]
     pub reference: String,
     /// The nominal model's effects, NAME=VALUE (repeatable; default: every effect off, the
     /// simulator's defaults).
-    #[arg(long = "effect", value_name = "NAME=VALUE", value_parser = crate::args::effect_setting)]
+    #[cfg_attr(feature = "clap", arg(long = "effect", value_name = "NAME=VALUE", value_parser = auvnav_studies::args::effect_setting))]
     pub effects: Vec<String>,
     /// Start from the effects a previous `auvnav discover --json` report found (what the data
     /// already contain), or from an effect set file (`.toml`, e.g. `--write-effects`), so that
     /// this run reports what changed on top of them; `--effect` settings apply after it.
-    #[arg(long, value_name = "REPORT.json|EFFECTS.toml")]
+    #[cfg_attr(feature = "clap", arg(long, value_name = "REPORT.json|EFFECTS.toml"))]
     pub nominal_from: Option<PathBuf>,
     /// Fraction of each channel (in time order) the held-out gain is fitted on; the rest scores it.
-    #[arg(long, default_value_t = 0.7)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 0.7))]
     pub fit_fraction: f64,
     /// Print the report as JSON.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub json: bool,
     /// Write a report directory: report.md with plots (SVG), report.json, effects.toml and
     /// navigation.toml.
-    #[arg(long, value_name = "DIR")]
+    #[cfg_attr(feature = "clap", arg(long, value_name = "DIR"))]
     pub report: Option<PathBuf>,
     /// Write the extended model as an effect set (`auvnav sim --effects-from FILE`): the nominal
     /// effects, the effects found and each channel's residual noise.
-    #[arg(long, value_name = "FILE")]
+    #[cfg_attr(feature = "clap", arg(long, value_name = "FILE"))]
     pub write_effects: Option<PathBuf>,
     /// Write the navigator configuration of the effects found (`[navigation.dvl]`,
     /// `[navigation.magnetometer]`).
-    #[arg(long, value_name = "FILE")]
+    #[cfg_attr(feature = "clap", arg(long, value_name = "FILE"))]
     pub write_config: Option<PathBuf>,
     /// Do not replay the logs through the navigator to compare the navigation error before and
     /// after.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub no_navigation: bool,
     /// Compare the DVL's four beam velocities with the reference instead of its velocity (the
     /// `dvl_beams` channel; readings that carry all four beams): finds each beam's own scale and
     /// angle error (`dvl.beam_scale_factor`, `dvl.beam_angle_error`) besides the installation.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub dvl_beams: bool,
     /// The logs are pieces of one voyage (one recording split into files): read them as one
     /// series against one reference. By default each log is a voyage of its own: its own
     /// reference, time base and held-out blocks, with the installation effects shared by the
     /// voyages and tested for agreement.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub one_voyage: bool,
 }
 
@@ -433,7 +434,7 @@ impl Collector {
                 c.push_ranges(a.host_time_ns as f64 * 1e-9, ranges, a.position_array_m);
             }
             LogMessage::Imu(x) => {
-                let force = crate::calibrate::mag::input::specific_force(x);
+                let force = auvnav_calibrate::mag::input::specific_force(x);
                 if let Some(f) = force {
                     for k in 0..3 {
                         self.force_sum[k] += f[k];
@@ -1305,171 +1306,5 @@ pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
     if let Some(dir) = &a.report {
         super::report::write_report_dir(dir, &r)?;
     }
-    if a.json {
-        crate::json::print(&r)?;
-    } else {
-        print_text(&r);
-    }
     Ok(r)
-}
-
-fn print_text(r: &DiscoverReport) {
-    println!(
-        "auvnav discover: {} (reference: {})",
-        r.inputs.join(", "),
-        r.reference
-    );
-    for c in &r.channels {
-        println!(
-            "  {}: {} readings ({} compared, {} skipped); held-out mean squared residual {:.4e} nominal, {:.4e} with the effects found",
-            c.channel.name(),
-            c.epochs,
-            c.compared,
-            c.skipped,
-            c.held_out_mse_nominal,
-            c.held_out_mse_selected
-        );
-    }
-    if let Some(v) = &r.voyages {
-        println!("  {} voyages, each analysed alone:", v.voyages.len());
-        for x in &v.voyages {
-            let named: Vec<String> = x
-                .effects
-                .iter()
-                .map(|e| format!("{} = {}", e.name, e.value))
-                .collect();
-            println!(
-                "    {}: {}",
-                x.inputs.join(", "),
-                if named.is_empty() {
-                    "nothing named".into()
-                } else {
-                    named.join("; ")
-                }
-            );
-        }
-        for s in &v.scores {
-            println!(
-                "  {} over {} voyages, each predicted from the others: mean squared residual \
-                 {:.4e} nominal, {:.4e} with the shared effects",
-                s.channel.name(),
-                s.voyages,
-                s.mse_nominal,
-                s.mse_shared
-            );
-        }
-        for s in &v.inconsistent {
-            println!(
-                "  inconsistent: {} ({}): χ² {:.1} > {:.1} ({} dof) across the voyages: {}",
-                s.name,
-                s.channel.name(),
-                s.chi2,
-                s.chi2_limit,
-                s.dof,
-                s.verdict
-            );
-            for e in &s.voyages {
-                println!("      {}: {} ± {} {}", e.log, e.value, e.std, s.unit);
-            }
-        }
-        for p in &v.per_voyage {
-            println!(
-                "  per voyage: {} ({}) named in {} voyages: {}",
-                p.name,
-                p.channel.name(),
-                p.voyages.len(),
-                p.voyages
-                    .iter()
-                    .map(|e| format!("{} {}", e.log, e.value))
-                    .collect::<Vec<_>>()
-                    .join("; ")
-            );
-        }
-    }
-    if r.channels.is_empty() && r.voyages.is_none() {
-        println!("  nothing analysed (see the notes)");
-    } else if r.effects.is_empty() {
-        println!("  effects found: none (the nominal model explains the data)");
-    } else {
-        println!("  effects found:");
-        for e in &r.effects {
-            println!(
-                "    {} = {} ± {} {} (nominal {})  ({})",
-                e.name, e.value, e.std, e.unit, e.nominal, e.evidence
-            );
-            if let Some(q) = &e.equivalent {
-                println!(
-                    "      or {} = {:.1} ± {:.1} {}: {}",
-                    q.name, q.value, q.std, q.unit, q.note
-                );
-            }
-        }
-    }
-    for u in &r.unseparable {
-        println!(
-            "  unseparable: {} (correlation {:.3}): {}",
-            u.effects.join(" and "),
-            u.correlation,
-            u.note
-        );
-    }
-    for u in &r.unobservable {
-        println!(
-            "  not excited by this motion: {} components {:?}",
-            u.name, u.components
-        );
-    }
-    for f in &r.floors {
-        println!("  not named: {}", f.describe());
-    }
-    for u in &r.unexplained {
-        println!(
-            "  unexplained: {}: {}",
-            u.channel.component_label(u.component),
-            u.note
-        );
-    }
-    for g in &r.gain {
-        println!(
-            "  held-out gain {} (fit on the first {:.0} %): rms {:?} -> {:?} {}",
-            g.channel.name(),
-            100.0 * g.fit_fraction,
-            g.rms_before
-                .iter()
-                .map(|x| format!("{x:.4}"))
-                .collect::<Vec<_>>(),
-            g.rms_after
-                .iter()
-                .map(|x| format!("{x:.4}"))
-                .collect::<Vec<_>>(),
-            r.channels
-                .iter()
-                .find(|c| c.channel == g.channel)
-                .map_or("", |c| c.unit.as_str())
-        );
-    }
-    for n in &r.noise {
-        println!(
-            "  noise with the effects found: {} = {:.5} {}",
-            n.name, n.value, n.unit
-        );
-    }
-    for n in &r.navigation {
-        println!(
-            "  navigation {}: end error {:.2} m -> {:.2} m, CEP50 {:.3} % -> {:.3} %, heading RMS {:.3} -> {:.3} deg, DVL rejected {} -> {}",
-            n.log,
-            n.before.horizontal_error_final_m,
-            n.after.horizontal_error_final_m,
-            n.before.error_per_distance_cep50_percent,
-            n.after.error_per_distance_cep50_percent,
-            n.before.heading_error_rms_deg,
-            n.after.heading_error_rms_deg,
-            n.dvl_rejected_before,
-            n.dvl_rejected_after
-        );
-    }
-    for n in &r.notes {
-        println!("  note: {n}");
-    }
-    println!("  {:.2} s", r.wall_s);
 }

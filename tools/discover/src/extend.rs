@@ -4,11 +4,11 @@
 
 use super::ChannelKind;
 use super::command::DiscoverReport;
-use crate::accuracy::Accuracy;
-use crate::replay::{self, Replay, ReplayArgs, ReplayConfig};
 use anyhow::Context;
 use auvnav_core::aid::magnetometer::MagnetometerConfig;
 use auvnav_core::config::DvlInstallation;
+use auvnav_replay::accuracy::Accuracy;
+use auvnav_replay::{Replay, ReplayConfig, ReplayOptions};
 use auvnav_sim::effects::{self, Effects};
 use auvnav_sim::sensors::{MagnetometerModel, dvl_velocity_std_per_beam_noise};
 use serde::Serialize;
@@ -329,17 +329,8 @@ fn navigation_of(
     after: &Effects,
     kinds: &[ChannelKind],
 ) -> anyhow::Result<Option<NavigationGain>> {
-    let args = ReplayArgs {
-        log: log.to_path_buf(),
-        config: None,
-        out: None,
-        decimate: 1,
-        min_distance: 100.0,
-        usbl: None,
-        json: true,
-        compare_recorded: false,
-    };
-    let (base, source) = replay::replay_config(&args)?;
+    let options = ReplayOptions::new(log);
+    let (base, source) = auvnav_replay::replay_config(&options)?;
     let with = |e: &Effects| -> ReplayConfig {
         let mut cfg = base.clone();
         let (dvl, mag) = navigator_tables(e, kinds, "auvnav discover");
@@ -359,8 +350,8 @@ fn navigation_of(
         cfg
     };
     let run = |cfg: &ReplayConfig| -> anyhow::Result<Option<(Accuracy, u64, u64)>> {
-        let mut replay = Replay::new(cfg, args.min_distance);
-        replay::run_log(log, &mut replay, &mut |_| Ok(()))
+        let mut replay = Replay::new(cfg, options.min_distance);
+        auvnav_replay::run_log(log, &mut replay, &mut |_| Ok(()))
             .with_context(|| format!("replaying {}", log.display()))?;
         if replay.counts.imu == 0 {
             return Ok(None);
