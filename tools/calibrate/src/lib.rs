@@ -17,6 +17,7 @@ pub mod command;
 pub mod fast;
 pub mod mag;
 pub mod objective;
+pub mod options;
 pub mod params;
 pub mod report;
 pub mod seed;
@@ -26,6 +27,8 @@ pub mod two_point;
 pub mod voyage;
 
 pub use command::*;
+pub use options::*;
+pub use report::{installation_of, recommended};
 
 use auvnav_core::config::NavConfig;
 use auvnav_studies::parallel::map_runs;

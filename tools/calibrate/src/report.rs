@@ -2,9 +2,10 @@
 //! `[navigation.dvl]` table (`--write-config`, atomic) and the report directory (`--report`:
 //! Markdown, SVG plots, the JSON).
 
-use super::command::{CalibrateDvlArgs, Method, installation_of};
 use super::objective::VoyageRun;
+use super::options::{CalibrateDvlArgs, Method};
 use super::params::{NAMES, ParameterSet};
+use super::params::{installation, installation_vector};
 use super::svg::{PALETTE, Series, plot};
 use super::two_point::TwoPointVoyage;
 use super::voyage::{DistanceSource, FixSource, Voyage};
@@ -685,4 +686,24 @@ pub fn write_report_dir(
     }
     write_atomically(&dir.join("report.md"), &md)?;
     Ok(())
+}
+
+/// The installation a report recommends, as eight numbers.
+pub fn recommended(report: &CalibrationReport) -> [f64; 8] {
+    let mut x = [0.0; 8];
+    for p in &report.parameters {
+        if let Some(i) = NAMES.iter().position(|n| *n == p.name) {
+            x[i] = p.value;
+        }
+    }
+    x
+}
+
+/// Round trip used by the tests: the TOML the tool writes is the installation it reports.
+pub fn installation_of(report: &CalibrationReport) -> auvnav_core::config::DvlInstallation {
+    let x = recommended(report);
+    let mut d = installation(&x);
+    d.source = report.source_note();
+    debug_assert_eq!(installation_vector(&d), x);
+    d
 }

@@ -7,6 +7,7 @@ pub use auvnav_calibrate as calibrate;
 pub mod csv;
 pub mod decode;
 pub mod demo;
+pub mod demo_start;
 pub mod discover;
 pub mod emulate;
 pub use auvnav_import as import;

@@ -6,7 +6,7 @@
 //! replayed solution is byte-identical to the live one.
 
 use crate::accuracy::{Accuracy, AccuracyTracker};
-use crate::demo::{DemoStart, session_config};
+use crate::demo_start::{DemoStart, session_config};
 use crate::phases::{PhaseFigures, PhaseRecorder};
 use crate::process::{ChildProcess, sibling};
 use crate::replay::interpolate;

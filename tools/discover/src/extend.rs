@@ -3,7 +3,7 @@
 //! `auvnav replay` take), and the navigation error before/after on the logs.
 
 use super::ChannelKind;
-use super::command::DiscoverReport;
+use super::findings::{DiscoverReport, NavigationGain};
 use anyhow::Context;
 use auvnav_core::aid::magnetometer::MagnetometerConfig;
 use auvnav_core::config::DvlInstallation;
@@ -23,7 +23,7 @@ pub fn noise_estimate(
     kind: ChannelKind,
     rms: &[f64],
     spacing_s: f64,
-) -> super::command::NoiseEstimate {
+) -> super::findings::NoiseEstimate {
     let rms_all = (rms.iter().map(|r| r * r).sum::<f64>() / rms.len().max(1) as f64).sqrt();
     let (name, value) = match kind {
         // deg/h × √s → deg/√h: × √(s / 3600).
@@ -54,7 +54,7 @@ pub fn noise_estimate(
     };
     let spec = super::spec(name);
     let value = spec.map_or(value, |s| value.clamp(s.min, s.max));
-    super::command::NoiseEstimate {
+    super::findings::NoiseEstimate {
         name: name.into(),
         value,
         unit: spec.map_or("", |s| s.unit).into(),
@@ -250,20 +250,6 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
         }
     }
     Ok(head + &body)
-}
-
-/// Navigation error of one log before/after.
-#[derive(Debug, Clone, Serialize)]
-pub struct NavigationGain {
-    pub log: String,
-    /// Where the rest of the configuration came from (the log header or the defaults).
-    pub configuration: String,
-    pub before: Accuracy,
-    pub after: Accuracy,
-    pub dvl_fused_before: u64,
-    pub dvl_rejected_before: u64,
-    pub dvl_fused_after: u64,
-    pub dvl_rejected_after: u64,
 }
 
 /// Replays each log with an IMU and a reference twice: with the navigator tables of the nominal

@@ -3,7 +3,7 @@
 //! name came back with its value within 10 %. Null trials hide nothing. The tests run a few; the
 //! benchmark (`auvnav bench discover`) runs many and reports the rates and the confusion table.
 
-use super::command::{DiscoverReport, discover, read_logs, values_of};
+use super::analysis::{DiscoverReport, discover, read_logs, values_of};
 use super::fit::Selection;
 use anyhow::Context;
 use auvnav_sim::effects::Effects;

@@ -12,9 +12,11 @@
 //! are also the command line's.
 #![forbid(unsafe_code)]
 
+pub mod analysis;
 pub mod command;
 pub mod describe;
 pub mod extend;
+pub mod findings;
 pub mod fit;
 pub mod hidden;
 pub mod imu;

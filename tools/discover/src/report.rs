@@ -3,9 +3,9 @@
 //! `navigation.toml`.
 
 use super::ChannelKind;
-use super::command::{DiscoverReport, ResidualSeries};
 use super::describe::{periodogram_nyquist, periodogram_up_to};
 use super::extend;
+use super::findings::{DiscoverReport, ResidualSeries};
 use anyhow::Context;
 use auvnav_calibrate::report::write_atomically;
 use auvnav_calibrate::svg::{PALETTE, Series, plot};
@@ -108,7 +108,7 @@ fn spectrum_plot(s: &ResidualSeries) -> (String, String) {
 
 /// The Allan deviation of an IMU channel's residual with the effects found, per component, on
 /// logarithmic axes (None for channels without one).
-fn allan_plot(c: &super::command::ChannelReport) -> Option<(String, String)> {
+fn allan_plot(c: &super::findings::ChannelReport) -> Option<(String, String)> {
     if c.allan.is_empty() {
         return None;
     }
@@ -380,7 +380,7 @@ pub fn write_report_dir(dir: &Path, r: &DiscoverReport) -> anyhow::Result<()> {
 /// The voyages' section: each installation effect tested together, the voyages' own estimates
 /// (plotted with ±2σ), and where each voyage's own report is.
 fn voyages_markdown(dir: &Path, v: &super::voyages::Voyages) -> anyhow::Result<String> {
-    use super::command::values_of;
+    use super::analysis::values_of;
     let mut m = String::new();
     let _ = writeln!(
         m,

@@ -11,7 +11,7 @@
 //! is compared with the smoothed motion as if it were a DVL on the vehicle: the lever arm, lag,
 //! mounting and scale that separate the two are the reference's own against the IMU.
 
-use super::command::{DiscoverReport, discover, json_of};
+use super::analysis::{DiscoverReport, discover, json_of};
 use super::fit::Selection;
 use super::{Channel, ChannelKind, Reference};
 use anyhow::Context;
@@ -19,7 +19,6 @@ use auvnav_log::LogReader;
 use auvnav_shm_schema::{NavMode, NavSolutionV1, TruthStateV1};
 use auvnav_sim::effects::Effects;
 use auvnav_smooth::{NAV_SOLUTION_SMOOTHED, SmoothArgs, smooth_log_with};
-use serde::Serialize;
 use std::path::Path;
 
 /// Prior one-sigma of the DVL installation states in the smoothing run: wide, because discovery
@@ -146,17 +145,7 @@ pub fn smooth(log: &Path, work: &Path) -> anyhow::Result<Smoothed> {
     })
 }
 
-/// What separates a log's own reference from its smoothed motion.
-#[derive(Debug, Clone, Serialize)]
-pub struct ReferenceAgainstImu {
-    pub log: String,
-    /// Effects of the reference's velocity, read as a DVL on the vehicle against the smoothed
-    /// motion (`dvl.lever_arm`: where on the vehicle the reference's velocity is taken;
-    /// `dvl.time_offset`: its lag), with their deviations.
-    pub effects: Vec<(String, serde_json::Value, serde_json::Value)>,
-    /// The smoother's own estimate of the DVL installation (against the IMU).
-    pub smoothed_installation: Option<serde_json::Value>,
-}
+pub use super::findings::ReferenceAgainstImu;
 
 /// The reference's velocity in body axes as a DVL channel (one reading per `spacing_s`),
 /// compared with the smoothed motion by the DVL's own model.

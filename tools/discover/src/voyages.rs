@@ -9,14 +9,13 @@
 //! water's density, the sound speed of the acoustic link, the local field — stay each voyage's
 //! own, fitted in every voyage where its own discovery named them.
 
-use super::command::{
+use super::analysis::{
     DiscoverReport, FoundEffect, NoiseEstimate, Unseparable, discover, json_of, screen_outliers,
 };
 use super::fit::{self, Fit, Problem, Selection};
 use super::{CANDIDATES, Channel, ChannelKind, Reference, spec};
 use auvnav_sim::effects::Effects;
 use nalgebra::{DMatrix, DVector};
-use serde::Serialize;
 
 /// The standard normal quantile of the agreement test (one-sided 1 %): voyages whose spread
 /// exceeds the χ² quantile at this level disagree.
@@ -45,92 +44,9 @@ pub struct VoyageData {
     pub reference: Reference,
 }
 
-/// One voyage's estimate of an effect.
-#[derive(Debug, Clone, Serialize)]
-pub struct VoyageEstimate {
-    pub log: String,
-    pub value: serde_json::Value,
-    /// One sigma (null where this voyage's motion does not determine the component).
-    pub std: serde_json::Value,
-}
-
-/// An installation effect the voyages were tested on together.
-#[derive(Debug, Clone, Serialize)]
-pub struct SharedEffect {
-    pub name: String,
-    pub channel: ChannelKind,
-    pub unit: String,
-    /// The information-weighted mean of the voyages' estimates.
-    pub value: serde_json::Value,
-    pub std: serde_json::Value,
-    pub nominal: serde_json::Value,
-    /// Each voyage's estimate, fitted with the other effects of the shared set and its own.
-    pub voyages: Vec<VoyageEstimate>,
-    /// Σ over voyages of (estimate − mean)ᵀ C⁻¹ (estimate − mean).
-    pub chi2: f64,
-    pub dof: usize,
-    /// The χ² at which the voyages are taken to disagree (1 %).
-    pub chi2_limit: f64,
-    /// Relative drop of the leave-one-voyage-out mean squared residual when the effect was added.
-    pub held_out_gain: f64,
-    pub verdict: String,
-    /// For voyages that disagree: the largest set of voyages (at least half) that agree, found
-    /// by setting aside the most departing voyage in turn; for the engineer to look at the
-    /// voyages left out, never a finding by itself.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub agreeing: Option<Agreeing>,
-}
-
-/// Voyages that agree once the most departing ones are set aside.
-#[derive(Debug, Clone, Serialize)]
-pub struct Agreeing {
-    pub left_out: Vec<String>,
-    pub voyages: usize,
-    pub value: serde_json::Value,
-    pub std: serde_json::Value,
-}
-
-/// An effect named by voyages alone: per-voyage effects, or installation effects the voyages
-/// together did not confirm.
-#[derive(Debug, Clone, Serialize)]
-pub struct NamedAlone {
-    pub name: String,
-    pub channel: ChannelKind,
-    pub unit: String,
-    pub voyages: Vec<VoyageEstimate>,
-}
-
-/// One channel's leave-one-voyage-out score.
-#[derive(Debug, Clone, Serialize)]
-pub struct VoyageScore {
-    pub channel: ChannelKind,
-    pub voyages: usize,
-    /// Mean squared residual over all voyages, each predicted with the nominal installation (its
-    /// own per-voyage effects fitted).
-    pub mse_nominal: f64,
-    /// The same with the shared effects fitted on the other voyages.
-    pub mse_shared: f64,
-}
-
-/// What several voyages say together (`voyages` in the report).
-#[derive(Debug, Clone, Serialize)]
-pub struct Voyages {
-    /// Each voyage's own discovery.
-    pub voyages: Vec<DiscoverReport>,
-    /// Installation effects the voyages agree on, significant together.
-    pub shared: Vec<SharedEffect>,
-    /// Installation effects the voyages disagree on beyond their uncertainties.
-    pub inconsistent: Vec<SharedEffect>,
-    /// Effects of one voyage (biases, water, place), where each voyage named them.
-    pub per_voyage: Vec<NamedAlone>,
-    /// Installation effects some voyages named alone that the voyages together do not.
-    pub not_confirmed: Vec<NamedAlone>,
-    pub scores: Vec<VoyageScore>,
-    /// Per voyage: the nominal model with the shared effects fitted on the other voyages (the
-    /// held-out model its navigation is replayed with).
-    #[serde(skip)]
-    pub held_out_models: Vec<Effects>,
-}
+pub use super::findings::{
+    Agreeing, NamedAlone, SharedEffect, VoyageEstimate, VoyageScore, Voyages,
+};
 
 /// An estimate in deviations from nominal with its information (pseudo-inverse of the
 /// covariance; a component without a finite variance carries none).

@@ -1,4 +1,4 @@
-//! The core's modules form no cycle, file by file and top-level module by top-level module: a
+//! No crate of the workspace has a module cycle, file by file or between top-level modules: a
 //! module's `crate::…` and `super::…` paths (outside comments) are its dependencies.
 
 use std::collections::{BTreeMap, BTreeSet};
@@ -112,11 +112,15 @@ fn find_cycle(graph: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>>
     None
 }
 
-#[test]
-fn core_modules_have_no_cycles() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+/// A crate's modules by file and by top-level module.
+struct Graphs {
+    by_file: BTreeMap<String, BTreeSet<String>>,
+    by_top: BTreeMap<String, BTreeSet<String>>,
+}
+
+fn graphs(src: &Path) -> Graphs {
     let mut files = Vec::new();
-    sources(&root, &root, &mut files);
+    sources(src, src, &mut files);
     let known: BTreeSet<String> = files.iter().map(|(m, _)| m.clone()).collect();
     let mut by_file = BTreeMap::new();
     let mut by_top: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
@@ -134,16 +138,51 @@ fn core_modules_have_no_cycles() {
         }
         by_file.insert(m.clone(), deps);
     }
-    assert!(by_file.len() > 15, "{} modules found", by_file.len());
+    Graphs { by_file, by_top }
+}
+
+#[test]
+fn no_crate_has_a_module_cycle() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("the workspace root")
+        .to_path_buf();
+    let manifest: toml::Table = std::fs::read_to_string(root.join("Cargo.toml"))
+        .expect("workspace manifest")
+        .parse()
+        .expect("TOML");
+    let core = graphs(&root.join("daemon/core/src"));
     assert!(
-        by_file["navigator"].contains("aid::dvl"),
+        core.by_file.len() > 15,
+        "{} modules found",
+        core.by_file.len()
+    );
+    assert!(
+        core.by_file["navigator"].contains("aid::dvl"),
         "the scan sees dependencies: {:?}",
-        by_file["navigator"]
+        core.by_file["navigator"]
     );
-    assert_eq!(find_cycle(&by_file), None, "module cycle between files");
-    assert_eq!(
-        find_cycle(&by_top),
-        None,
-        "module cycle between top-level modules"
-    );
+    let mut cycles = Vec::new();
+    for member in manifest["workspace"]["members"]
+        .as_array()
+        .expect("members")
+        .iter()
+        .filter_map(|m| m.as_str())
+    {
+        let src = root.join(member).join("src");
+        if !src.is_dir() {
+            continue;
+        }
+        let g = graphs(&src);
+        if let Some(c) = find_cycle(&g.by_file) {
+            cycles.push(format!("{member}, between files: {}", c.join(" -> ")));
+        }
+        if let Some(c) = find_cycle(&g.by_top) {
+            cycles.push(format!(
+                "{member}, between top-level modules: {}",
+                c.join(" -> ")
+            ));
+        }
+    }
+    assert!(cycles.is_empty(), "module cycles:\n{}", cycles.join("\n"));
 }
