@@ -64,11 +64,6 @@ pub fn run(a: &ReplayArgs) -> anyhow::Result<ReplayReport> {
     replay(&a.options())
 }
 
-/// The configuration `auvnav replay` runs with, and where it came from.
-pub fn replay_config(a: &ReplayArgs) -> anyhow::Result<(ReplayConfig, String)> {
-    auvnav_replay::replay_config(&a.options())
-}
-
 /// Prints a replay report for people.
 pub fn print_report(r: &ReplayReport) {
     println!("auvnav replay: {}", r.log);
