@@ -56,7 +56,7 @@ impl Protocol {
     ];
 
     /// The name used in configuration files and on the command line.
-    pub fn name(self) -> &'static str {
+    pub const fn name(self) -> &'static str {
         match self {
             Protocol::Pd0 => "pd0",
             Protocol::Wldvl => "wldvl",
@@ -75,17 +75,15 @@ impl Protocol {
     }
 
     /// Every protocol's name, in the order of [`Protocol::ALL`].
-    pub const NAMES: [&'static str; 9] = [
-        "pd0",
-        "wldvl",
-        "kvh1750",
-        "xsens",
-        "seatrac",
-        "nortek",
-        "wldvl-json",
-        "nmea",
-        "ubx",
-    ];
+    pub const NAMES: [&'static str; 9] = {
+        let mut names = [""; 9];
+        let mut i = 0;
+        while i < names.len() {
+            names[i] = Protocol::ALL[i].name();
+            i += 1;
+        }
+        names
+    };
 
     /// The class of device that speaks it.
     /// Whether the device also sends the magnetic field (published on the magnetometer topic).
