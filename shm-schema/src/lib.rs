@@ -69,7 +69,45 @@ pub trait Message: Pod + ZeroCopySend + Default + std::fmt::Debug {
     fn ros2msg_definition() -> String;
     /// The host-clock time stamp of the message, used as the log time.
     fn host_time(&self) -> HostTime;
+    /// Every field in declaration order, by name, as a slice of its values (one value for a
+    /// scalar, N for an array): the table view of a message (log readers, exports).
+    fn for_each_field(&self, f: &mut dyn FnMut(&'static str, FieldValues<'_>));
 }
+
+/// The values of one message field: a scalar is a slice of one.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FieldValues<'a> {
+    F64(&'a [f64]),
+    F32(&'a [f32]),
+    U64(&'a [u64]),
+    U32(&'a [u32]),
+    U16(&'a [u16]),
+    /// Bytes: a NUL-padded text (a process name) or a raw frame.
+    U8(&'a [u8]),
+}
+
+/// A field type's values as [`FieldValues`].
+pub trait AsFieldValues {
+    fn field_values(&self) -> FieldValues<'_>;
+}
+
+macro_rules! as_field_values {
+    ($($t:ty => $v:ident),* $(,)?) => {
+        $(
+            impl AsFieldValues for $t {
+                fn field_values(&self) -> FieldValues<'_> {
+                    FieldValues::$v(std::slice::from_ref(self))
+                }
+            }
+            impl<const N: usize> AsFieldValues for [$t; N] {
+                fn field_values(&self) -> FieldValues<'_> {
+                    FieldValues::$v(self)
+                }
+            }
+        )*
+    };
+}
+as_field_values!(f64 => F64, f32 => F32, u64 => U64, u32 => U32, u16 => U16, u8 => U8);
 
 /// The `ros2msg` name of a field type.
 pub trait RosField {
@@ -133,6 +171,9 @@ macro_rules! message {
             }
             fn host_time(&self) -> HostTime {
                 HostTime(self.host_time_ns)
+            }
+            fn for_each_field(&self, f: &mut dyn FnMut(&'static str, FieldValues<'_>)) {
+                $( f(stringify!($field), AsFieldValues::field_values(&self.$field)); )*
             }
         }
 

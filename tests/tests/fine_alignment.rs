@@ -15,6 +15,7 @@ fn args(scenario: &str, runs: usize, seconds: f64, heading: f64, mount: &str) ->
         seconds,
         converged_deg: 1.0,
         threads: None,
+        per_run: false,
         json: false,
     }
 }

@@ -42,6 +42,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 mod framing;
+pub mod table;
 use framing::{Frame, Framer};
 
 /// Version of the log layout written by this program.

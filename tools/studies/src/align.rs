@@ -48,6 +48,9 @@ pub struct AlignArgs {
     /// Worker threads (default: the available cores).
     #[cfg_attr(feature = "clap", arg(long))]
     pub threads: Option<usize>,
+    /// Include every run's errors in the report (`per_run`).
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub per_run: bool,
     #[cfg_attr(feature = "clap", arg(long))]
     pub json: bool,
 }
@@ -190,12 +193,14 @@ pub fn measured_rows(a: &AlignMeasuredArgs) -> anyhow::Result<Vec<MeasuredRow>> 
 pub const CHECKPOINTS: [f64; 4] = [60.0, 300.0, 600.0, 1200.0];
 
 /// One model's errors in one run.
-#[derive(Debug, Clone, Default)]
-struct RunResult {
+#[derive(Debug, Clone, Default, Serialize, serde::Deserialize)]
+pub struct RunResult {
     /// Roll, pitch, heading errors (deg) at each checkpoint reached.
-    attitude: Vec<[f64; 3]>,
-    position_m: f64,
-    mount_error_deg: Option<[f64; 3]>,
+    pub attitude_error_deg: Vec<[f64; 3]>,
+    /// Horizontal position error at the end (m).
+    pub position_error_m: f64,
+    /// Mounting-angle estimation error per axis at the end (deg); models 1 and 2.
+    pub mount_error_deg: Option<[f64; 3]>,
 }
 
 /// One model's statistics over the runs.
@@ -223,6 +228,9 @@ pub struct AlignReport {
     pub mount: String,
     pub seed: u64,
     pub models: Vec<ModelReport>,
+    /// With `--per-run`: each run's results, one per model in the order of `models`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub per_run: Option<Vec<Vec<RunResult>>>,
     pub wall_s: f64,
 }
 
@@ -356,7 +364,9 @@ fn run_one(
                     let f = session
                         .fine_aligner()
                         .context("the alignment filter stopped")?;
-                    result.attitude.push(attitude_errors(f.state(), t));
+                    result
+                        .attitude_error_deg
+                        .push(attitude_errors(f.state(), t));
                     next += 1;
                 }
             } else if let Some(x) = m.sensor() {
@@ -372,7 +382,7 @@ fn run_one(
             height_m: last_truth.height_m,
         };
         let d = ned_offset(&end, &f.state().position);
-        result.position_m = (d.x * d.x + d.y * d.y).sqrt();
+        result.position_error_m = (d.x * d.x + d.y * d.y).sqrt();
         if model != ErrorModel::Navigation {
             let e = f.mounting() - true_mount;
             result.mount_error_deg = Some([e.x, e.y, e.z].map(f64::to_degrees));
@@ -391,80 +401,125 @@ fn rms(v: impl Iterator<Item = f64>) -> f64 {
     if n > 0.0 { (s / n).sqrt() } else { f64::NAN }
 }
 
-/// Runs the Monte Carlo study.
+/// The alignment study: its options checked, its scenario and models resolved.
+pub struct AlignStudy {
+    args: AlignArgs,
+    scenario: Scenario,
+    models: Vec<ErrorModel>,
+    mount: Option<[f64; 3]>,
+}
+
+impl AlignStudy {
+    /// Checks the options and loads the scenario.
+    pub fn new(a: &AlignArgs) -> anyhow::Result<AlignStudy> {
+        if a.runs == 0 {
+            bail!("--runs must be at least 1");
+        }
+        if !(a.heading_error.is_finite() && a.heading_error.abs() <= 90.0) {
+            bail!("--heading-error {}: expected -90..=90 deg", a.heading_error);
+        }
+        if !(a.seconds.is_finite() && (60.0..=1200.0).contains(&a.seconds)) {
+            bail!("--seconds {}: expected 60..=1200", a.seconds);
+        }
+        let mut models = Vec::new();
+        for n in if a.models.is_empty() {
+            vec![1, 2, 3]
+        } else {
+            a.models.clone()
+        } {
+            models.push(
+                ErrorModel::from_number(n)
+                    .with_context(|| format!("--model {n}: expected 1, 2 or 3"))?,
+            );
+        }
+        Ok(AlignStudy {
+            scenario: Scenario::load(scenario_name(&a.scenario)?)?,
+            mount: parse_mount(&a.mount)?,
+            models,
+            args: a.clone(),
+        })
+    }
+}
+
+impl crate::runs::RunStudy for AlignStudy {
+    type Run = Vec<RunResult>;
+    type Report = AlignReport;
+
+    fn runs(&self) -> usize {
+        self.args.runs
+    }
+
+    fn run(&self, k: usize) -> anyhow::Result<Vec<RunResult>> {
+        let seed = self.args.seed.wrapping_add(k as u64);
+        run_one(&self.args, &self.scenario, &self.models, self.mount, seed)
+    }
+
+    fn report(&self, runs: Vec<Vec<RunResult>>, wall_s: f64) -> anyhow::Result<AlignReport> {
+        let a = &self.args;
+        if runs.len() != a.runs || runs.iter().any(|r| r.len() != self.models.len()) {
+            bail!(
+                "{} run results for {} runs of {} models",
+                runs.len(),
+                a.runs,
+                self.models.len()
+            );
+        }
+        let mut reports = Vec::new();
+        for (mi, model) in self.models.iter().enumerate() {
+            let per = |axis: usize| -> Vec<(f64, f64)> {
+                CHECKPOINTS
+                    .iter()
+                    .enumerate()
+                    .filter(|(c, _)| runs.iter().all(|r| r[mi].attitude_error_deg.len() > *c))
+                    .map(|(c, t)| {
+                        let errors = runs.iter().map(|r| r[mi].attitude_error_deg[c][axis]);
+                        (*t, rms(errors))
+                    })
+                    .collect()
+            };
+            let mount_error_rms_deg = (model.number() != 3).then(|| {
+                [0, 1, 2].map(|i| {
+                    rms(runs
+                        .iter()
+                        .filter_map(|r| r[mi].mount_error_deg.map(|m| m[i])))
+                })
+            });
+            reports.push(ModelReport {
+                model: model.number(),
+                heading_rms_deg: per(2),
+                pitch_rms_deg: per(1),
+                roll_rms_deg: per(0),
+                position_rms_m: rms(runs.iter().map(|r| r[mi].position_error_m)),
+                mount_error_rms_deg,
+                not_converged: runs
+                    .iter()
+                    .filter(|r| {
+                        r[mi]
+                            .attitude_error_deg
+                            .last()
+                            .is_none_or(|e| e[2].abs() >= a.converged_deg || e[2].is_nan())
+                    })
+                    .count(),
+            });
+        }
+        Ok(AlignReport {
+            scenario: a.scenario.clone(),
+            runs: a.runs,
+            seconds: a.seconds,
+            heading_error_deg: a.heading_error,
+            mount: a.mount.clone(),
+            seed: a.seed,
+            models: reports,
+            per_run: a.per_run.then_some(runs),
+            wall_s,
+        })
+    }
+}
+
+/// Runs the Monte Carlo study on this machine's cores.
 pub fn run(a: &AlignArgs) -> anyhow::Result<AlignReport> {
-    let start = std::time::Instant::now();
-    if a.runs == 0 {
-        bail!("--runs must be at least 1");
-    }
-    if !(a.heading_error.is_finite() && a.heading_error.abs() <= 90.0) {
-        bail!("--heading-error {}: expected -90..=90 deg", a.heading_error);
-    }
-    if !(a.seconds.is_finite() && (60.0..=1200.0).contains(&a.seconds)) {
-        bail!("--seconds {}: expected 60..=1200", a.seconds);
-    }
-    let mut models = Vec::new();
-    for n in if a.models.is_empty() {
-        vec![1, 2, 3]
-    } else {
-        a.models.clone()
-    } {
-        models.push(
-            ErrorModel::from_number(n)
-                .with_context(|| format!("--model {n}: expected 1, 2 or 3"))?,
-        );
-    }
-    let scenario = Scenario::load(scenario_name(&a.scenario)?)?;
-    let mount = parse_mount(&a.mount)?;
+    let study = AlignStudy::new(a)?;
     let threads = a.threads.unwrap_or_else(crate::parallel::default_threads);
     let bar = crate::progress::Progress::new(!a.json).runs("alignment Monte Carlo", a.runs);
-    let runs: Vec<Vec<RunResult>> =
-        crate::parallel::map_runs_with_progress(a.runs, threads, &bar, |k| {
-            run_one(a, &scenario, &models, mount, a.seed.wrapping_add(k as u64))
-        })?;
-    let mut reports = Vec::new();
-    for (mi, model) in models.iter().enumerate() {
-        let per = |axis: usize| -> Vec<(f64, f64)> {
-            CHECKPOINTS
-                .iter()
-                .enumerate()
-                .filter(|(c, _)| runs.iter().all(|r| r[mi].attitude.len() > *c))
-                .map(|(c, t)| (*t, rms(runs.iter().map(|r| r[mi].attitude[c][axis]))))
-                .collect()
-        };
-        let mount_error_rms_deg = (model.number() != 3).then(|| {
-            [0, 1, 2].map(|i| {
-                rms(runs
-                    .iter()
-                    .filter_map(|r| r[mi].mount_error_deg.map(|m| m[i])))
-            })
-        });
-        reports.push(ModelReport {
-            model: model.number(),
-            heading_rms_deg: per(2),
-            pitch_rms_deg: per(1),
-            roll_rms_deg: per(0),
-            position_rms_m: rms(runs.iter().map(|r| r[mi].position_m)),
-            mount_error_rms_deg,
-            not_converged: runs
-                .iter()
-                .filter(|r| {
-                    r[mi]
-                        .attitude
-                        .last()
-                        .is_none_or(|e| e[2].abs() >= a.converged_deg || e[2].is_nan())
-                })
-                .count(),
-        });
-    }
-    Ok(AlignReport {
-        scenario: a.scenario.clone(),
-        runs: a.runs,
-        seconds: a.seconds,
-        heading_error_deg: a.heading_error,
-        mount: a.mount.clone(),
-        seed: a.seed,
-        models: reports,
-        wall_s: start.elapsed().as_secs_f64(),
-    })
+    crate::runs::run_local(&study, threads, &bar)
 }

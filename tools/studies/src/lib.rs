@@ -8,7 +8,9 @@
 //! - [`study`]: how a run's navigation starts (the truth perturbed by a draw of the initial
 //!   covariance), [`parallel`]: the one runner (each run depends only on its seed, so results do
 //!   not depend on the number of threads), [`progress`]: the progress bars (standard error, a
-//!   terminal only), [`args`]: value parsers shared by the command lines.
+//!   terminal only), [`runs`]: a study as independent runs (plan, run by index, report) that the
+//!   local runner and a distributed engine share, [`args`]: value parsers shared by the command
+//!   lines.
 #![forbid(unsafe_code)]
 
 pub mod align;
@@ -16,5 +18,6 @@ pub mod args;
 pub mod nees;
 pub mod parallel;
 pub mod progress;
+pub mod runs;
 pub mod study;
 pub mod usbl;

@@ -150,26 +150,68 @@ pub fn nees_monte_carlo(a: &NeesArgs, cfg: &NavConfig) -> anyhow::Result<NeesRep
 }
 
 /// The Monte Carlo with the simulated errors drawn from `truth_cfg` and the filter run with
-/// `filter_cfg` (to show what a mis-tuned filter looks like).
+/// `filter_cfg` (to show what a mis-tuned filter looks like), on this machine's cores.
 pub fn nees_monte_carlo_with(
     a: &NeesArgs,
     truth_cfg: &NavConfig,
     filter_cfg: &NavConfig,
 ) -> anyhow::Result<NeesReport> {
-    if a.runs == 0 {
-        bail!("--runs must be at least 1");
+    let study = NeesStudy::new(a, truth_cfg, filter_cfg)?;
+    let bar = crate::progress::Progress::new(!a.json).runs("NEES Monte Carlo", a.runs);
+    crate::runs::run_local(&study, crate::parallel::default_threads(), &bar)
+}
+
+/// One run of the NEES study.
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
+pub struct NeesRun {
+    /// Simulated seconds.
+    pub seconds: f64,
+    /// Per evaluated epoch: time (s from the start), position, velocity and attitude NEES.
+    pub epochs: Vec<[f64; 4]>,
+}
+
+/// The NEES study: the scenario loaded, the configurations of the truth and the filter.
+pub struct NeesStudy {
+    args: NeesArgs,
+    scenario: Scenario,
+    truth_cfg: NavConfig,
+    filter_cfg: NavConfig,
+}
+
+impl NeesStudy {
+    /// Checks the options and loads the scenario.
+    pub fn new(
+        a: &NeesArgs,
+        truth_cfg: &NavConfig,
+        filter_cfg: &NavConfig,
+    ) -> anyhow::Result<NeesStudy> {
+        if a.runs == 0 {
+            bail!("--runs must be at least 1");
+        }
+        Ok(NeesStudy {
+            args: a.clone(),
+            scenario: Scenario::load(&a.scenario)?,
+            truth_cfg: truth_cfg.clone(),
+            filter_cfg: filter_cfg.clone(),
+        })
     }
-    let scenario = Scenario::load(&a.scenario)?;
-    // Sums over runs per epoch index: time, position, velocity, attitude NEES.
-    let mut sums: Vec<[f64; 4]> = Vec::new();
-    let mut counts: Vec<usize> = Vec::new();
-    let mut seconds = 0.0;
-    for k in 0..a.runs {
+}
+
+impl crate::runs::RunStudy for NeesStudy {
+    type Run = NeesRun;
+    type Report = NeesReport;
+
+    fn runs(&self) -> usize {
+        self.args.runs
+    }
+
+    fn run(&self, k: usize) -> anyhow::Result<NeesRun> {
+        let (a, truth_cfg, filter_cfg) = (&self.args, &self.truth_cfg, &self.filter_cfg);
         let seed = a.seed.wrapping_add(k as u64);
         let mut rng = Rng::new(seed, "montecarlo.nees");
         let effects = matched_effects(truth_cfg, a.dvl_beam_noise, &mut rng)?;
         let sim_cfg = SimConfig {
-            scenario: scenario.clone(),
+            scenario: self.scenario.clone(),
             effects,
             seed,
             duration_s: a.seconds,
@@ -179,7 +221,7 @@ pub fn nees_monte_carlo_with(
             navigation: filter_cfg.clone(),
             ..Default::default()
         });
-        let mut epoch = 0usize;
+        let mut epochs = Vec::new();
         let mut last_imu_ns = None;
         let mut start_ns = 0u64;
         let summary = sim::simulate(&sim_cfg, |m| {
@@ -212,21 +254,12 @@ pub fn nees_monte_carlo_with(
                     let dp = earth::ned_offset(&truth_pos, &s.position);
                     let dv = s.velocity_ned - Vector3::from(t.velocity_ned_m_s);
                     let phi = attitude_error(&s.q_body_to_ned, &truth_q);
-                    let values = [
+                    epochs.push([
                         time_s,
                         nees(&dp, &block(filter::POS)),
                         nees(&dv, &block(filter::VEL)),
                         nees(&phi, &block(filter::ATT)),
-                    ];
-                    if sums.len() <= epoch {
-                        sums.push([0.0; 4]);
-                        counts.push(0);
-                    }
-                    for i in 0..4 {
-                        sums[epoch][i] += values[i];
-                    }
-                    counts[epoch] += 1;
-                    epoch += 1;
+                    ]);
                 }
                 other if session.started() => {
                     if let Some(x) = other.sensor() {
@@ -244,47 +277,73 @@ pub fn nees_monte_carlo_with(
             }
             Ok(())
         })?;
-        seconds = summary.duration_s;
-    }
-    // Only epochs every run reached.
-    let series: Vec<[f64; 4]> = sums
-        .iter()
-        .zip(&counts)
-        .filter(|(_, c)| **c == a.runs)
-        .map(|(s, c)| {
-            let n = *c as f64;
-            [s[0] / n, s[1] / n, s[2] / n, s[3] / n]
+        Ok(NeesRun {
+            seconds: summary.duration_s,
+            epochs,
         })
-        .collect();
-    if series.is_empty() {
-        bail!("no epoch to evaluate (is the run shorter than --skip-seconds?)");
     }
-    let dof = 3.0 * a.runs as f64;
-    let lower = chi2_quantile(dof, -1.959_964) / a.runs as f64;
-    let upper = chi2_quantile(dof, 1.959_964) / a.runs as f64;
-    let block = |i: usize| {
-        let n = series.len() as f64;
-        let above = series.iter().filter(|s| s[i] > upper).count() as f64 / n;
-        let below = series.iter().filter(|s| s[i] < lower).count() as f64 / n;
-        NeesBlock {
-            mean_anees: series.iter().map(|s| s[i]).sum::<f64>() / n,
-            fraction_inside: 1.0 - above - below,
-            fraction_above: above,
-            fraction_below: below,
+
+    fn report(&self, runs: Vec<NeesRun>, _wall_s: f64) -> anyhow::Result<NeesReport> {
+        let a = &self.args;
+        if runs.len() != a.runs {
+            bail!("{} run results for {} runs", runs.len(), a.runs);
         }
-    };
-    Ok(NeesReport {
-        scenario: scenario.name.clone(),
-        runs: a.runs,
-        epochs: series.len(),
-        wall_s_per_run: seconds,
-        lower_bound: lower,
-        upper_bound: upper,
-        position: block(1),
-        velocity: block(2),
-        attitude: block(3),
-        series,
-    })
+        // Sums over runs per epoch index (in run order): time, position, velocity, attitude NEES.
+        let mut sums: Vec<[f64; 4]> = Vec::new();
+        let mut counts: Vec<usize> = Vec::new();
+        for run in &runs {
+            for (epoch, values) in run.epochs.iter().enumerate() {
+                if sums.len() <= epoch {
+                    sums.push([0.0; 4]);
+                    counts.push(0);
+                }
+                for i in 0..4 {
+                    sums[epoch][i] += values[i];
+                }
+                counts[epoch] += 1;
+            }
+        }
+        let seconds = runs.last().map_or(0.0, |r| r.seconds);
+        // Only epochs every run reached.
+        let series: Vec<[f64; 4]> = sums
+            .iter()
+            .zip(&counts)
+            .filter(|(_, c)| **c == a.runs)
+            .map(|(s, c)| {
+                let n = *c as f64;
+                [s[0] / n, s[1] / n, s[2] / n, s[3] / n]
+            })
+            .collect();
+        if series.is_empty() {
+            bail!("no epoch to evaluate (is the run shorter than --skip-seconds?)");
+        }
+        let dof = 3.0 * a.runs as f64;
+        let lower = chi2_quantile(dof, -1.959_964) / a.runs as f64;
+        let upper = chi2_quantile(dof, 1.959_964) / a.runs as f64;
+        let block = |i: usize| {
+            let n = series.len() as f64;
+            let above = series.iter().filter(|s| s[i] > upper).count() as f64 / n;
+            let below = series.iter().filter(|s| s[i] < lower).count() as f64 / n;
+            NeesBlock {
+                mean_anees: series.iter().map(|s| s[i]).sum::<f64>() / n,
+                fraction_inside: 1.0 - above - below,
+                fraction_above: above,
+                fraction_below: below,
+            }
+        };
+        Ok(NeesReport {
+            scenario: self.scenario.name.clone(),
+            runs: a.runs,
+            epochs: series.len(),
+            wall_s_per_run: seconds,
+            lower_bound: lower,
+            upper_bound: upper,
+            position: block(1),
+            velocity: block(2),
+            attitude: block(3),
+            series,
+        })
+    }
 }
 
 #[cfg(test)]

@@ -82,7 +82,7 @@ pub struct UsblArgs {
 }
 
 /// The outcome of one run.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct RunResult {
     pub seed: u64,
     pub horizontal_error_rms_m: f64,
@@ -362,82 +362,120 @@ fn run_one(
     Ok(r)
 }
 
-/// Runs the Monte Carlo for one configuration.
+/// The USBL study of one configuration: its options checked, its scenario and station loaded.
+pub struct UsblStudy {
+    args: UsblArgs,
+    scenario: Scenario,
+    station: StationGeometry,
+}
+
+impl UsblStudy {
+    /// Checks the options and loads the scenario.
+    pub fn new(a: &UsblArgs) -> anyhow::Result<UsblStudy> {
+        if a.runs == 0 {
+            bail!("--runs must be at least 1");
+        }
+        if !(0.0..=0.5).contains(&a.outliers) {
+            bail!("--outliers {}: expected a fraction 0..=0.5", a.outliers);
+        }
+        if !(a.array_yaw_error.is_finite() && a.array_yaw_error.abs() <= 30.0) {
+            bail!(
+                "--array-yaw-error {}: expected -30..=30 deg",
+                a.array_yaw_error
+            );
+        }
+        if let Some(s) = a.seconds
+            && !(s.is_finite() && s >= 10.0 + a.settle_s)
+        {
+            bail!("--seconds {s}: expected at least --settle-s + 10");
+        }
+        if !(0.0..=5.0).contains(&a.latency) {
+            bail!("--latency {}: expected 0..=5 s", a.latency);
+        }
+        if !(a.settle_s.is_finite() && a.settle_s >= 0.0) {
+            bail!("--settle-s {}: expected zero or more", a.settle_s);
+        }
+        let scenario = Scenario::load(&a.scenario)?;
+        let station = StationGeometry::from_scenario(&scenario).with_context(|| {
+            format!(
+                "scenario {} has no [station]: the USBL Monte Carlo needs one",
+                scenario.name
+            )
+        })?;
+        Ok(UsblStudy {
+            args: a.clone(),
+            scenario,
+            station,
+        })
+    }
+}
+
+impl crate::runs::RunStudy for UsblStudy {
+    type Run = RunResult;
+    type Report = UsblReport;
+
+    fn runs(&self) -> usize {
+        self.args.runs
+    }
+
+    fn run(&self, k: usize) -> anyhow::Result<RunResult> {
+        let seed = self.args.seed.wrapping_add(k as u64);
+        run_one(&self.args, &self.scenario, &self.station, seed)
+    }
+
+    fn report(&self, per_run: Vec<RunResult>, wall_s: f64) -> anyhow::Result<UsblReport> {
+        let a = &self.args;
+        if per_run.len() != a.runs {
+            bail!("{} run results for {} runs", per_run.len(), a.runs);
+        }
+        let pooled = |f: fn(&RunResult) -> f64| {
+            (per_run.iter().map(|r| f(r).powi(2)).sum::<f64>() / per_run.len() as f64).sqrt()
+        };
+        let max = |f: fn(&RunResult) -> f64| per_run.iter().map(f).fold(0.0, f64::max);
+        let sum = |f: fn(&RunResult) -> u64| per_run.iter().map(f).sum::<u64>();
+        let seconds = match a.seconds {
+            Some(s) => s,
+            None => auvnav_sim::trajectory::Trajectory::from_scenario(&self.scenario)?.duration_s,
+        };
+        Ok(UsblReport {
+            scenario: self.scenario.name.clone(),
+            coupling: a.coupling,
+            filter: a.filter,
+            outlier_fraction: a.outliers,
+            array_yaw_error_deg: a.array_yaw_error,
+            runs: a.runs,
+            seed: a.seed,
+            wall_s_per_run: seconds,
+            settle_s: a.settle_s,
+            horizontal_error_rms_m: pooled(|r| r.horizontal_error_rms_m),
+            horizontal_error_max_m: max(|r| r.horizontal_error_max_m),
+            worst_run_horizontal_error_rms_m: max(|r| r.horizontal_error_rms_m),
+            vertical_rms_m: pooled(|r| r.vertical_rms_m),
+            vertical_max_m: max(|r| r.vertical_max_m),
+            velocity_rms_m_s: pooled(|r| r.velocity_rms_m_s),
+            divergent_runs: per_run
+                .iter()
+                .filter(|r| r.horizontal_error_max_m > a.divergence_m)
+                .count(),
+            divergence_m: a.divergence_m,
+            fixes: sum(|r| r.fixes),
+            rejected: sum(|r| r.rejected),
+            reopened: sum(|r| r.reopened),
+            injected_outliers: sum(|r| r.injected_outliers),
+            accepted_outliers: sum(|r| r.accepted_outliers),
+            rejected_clean: sum(|r| r.rejected_clean),
+            wall_s,
+            per_run,
+        })
+    }
+}
+
+/// Runs the Monte Carlo for one configuration on this machine's cores.
 pub fn run(a: &UsblArgs) -> anyhow::Result<UsblReport> {
-    let start = std::time::Instant::now();
-    if a.runs == 0 {
-        bail!("--runs must be at least 1");
-    }
-    if !(0.0..=0.5).contains(&a.outliers) {
-        bail!("--outliers {}: expected a fraction 0..=0.5", a.outliers);
-    }
-    if !(a.array_yaw_error.is_finite() && a.array_yaw_error.abs() <= 30.0) {
-        bail!(
-            "--array-yaw-error {}: expected -30..=30 deg",
-            a.array_yaw_error
-        );
-    }
-    if let Some(s) = a.seconds
-        && !(s.is_finite() && s >= 10.0 + a.settle_s)
-    {
-        bail!("--seconds {s}: expected at least --settle-s + 10");
-    }
-    if !(0.0..=5.0).contains(&a.latency) {
-        bail!("--latency {}: expected 0..=5 s", a.latency);
-    }
-    if !(a.settle_s.is_finite() && a.settle_s >= 0.0) {
-        bail!("--settle-s {}: expected zero or more", a.settle_s);
-    }
-    let scenario = Scenario::load(&a.scenario)?;
-    let station = StationGeometry::from_scenario(&scenario).with_context(|| {
-        format!(
-            "scenario {} has no [station]: the USBL Monte Carlo needs one",
-            scenario.name
-        )
-    })?;
+    let study = UsblStudy::new(a)?;
     let threads = a.threads.unwrap_or_else(crate::parallel::default_threads);
     let bar = crate::progress::Progress::new(!a.json).runs("USBL Monte Carlo", a.runs);
-    let per_run = crate::parallel::map_runs_with_progress(a.runs, threads, &bar, |k| {
-        run_one(a, &scenario, &station, a.seed.wrapping_add(k as u64))
-    })?;
-    let pooled = |f: fn(&RunResult) -> f64| {
-        (per_run.iter().map(|r| f(r).powi(2)).sum::<f64>() / per_run.len() as f64).sqrt()
-    };
-    let max = |f: fn(&RunResult) -> f64| per_run.iter().map(f).fold(0.0, f64::max);
-    let sum = |f: fn(&RunResult) -> u64| per_run.iter().map(f).sum::<u64>();
-    let seconds = a
-        .seconds
-        .unwrap_or(auvnav_sim::trajectory::Trajectory::from_scenario(&scenario)?.duration_s);
-    Ok(UsblReport {
-        scenario: scenario.name.clone(),
-        coupling: a.coupling,
-        filter: a.filter,
-        outlier_fraction: a.outliers,
-        array_yaw_error_deg: a.array_yaw_error,
-        runs: a.runs,
-        seed: a.seed,
-        wall_s_per_run: seconds,
-        settle_s: a.settle_s,
-        horizontal_error_rms_m: pooled(|r| r.horizontal_error_rms_m),
-        horizontal_error_max_m: max(|r| r.horizontal_error_max_m),
-        worst_run_horizontal_error_rms_m: max(|r| r.horizontal_error_rms_m),
-        vertical_rms_m: pooled(|r| r.vertical_rms_m),
-        vertical_max_m: max(|r| r.vertical_max_m),
-        velocity_rms_m_s: pooled(|r| r.velocity_rms_m_s),
-        divergent_runs: per_run
-            .iter()
-            .filter(|r| r.horizontal_error_max_m > a.divergence_m)
-            .count(),
-        divergence_m: a.divergence_m,
-        fixes: sum(|r| r.fixes),
-        rejected: sum(|r| r.rejected),
-        reopened: sum(|r| r.reopened),
-        injected_outliers: sum(|r| r.injected_outliers),
-        accepted_outliers: sum(|r| r.accepted_outliers),
-        rejected_clean: sum(|r| r.rejected_clean),
-        wall_s: start.elapsed().as_secs_f64(),
-        per_run,
-    })
+    crate::runs::run_local(&study, threads, &bar)
 }
 
 /// The comparison table: {loose, tight} × {ukf, akf, aukf} × {clean, 5 % outliers, 1° array

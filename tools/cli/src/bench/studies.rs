@@ -29,6 +29,7 @@ pub fn align(runs: usize, json: bool) -> anyhow::Result<()> {
             seconds: 1200.0,
             converged_deg: 1.0,
             threads: None,
+            per_run: false,
             json: false,
         };
         let r = crate::align::run(&a)?;
