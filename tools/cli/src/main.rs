@@ -170,14 +170,8 @@ fn run_perturb(a: &PerturbArgs) -> anyhow::Result<()> {
 }
 
 fn run_calibrate_mag(a: &auvnav_tools::calibrate::mag::CalibrateMagArgs) -> anyhow::Result<()> {
-    use auvnav_tools::calibrate::mag::{calibrate_mag, report};
-    let r = calibrate_mag(a)?;
-    if let Some(p) = &a.write_config {
-        report::write_config(p, &r)?;
-    }
-    if let Some(d) = &a.report {
-        report::write_report_dir(d, &r, &r.samples)?;
-    }
+    use auvnav_tools::calibrate::mag::report;
+    let r = auvnav_tools::calibrate::mag::run(a)?;
     if a.json {
         auvnav_tools::json::print(&r)?;
     } else {

@@ -13,11 +13,7 @@ pub fn run_nees(a: &NeesArgs) -> anyhow::Result<()> {
     let start = std::time::Instant::now();
     let r = nees_monte_carlo(a, &cfg)?;
     if let Some(path) = &a.series {
-        let mut text = String::from("time_s,anees_position,anees_velocity,anees_attitude\n");
-        for e in &r.series {
-            text.push_str(&format!("{},{},{},{}\n", e[0], e[1], e[2], e[3]));
-        }
-        std::fs::write(path, text)?;
+        write_series(path, &r)?;
     }
     if a.json {
         crate::json::print(&r)?;

@@ -9,7 +9,7 @@
 //! runs, `N * ANEES` of a consistent filter is chi-square with `3 N` degrees of freedom; the report
 //! gives the two-sided 95 % bounds and the fraction of epochs inside them per block.
 
-use anyhow::bail;
+use anyhow::{Context, bail};
 use auvnav_core::earth;
 use auvnav_core::ekf as filter;
 use auvnav_core::navigator::NavConfig;
@@ -159,6 +159,15 @@ pub fn nees_monte_carlo_with(
     let study = NeesStudy::new(a, truth_cfg, filter_cfg)?;
     let bar = crate::progress::Progress::new(!a.json).runs("NEES Monte Carlo", a.runs);
     crate::runs::run_local(&study, crate::parallel::default_threads(), &bar)
+}
+
+/// Writes the run-averaged NEES per epoch as CSV (time_s, position, velocity, attitude).
+pub fn write_series(path: &std::path::Path, r: &NeesReport) -> anyhow::Result<()> {
+    let mut text = String::from("time_s,anees_position,anees_velocity,anees_attitude\n");
+    for e in &r.series {
+        text.push_str(&format!("{},{},{},{}\n", e[0], e[1], e[2], e[3]));
+    }
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
 }
 
 /// One run of the NEES study.

@@ -277,7 +277,7 @@ fn effects(c: &Calibration, lm: Option<&fit::LmFit>, model: Model) -> Vec<Effect
     ]
 }
 
-/// Runs the calibration.
+/// Runs the calibration (no file written).
 pub fn calibrate_mag(a: &CalibrateMagArgs) -> anyhow::Result<MagReport> {
     if !(a.fit_fraction > 0.0 && a.fit_fraction <= 1.0) {
         bail!("--fit-fraction {}: expected 0 < f <= 1", a.fit_fraction);

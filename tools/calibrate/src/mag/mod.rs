@@ -18,6 +18,19 @@ use serde::Serialize;
 
 pub use command::{CalibrateMagArgs, calibrate_mag};
 
+/// `auvnav calibrate mag` as a function: the calibration, then the files it asks for (the
+/// `[navigation.magnetometer]` table, the report directory).
+pub fn run(a: &CalibrateMagArgs) -> anyhow::Result<command::MagReport> {
+    let r = calibrate_mag(a)?;
+    if let Some(p) = &a.write_config {
+        report::write_config(p, &r)?;
+    }
+    if let Some(d) = &a.report {
+        report::write_report_dir(d, &r, &r.samples)?;
+    }
+    Ok(r)
+}
+
 /// The calibration methods (`--method`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
