@@ -22,13 +22,16 @@ import json
 import os
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Union
-
-import numpy as np
-import pandas as pd
+from typing import TYPE_CHECKING, Any, Union
 
 from . import _native
 from ._native import AuvnavError
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+# numpy and pandas are imported by read_log only: a replay or a study from a script or a Dask
+# task does not pay for them.
 
 __all__ = [
     "AuvnavError",
@@ -38,6 +41,7 @@ __all__ = [
     "calibrate_dvl",
     "calibrate_mag",
     "discover",
+    "discover_trials",
     "effects",
     "import_mag_csv",
     "import_pd0",
@@ -72,13 +76,13 @@ def _document(text: str) -> dict[str, Any]:
 
 
 @dataclass
-class LogTables(Mapping[str, pd.DataFrame]):
+class LogTables(Mapping[str, "pd.DataFrame"]):
     """A log's channels, one :class:`pandas.DataFrame` per topic (``"sensors/imu"``,
     ``"nav/solution"``, ``"truth"``...), one row per message, the unit in every column name
     (``time_s``, ``velocity_north_m_s``, ``roll_rad``). ``time_s`` is the message's host time.
     """
 
-    channels: dict[str, pd.DataFrame]
+    channels: dict[str, "pd.DataFrame"]
     #: The schema of each channel (``auvnav_msgs/msg/ImuSampleV1``).
     schemas: dict[str, str] = field(default_factory=dict)
     #: Messages on channels of a schema this version does not know (not tabled).
@@ -110,6 +114,9 @@ def read_log(path: PathLike) -> LogTables:
     A truncated or damaged tail gives the tables read so far and the reason in
     ``log_error``; a file that is not a log raises :class:`AuvnavError`.
     """
+    import numpy as np
+    import pandas as pd
+
     tables, info = _native.read_log(_fspath(path))
     channels: dict[str, pd.DataFrame] = {}
     schemas: dict[str, str] = {}
@@ -180,6 +187,10 @@ def usbl(**options: Any) -> dict[str, Any]:
 
 def nees(**options: Any) -> dict[str, Any]:
     return _run("nees", (), options)
+
+
+def discover_trials(**options: Any) -> dict[str, Any]:
+    return _run("discover_trials", (), options)
 
 
 def import_snapir(dir: PathLike, **options: Any) -> dict[str, Any]:

@@ -9,7 +9,8 @@ a map over logs and a map over run indices.
 
 - :func:`map_logs` applies one operation (``replay``, ``smooth``, ``discover``,
   ``calibrate_dvl``, ...) to each log as a task and gathers the reports into one table.
-- :func:`montecarlo` runs a study (``align``, ``usbl``, ``nees``) with every run a task: the run
+- :func:`montecarlo` runs a study (``align``, ``usbl``, ``nees``, ``discover_trials``: the
+  hidden-effect trials of ``auvnav bench discover``) with every run a task: the run
   index fixes its seed, so the per-run results and the report are those of the single-machine
   runner (``auvnav align --runs N``), bit for bit, whatever the number of workers, and a run lost
   with a killed worker is simply run again.
@@ -113,9 +114,10 @@ def montecarlo(
     retries: int = 1,
     **options: Any,
 ) -> dict[str, Any]:
-    """Runs the Monte Carlo ``study`` (``align``, ``usbl`` or ``nees``; the options are the
-    command's, e.g. ``runs=220, seed=1, per_run=True``) with one Dask task per run, and returns
-    its report, as ``auvnav.<study>(**options)`` does on one machine. ``wall_s`` is the cluster's.
+    """Runs the Monte Carlo ``study`` (``align``, ``usbl``, ``nees`` or ``discover_trials``; the
+    options are the command's, e.g. ``runs=220, seed=1, per_run=True``) with one Dask task per
+    run, and returns its report, as ``auvnav.<study>(**options)`` does on one machine.
+    ``wall_s`` is the cluster's.
     """
     if study not in _native.studies():
         raise ValueError(f"study {study!r}: expected one of {', '.join(_native.studies())}")

@@ -144,6 +144,18 @@ fn specs() -> Vec<Spec> {
             }
         ),
         spec!(
+            "discover_trials",
+            "auvnav bench discover's hidden-effect and null trials",
+            auvnav_discover::trials::TrialsArgs,
+            |a| {
+                let study = auvnav_discover::trials::TrialsStudy::new(&a)?;
+                let threads = auvnav_studies::parallel::default_threads();
+                let bar = auvnav_studies::progress::Progress::new(true)
+                    .runs("discovery trials", study.runs());
+                document(&auvnav_studies::runs::run_local(&study, threads, &bar)?)
+            }
+        ),
+        spec!(
             "import_snapir",
             "auvnav import snapir: a Snapir segment into a log",
             SnapirArgs,
@@ -324,6 +336,7 @@ enum Study {
     Align(auvnav_studies::align::AlignStudy),
     Usbl(auvnav_studies::usbl::UsblStudy),
     Nees(Box<auvnav_studies::nees::NeesStudy>),
+    Trials(auvnav_discover::trials::TrialsStudy),
 }
 
 fn study(name: &str, options_given: &[(String, OptionValue)]) -> anyhow::Result<Study> {
@@ -342,12 +355,18 @@ fn study(name: &str, options_given: &[(String, OptionValue)]) -> anyhow::Result<
                 &a, &cfg, &cfg,
             )?))
         }
-        _ => anyhow::bail!("{name:?} is not a study of independent runs (align, usbl, nees)"),
+        "discover_trials" => {
+            Study::Trials(auvnav_discover::trials::TrialsStudy::new(&parsed(&m)?)?)
+        }
+        _ => anyhow::bail!(
+            "{name:?} is not a study of independent runs ({})",
+            STUDIES.join(", ")
+        ),
     })
 }
 
 /// The studies whose runs can be spread over a cluster.
-pub const STUDIES: [&str; 3] = ["align", "usbl", "nees"];
+pub const STUDIES: [&str; 4] = ["align", "usbl", "nees", "discover_trials"];
 
 /// How many runs the study's options ask for (and a check of the options).
 pub fn study_runs(name: &str, options_given: &[(String, OptionValue)]) -> anyhow::Result<usize> {
@@ -355,6 +374,7 @@ pub fn study_runs(name: &str, options_given: &[(String, OptionValue)]) -> anyhow
         Study::Align(s) => s.runs(),
         Study::Usbl(s) => s.runs(),
         Study::Nees(s) => s.runs(),
+        Study::Trials(s) => s.runs(),
     })
 }
 
@@ -372,6 +392,7 @@ pub fn study_run(
         Study::Align(s) => one(&s, k),
         Study::Usbl(s) => one(&s, k),
         Study::Nees(s) => one(s.as_ref(), k),
+        Study::Trials(s) => one(&s, k),
     }
 }
 
@@ -393,5 +414,6 @@ pub fn study_report(
         Study::Align(s) => report(&s, runs, wall_s),
         Study::Usbl(s) => report(&s, runs, wall_s),
         Study::Nees(s) => report(s.as_ref(), runs, wall_s),
+        Study::Trials(s) => report(&s, runs, wall_s),
     }
 }

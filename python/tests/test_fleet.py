@@ -56,6 +56,7 @@ def test_a_distributed_alignment_study_equals_the_command_line_run_for_run(cli, 
     [
         ("usbl", {"runs": 3, "seconds": 150, "settle_s": 30, "seed": 5}),
         ("nees", {"runs": 3, "seconds": 60, "seed": 9}),
+        ("discover_trials", {"hidden": 2, "null": 1, "per_run": True}),
     ],
 )
 def test_the_other_studies_equal_the_single_process_runner(client, study, options):

@@ -96,7 +96,7 @@ pub const HIDDEN: &[(&str, f64, f64)] = &[
 ];
 
 /// One hidden effect.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct Hidden {
     pub name: String,
     pub value: Vec<f64>,
@@ -221,7 +221,7 @@ pub fn trial_set_with(
 }
 
 /// What one trial gave.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct Trial {
     pub seed: u64,
     /// None for a null trial.

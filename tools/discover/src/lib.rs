@@ -22,6 +22,7 @@ pub mod hidden;
 pub mod imu;
 pub mod report;
 pub mod smoothed;
+pub mod trials;
 pub mod voyages;
 
 use auvnav_core::earth;

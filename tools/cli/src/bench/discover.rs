@@ -7,7 +7,7 @@
 use crate::calibrate::Progress;
 use crate::discover::hidden::{
     HIDDEN, SetTrial, Trial, coloured, draw, draw_of, draw_pair, installation_effects, scaled,
-    trial, trial_set, trial_set_with, trial_voyages,
+    trial_set, trial_set_with, trial_voyages,
 };
 use crate::parallel::{default_threads, map_runs};
 use serde::Serialize;
@@ -205,15 +205,15 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
     let installation = installation_effects();
     let total = hidden + null;
     let progress = Mutex::new((Progress::new(!json), 0usize));
+    // The hidden and null trials are the library's trial study (the runs a cluster runs too).
+    let study = crate::discover::trials::TrialsStudy::new(&crate::discover::trials::TrialsArgs {
+        hidden,
+        null,
+        per_run: false,
+    })?;
     let results = map_runs(total, threads, |k| {
         let t0 = std::time::Instant::now();
-        let (seed, h) = if k < hidden {
-            let seed = k as u64 + 1;
-            (seed, Some(draw(seed)))
-        } else {
-            (100_001 + (k - hidden) as u64, None)
-        };
-        let (t, _) = trial(seed, h, &dir)?;
+        let t = auvnav_studies::runs::RunStudy::run(&study, k)?;
         if let Ok(mut p) = progress.lock() {
             p.1 += 1;
             let done = p.1;

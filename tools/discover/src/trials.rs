@@ -1,0 +1,112 @@
+//! The hidden-effect and null trials of `auvnav bench discover` as a study of independent runs
+//! ([`auvnav_studies::runs::RunStudy`]): trial k < `hidden` hides the effect drawn for seed k + 1,
+//! the others (null trials) hide nothing and use seeds from 100 001. The benchmark and a
+//! distributed engine (the Python package's `auvnav.fleet`) run the same trials.
+
+use super::hidden::{Trial, draw, trial};
+use serde::Serialize;
+
+/// How many trials of each kind.
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
+pub struct TrialsArgs {
+    /// Trials with a hidden effect (seeds 1, 2, ...).
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 20))]
+    pub hidden: usize,
+    /// Trials with nothing hidden (seeds 100001, 100002, ...).
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 10))]
+    pub null: usize,
+    /// Include every trial in the report (`per_run`).
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub per_run: bool,
+}
+
+/// The trials' outcome.
+#[derive(Debug, Clone, Serialize)]
+pub struct TrialsReport {
+    pub hidden: usize,
+    pub null: usize,
+    /// Hidden trials with the right name, the value within 10 % and nothing else.
+    pub correct: usize,
+    /// Hidden trials whose effect was named (whatever its value and the rest).
+    pub named: usize,
+    /// Null trials where something was named.
+    pub null_false_discoveries: usize,
+    pub correct_fraction: f64,
+    pub null_false_discovery_fraction: f64,
+    /// With `per_run`: every trial, hidden ones first.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub per_run: Option<Vec<Trial>>,
+    pub wall_s: f64,
+}
+
+/// The trial study.
+pub struct TrialsStudy {
+    args: TrialsArgs,
+}
+
+impl TrialsStudy {
+    pub fn new(a: &TrialsArgs) -> anyhow::Result<TrialsStudy> {
+        Ok(TrialsStudy { args: a.clone() })
+    }
+
+    /// The seed and the hidden effect of trial `k`.
+    pub fn seed_of(&self, k: usize) -> (u64, bool) {
+        if k < self.args.hidden {
+            (k as u64 + 1, true)
+        } else {
+            (100_001 + (k - self.args.hidden) as u64, false)
+        }
+    }
+}
+
+impl auvnav_studies::runs::RunStudy for TrialsStudy {
+    type Run = Trial;
+    type Report = TrialsReport;
+
+    fn runs(&self) -> usize {
+        self.args.hidden + self.args.null
+    }
+
+    fn run(&self, k: usize) -> anyhow::Result<Trial> {
+        let (seed, hide) = self.seed_of(k);
+        let dir = std::env::temp_dir().join(format!(
+            "auvnav-trial-{}-{seed}-{}",
+            std::process::id(),
+            if hide { "hidden" } else { "null" }
+        ));
+        std::fs::create_dir_all(&dir)?;
+        let result = trial(seed, hide.then(|| draw(seed)), &dir);
+        let _ = std::fs::remove_dir_all(&dir);
+        Ok(result?.0)
+    }
+
+    fn report(&self, runs: Vec<Trial>, wall_s: f64) -> anyhow::Result<TrialsReport> {
+        let a = &self.args;
+        anyhow::ensure!(
+            runs.len() == a.hidden + a.null,
+            "{} trial results for {} trials",
+            runs.len(),
+            a.hidden + a.null
+        );
+        let (hidden, null) = runs.split_at(a.hidden);
+        let correct = hidden.iter().filter(|t| t.correct).count();
+        let named = hidden
+            .iter()
+            .filter(|t| t.hidden.as_ref().is_some_and(|h| t.found.contains(&h.name)))
+            .count();
+        let null_false_discoveries = null.iter().filter(|t| t.false_discovery).count();
+        let fraction = |n: usize, of: usize| if of > 0 { n as f64 / of as f64 } else { 0.0 };
+        Ok(TrialsReport {
+            hidden: a.hidden,
+            null: a.null,
+            correct,
+            named,
+            null_false_discoveries,
+            correct_fraction: fraction(correct, a.hidden),
+            null_false_discovery_fraction: fraction(null_false_discoveries, a.null),
+            per_run: a.per_run.then_some(runs),
+            wall_s,
+        })
+    }
+}
