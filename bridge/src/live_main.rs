@@ -46,6 +46,8 @@ struct Served {
     failed: u64,
 }
 
+// Long on purpose: the live view's one loop: subscribers, the WebSocket server, rate limits and the
+// slow-client accounting share its locals.
 fn run(cfg: &LiveConfig, slow: &SlowClientReports) -> Result<(), String> {
     let e = |x: BusError| x.to_string();
     let bus = Bus::new(&cfg.name, &cfg.prefix).map_err(e)?;

@@ -248,6 +248,8 @@ fn zenoh_config(z: &ZenohConfig) -> Result<zenoh::Config, String> {
     Ok(c)
 }
 
+// Long on purpose: the bridge's one loop: a subscriber and a Zenoh publisher per topic, restarts
+// and counters over the same state.
 fn run(cfg: &BridgeConfig) -> Result<(), String> {
     let e = |x: BusError| x.to_string();
     let bus = Bus::new(&cfg.name, &cfg.prefix).map_err(e)?;

@@ -22,6 +22,9 @@
 //! twist in `base_link`; `NavSatFix` carries latitude, longitude and ellipsoid height with the ENU
 //! position covariance; `Imu` (`imu/data_raw`: no orientation, `orientation_covariance[0] = −1`)
 //! and the DVL's `TwistWithCovarianceStamped` are in their devices' frames, FLU.
+//!
+//! Long on purpose: the last 60 lines are the unit tests, beside the code they test; the code is
+//! 543 lines.
 
 use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, NavMode, NavSolutionV1, ProcessHealthV1};
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};

@@ -8,6 +8,9 @@
 //! A GNSS receiver's driver also listens to the depth topic: with `settings.gnss.surface_only`
 //! it publishes a fix only while the latest depth says the vehicle is at the surface, since a
 //! receiver whose antenna is awash or just under water reports multipath positions as fixes.
+//!
+//! Long on purpose: one driver process: its settings, the port's reconnection, the loop and the
+//! health report share the port's state; the protocols are in auvnav-protocols.
 
 use crate::clock::monotonic_ns;
 use crate::device::{DeviceClass, DeviceDecoder, Output, Protocol, ProtocolSettings};
@@ -638,6 +641,8 @@ struct Health {
 }
 
 /// Runs the driver until SIGTERM/SIGINT. Progress and problems go to stderr, one line each.
+// Long on purpose: the driver's one loop (open with back-off, read, decode, publish, health,
+// signals) over one port's state; decoding and health are functions of their own.
 pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
     let name = cfg.process_name();
     let class = cfg.protocol.class();

@@ -2,6 +2,9 @@
 //! their sources give, and the files in ../shared/data/rdi-pd0/raw against the independent
 //! decoder dolfyn 1.3.0 (`decoded_by_dolfyn/*.csv`). Outside CI a missing ../shared is a skip
 //! with a message; under CI it is a failure.
+//!
+//! Long on purpose: measured PD0 files against the vendor's export, field by field; the field
+//! tables are most of it.
 
 use auvnav_drivers::pd0::{self, Ensemble, NmeaBlock};
 use std::collections::HashMap;
@@ -288,6 +291,8 @@ fn last_vtg(e: &Ensemble) -> Option<&NmeaBlock> {
         .find(|b| matches!(b, NmeaBlock::Vtg { .. }))
 }
 
+// Long on purpose: compares every field of one measured PD0 file with the vendor's export, field by
+// field in the file's order.
 fn compare(file: &str) -> Comparison {
     let dir = shared("data/rdi-pd0").expect("checked by the caller");
     let (ens, _) = decode(&dir.join("raw").join(file));

@@ -1,9 +1,9 @@
 //! Message types exchanged between the auvnav processes through iceoryx2 shared memory, and
 //! written to the logs.
 //!
-//! (About 660 lines, on purpose: every message type of the bus in one file, so the schema that the
+//! Long on purpose: every message type of the bus in one file, so the schema that the
 //! processes and the logs share is read, versioned and reviewed as one; the bus, QoS, topics and
-//! clocks are in their own modules.)
+//! clocks are in their own modules.
 //!
 //! Every type is `#[repr(C)]`, made of fixed-size fields only, free of padding (checked at compile
 //! time by `bytemuck::Pod`) and carries a versioned iceoryx2 type name (`auvnav/<Type>/v<N>`).

@@ -30,6 +30,8 @@ fn at_rest(sequence: u8, t_us: u32) -> KvhSample {
 }
 
 #[test]
+// Long on purpose: one scenario with real processes read top to bottom: each step depends on the
+// state the previous one left.
 fn absurd_valid_checksum_frames_never_give_a_nan_solution() {
     let seconds: f64 = std::env::var("AUVNAV_FUZZ_SECONDS")
         .ok()

@@ -99,6 +99,8 @@ fn run_for(
 }
 
 #[test]
+// Long on purpose: one scenario with real processes read top to bottom: each step depends on the
+// state the previous one left.
 fn topics_cross_the_bridge_with_their_values_at_their_rate_and_survive_restarts() {
     let dir = TempDir::new("bridge");
     let d = dir.path();

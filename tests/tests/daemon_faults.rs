@@ -83,6 +83,8 @@ impl Watch {
 }
 
 #[test]
+// Long on purpose: one scenario with real processes read top to bottom: each step depends on the
+// state the previous one left.
 fn killed_driver_degrades_and_recovers_and_a_killed_daemon_is_replaced() {
     let dir = TempDir::new("daemonfault");
     let d = dir.path();

@@ -23,6 +23,8 @@ fn free_port() -> u16 {
 static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 #[test]
+// Long on purpose: one scenario with real processes read top to bottom: each step depends on the
+// state the previous one left.
 fn a_foxglove_client_sees_the_live_solution_of_the_demo() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let dir = TempDir::new("liveview");

@@ -52,6 +52,8 @@ fn solution(t: f64, mode: NavMode, health: u32) -> NavSolutionV1 {
 }
 
 #[test]
+// Long on purpose: one scenario with real processes read top to bottom: each step depends on the
+// state the previous one left.
 fn pymavlink_receives_odometry_origin_heartbeat_and_status_from_auvnav_mavlink() {
     if !pymavlink_available() {
         assert!(

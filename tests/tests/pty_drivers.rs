@@ -2,6 +2,9 @@
 //! `auvnav emulate` → pty → `auvnav-dvl`/`-imu`/`-usbl` → iceoryx2 → this test's subscribers.
 //! Checks that values and counts match what was played, that garbage and corrupted frames are
 //! counted and never published, and that an unplugged device is reported and reconnected.
+//!
+//! Long on purpose: the drivers against real pseudo-terminals, one test per device and failure,
+//! sharing the harness at the top.
 
 use auvnav_log::{LogMessage, LogReader};
 use auvnav_shm_schema::bus::Bus;

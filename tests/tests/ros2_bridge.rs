@@ -26,6 +26,8 @@ fn monotonic_ns() -> u64 {
 }
 
 #[test]
+// Long on purpose: one scenario with real processes read top to bottom: each step depends on the
+// state the previous one left.
 fn a_ros_2_client_decodes_the_bridge_topics_with_rmw_zenoh_keys_tokens_and_hashes() {
     if !python_has("zenoh, rosbags") {
         assert!(

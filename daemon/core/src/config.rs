@@ -5,6 +5,9 @@
 //! ([`NavConfig::problems`], [`SessionConfig::problems`], [`DaemonConfig::validate`]) that the
 //! daemon, replay and every tool apply, so no program accepts a configuration another rejects.
 //! Files are written by serialising these types ([`DaemonConfig::to_toml`]).
+//!
+//! Long on purpose: every table of the configuration with its defaults, units and validation in one
+//! place, so that no program accepts a configuration another rejects.
 
 use crate::earth::Geodetic;
 use crate::ekf::gate;
@@ -633,6 +636,8 @@ pub use auvnav_shm_schema::stage_times::output_path_problem;
 
 impl NavConfig {
     /// Every value of `[navigation]` that makes no sense, as `navigation.key …`.
+    // Long on purpose: one rule per key of `[navigation]`, in the table's order, so every
+    // key's check is read beside the others; a list, not logic.
     pub fn problems(&self) -> Vec<String> {
         let mut p = Problems(Vec::new());
         for (key, v, lo, hi) in [

@@ -8,6 +8,10 @@
 //! about 7 000 flops, and doing it at 200–1000 Hz would dominate the replay time that offline
 //! calibration depends on. The pending interval is always propagated before a measurement update,
 //! so updates see the covariance at their own time.
+//!
+//! Long on purpose: the navigator's state and feed (IMU propagation, covariance scheduling, the aid
+//! list and each aid's correction) work on one filter and are read as one; the aids' models are in
+//! `aid/`.
 
 use crate::aid::AidUpdate;
 use crate::aid::depth::DepthAid;

@@ -1,6 +1,9 @@
 //! A navigation session: the navigator together with how it starts, fed sensor messages one at a
 //! time through [`crate::feed`]. The daemon runs it on live messages and `auvnav replay` on a
 //! log's, in the same order, so that the same messages give the same solutions bit for bit.
+//!
+//! Long on purpose: how a session starts (initial state, coarse and fine alignment) and its feed
+//! with the late-aid ordering are one state machine over the same fields.
 
 use crate::aid::magnetometer::MagnetometerAid;
 use crate::align::coarse::InMotionAligner;

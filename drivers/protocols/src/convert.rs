@@ -1,5 +1,8 @@
 //! From decoded device frames to the schema messages the drivers publish. Pure: the caller
 //! passes the host time at read return and the sequence number.
+//!
+//! Long on purpose: frames to schema messages for every device class with shared validity rules,
+//! and its tests.
 
 use crate::kvh::KvhSample;
 use crate::nortek::BottomTrack;

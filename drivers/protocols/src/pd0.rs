@@ -1,9 +1,9 @@
 //! Teledyne RDI PD0: ensembles of the Workhorse, Pioneer/Pathfinder, Ocean Surveyor, Rio Grande,
 //! Sentinel and their relatives.
 //!
-//! (One file of about 770 lines, on purpose: PD0 is one format whose leaders, bottom track and
+//! Long on purpose: PD0 is one format whose leaders, bottom track and
 //! vendor blocks share one ensemble layout, one table of block IDs and one checksum; split, the
-//! offsets of one ensemble would live in several places.)
+//! offsets of one ensemble would live in several places.
 //!
 //! Framing: `7F 7F`, u16 number of bytes `n` (header to the end of the last block, without the
 //! checksum), a spare byte, the number of data types, one u16 offset per data type (from the

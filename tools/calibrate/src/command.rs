@@ -92,6 +92,8 @@ pub fn load_voyages(
 }
 
 /// The whole calibration: returns the report (also what `--json` prints).
+// Long on purpose: the calibration as the recipe the report documents (options checked, voyages
+// read, method, held-out evaluation, report); each step is a function.
 pub fn calibrate_dvl(args: &CalibrateDvlArgs) -> anyhow::Result<CalibrationReport> {
     let started = Instant::now();
     if !(args.threshold.is_finite() && args.threshold >= 0.0) {

@@ -1,6 +1,10 @@
 //! The calibration's outputs: the report structure (`--json`), a text summary, the
 //! `[navigation.dvl]` table (`--write-config`, atomic) and the report directory (`--report`:
 //! Markdown, SVG plots, the JSON).
+//!
+//! Long on purpose: the report's structure, its text, the configuration table and the report
+//! directory are the one output of a calibration: a change to the JSON is a change to the text and
+//! the Markdown.
 
 use super::objective::VoyageRun;
 use super::options::{CalibrateDvlArgs, Method};
@@ -178,6 +182,8 @@ fn mean(x: impl Iterator<Item = f64>) -> f64 {
     v.iter().sum::<f64>() / v.len().max(1) as f64
 }
 
+// Long on purpose: assembles the report from the calibration's results, one field per documented
+// field of the JSON (docs/json.md).
 pub fn build(i: Inputs) -> CalibrationReport {
     let r = i.result;
     let parameters: Vec<ParameterRow> = i
@@ -482,6 +488,8 @@ fn ne_track(v: &Voyage, run: &VoyageRun) -> Vec<(f64, f64)> {
 }
 
 /// The report directory: `report.md`, `report.json`, `calibration.toml` and SVG plots.
+// Long on purpose: writes the report directory: the Markdown with its tables and one SVG per
+// figure, in the order the report reads.
 pub fn write_report_dir(
     dir: &Path,
     r: &CalibrationReport,

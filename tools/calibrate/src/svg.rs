@@ -42,6 +42,8 @@ fn escape(s: &str) -> String {
 }
 
 /// Renders the plot; `equal_axes` keeps one metre the same length on both axes (for tracks).
+// Long on purpose: the hand-written SVG plot (axes, ticks, series, legend); the architecture issue
+// replaces it with a maintained plotting crate.
 pub fn plot(
     title: &str,
     x_label: &str,

@@ -123,6 +123,8 @@ impl Voyage {
     /// Reads a voyage. The start state is the first truth record in the window, otherwise the
     /// configuration's `[initial]` state, otherwise (a recording of a vehicle that aligned on
     /// board) the daemon's first recorded solution in mode *navigating*.
+    // Long on purpose: reads one voyage: window, start state (truth, `[initial]` or the recorded
+    // solution), fixes and distances, each missing piece with its error.
     pub fn load(
         spec: &VoyageSpec,
         fixes: FixSource,

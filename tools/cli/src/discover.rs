@@ -18,6 +18,8 @@ pub mod command {
         Ok(r)
     }
 
+    // Long on purpose: prints every section of the discovery report in order: a list of print
+    // statements.
     fn print_text(r: &DiscoverReport) {
         println!(
             "auvnav discover: {} (reference: {})",

@@ -11,6 +11,9 @@
 //! `--pause DEVICE,AT,FOR` stops writing (a silent device) and `--unplug DEVICE,AT,FOR` closes the
 //! pseudo-terminal (times in seconds of log time from the first message). Every fault is counted
 //! in the summary, so a test can check the driver against what was played.
+//!
+//! Long on purpose: the last 44 lines are the unit tests, beside the code they test; the code is
+//! 604 lines.
 
 use anyhow::{Context, bail};
 use auvnav_drivers::convert::KvhConfig;
@@ -337,6 +340,8 @@ fn protocol_for(class: DeviceClass, name: &Option<String>) -> anyhow::Result<Opt
 }
 
 /// Runs the emulator; returns the per-device summary (also printed).
+// Long on purpose: the emulator's one loop over every device of the log: pseudo-terminals, pacing,
+// per-device encoders and counts share its state.
 pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
     if !(a.speed.is_finite() && (0.01..=1000.0).contains(&a.speed)) {
         bail!("--speed {}: expected 0.01..=1000", a.speed);

@@ -4,6 +4,9 @@
 //! stops them cleanly and reports the live navigation against the simulated truth, phase by phase
 //! ([`crate::phases`]). It then replays the recording through `auvnav replay` and says whether the
 //! replayed solution is byte-identical to the live one.
+//!
+//! Long on purpose: the last 47 lines are the unit tests, beside the code they test; the code is
+//! 572 lines.
 
 use crate::accuracy::{Accuracy, AccuracyTracker};
 use crate::demo_start::{DemoStart, session_config};
@@ -236,6 +239,8 @@ fn write_candump(path: &Path, depths: &[auvnav_shm_schema::DepthV1]) -> anyhow::
 
 /// Runs the live demo.
 #[allow(clippy::too_many_arguments)]
+// Long on purpose: the live demo: processes started in order, phases followed as they happen,
+// checks at each phase and teardown; the processes it owns are its locals.
 pub fn run_live(
     scenario_name: &str,
     start_mode: DemoStart,

@@ -1,5 +1,8 @@
 //! `auvnav`: the offline tools. `main` only parses arguments and dispatches; the work is done by
 //! library functions that tests drive directly.
+//!
+//! Long on purpose: the command line's definition: every subcommand's arguments and their dispatch,
+//! which clap takes as one tree.
 #![forbid(unsafe_code)]
 
 use anyhow::{Context, bail};
@@ -639,6 +642,7 @@ fn run_import_snapir(a: &auvnav_tools::import::SnapirArgs) -> anyhow::Result<()>
     Ok(())
 }
 
+// Long on purpose: the dispatch of the `auvnav` subcommands: one arm per command.
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {

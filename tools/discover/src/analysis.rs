@@ -2,6 +2,9 @@
 //! ([`Collector`], [`read_logs`]), and the fit, selection, floors and description of what is left
 //! ([`discover`]). `command` runs it per voyage or over the voyages (`voyages`), against the
 //! truth or the smoothed motion (`smoothed`).
+//!
+//! Long on purpose: one voyage's discovery (collector, fit, selection, floors, description) in the
+//! order the report is built.
 
 use super::describe::{Description, describe};
 pub use super::findings::*;
@@ -255,6 +258,8 @@ pub(crate) fn json_of(v: &[f64]) -> serde_json::Value {
 }
 
 /// Runs discovery on channels against a reference with a nominal model.
+// Long on purpose: one voyage's discovery in the order the report is built (channels, candidates,
+// fit and selection, floors, gain, description); the steps share the per-channel tables.
 pub fn discover(
     channels: &[Channel],
     reference: &Reference,

@@ -8,6 +8,9 @@
 //! other four. Forward selection adds, one at a time, the candidate that lowers the held-out score
 //! most, and keeps it only when the score drops by at least [`Selection::min_gain`] and the
 //! estimate lies at least [`Selection::min_sigma`] standard deviations from its nominal value.
+//!
+//! Long on purpose: the fit, the held-out selection and the separability check share the channel's
+//! epochs, design and prior: three steps of one estimator.
 
 use super::{CANDIDATES, Candidate, Channel, Reference, spec};
 use auvnav_sim::effects::Effects;
@@ -123,6 +126,8 @@ impl<'a> Problem<'a> {
     /// readings excite an effect the prior is negligible; where they hardly do (a time offset
     /// on a stretch without accelerations) the estimate stays plausible instead of wandering
     /// outside the range and spoiling a held-out prediction.
+    // Long on purpose: Gauss–Newton with a prior and numerical derivatives: step, damping and
+    // convergence test share the Jacobian and the normal equations.
     pub fn fit(&self, set: &[usize], epochs: &[usize]) -> Fit {
         let theta0 = self.nominal_theta(set);
         let prior_sd: Vec<f64> = set

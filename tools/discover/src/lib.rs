@@ -10,6 +10,9 @@
 //! motion). [`command`] is `auvnav discover` as a function: options in, a typed report (and the
 //! files it asks for) out; the library never prints. With the `clap` feature the option structs
 //! are also the command line's.
+//!
+//! Long on purpose: the reference motion and the channel model (each channel's prediction under the
+//! effects) that every module of discovery uses: one table of channels.
 #![forbid(unsafe_code)]
 
 pub mod analysis;

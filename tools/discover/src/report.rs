@@ -163,6 +163,7 @@ fn short(v: &serde_json::Value) -> String {
 }
 
 /// The report's Markdown.
+// Long on purpose: writes every section of the Markdown report in order.
 fn markdown(r: &DiscoverReport, figures: &[(ChannelKind, Vec<String>)]) -> String {
     let mut m = String::new();
     let _ = writeln!(m, "# Model discovery\n");

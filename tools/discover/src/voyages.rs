@@ -8,6 +8,9 @@
 //! as inconsistent, never as a finding. The effects of one voyage — an IMU bias realisation, the
 //! water's density, the sound speed of the acoustic link, the local field — stay each voyage's
 //! own, fitted in every voyage where its own discovery named them.
+//!
+//! Long on purpose: several voyages' discovery (per-voyage analyses, shared selection with voyages
+//! left out, combination, agreement test), in the order of the module's text.
 
 use super::analysis::{
     DiscoverReport, FoundEffect, NoiseEstimate, Unseparable, discover, json_of, screen_outliers,
@@ -286,6 +289,8 @@ fn held_out(
 /// Discovery on several voyages (see the module's text): each voyage's own report, the shared
 /// installation effects and their agreement, in one report whose `effects` are the shared
 /// effects the voyages agree on.
+// Long on purpose: per-voyage analyses, the shared selection with voyages left out, the combination
+// and the agreement test share the per-voyage tables, in the module text's order.
 pub fn discover_voyages(
     data: &[VoyageData],
     nominal: &Effects,

@@ -237,6 +237,8 @@ fn decimal_year_from_unix(seconds: f64) -> Option<f64> {
 
 /// Reads magnetometer (and accelerometer) columns of a CSV file. Lines starting with `#` are
 /// comments; the first other line names the columns.
+// Long on purpose: a parser over one file's state: header, column lookup, units and rows, each
+// error counted.
 pub fn read_csv(path: &Path, cols: &CsvColumns) -> anyhow::Result<Recording> {
     // The `csv` crate: quoted fields, CRLF line ends; `#` lines are comments, rows may have
     // fewer or more fields than the header (counted as skipped when a needed one is missing).

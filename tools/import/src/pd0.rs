@@ -110,6 +110,8 @@ fn velocity_from_positions(s: &[GpsSample], t: f64, half: f64) -> Option<(f64, f
 /// The messages of a PD0 file with GPS: the DVL channel (bottom track, as the DVL driver
 /// converts it) and a reference at each ensemble from the GPS (position, velocity over ground)
 /// with the DVL's own heading, pitch and roll as attitude.
+// Long on purpose: one pass over a PD0 stream with the GPS blocks between its ensembles, pairing
+// each ensemble with its fix, with its counters.
 pub fn pd0_messages(
     bytes: &[u8],
     velocity: GpsVelocity,

@@ -1,7 +1,7 @@
 //! The auvnav log format: an MCAP file with one channel per topic.
 //!
-//! (About 730 lines, on purpose: the writer, the bounded streaming reader and their tests are one
-//! format with one table of channels and schemas; a change to one side is a change to both.)
+//! Long on purpose: the writer, the bounded streaming reader and their tests are one
+//! format with one table of channels and schemas; a change to one side is a change to both.
 //!
 //! Why MCAP with `ros2msg` schemas and CDR encoding: every message type in `shm-schema` is a
 //! padding-free `#[repr(C)]` struct whose fields sit at offsets that are multiples of their size,

@@ -203,6 +203,8 @@ pub fn recover(path: &Path, out: &Path) -> anyhow::Result<(u64, Option<String>, 
 }
 
 /// Runs `auvnav record`.
+// Long on purpose: the recorder's loop: subscriptions, the chunked writer, flushes, signals and the
+// summary share the open file's state; recovery and the writer are functions.
 pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
     if let Some(src) = &a.recover {
         let out = a

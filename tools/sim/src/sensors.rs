@@ -1,4 +1,7 @@
 //! Sensor models: each turns the true state into one message, applying its named effects.
+//!
+//! Long on purpose: every sensor model of the simulator, each applying its named effects, so that
+//! what an effect means for every sensor is read in one place.
 
 use super::effects::Effects;
 use super::rng::Rng;

@@ -11,6 +11,9 @@
 //!
 //! A library: options in, typed reports and the output files out; it never prints (with the
 //! `clap` feature, the option structs are also the command line's).
+//!
+//! Long on purpose: the smoothing command (options, the two passes, the outputs) and its report
+//! types, which export, report and montecarlo build on.
 #![forbid(unsafe_code)]
 
 pub mod export;
@@ -369,6 +372,8 @@ pub fn smooth_log(
 
 /// [`smooth_log`] with the replay configuration adjusted first (e.g. installation states
 /// switched on).
+// Long on purpose: the two replays and the smoothing between them over one log share the replay
+// configuration, the recorded epochs and the output writers.
 pub fn smooth_log_with(
     a: &SmoothArgs,
     log: &Path,

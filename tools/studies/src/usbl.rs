@@ -197,6 +197,8 @@ pub fn apply_settings(base: &UsblConfig, settings: &[String]) -> anyhow::Result<
     Ok(cfg)
 }
 
+// Long on purpose: one S-USBL run: the voyage simulated, outliers and array error injected, the
+// filter fed and scored at every epoch, in one loop over the run's messages.
 fn run_one(
     a: &UsblArgs,
     scenario: &Scenario,

@@ -353,6 +353,8 @@ mod tests {
     /// nominal state after each update, as the navigation filter does; the backward pass must give
     /// the batch weighted least-squares solution of the whole problem.
     #[test]
+    // Long on purpose: one worked example: the problem, its batch least-squares solution and the
+    // smoother's, compared.
     fn smoother_equals_batch_weighted_least_squares() {
         const N: usize = 6;
         const K: usize = 40;

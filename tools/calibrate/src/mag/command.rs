@@ -278,6 +278,8 @@ fn effects(c: &Calibration, lm: Option<&fit::LmFit>, model: Model) -> Vec<Effect
 }
 
 /// Runs the calibration (no file written).
+// Long on purpose: reads the recordings, splits fit and held-out samples, runs the method and every
+// comparison the report shows; the steps share the sample sets.
 pub fn calibrate_mag(a: &CalibrateMagArgs) -> anyhow::Result<MagReport> {
     if !(a.fit_fraction > 0.0 && a.fit_fraction <= 1.0) {
         bail!("--fit-fraction {}: expected 0 < f <= 1", a.fit_fraction);

@@ -240,6 +240,8 @@ fn std_by_kind(f: &LmFit) -> (f64, f64) {
 
 /// Runs `method` on `samples` with the reference field; for `lm`, chooses the richest model the
 /// data determine (full → diagonal → hard iron → heading plane), with the reason for each step.
+// Long on purpose: the fallback chain of the Levenberg–Marquardt method (full, diagonal, hard iron,
+// heading plane) with each step's reason: one decision list.
 pub fn run_method(
     method: MagMethod,
     samples: &[MagSample],

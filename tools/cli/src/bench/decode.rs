@@ -48,6 +48,8 @@ pub(crate) fn time_decoder<D: auvnav_drivers::framing::StreamDecoder>(
 /// variable leader + bottom track, Water Linked `wrz`, Nortek bottom track, KVH format A, Xsens MTData2 with
 /// counter/time/status/acceleration/rate/delta-v/delta-q, SeaTrac fixes with range, USBL and
 /// position) fed in 4 KiB reads, as a driver reads a serial port.
+// Long on purpose: one benchmark per protocol in the same form (a synthetic stream, timed 4 KiB
+// reads); the table of protocols is the function.
 pub fn decode(repeat: usize, pty_seconds: f64, json: bool) -> anyhow::Result<()> {
     use auvnav_drivers::{kvh, nortek, pd0, seatrac, wldvl, xsens};
     let n = 100_000u32;

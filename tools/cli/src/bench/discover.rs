@@ -178,6 +178,8 @@ fn measured_timings(data: &std::path::Path) -> anyhow::Result<Vec<MeasuredTiming
 /// hidden: 410 001..) and the coloured three-voyage trials (null: 420 001.., hidden: 430 001..;
 /// voyage i of trial s simulated with seed 16 s + i) on
 /// all cores, then the measured data sets one at a time.
+// Long on purpose: every trial kind of the benchmark (hidden, null, pairs, floors, coloured,
+// voyages) laid out and scored in one place, so their seeds are seen together.
 pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
     let (hidden, null, json) = (o.hidden, o.null, o.json);
     let start = std::time::Instant::now();

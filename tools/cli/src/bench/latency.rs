@@ -1,4 +1,7 @@
 //! Latency: a frame on a pseudo-terminal to the bus (`pty_latency`), and to the navigation solution through real driver, daemon and recorder processes (`auvnav bench e2e`).
+//!
+//! Long on purpose: both latency benchmarks share the pseudo-terminal writers, the frame makers and
+//! the statistics.
 
 #[allow(unused_imports)]
 use super::*;
@@ -354,6 +357,8 @@ pub(crate) fn cpu_seconds(pid: u32) -> Option<f64> {
 /// Runs the chain with real processes — `auvnav-imu`, `auvnav-dvl` (Water Linked, 5 Hz),
 /// `auvnav-usbl` (SeaTrac, 1 Hz), `auvnavd` and `auvnav record` — on pseudo-terminals written by
 /// this process, and times each IMU frame to its navigation solution.
+// Long on purpose: starts the chain of real processes, times it and tears it down; the processes
+// and pseudo-terminals it owns are its locals, released in order on every path.
 pub fn e2e(
     rate_hz: f64,
     seconds: f64,

@@ -150,6 +150,8 @@ impl UsblAid {
     /// The update runs over every state with non-zero variance (unscented for ukf/aukf,
     /// linearised for akf); the innovation passes the gate of the noise estimator before anything
     /// is changed, so a rejected fix moves neither the state nor the noise estimate.
+    // Long on purpose: the tight and the loose USBL updates share the gate, the adaptive noise step
+    // and the bookkeeping, so the state is changed in one place.
     pub fn fuse(&mut self, core: &mut NavCore, m: &UsblFixV1) -> AidUpdate {
         let t_ns = m.validity_time_ns;
         let source = match self.fusion.as_ref().map(|u| u.cfg.coupling) {
