@@ -80,10 +80,15 @@ pub struct NeesReport {
     pub series: Vec<[f64; 4]>,
 }
 
-/// Chi-square quantile (Wilson-Hilferty; better than 1 % for k >= 30).
+/// The χ² quantile with `k` degrees of freedom at the probability of the standard normal's `z`
+/// (z = ±1.96: the 2.5 % and 97.5 % points), from `statrs` (exact inverse; k > 0).
 pub fn chi2_quantile(k: f64, z: f64) -> f64 {
-    let a = 2.0 / (9.0 * k);
-    k * (1.0 - a + z * a.sqrt()).powi(3)
+    use statrs::distribution::{ChiSquared, ContinuousCDF, Normal};
+    let p = Normal::standard().cdf(z);
+    match ChiSquared::new(k) {
+        Ok(chi2) => chi2.inverse_cdf(p),
+        Err(_) => f64::NAN,
+    }
 }
 
 /// The attitude error `phi` with `C_est = (I - [phi x]) C_true`.
@@ -361,6 +366,10 @@ mod tests {
 
     #[test]
     fn chi2_quantiles_match_tables() {
+        // Table values, and small degrees of freedom where an approximation would not hold.
+        assert!((chi2_quantile(1.0, 1.959_964) - 5.024).abs() < 0.001);
+        assert!((chi2_quantile(3.0, -1.959_964) - 0.216).abs() < 0.001);
+        assert!((chi2_quantile(3.0, 2.326_348) - 11.345).abs() < 0.001);
         // Tabulated: chi2(150) 2.5 % = 117.98, 97.5 % = 185.80; chi2(30) 2.5 % = 16.79, 97.5 % = 46.98.
         assert!((chi2_quantile(150.0, -1.959_964) - 117.98).abs() < 0.1);
         assert!((chi2_quantile(150.0, 1.959_964) - 185.80).abs() < 0.1);
