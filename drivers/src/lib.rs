@@ -3,7 +3,7 @@
 #![forbid(unsafe_code)]
 
 pub use auvnav_protocols::{
-    convert, device, emulate, framing, gnss, kvh, nmea, nortek, pd0, seatrac, ubx, wldvl,
+    device, framing, gnss, kvh, nmea, nortek, pd0, seatrac, to_device, to_schema, ubx, wldvl,
     wldvl_json, xsens,
 };
 

@@ -552,7 +552,7 @@ fn body_to_ned(v: [f64; 3], roll: f64, pitch: f64, yaw: f64) -> [f64; 3] {
 /// course off by 90–180° or a speed off by the beam geometry.
 #[test]
 fn beam_coordinates_give_the_gps_speed_and_course() {
-    use auvnav_drivers::convert::pd0_velocity;
+    use auvnav_drivers::to_schema::pd0_velocity;
     use auvnav_shm_schema::DvlVelocityV1;
     let Some(dir) = shared("data/rdi-pd0/raw") else {
         return;
@@ -611,8 +611,8 @@ fn beam_coordinates_give_the_gps_speed_and_course() {
 /// rotation's direction is tested on synthesised ensembles and through the driver on a pty.)
 #[test]
 fn earth_coordinates_are_rotated_back_on_a_measured_file() {
-    use auvnav_drivers::convert::pd0_velocity;
     use auvnav_drivers::pd0::CoordinateSystem;
+    use auvnav_drivers::to_schema::pd0_velocity;
     use auvnav_shm_schema::DvlVelocityV1;
     let Some(dir) = shared("data/rdi-pd0/raw") else {
         return;

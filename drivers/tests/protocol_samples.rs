@@ -452,7 +452,7 @@ fn nortek_dvl1000_captures_decode_to_their_documented_values() {
 
 #[test]
 fn water_linked_tcp_json_reports_decode_to_the_documented_values() {
-    use auvnav_drivers::convert::water_linked_velocity;
+    use auvnav_drivers::to_schema::water_linked_velocity;
     use auvnav_drivers::wldvl_json::{JsonDecoder, JsonFrame};
     use auvnav_shm_schema::DvlVelocityV1;
     let Some(dir) = shared("protocols/waterlinked_dvl") else {

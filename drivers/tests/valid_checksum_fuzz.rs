@@ -4,10 +4,10 @@
 //! decoders and conversions never panic (debug builds check integer overflow), and an IMU sample
 //! they publish as valid is finite and within its device's measurement range.
 
-use auvnav_drivers::convert::{KVH_RANGE, XSENS_RANGE};
 use auvnav_drivers::device::{DeviceDecoder, Output, Protocol, ProtocolSettings};
 use auvnav_drivers::kvh::{KvhSample, encode as encode_kvh};
 use auvnav_drivers::seatrac::{CID_PING_RESP, CID_XCVR_FIX, CID_XCVR_USBL, encode_line};
+use auvnav_drivers::to_schema::{KVH_RANGE, XSENS_RANGE};
 use auvnav_drivers::xsens::{MtData2, encode_mtdata2};
 use auvnav_shm_schema::ImuSampleV1;
 

@@ -5,9 +5,9 @@
 
 use auvnav_sim::effects::{Effects, set};
 use auvnav_tools::discover::command::{discover, read_logs};
-use auvnav_tools::discover::extend::effect_set_toml;
 use auvnav_tools::discover::fit::Selection;
-use auvnav_tools::discover::hidden::{Hidden, draw, simulate, trial, trial_set};
+use auvnav_tools::discover::hidden_effects::{Hidden, draw, simulate, trial, trial_set};
+use auvnav_tools::discover::outputs::effect_set_toml;
 
 struct Dir(std::path::PathBuf);
 impl Drop for Dir {
@@ -118,7 +118,7 @@ fn the_extended_model_reproduces_the_residuals_and_leaves_nothing_to_find() {
 /// within 10 %, nothing else.
 #[test]
 fn two_hidden_effects_are_both_found() {
-    use auvnav_tools::discover::hidden::{draw_pair, trial_set};
+    use auvnav_tools::discover::hidden_effects::{draw_pair, trial_set};
     let d = dir("discover-pairs");
     for seed in [9401, 9402, 9403] {
         let h = draw_pair(seed);

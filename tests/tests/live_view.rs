@@ -135,7 +135,8 @@ fn a_foxglove_client_sees_the_live_solution_of_the_demo() {
     assert_eq!(v["clean_stop"], true, "{v}");
     assert_eq!(v["solutions"], 6000, "{v}");
 
-    let csv = auvnav_tools::live::read_nav_csv(&out.join("live_nav.csv")).expect("live CSV");
+    let csv =
+        auvnav_tools::demo_processes::read_nav_csv(&out.join("live_nav.csv")).expect("live CSV");
     assert!(
         solutions.len() > 5000,
         "{} of {} solutions reached the client",

@@ -2,7 +2,6 @@
 //! schema message the driver publishes. Pure (no I/O, no clock): the driver passes the host time
 //! at read return.
 
-use crate::convert::{self, KvhConfig};
 use crate::framing::DecoderStats;
 use crate::gnss::{EpochGatherer, GnssSettings};
 use crate::kvh::KvhDecoder;
@@ -10,6 +9,7 @@ use crate::nmea::NmeaDecoder;
 use crate::nortek::{NortekDecoder, NortekFrame};
 use crate::pd0::Pd0Decoder;
 use crate::seatrac::{SeatracDecoder, SeatracMessage};
+use crate::to_schema::{self, KvhConfig};
 use crate::ubx::{UbxDecoder, UbxFrame};
 use crate::wldvl::{WlDecoder, WlFrame};
 use crate::wldvl_json::{JsonDecoder, JsonFrame};
@@ -311,10 +311,10 @@ impl DeviceDecoder {
             match &mut self.inner {
                 Inner::Pd0(d) => match d.next_ensemble()? {
                     Ok(e) => {
-                        if let Some(m) = convert::pd0_velocity(&e, host_time_ns, s.latency_s, 0) {
+                        if let Some(m) = to_schema::pd0_velocity(&e, host_time_ns, s.latency_s, 0) {
                             // The water-mass reference layer of the same ping, next.
                             self.pending =
-                                convert::pd0_water_track(&e, host_time_ns, s.latency_s, 0)
+                                to_schema::pd0_water_track(&e, host_time_ns, s.latency_s, 0)
                                     .map(Output::Dvl);
                             return Some(Output::Dvl(m));
                         }
@@ -324,7 +324,7 @@ impl DeviceDecoder {
                 },
                 Inner::Wldvl(d) => match d.next_frame()? {
                     Ok(WlFrame::Velocity(v)) => {
-                        return Some(Output::Dvl(convert::water_linked_velocity(
+                        return Some(Output::Dvl(to_schema::water_linked_velocity(
                             &v,
                             host_time_ns,
                             0,
@@ -336,8 +336,8 @@ impl DeviceDecoder {
                 Inner::Kvh(d) => {
                     let sample = d.next_sample()?;
                     self.device_counter(u16::from(sample.sequence), 128);
-                    let mut m = convert::kvh_sample(&sample, &s.kvh, host_time_ns, 0);
-                    if !convert::KVH_RANGE.check(&mut m) {
+                    let mut m = to_schema::kvh_sample(&sample, &s.kvh, host_time_ns, 0);
+                    if !to_schema::KVH_RANGE.check(&mut m) {
                         self.counters.out_of_range += 1;
                     }
                     return Some(Output::Imu(m));
@@ -347,17 +347,20 @@ impl DeviceDecoder {
                         if let Some(c) = m.packet_counter {
                             self.device_counter(c, 1 << 16);
                         }
-                        let imu = convert::xsens_sample(&m, s.xsens_rate_hz, host_time_ns, 0).map(
-                            |mut i| {
-                                if !convert::XSENS_RANGE.check(&mut i) {
+                        let imu = to_schema::xsens_sample(&m, s.xsens_rate_hz, host_time_ns, 0)
+                            .map(|mut i| {
+                                if !to_schema::XSENS_RANGE.check(&mut i) {
                                     self.counters.out_of_range += 1;
                                 }
                                 Output::Imu(i)
-                            },
-                        );
-                        let mag =
-                            convert::xsens_magnetometer(&m, s.xsens_field_unit_ut, host_time_ns, 0)
-                                .map(Output::Magnetometer);
+                            });
+                        let mag = to_schema::xsens_magnetometer(
+                            &m,
+                            s.xsens_field_unit_ut,
+                            host_time_ns,
+                            0,
+                        )
+                        .map(Output::Magnetometer);
                         match (imu, mag) {
                             (Some(i), m) => {
                                 self.pending = m;
@@ -371,7 +374,7 @@ impl DeviceDecoder {
                 },
                 Inner::Nortek(d) => match d.next_frame()? {
                     Ok(NortekFrame::BottomTrack(bt)) => {
-                        return Some(Output::Dvl(convert::nortek_velocity(
+                        return Some(Output::Dvl(to_schema::nortek_velocity(
                             &bt,
                             host_time_ns,
                             s.latency_s,
@@ -383,7 +386,7 @@ impl DeviceDecoder {
                 },
                 Inner::WldvlJson(d) => match d.next_frame()? {
                     Ok(JsonFrame::Velocity { velocity, .. }) => {
-                        return Some(Output::Dvl(convert::water_linked_velocity(
+                        return Some(Output::Dvl(to_schema::water_linked_velocity(
                             &velocity,
                             host_time_ns,
                             0,
@@ -426,7 +429,7 @@ impl DeviceDecoder {
                 Inner::Seatrac(d) => match d.next_frame()? {
                     Ok(f) => match f.message {
                         SeatracMessage::Fix { fix, .. } if f.from_beacon => {
-                            return Some(Output::Usbl(convert::seatrac_fix(
+                            return Some(Output::Usbl(to_schema::seatrac_fix(
                                 &fix,
                                 host_time_ns,
                                 s.latency_s,

@@ -4,9 +4,7 @@
 //! decoder can be used here without that stack.
 #![forbid(unsafe_code)]
 
-pub mod convert;
 pub mod device;
-pub mod emulate;
 pub mod framing;
 pub mod gnss;
 pub mod kvh;
@@ -14,6 +12,8 @@ pub mod nmea;
 pub mod nortek;
 pub mod pd0;
 pub mod seatrac;
+pub mod to_device;
+pub mod to_schema;
 pub mod ubx;
 pub mod wldvl;
 pub mod wldvl_json;

@@ -3,7 +3,7 @@
 //! Decoded: the velocity report (`"type": "velocity"`, formats `json_v2` and `json_v3`: velocity,
 //! figure of merit, 3×3 covariance, altitude, validity, status, the time of validity and of
 //! transmission in µs, the transducers) into the same [`Velocity`] the serial `wrz` report gives,
-//! so that one conversion (`convert::water_linked_velocity`) serves both; the dead-reckoning
+//! so that one conversion (`to_schema::water_linked_velocity`) serves both; the dead-reckoning
 //! report (`"type": "position_local"`) into [`DeadReckoning`]. Other report types are returned
 //! by name. A line that is not JSON, or a velocity report without its fields, is counted as
 //! malformed and skipped; a line longer than [`MAX_LINE`] without a newline is dropped.

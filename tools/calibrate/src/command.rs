@@ -1,12 +1,12 @@
 //! `auvnav calibrate dvl`: arguments, the run (baseline, method, re-score, hold-out) and its
 //! outputs.
 
-use super::fast;
+use super::gauss_newton;
 use super::objective::Record;
 use super::options::{CalibrateDvlArgs, Holdout, Method};
 use super::params::ParameterSet;
 use super::report::{self, CalibrationReport};
-use super::seed::SeedSettings;
+use super::scal::SeedSettings;
 use super::two_point;
 use super::voyage::{DistanceSource, FixSource, Voyage, VoyageSpec};
 use super::{Evaluation, MethodResult, Problem};
@@ -69,9 +69,12 @@ fn run_method(
 ) -> anyhow::Result<(MethodResult, Vec<two_point::TwoPointVoyage>)> {
     let mut p = |l: &str, d: usize, t: usize| progress.update(l, d, t);
     match method {
-        Method::Fast => Ok((fast::calibrate(problem, params, &mut p)?, Vec::new())),
+        Method::Fast => Ok((
+            gauss_newton::calibrate(problem, params, &mut p)?,
+            Vec::new(),
+        )),
         Method::Seed => Ok((
-            super::seed::calibrate(problem, params, settings, &mut p)?,
+            super::scal::calibrate(problem, params, settings, &mut p)?,
             Vec::new(),
         )),
         Method::TwoPoint => two_point::calibrate(problem, params, baseline),
@@ -161,7 +164,7 @@ pub fn calibrate_dvl(args: &CalibrateDvlArgs) -> anyhow::Result<CalibrationRepor
     let fit_wall_s = fit_started.elapsed().as_secs_f64();
     // The smoother's standard deviations are its own; the others get the fast method's analysis.
     if !matches!(args.method, Method::Fast | Method::Smoother) {
-        let a = fast::analyse(&problem, &params, &after.runs, &result.x)?;
+        let a = gauss_newton::analyse(&problem, &params, &after.runs, &result.x)?;
         result.std = a.std;
         result.determined = a.determined;
         result.inseparable = a.inseparable;

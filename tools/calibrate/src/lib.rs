@@ -4,8 +4,8 @@
 //! configuration and the distance threshold; its objective is the S-CAL mean CEP50 of
 //! error/distance over the fixes beyond the threshold, each voyage dead-reckoned by a full replay
 //! through the navigation session ([`objective::run_voyage`]). Four methods search the
-//! installation ([`params::ParameterSet`]): [`two_point`] (the seed's formulas), [`seed`] (Latin
-//! hypercube → response surface → particle swarm), [`fast`] (Gauss–Newton with replay
+//! installation ([`params::ParameterSet`]): [`two_point`] (the seed's formulas), [`scal`] (the published S-CAL method: Latin
+//! hypercube → response surface → particle swarm), [`gauss_newton`] (Gauss–Newton with replay
 //! sensitivities, the default) and [`smoother`] (the installation states of the filter, smoothed
 //! over each voyage and fused across them). [`command`] is `auvnav calibrate dvl` as a function
 //! (options in, a typed report out); [`report`] writes JSON, the `[navigation.dvl]` table and the
@@ -14,13 +14,13 @@
 #![forbid(unsafe_code)]
 
 pub mod command;
-pub mod fast;
+pub mod gauss_newton;
 pub mod mag;
 pub mod objective;
 pub mod options;
 pub mod params;
 pub mod report;
-pub mod seed;
+pub mod scal;
 pub mod smoother;
 pub mod svg;
 pub mod two_point;

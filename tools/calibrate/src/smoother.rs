@@ -9,7 +9,7 @@
 //! parameters are dropped), so the reported standard deviations are those of each parameter
 //! with the others estimated alongside it in the filter.
 
-use super::fast::DETERMINED_RATIO;
+use super::gauss_newton::DETERMINED_RATIO;
 use super::params::{NAMES, ParameterSet, installation};
 use super::voyage::{DistanceSource, Voyage};
 use super::{MethodResult, Problem};

@@ -57,8 +57,8 @@ pub struct DemoArgs {
     /// The coordinate system the emulated PD0 DVL records its bottom track in (processes only):
     /// instrument (x, y, z), beam (the four radial velocities) or earth (east, north, up with
     /// the attitude in the ensemble); `auvnav-dvl` converts each back.
-    #[arg(long, value_enum, default_value_t = crate::emulate::Pd0Coordinates::Instrument)]
-    pub pd0_coordinates: crate::emulate::Pd0Coordinates,
+    #[arg(long, value_enum, default_value_t = crate::emulate_ptys::Pd0Coordinates::Instrument)]
+    pub pd0_coordinates: crate::emulate_ptys::Pd0Coordinates,
     /// Write the logs and solutions here (processes: voyage.mcap, record.mcap, live_nav.csv,
     /// replay_nav.csv and each process's log; in process: sim.mcap and nav.csv).
     #[arg(long)]
@@ -343,7 +343,7 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
         .gnss
         .as_deref()
         .and_then(auvnav_drivers::device::Protocol::from_name);
-    let r = crate::live::run_live(
+    let r = crate::demo_processes::run_live(
         a.scenario_name(),
         a.start,
         imu,

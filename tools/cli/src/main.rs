@@ -29,7 +29,7 @@ enum Command {
     /// process): in-motion alignment from no heading, USBL homing, figures against the truth.
     Demo(auvnav_tools::demo::DemoArgs),
     /// What a log holds: header, channels with counts and rates, duration, configuration.
-    Info(auvnav_tools::info::InfoArgs),
+    Info(auvnav_tools::log_info::InfoArgs),
     /// Run a log through the navigation core; with a truth channel, report the accuracy.
     Replay(auvnav_tools::replay::ReplayArgs),
     /// Post-process logs: forward-backward (RTS) smoothing with fixes from the log and a fix
@@ -38,7 +38,7 @@ enum Command {
     /// Decode a captured device byte stream (one JSON object per frame with --json).
     Decode(auvnav_tools::decode::DecodeArgs),
     /// Play a log's sensor messages into pseudo-terminals in the devices' protocols.
-    Emulate(auvnav_tools::emulate::EmulateArgs),
+    Emulate(auvnav_tools::emulate_ptys::EmulateArgs),
     /// Record every topic of a deployment to a log (MCAP); or recover a killed recorder's log.
     Record(auvnav_recorder::RecordArgs),
     /// S-ALIGN fine-alignment Monte Carlo: error models 1/2/3 on moored, straight, turning runs.
@@ -657,12 +657,12 @@ fn main() -> std::process::ExitCode {
                 Ok(())
             }
         }),
-        Command::Info(a) => auvnav_tools::info::run(&a).map(|_| ()),
+        Command::Info(a) => auvnav_tools::log_info::run(&a).map(|_| ()),
         Command::Completions { shell, out } => completions(shell, out.as_deref()),
         Command::Man { out } => man_pages(&out),
         Command::Decode(a) => auvnav_tools::decode::run(&a).map(|_| ()),
         Command::Discover(a) => auvnav_tools::discover::command::run(&a).map(|_| ()),
-        Command::Emulate(a) => auvnav_tools::emulate::run(&a).map(|_| ()),
+        Command::Emulate(a) => auvnav_tools::emulate_ptys::run(&a).map(|_| ()),
         Command::Record(a) => auvnav_recorder::run(&a).map(|_| ()),
         Command::AlignMeasured(a) => auvnav_tools::align::run_measured(&a).map(|_| ()),
         Command::Align(a) => auvnav_tools::align::run(&a).and_then(|r| {

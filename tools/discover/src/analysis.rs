@@ -6,9 +6,9 @@
 //! Long on purpose: one voyage's discovery (collector, fit, selection, floors, description) in the
 //! order the report is built.
 
-use super::describe::{Description, describe};
 pub use super::findings::*;
 use super::fit::{self, Problem, Selection};
+use super::residuals::{Description, describe};
 use super::{Channel, ChannelKind, Reference, spec};
 use anyhow::Context;
 use auvnav_log::{LogMessage, LogReader};
@@ -594,7 +594,7 @@ pub fn discover(
             let mut note = format!(
                 "not white (Ljung-Box Q {:.0} > {:.1}; lag-1 autocorrelation {:.2}); rms {:.4} {}",
                 desc.ljung_box_q,
-                super::describe::CHI2_20_99,
+                super::residuals::CHI2_20_99,
                 desc.lag1,
                 desc.rms,
                 kind.unit()
@@ -659,7 +659,7 @@ pub fn discover(
             Vec::new()
         };
         r.noise
-            .push(super::extend::noise_estimate(kind, &rms_all, spacing_s));
+            .push(super::outputs::noise_estimate(kind, &rms_all, spacing_s));
         r.residuals.push(ResidualSeries {
             channel: kind,
             times: times.clone(),

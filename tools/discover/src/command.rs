@@ -203,14 +203,14 @@ pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
     }
     if !a.no_navigation {
         let start = std::time::Instant::now();
-        super::extend::navigation_gain(&a.logs, &mut r);
+        super::outputs::navigation_gain(&a.logs, &mut r);
         r.wall_s += start.elapsed().as_secs_f64();
     }
     if let Some(p) = &a.write_effects {
-        write_atomically(p, &super::extend::effect_set_toml(&r))?;
+        write_atomically(p, &super::outputs::effect_set_toml(&r))?;
     }
     if let Some(p) = &a.write_config {
-        write_atomically(p, &super::extend::navigator_toml(&r)?)?;
+        write_atomically(p, &super::outputs::navigator_toml(&r)?)?;
     }
     if let Some(dir) = &a.report {
         super::report::write_report_dir(dir, &r)?;

@@ -3,7 +3,7 @@
 //! `DiscoverReport`, apart from the code that fills them).
 
 use super::ChannelKind;
-use super::describe::Description;
+use super::residuals::Description;
 use auvnav_replay::accuracy::Accuracy;
 use auvnav_sim::effects::Effects;
 use serde::Serialize;

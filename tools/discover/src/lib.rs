@@ -17,13 +17,13 @@
 
 pub mod analysis;
 pub mod command;
-pub mod describe;
-pub mod extend;
 pub mod findings;
 pub mod fit;
-pub mod hidden;
+pub mod hidden_effects;
 pub mod imu;
+pub mod outputs;
 pub mod report;
+pub mod residuals;
 pub mod smoothed;
 pub mod trials;
 pub mod voyages;

@@ -3,9 +3,9 @@
 //! `navigation.toml`.
 
 use super::ChannelKind;
-use super::describe::{periodogram_nyquist, periodogram_up_to};
-use super::extend;
 use super::findings::{DiscoverReport, ResidualSeries};
+use super::outputs;
+use super::residuals::{periodogram_nyquist, periodogram_up_to};
 use anyhow::Context;
 use auvnav_calibrate::report::write_atomically;
 use auvnav_calibrate::svg::{PALETTE, Series, plot};
@@ -347,8 +347,8 @@ pub fn write_report_dir(dir: &Path, r: &DiscoverReport) -> anyhow::Result<()> {
         &dir.join("report.json"),
         &auvnav_replay::json::to_string_pretty(r)?,
     )?;
-    write_atomically(&dir.join("effects.toml"), &extend::effect_set_toml(r))?;
-    write_atomically(&dir.join("navigation.toml"), &extend::navigator_toml(r)?)?;
+    write_atomically(&dir.join("effects.toml"), &outputs::effect_set_toml(r))?;
+    write_atomically(&dir.join("navigation.toml"), &outputs::navigator_toml(r)?)?;
     let mut figures = Vec::new();
     for s in &r.residuals {
         let mut files = Vec::new();

@@ -3,7 +3,7 @@
 //! the others (null trials) hide nothing and use seeds from 100 001. The benchmark and a
 //! distributed engine (the Python package's `auvnav.fleet`) run the same trials.
 
-use super::hidden::{Trial, draw, trial};
+use super::hidden_effects::{Trial, draw, trial};
 use serde::Serialize;
 
 /// How many trials of each kind.

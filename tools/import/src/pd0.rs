@@ -116,8 +116,8 @@ pub fn pd0_messages(
     bytes: &[u8],
     velocity: GpsVelocity,
 ) -> anyhow::Result<(Vec<(&'static str, LogMessage)>, Pd0Summary)> {
-    use auvnav_protocols::convert::{pd0_rtc_ns, pd0_velocity};
     use auvnav_protocols::pd0::{NmeaBlock, decode_all};
+    use auvnav_protocols::to_schema::{pd0_rtc_ns, pd0_velocity};
     let (ensembles, stats) = decode_all(bytes);
     let mut s = Pd0Summary {
         ensembles: ensembles.len() as u64,

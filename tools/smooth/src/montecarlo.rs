@@ -241,7 +241,7 @@ fn one_run(
     let (Some(first), Some(last)) = (truths.first(), truths.last()) else {
         bail!("run {k}: the simulation has no truth records");
     };
-    let start = auvnav_studies::study::perturbed_start(cfg, first, &mut rng);
+    let start = auvnav_studies::perturbed_start::perturbed_start(cfg, first, &mut rng);
     let end = truth_position(last);
     let std = a.end_fix_std;
     let (dn, de, dd) = (rng.gauss(std), rng.gauss(std), rng.gauss(std));

@@ -17,7 +17,7 @@ pub mod align;
 pub mod args;
 pub mod nees;
 pub mod parallel;
+pub mod perturbed_start;
 pub mod progress;
 pub mod runs;
-pub mod study;
 pub mod usbl;

@@ -248,7 +248,7 @@ impl crate::runs::RunStudy for NeesStudy {
                     );
                     let truth_pos = truth_position(t);
                     let Some(n) = session.navigator() else {
-                        let start = crate::study::perturbed_start(truth_cfg, t, &mut rng);
+                        let start = crate::perturbed_start::perturbed_start(truth_cfg, t, &mut rng);
                         session.start(start, "truth perturbed by a draw of P0", &mut |_| {
                             Ok::<(), anyhow::Error>(())
                         })?;

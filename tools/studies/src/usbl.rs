@@ -263,7 +263,7 @@ fn run_one(
             LogMessage::Truth(t) => {
                 let truth_pos = truth_position(t);
                 let Some(nv) = session.navigator() else {
-                    let start = crate::study::perturbed_start(&cfg, t, &mut rng);
+                    let start = crate::perturbed_start::perturbed_start(&cfg, t, &mut rng);
                     session.start(start, "truth perturbed by a draw of P0", &mut |_| {
                         Ok::<(), anyhow::Error>(())
                     })?;

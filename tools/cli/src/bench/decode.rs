@@ -112,7 +112,7 @@ pub fn decode(repeat: usize, pty_seconds: f64, json: bool) -> anyhow::Result<()>
 
     let mut stream = Vec::new();
     for k in 0..n {
-        stream.extend(auvnav_drivers::emulate::nortek_from_dvl(
+        stream.extend(auvnav_drivers::to_device::nortek_from_dvl(
             &auvnav_shm_schema::DvlVelocityV1 {
                 device_time_ns: 1_795_000_000_000_000_000 + u64::from(k) * 100_000_000,
                 velocity_dvl_m_s: [1.5, 0.01 * f64::from(k % 7), -0.02],

@@ -5,7 +5,7 @@
 //! magnitude); and the wall time of discovery on each measured data set.
 
 use crate::calibrate::Progress;
-use crate::discover::hidden::{
+use crate::discover::hidden_effects::{
     HIDDEN, SetTrial, Trial, coloured, draw, draw_of, draw_pair, installation_effects, scaled,
     trial_set, trial_set_with, trial_voyages,
 };

@@ -366,7 +366,7 @@ pub fn e2e(
     outputs: bool,
 ) -> anyhow::Result<E2eLatency> {
     use auvnav_drivers::clock::monotonic_ns;
-    use auvnav_drivers::emulate as enc;
+    use auvnav_drivers::to_device as enc;
     use auvnav_shm_schema::bus::Bus;
     use auvnav_shm_schema::{DvlVelocityV1, ImuSampleV1, NavSolutionV1, UsblFixV1, qos, topic};
     use serialport::SerialPort;
@@ -585,7 +585,7 @@ pub fn e2e(
                 | ImuSampleV1::STATUS_DEVICE_TIME_VALID,
             ..Default::default()
         };
-        let cfg = auvnav_drivers::convert::KvhConfig {
+        let cfg = auvnav_drivers::to_schema::KvhConfig {
             increments: false,
             degrees: false,
             rate_hz,

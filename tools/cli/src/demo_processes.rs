@@ -246,7 +246,7 @@ pub fn run_live(
     start_mode: DemoStart,
     imu: Protocol,
     gnss: Option<Protocol>,
-    pd0_coordinates: crate::emulate::Pd0Coordinates,
+    pd0_coordinates: crate::emulate_ptys::Pd0Coordinates,
     seed: u64,
     seconds: Option<f64>,
     speed: f64,

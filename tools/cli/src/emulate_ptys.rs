@@ -16,9 +16,9 @@
 //! 604 lines.
 
 use anyhow::{Context, bail};
-use auvnav_drivers::convert::KvhConfig;
 use auvnav_drivers::device::{DeviceClass, Protocol, XSENS_FIELD_UNIT_UT};
-use auvnav_drivers::emulate as enc;
+use auvnav_drivers::to_device as enc;
+use auvnav_drivers::to_schema::KvhConfig;
 use auvnav_log::{LogMessage, LogReader};
 use auvnav_sim::rng::Rng;
 use serde::Serialize;

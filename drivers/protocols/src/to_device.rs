@@ -1,16 +1,16 @@
 //! Device emulation: schema messages encoded in the devices' own protocols, the inverse of
-//! [`crate::convert`]. The emulator (`auvnav emulate`) plays a log's messages through these into
+//! [`crate::to_schema`]. The emulator (`auvnav emulate`) plays a log's messages through these into
 //! pseudo-terminals; decoding the bytes with the driver's conversion gives the message back up to
 //! the protocol's resolution (PD0 1 mm/s, SeaTrac 0.1 m and 0.1°, KVH and Xsens f32).
 //!
 //! Long on purpose: the last 493 lines are the unit tests, beside the code they test; the code is
 //! 520 lines.
 
-use crate::convert::{KvhConfig, STANDARD_GRAVITY};
 use crate::kvh::{self, KvhSample};
 use crate::nortek;
 use crate::pd0::{self, BottomTrack, CoordinateSystem, Ensemble, FixedLeader, VariableLeader};
 use crate::seatrac::{self, AcoFix, FixRange, FixUsbl};
+use crate::to_schema::{KvhConfig, STANDARD_GRAVITY};
 use crate::wldvl::{self, Velocity, WlFrame};
 use crate::xsens::{self, MtData2};
 use auvnav_shm_schema::{DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, UsblFixV1};
@@ -32,13 +32,13 @@ fn dvl_device_time_ns(m: &DvlVelocityV1) -> u64 {
     }
 }
 
-pub use crate::convert::pd0_rtc;
+pub use crate::to_schema::pd0_rtc;
 
 /// Beam angle of the emulated Nortek DVL (deg, the DVL1000's).
 pub const NORTEK_BEAM_ANGLE_DEG: f64 = 25.0;
 
 /// A DVL message as a Nortek bottom-track record of a down-looking DVL with beam 1 forward (see
-/// [`crate::convert::nortek_velocity`]): X, Y, Z1 = Z2 the velocity, beam velocities its
+/// [`crate::to_schema::nortek_velocity`]): X, Y, Z1 = Z2 the velocity, beam velocities its
 /// projection on the four beams (azimuths 45°, −45°, −135°, 135° from X, 25° from Z), every beam's
 /// vertical distance the altitude, the device time as the ping's date. Invalid values are written
 /// as the device writes them (−32.768 m/s, figure of merit 10).
@@ -349,7 +349,7 @@ pub fn xsens_from_imu(m: &ImuSampleV1, packet_counter: u16) -> Vec<u8> {
 }
 
 /// A magnetometer message as an Xsens MTData2 message carrying the magnetic field in normalised
-/// units of `unit_ut` µT (the inverse of [`crate::convert::xsens_magnetometer`]), with packet
+/// units of `unit_ut` µT (the inverse of [`crate::to_schema::xsens_magnetometer`]), with packet
 /// counter, sample time fine and temperature. An invalid field is sent as NaN.
 pub fn xsens_from_magnetometer(m: &MagnetometerV1, unit_ut: f64, packet_counter: u16) -> Vec<u8> {
     let field = if m.validity & MagnetometerV1::VALID_FIELD != 0 {
@@ -369,7 +369,7 @@ pub fn xsens_from_magnetometer(m: &MagnetometerV1, unit_ut: f64, packet_counter:
 }
 
 /// A USBL message as a SeaTrac `CID_XCVR_FIX` line (the inverse of
-/// [`crate::convert::seatrac_fix`]; `position_array_m` is `[northing, easting, depth]`).
+/// [`crate::to_schema::seatrac_fix`]; `position_array_m` is `[northing, easting, depth]`).
 /// `ddmm.mmmmmmm,N` / `dddmm.mmmmmmm,E`.
 fn nmea_angle(deg: f64, width: usize, pos: char, neg: char) -> String {
     let a = deg.abs();
@@ -942,7 +942,7 @@ mod tests {
             1_700_000_000_120_000_000,
             2_000_000_000_990_000_000,
         ] {
-            assert_eq!(crate::convert::pd0_rtc_ns(&pd0_rtc(ns)), Some(ns));
+            assert_eq!(crate::to_schema::pd0_rtc_ns(&pd0_rtc(ns)), Some(ns));
         }
     }
 
