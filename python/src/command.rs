@@ -78,62 +78,67 @@ macro_rules! spec {
 }
 
 fn specs() -> Vec<Spec> {
-    use auvnav_calibrate::CalibrateDvlArgs;
-    use auvnav_calibrate::mag::CalibrateMagArgs;
-    use auvnav_discover::command::DiscoverArgs;
-    use auvnav_import::{MagCsvArgs, Pd0Args, SnapirArgs, UgpsArgs};
-    use auvnav_smooth::SmoothArgs;
-    use auvnav_studies::align::{AlignArgs, AlignMeasuredArgs};
-    use auvnav_studies::nees::NeesArgs;
-    use auvnav_studies::usbl::UsblArgs;
+    use auvnav_calibrate::CalibrateDvlOptions;
+    use auvnav_calibrate::mag::CalibrateMagOptions;
+    use auvnav_discover::command::DiscoverOptions;
+    use auvnav_import::{MagCsvOptions, Pd0Options, SnapirOptions, UgpsOptions};
+    use auvnav_smooth::SmoothOptions;
+    use auvnav_studies::align::{AlignMeasuredOptions, AlignOptions};
+    use auvnav_studies::nees::NeesOptions;
+    use auvnav_studies::usbl::UsblOptions;
     vec![
         spec!(
             "smooth",
             "auvnav smooth: forward-backward smoothing of logs",
-            SmoothArgs,
+            SmoothOptions,
             |a| document(&auvnav_smooth::run(&a)?)
         ),
         spec!(
             "calibrate_dvl",
             "auvnav calibrate dvl: S-CAL DVL installation",
-            CalibrateDvlArgs,
+            CalibrateDvlOptions,
             |a| document(&auvnav_calibrate::calibrate_dvl(&a)?)
         ),
         spec!(
             "calibrate_mag",
             "auvnav calibrate mag: magnetometer hard and soft iron",
-            CalibrateMagArgs,
+            CalibrateMagOptions,
             |a| document(&auvnav_calibrate::mag::run(&a)?)
         ),
         spec!(
             "discover",
             "auvnav discover: model discovery",
-            DiscoverArgs,
+            DiscoverOptions,
             |a| document(&auvnav_discover::command::run(&a)?)
         ),
         spec!(
             "align",
             "auvnav align: fine-alignment Monte Carlo",
-            AlignArgs,
+            AlignOptions,
             |a| document(&auvnav_studies::align::run(&a)?)
         ),
         spec!(
             "align_measured",
             "auvnav align-measured: fine alignment on the Snapir segments",
-            AlignMeasuredArgs,
+            AlignMeasuredOptions,
             |a| document(&auvnav_studies::align::measured_rows(&a)?)
         ),
-        spec!("usbl", "auvnav usbl: S-USBL Monte Carlo", UsblArgs, |a| {
-            if a.table {
-                document(&auvnav_studies::usbl::run_table(&a)?)
-            } else {
-                document(&auvnav_studies::usbl::run(&a)?)
+        spec!(
+            "usbl",
+            "auvnav usbl: S-USBL Monte Carlo",
+            UsblOptions,
+            |a| {
+                if a.table {
+                    document(&auvnav_studies::usbl::run_table(&a)?)
+                } else {
+                    document(&auvnav_studies::usbl::run(&a)?)
+                }
             }
-        }),
+        ),
         spec!(
             "nees",
             "auvnav montecarlo nees: filter consistency",
-            NeesArgs,
+            NeesOptions,
             |a| {
                 let cfg = nav_config(a.config.as_deref())?;
                 let r = auvnav_studies::nees::nees_monte_carlo(&a, &cfg)?;
@@ -146,7 +151,7 @@ fn specs() -> Vec<Spec> {
         spec!(
             "discover_trials",
             "auvnav bench discover's hidden-effect and null trials",
-            auvnav_discover::trials::TrialsArgs,
+            auvnav_discover::trials::TrialsOptions,
             |a| {
                 let study = auvnav_discover::trials::TrialsStudy::new(&a)?;
                 let threads = auvnav_studies::parallel::default_threads();
@@ -158,25 +163,25 @@ fn specs() -> Vec<Spec> {
         spec!(
             "import_snapir",
             "auvnav import snapir: a Snapir segment into a log",
-            SnapirArgs,
+            SnapirOptions,
             |a| document(&auvnav_import::snapir(&a)?)
         ),
         spec!(
             "import_pd0",
             "auvnav import pd0: a PD0 file with GPS into a log",
-            Pd0Args,
+            Pd0Options,
             |a| document(&auvnav_import::pd0(&a)?)
         ),
         spec!(
             "import_mag_csv",
             "auvnav import mag-csv: a magnetometer CSV into a log",
-            MagCsvArgs,
+            MagCsvOptions,
             |a| document(&auvnav_import::mag_csv(&a)?)
         ),
         spec!(
             "import_ugps_g2",
             "auvnav import ugps-g2: a UGPS G2 acoustic log into a log",
-            UgpsArgs,
+            UgpsOptions,
             |a| document(&auvnav_import::ugps(&a)?)
         ),
     ]
@@ -344,12 +349,12 @@ fn study(name: &str, options_given: &[(String, OptionValue)]) -> anyhow::Result<
     Ok(match name {
         "align" => Study::Align(auvnav_studies::align::AlignStudy::new(&parsed(&m)?)?),
         "usbl" => {
-            let a: auvnav_studies::usbl::UsblArgs = parsed(&m)?;
+            let a: auvnav_studies::usbl::UsblOptions = parsed(&m)?;
             anyhow::ensure!(!a.table, "usbl(table=True) is eighteen studies, not one");
             Study::Usbl(auvnav_studies::usbl::UsblStudy::new(&a)?)
         }
         "nees" => {
-            let a: auvnav_studies::nees::NeesArgs = parsed(&m)?;
+            let a: auvnav_studies::nees::NeesOptions = parsed(&m)?;
             let cfg = nav_config(a.config.as_deref())?;
             Study::Nees(Box::new(auvnav_studies::nees::NeesStudy::new(
                 &a, &cfg, &cfg,

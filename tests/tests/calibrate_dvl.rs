@@ -8,7 +8,7 @@ use auvnav_sim::{SimConfig, effects::Effects, simulate_to_log};
 use auvnav_tests::processes::{TempDir, binary};
 use auvnav_tools::calibrate::voyage::{FixSource, Voyage, VoyageSpec};
 use auvnav_tools::calibrate::{
-    CalibrateDvlArgs, Holdout, Method, Problem, calibrate_dvl, objective::Record, two_point,
+    CalibrateDvlOptions, Holdout, Method, Problem, calibrate_dvl, objective::Record, two_point,
 };
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -64,8 +64,8 @@ fn specs(paths: &[PathBuf]) -> Vec<VoyageSpec> {
         .collect()
 }
 
-fn args(paths: &[PathBuf], threshold: f64) -> CalibrateDvlArgs {
-    let mut a = CalibrateDvlArgs::new(specs(paths));
+fn args(paths: &[PathBuf], threshold: f64) -> CalibrateDvlOptions {
+    let mut a = CalibrateDvlOptions::new(specs(paths));
     a.fixes = FixSource::Truth;
     a.threshold = threshold;
     a
@@ -282,7 +282,7 @@ fn the_seed_method_is_deterministic_per_seed() {
 fn bad_input_gives_clear_errors_naming_the_voyage_or_option() {
     let dir = TempDir::new("calbad");
     let path = voyage(dir.path(), "short", 0.0, 20.0, &straight(60.0), &[], 51);
-    let err = |a: CalibrateDvlArgs| format!("{:#}", calibrate_dvl(&a).expect_err("must fail"));
+    let err = |a: CalibrateDvlOptions| format!("{:#}", calibrate_dvl(&a).expect_err("must fail"));
     // No GNSS fixes (the voyage stays submerged).
     let mut a = args(std::slice::from_ref(&path), 100.0);
     a.fixes = FixSource::Gnss;
@@ -445,7 +445,7 @@ fn the_smoother_method_recovers_the_installation_from_surface_fixes_and_holds_wh
             )
         })
         .collect();
-    let mut a = CalibrateDvlArgs::new(specs(&paths));
+    let mut a = CalibrateDvlOptions::new(specs(&paths));
     a.method = Method::Smoother;
     a.fixes = FixSource::Gnss;
     a.threshold = 1000.0;

@@ -8,7 +8,7 @@ use auvnav_tools::calibrate::mag::command::heading_check;
 use auvnav_tools::calibrate::mag::fit::{MagSample, SwarmSettings};
 use auvnav_tools::calibrate::mag::simulated::{Attitudes, samples};
 use auvnav_tools::calibrate::mag::{
-    CalibrateMagArgs, MagMethod, ReferenceField, Thresholds, calibrate_mag, run_method,
+    CalibrateMagOptions, MagMethod, ReferenceField, Thresholds, calibrate_mag, run_method,
 };
 use nalgebra::Vector3;
 
@@ -149,7 +149,7 @@ fn bad_input_gives_named_errors_or_constrained_fits() {
         s
     };
     let run = |p: std::path::PathBuf| {
-        let mut a = CalibrateMagArgs::new(vec![p]);
+        let mut a = CalibrateMagOptions::new(vec![p]);
         a.field_ut = Some(48.0);
         calibrate_mag(&a)
     };
@@ -174,7 +174,7 @@ fn bad_input_gives_named_errors_or_constrained_fits() {
     // Wrong columns: the error names the columns there are.
     let e3 = run(write(&dir, "wrong.csv", "a,b,c\n1,2,3\n")).expect_err("wrong columns");
     assert!(e3.to_string().contains("magnetometer columns"), "{e3}");
-    let mut a = CalibrateMagArgs::new(vec![write(&dir, "named.csv", &csv(&d, true, false))]);
+    let mut a = CalibrateMagOptions::new(vec![write(&dir, "named.csv", &csv(&d, true, false))]);
     a.columns.mag_columns = Some(vec!["mx".into(), "my".into(), "mz".into()]);
     let e4 = calibrate_mag(&a).expect_err("missing named column");
     assert!(e4.to_string().contains("no column \"mx\""), "{e4}");

@@ -6,14 +6,14 @@
 
 use auvnav_tests::measured_data;
 use auvnav_tools::calibrate::mag::fit::Model;
-use auvnav_tools::calibrate::mag::{CalibrateMagArgs, calibrate_mag};
+use auvnav_tools::calibrate::mag::{CalibrateMagOptions, calibrate_mag};
 
 #[test]
 fn nortek_vector_hard_iron_shrinks_the_held_out_spreads() {
     let Some(dir) = measured_data("nortek-vector-imu", "vector_data_imu01.VEC.csv") else {
         return;
     };
-    let mut a = CalibrateMagArgs::new(vec![dir.join("vector_data_imu01.VEC.csv")]);
+    let mut a = CalibrateMagOptions::new(vec![dir.join("vector_data_imu01.VEC.csv")]);
     a.columns.mag_columns = Some(vec!["mag_x".into(), "mag_y".into(), "mag_z".into()]);
     a.columns.accel_columns = Some(vec![
         "accel_m_s2_x".into(),
@@ -52,7 +52,7 @@ fn xio_recording_is_called_disturbed() {
     let Some(dir) = measured_data("xio-imu-mag", "sensor_data.csv") else {
         return;
     };
-    let r = calibrate_mag(&CalibrateMagArgs::new(vec![dir.join("sensor_data.csv")]))
+    let r = calibrate_mag(&CalibrateMagOptions::new(vec![dir.join("sensor_data.csv")]))
         .expect("calibration");
     let before = r
         .spreads

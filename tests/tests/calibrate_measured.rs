@@ -5,7 +5,7 @@
 
 use auvnav_tests::processes::{TempDir, binary};
 use auvnav_tools::calibrate::voyage::{FixSource, VoyageSpec};
-use auvnav_tools::calibrate::{CalibrateDvlArgs, Holdout, calibrate_dvl};
+use auvnav_tools::calibrate::{CalibrateDvlOptions, Holdout, calibrate_dvl};
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -49,7 +49,7 @@ fn a_hidden_yaw_and_scale_error_is_recovered_on_snapir_segments() {
         perturbed.push(b);
     }
     let fit = |paths: &[PathBuf]| {
-        let mut a = CalibrateDvlArgs::new(
+        let mut a = CalibrateDvlOptions::new(
             paths
                 .iter()
                 .map(|p| VoyageSpec {

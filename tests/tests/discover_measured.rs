@@ -228,10 +228,10 @@ fn rdi_pd0_heading_offset_against_gps_is_found() {
 
 fn mag_csv(file: std::path::PathBuf, columns: Option<[&str; 7]>) -> Vec<auvnav_log::LogMessage> {
     let owned = |v: &[&str]| Some(v.iter().map(|x| x.to_string()).collect::<Vec<_>>());
-    let a = auvnav_tools::import::MagCsvArgs {
+    let a = auvnav_tools::import::MagCsvOptions {
         file,
         out: std::path::PathBuf::new(),
-        columns: auvnav_tools::calibrate::mag::input::CsvColumnArgs {
+        columns: auvnav_tools::calibrate::mag::input::CsvColumnOptions {
             time_column: columns.map(|c| c[0].to_string()),
             mag_columns: columns.and_then(|c| owned(&c[1..4])),
             accel_columns: columns.and_then(|c| owned(&c[4..7])),

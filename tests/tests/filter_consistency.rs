@@ -4,10 +4,10 @@
 //! `auvnav montecarlo nees`).
 
 use auvnav_core::navigator::NavConfig;
-use auvnav_tools::montecarlo::{NeesArgs, nees_monte_carlo};
+use auvnav_tools::montecarlo::{NeesOptions, nees_monte_carlo};
 
-fn args(runs: usize, seconds: f64, seed: u64) -> NeesArgs {
-    NeesArgs {
+fn args(runs: usize, seconds: f64, seed: u64) -> NeesOptions {
+    NeesOptions {
         runs,
         scenario: "lawnmower".into(),
         seconds: Some(seconds),

@@ -2,10 +2,10 @@
 //! seed's 220 runs): the error models agree when the errors are small, the mounting yaw is not
 //! observable on a straight run but is in turns, and model 1 meets the turning target.
 
-use auvnav_tools::align::{AlignArgs, AlignReport, ModelReport, run};
+use auvnav_tools::align::{AlignOptions, AlignReport, ModelReport, run};
 
-fn args(scenario: &str, runs: usize, seconds: f64, heading: f64, mount: &str) -> AlignArgs {
-    AlignArgs {
+fn args(scenario: &str, runs: usize, seconds: f64, heading: f64, mount: &str) -> AlignOptions {
+    AlignOptions {
         models: vec![],
         scenario: scenario.into(),
         runs,
@@ -76,7 +76,7 @@ fn measured_segments_align_from_large_heading_offsets() {
     let Some(dir) = auvnav_tests::measured_data("snapir-auv", "imu_01.csv") else {
         return;
     };
-    let rows = auvnav_tools::align::run_measured(&auvnav_tools::align::AlignMeasuredArgs {
+    let rows = auvnav_tools::align::run_measured(&auvnav_tools::align::AlignMeasuredOptions {
         dir,
         heading_offsets: vec![20.0, -45.0],
         segments: vec![],

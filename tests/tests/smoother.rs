@@ -6,7 +6,7 @@
 use auvnav_log::{LogMessage, LogReader};
 use auvnav_shm_schema::TruthStateV1;
 use auvnav_sim::{SimConfig, scenario::Scenario, simulate_to_log};
-use auvnav_tools::smooth::{SmoothArgs, smooth_log};
+use auvnav_tools::smooth::{SmoothOptions, smooth_log};
 use std::path::{Path, PathBuf};
 
 fn scratch(name: &str) -> PathBuf {
@@ -60,8 +60,8 @@ fn fix_line(t: &TruthStateV1, north_m: f64, east_m: f64, std_m: f64) -> String {
     )
 }
 
-fn args(out: &Path, fixes: Option<PathBuf>) -> SmoothArgs {
-    SmoothArgs {
+fn args(out: &Path, fixes: Option<PathBuf>) -> SmoothOptions {
+    SmoothOptions {
         logs: Vec::new(),
         out: out.to_path_buf(),
         config: None,
@@ -330,9 +330,9 @@ fn a_solution_rate_writes_the_same_solutions_at_that_rate() {
 #[test]
 fn smoothed_errors_agree_with_the_smoothed_covariance_over_monte_carlo_runs() {
     use auvnav_tools::montecarlo::chi2_quantile;
-    use auvnav_tools::smooth::montecarlo::{SmootherMonteCarloArgs, smoother_monte_carlo};
+    use auvnav_tools::smooth::montecarlo::{SmootherMonteCarloOptions, smoother_monte_carlo};
     let runs = 10;
-    let a = SmootherMonteCarloArgs {
+    let a = SmootherMonteCarloOptions {
         runs,
         scenario: "survey".into(),
         seconds: None,

@@ -3,7 +3,7 @@
 //! table is `auvnav usbl --table --runs 50` (docs/usbl.md).
 
 use auvnav_core::aid::usbl::{Coupling, UsblFilter};
-use auvnav_tools::usbl::{UsblArgs, UsblReport, run};
+use auvnav_tools::usbl::{UsblOptions, UsblReport, run};
 
 fn monte_carlo(
     coupling: Coupling,
@@ -23,7 +23,7 @@ fn monte_carlo_with_latency(
     seed: u64,
     latency: f64,
 ) -> UsblReport {
-    run(&UsblArgs {
+    run(&UsblOptions {
         coupling,
         filter,
         outliers,

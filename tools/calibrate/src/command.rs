@@ -3,7 +3,7 @@
 
 use super::gauss_newton;
 use super::objective::Record;
-use super::options::{CalibrateDvlArgs, Holdout, Method};
+use super::options::{CalibrateDvlOptions, Holdout, Method};
 use super::params::ParameterSet;
 use super::report::{self, CalibrationReport};
 use super::scal::SeedSettings;
@@ -38,7 +38,7 @@ fn load_session_config(
     Ok(SessionConfig::default())
 }
 
-fn parameter_set(args: &CalibrateDvlArgs, cfg: &SessionConfig) -> anyhow::Result<ParameterSet> {
+fn parameter_set(args: &CalibrateDvlOptions, cfg: &SessionConfig) -> anyhow::Result<ParameterSet> {
     let mut params = ParameterSet::new(&cfg.navigation.dvl_installation());
     if let Some(path) = &args.limits {
         let text = std::fs::read_to_string(path)
@@ -97,7 +97,7 @@ pub fn load_voyages(
 /// The whole calibration: returns the report (also what `--json` prints).
 // Long on purpose: the calibration as the recipe the report documents (options checked, voyages
 // read, method, held-out evaluation, report); each step is a function.
-pub fn calibrate_dvl(args: &CalibrateDvlArgs) -> anyhow::Result<CalibrationReport> {
+pub fn calibrate_dvl(args: &CalibrateDvlOptions) -> anyhow::Result<CalibrationReport> {
     let started = Instant::now();
     if !(args.threshold.is_finite() && args.threshold >= 0.0) {
         bail!(

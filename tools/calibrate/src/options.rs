@@ -34,7 +34,7 @@ pub enum Holdout {
 
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
-pub struct CalibrateDvlArgs {
+pub struct CalibrateDvlOptions {
     /// Voyages: logs, or time windows of one as LOG@START..END (seconds from its first message).
     #[cfg_attr(feature = "clap", arg(required = true))]
     pub voyages: Vec<VoyageSpec>,
@@ -92,10 +92,10 @@ pub struct CalibrateDvlArgs {
     pub report: Option<PathBuf>,
 }
 
-impl CalibrateDvlArgs {
+impl CalibrateDvlOptions {
     /// The command's defaults for `voyages` (what the command line gives without options).
-    pub fn new(voyages: Vec<VoyageSpec>) -> CalibrateDvlArgs {
-        CalibrateDvlArgs {
+    pub fn new(voyages: Vec<VoyageSpec>) -> CalibrateDvlOptions {
+        CalibrateDvlOptions {
             voyages,
             fixes: FixSource::Gnss,
             method: Method::Fast,

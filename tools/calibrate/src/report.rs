@@ -7,7 +7,7 @@
 //! the Markdown.
 
 use super::objective::VoyageRun;
-use super::options::{CalibrateDvlArgs, Method};
+use super::options::{CalibrateDvlOptions, Method};
 use super::params::{NAMES, ParameterSet};
 use super::params::{installation, installation_vector};
 use super::svg::{PALETTE, Series, plot};
@@ -154,7 +154,7 @@ pub fn values(params: &ParameterSet, x: &[f64; 8]) -> Vec<(String, f64)> {
 }
 
 pub struct Inputs<'a> {
-    pub args: &'a CalibrateDvlArgs,
+    pub args: &'a CalibrateDvlOptions,
     pub params: &'a ParameterSet,
     pub voyages: &'a [Voyage],
     pub baseline: &'a Evaluation,

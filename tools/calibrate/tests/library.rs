@@ -1,7 +1,7 @@
 //! Calibration as a library, without the command line (and without clap): a magnetometer turned
 //! through many attitudes with a hard-iron offset gives that offset back in a typed report.
 
-use auvnav_calibrate::mag::command::{CalibrateMagArgs, calibrate_mag};
+use auvnav_calibrate::mag::command::{CalibrateMagOptions, calibrate_mag};
 use nalgebra::{Rotation3, Vector3};
 
 #[test]
@@ -28,7 +28,7 @@ fn a_magnetometer_recording_calibrates_through_the_library() {
     }
     let csv = dir.join("turns.csv");
     std::fs::write(&csv, text).expect("CSV");
-    let mut a = CalibrateMagArgs::new(vec![csv]);
+    let mut a = CalibrateMagOptions::new(vec![csv]);
     a.field_ut = Some(field.norm());
     a.dip_deg = Some(field.z.atan2(field.x).to_degrees());
     let r = calibrate_mag(&a).expect("calibration");

@@ -4,7 +4,7 @@
 pub use auvnav_studies::align::*;
 
 /// `auvnav align-measured`: every segment, every offset, every model, printed (or as JSON).
-pub fn run_measured(a: &AlignMeasuredArgs) -> anyhow::Result<Vec<MeasuredRow>> {
+pub fn run_measured(a: &AlignMeasuredOptions) -> anyhow::Result<Vec<MeasuredRow>> {
     let rows = measured_rows(a)?;
     if a.json {
         crate::json::print(&rows)?;

@@ -8,7 +8,7 @@ pub mod command {
     pub use auvnav_discover::command::*;
 
     /// Runs `auvnav discover` and prints the report.
-    pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
+    pub fn run(a: &DiscoverOptions) -> anyhow::Result<DiscoverReport> {
         let r = auvnav_discover::command::run(a)?;
         if a.json {
             crate::json::print(&r)?;

@@ -34,7 +34,7 @@ enum Command {
     Replay(auvnav_tools::replay::ReplayArgs),
     /// Post-process logs: forward-backward (RTS) smoothing with fixes from the log and a fix
     /// file; smoothed track (CSV, MCAP, GeoJSON, KML, plain CSV), parameters and a report.
-    Smooth(auvnav_tools::smooth::SmoothArgs),
+    Smooth(auvnav_tools::smooth::SmoothOptions),
     /// Decode a captured device byte stream (one JSON object per frame with --json).
     Decode(auvnav_tools::decode::DecodeArgs),
     /// Play a log's sensor messages into pseudo-terminals in the devices' protocols.
@@ -42,12 +42,12 @@ enum Command {
     /// Record every topic of a deployment to a log (MCAP); or recover a killed recorder's log.
     Record(auvnav_recorder::RecordArgs),
     /// S-ALIGN fine-alignment Monte Carlo: error models 1/2/3 on moored, straight, turning runs.
-    Align(auvnav_tools::align::AlignArgs),
+    Align(auvnav_tools::align::AlignOptions),
     /// S-ALIGN fine alignment on the Snapir segments from the reference heading plus an offset.
-    AlignMeasured(auvnav_tools::align::AlignMeasuredArgs),
+    AlignMeasured(auvnav_tools::align::AlignMeasuredOptions),
     /// S-USBL Monte Carlo on the docking scenario: loose or tight USBL coupling, ukf/akf/aukf,
     /// with multipath outliers and array orientation errors.
-    Usbl(auvnav_tools::usbl::UsblArgs),
+    Usbl(auvnav_tools::usbl::UsblOptions),
     /// Calibrate an installation from recorded voyages by replaying them through the core.
     Calibrate {
         #[command(subcommand)]
@@ -58,7 +58,7 @@ enum Command {
     Perturb(PerturbArgs),
     /// Find where the simulator's sensor models disagree with a log, name the cause from the
     /// effect vocabulary, and measure the gain on held-out data.
-    Discover(auvnav_tools::discover::command::DiscoverArgs),
+    Discover(auvnav_tools::discover::command::DiscoverOptions),
     /// Turn a measured data set into a log.
     Import {
         #[command(subcommand)]
@@ -93,10 +93,10 @@ enum Command {
 #[derive(Subcommand)]
 enum MonteCarloWhat {
     /// Filter consistency: normalised estimation error squared of position, velocity and attitude.
-    Nees(auvnav_tools::montecarlo::NeesArgs),
+    Nees(auvnav_tools::montecarlo::NeesOptions),
     /// Smoother consistency and gain: runs with matched sensor errors, a start and an end fix,
     /// smoothed; per-axis NEES of the forward and the smoothed position, and their errors.
-    Smoother(auvnav_tools::smooth::montecarlo::SmootherMonteCarloArgs),
+    Smoother(auvnav_tools::smooth::montecarlo::SmootherMonteCarloOptions),
 }
 
 #[derive(Subcommand)]
@@ -104,12 +104,12 @@ enum CalibrateWhat {
     /// S-CAL: DVL mounting, scale factor, lever arm and time offset that minimise the dead
     /// reckoning's error at the fixes (CEP50 of error/distance), with standard deviations,
     /// observability, hold-out evaluation, a [navigation.dvl] table and a report.
-    Dvl(auvnav_tools::calibrate::CalibrateDvlArgs),
+    Dvl(auvnav_tools::calibrate::CalibrateDvlOptions),
     /// S-MAG: magnetometer hard and soft iron from recordings with the attitude the vehicle
     /// reached (ellipsoid, the seed's particle swarm, or Levenberg–Marquardt with constrained
     /// fallbacks), checked on held-out readings, with a [navigation.magnetometer] table, plots
     /// and a verdict.
-    Mag(auvnav_tools::calibrate::mag::CalibrateMagArgs),
+    Mag(auvnav_tools::calibrate::mag::CalibrateMagOptions),
 }
 
 #[derive(clap::Args)]
@@ -172,7 +172,7 @@ fn run_perturb(a: &PerturbArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn run_calibrate_mag(a: &auvnav_tools::calibrate::mag::CalibrateMagArgs) -> anyhow::Result<()> {
+fn run_calibrate_mag(a: &auvnav_tools::calibrate::mag::CalibrateMagOptions) -> anyhow::Result<()> {
     use auvnav_tools::calibrate::mag::report;
     let r = auvnav_tools::calibrate::mag::run(a)?;
     if a.json {
@@ -183,7 +183,7 @@ fn run_calibrate_mag(a: &auvnav_tools::calibrate::mag::CalibrateMagArgs) -> anyh
     Ok(())
 }
 
-fn run_calibrate_dvl(a: &auvnav_tools::calibrate::CalibrateDvlArgs) -> anyhow::Result<()> {
+fn run_calibrate_dvl(a: &auvnav_tools::calibrate::CalibrateDvlOptions) -> anyhow::Result<()> {
     let r = auvnav_tools::calibrate::calibrate_dvl(a)?;
     if a.json {
         auvnav_tools::json::print(&r)?;
@@ -197,17 +197,17 @@ fn run_calibrate_dvl(a: &auvnav_tools::calibrate::CalibrateDvlArgs) -> anyhow::R
 enum ImportWhat {
     /// A segment of the Snapir AUV data set (IMU, DVL, reference solution as truth, depth from
     /// the reference).
-    Snapir(auvnav_tools::import::SnapirArgs),
+    Snapir(auvnav_tools::import::SnapirOptions),
     /// A Teledyne RDI PD0 file with GPS (WinRiver NMEA blocks): the bottom track as the DVL
     /// channel, the GPS velocity over ground with the DVL's own attitude as the reference
-    Pd0(auvnav_tools::import::Pd0Args),
+    Pd0(auvnav_tools::import::Pd0Options),
     /// A magnetometer recording in CSV (magnetometer and accelerometer columns, as
     /// `auvnav calibrate mag` reads them): the magnetometer channel and the specific force, for
     /// `auvnav discover` without a reference attitude.
-    MagCsv(auvnav_tools::import::MagCsvArgs),
+    MagCsv(auvnav_tools::import::MagCsvOptions),
     /// A Water Linked Underwater GPS G2 acoustic log (CSV): per-receiver ranges with the
     /// system's own fixes, for `auvnav discover` (receiver geometry, range noise, outliers).
-    UgpsG2(auvnav_tools::import::UgpsArgs),
+    UgpsG2(auvnav_tools::import::UgpsOptions),
 }
 
 #[derive(Subcommand)]
@@ -542,7 +542,7 @@ fn run_replay(a: &auvnav_tools::replay::ReplayArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn run_import_pd0(a: &auvnav_tools::import::Pd0Args) -> anyhow::Result<()> {
+fn run_import_pd0(a: &auvnav_tools::import::Pd0Options) -> anyhow::Result<()> {
     let s = auvnav_tools::import::pd0(a)?;
     if a.json {
         auvnav_tools::json::print(&s)?;
@@ -572,7 +572,7 @@ fn run_import_pd0(a: &auvnav_tools::import::Pd0Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn run_import_mag_csv(a: &auvnav_tools::import::MagCsvArgs) -> anyhow::Result<()> {
+fn run_import_mag_csv(a: &auvnav_tools::import::MagCsvOptions) -> anyhow::Result<()> {
     let s = auvnav_tools::import::mag_csv(a)?;
     if a.json {
         auvnav_tools::json::print(&s)?;
@@ -592,7 +592,7 @@ fn run_import_mag_csv(a: &auvnav_tools::import::MagCsvArgs) -> anyhow::Result<()
     Ok(())
 }
 
-fn run_import_ugps(a: &auvnav_tools::import::UgpsArgs) -> anyhow::Result<()> {
+fn run_import_ugps(a: &auvnav_tools::import::UgpsOptions) -> anyhow::Result<()> {
     let s = auvnav_tools::import::ugps(a)?;
     if a.json {
         auvnav_tools::json::print(&s)?;
@@ -612,7 +612,7 @@ fn run_import_ugps(a: &auvnav_tools::import::UgpsArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn run_import_snapir(a: &auvnav_tools::import::SnapirArgs) -> anyhow::Result<()> {
+fn run_import_snapir(a: &auvnav_tools::import::SnapirOptions) -> anyhow::Result<()> {
     let s = auvnav_tools::import::snapir(a)?;
     if a.json {
         auvnav_tools::json::print(&s)?;

@@ -5,7 +5,7 @@ use auvnav_core::navigator::NavConfig;
 pub use auvnav_studies::nees::*;
 
 /// Runs `auvnav montecarlo nees` and prints the report.
-pub fn run_nees(a: &NeesArgs) -> anyhow::Result<()> {
+pub fn run_nees(a: &NeesOptions) -> anyhow::Result<()> {
     let cfg = match &a.config {
         Some(p) => crate::replay::load_config(p)?.navigation,
         None => NavConfig::default(),

@@ -10,7 +10,7 @@ pub mod montecarlo {
     pub use auvnav_smooth::montecarlo::*;
 
     /// Runs `auvnav montecarlo smoother` and prints the report.
-    pub fn run(a: &SmootherMonteCarloArgs) -> anyhow::Result<()> {
+    pub fn run(a: &SmootherMonteCarloOptions) -> anyhow::Result<()> {
         let cfg = match &a.config {
             Some(p) => auvnav_replay::load_config(p)?.navigation,
             None => NavConfig::default(),

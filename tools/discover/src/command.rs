@@ -10,7 +10,7 @@ use std::path::PathBuf;
 
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
-pub struct DiscoverArgs {
+pub struct DiscoverOptions {
     /// Logs (MCAP, as written by `auvnav sim` or the recorder) with the sensor channels and the
     /// reference motion.
     #[cfg_attr(feature = "clap", arg(required = true))]
@@ -97,7 +97,7 @@ pub fn nominal_from_report(nominal: &mut Effects, path: &std::path::Path) -> any
 }
 
 /// `auvnav discover`.
-pub fn run(a: &DiscoverArgs) -> anyhow::Result<DiscoverReport> {
+pub fn run(a: &DiscoverOptions) -> anyhow::Result<DiscoverReport> {
     let smoothed = a.reference == "smoothed";
     if smoothed && a.one_voyage && a.logs.len() > 1 {
         bail!(

@@ -18,7 +18,7 @@ use anyhow::Context;
 use auvnav_log::LogReader;
 use auvnav_shm_schema::{NavMode, NavSolutionV1, TruthStateV1};
 use auvnav_sim::effects::Effects;
-use auvnav_smooth::{NAV_SOLUTION_SMOOTHED, SmoothArgs, smooth_log_with};
+use auvnav_smooth::{NAV_SOLUTION_SMOOTHED, SmoothOptions, smooth_log_with};
 use std::path::Path;
 
 /// Prior one-sigma of the DVL installation states in the smoothing run: wide, because discovery
@@ -49,7 +49,7 @@ impl Smoothed {
 /// Smooths `log` (outputs into `work`, a scratch folder) and returns its smoothed motion.
 pub fn smooth(log: &Path, work: &Path) -> anyhow::Result<Smoothed> {
     std::fs::create_dir_all(work).with_context(|| format!("creating {}", work.display()))?;
-    let args = SmoothArgs {
+    let args = SmoothOptions {
         logs: vec![log.to_path_buf()],
         out: work.to_path_buf(),
         config: None,

@@ -9,7 +9,7 @@ use serde::Serialize;
 /// How many trials of each kind.
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
-pub struct TrialsArgs {
+pub struct TrialsOptions {
     /// Trials with a hidden effect (seeds 1, 2, ...).
     #[cfg_attr(feature = "clap", arg(long, default_value_t = 20))]
     pub hidden: usize,
@@ -42,11 +42,11 @@ pub struct TrialsReport {
 
 /// The trial study.
 pub struct TrialsStudy {
-    args: TrialsArgs,
+    args: TrialsOptions,
 }
 
 impl TrialsStudy {
-    pub fn new(a: &TrialsArgs) -> anyhow::Result<TrialsStudy> {
+    pub fn new(a: &TrialsOptions) -> anyhow::Result<TrialsStudy> {
         Ok(TrialsStudy { args: a.clone() })
     }
 

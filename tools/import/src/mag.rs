@@ -166,7 +166,7 @@ pub struct CsvColumns {
 /// `auvnav import mag-csv`).
 #[derive(Debug, Clone, Default)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
-pub struct CsvColumnArgs {
+pub struct CsvColumnOptions {
     /// CSV: the time column (seconds or ISO-8601 UTC); default: the first column named `time…`.
     #[cfg_attr(feature = "clap", arg(long))]
     pub time_column: Option<String>,
@@ -181,7 +181,7 @@ pub struct CsvColumnArgs {
     pub mag_unit: Option<String>,
 }
 
-impl CsvColumnArgs {
+impl CsvColumnOptions {
     /// The column choice, refusing a column list that does not name three columns.
     pub fn columns(&self) -> anyhow::Result<CsvColumns> {
         let three = |v: &Option<Vec<String>>, what: &str| -> anyhow::Result<Option<[String; 3]>> {

@@ -6,7 +6,7 @@ use super::*;
 /// Command-line arguments of `auvnav import mag-csv`.
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
-pub struct MagCsvArgs {
+pub struct MagCsvOptions {
     /// A CSV file with magnetometer and accelerometer columns (a header line names them; lines
     /// starting with `#` are comments).
     pub file: PathBuf,
@@ -14,7 +14,7 @@ pub struct MagCsvArgs {
     #[cfg_attr(feature = "clap", arg(long))]
     pub out: PathBuf,
     #[cfg_attr(feature = "clap", command(flatten))]
-    pub columns: crate::mag::CsvColumnArgs,
+    pub columns: crate::mag::CsvColumnOptions,
     /// Print the summary as JSON.
     #[cfg_attr(feature = "clap", arg(long))]
     pub json: bool,
@@ -44,7 +44,7 @@ const STANDARD_GRAVITY: f64 = 9.80665;
 /// The messages of a magnetometer CSV recording (an IMU sample with the specific force, then the
 /// magnetometer reading, per row; time 0 = first row) and the summary.
 pub fn mag_csv_messages(
-    a: &MagCsvArgs,
+    a: &MagCsvOptions,
 ) -> anyhow::Result<(Vec<(&'static str, LogMessage)>, MagCsvSummary)> {
     use auvnav_shm_schema::MagnetometerV1;
     let cols = a.columns.columns()?;
@@ -126,7 +126,7 @@ pub fn mag_csv_messages(
 }
 
 /// Imports a magnetometer CSV recording into a log at `out` (written atomically).
-pub fn mag_csv(a: &MagCsvArgs) -> anyhow::Result<MagCsvSummary> {
+pub fn mag_csv(a: &MagCsvOptions) -> anyhow::Result<MagCsvSummary> {
     use auvnav_shm_schema::MagnetometerV1;
     let (messages, summary) = mag_csv_messages(a)?;
     let mut header = LogHeader::new("auvnav import mag-csv", "");

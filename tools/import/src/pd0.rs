@@ -19,7 +19,7 @@ pub enum GpsVelocity {
 /// Command-line arguments of `auvnav import pd0`.
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
-pub struct Pd0Args {
+pub struct Pd0Options {
     /// A Teledyne RDI PD0 file with bottom track and GPS in WinRiver NMEA blocks (GGA, VTG).
     pub file: PathBuf,
     /// Output log (written atomically).
@@ -294,7 +294,7 @@ pub fn pd0_messages(
 }
 
 /// Imports a PD0 file with GPS into a log at `out` (written atomically).
-pub fn pd0(a: &Pd0Args) -> anyhow::Result<Pd0Summary> {
+pub fn pd0(a: &Pd0Options) -> anyhow::Result<Pd0Summary> {
     let bytes = std::fs::read(&a.file).with_context(|| format!("reading {}", a.file.display()))?;
     let (messages, mut summary) = pd0_messages(&bytes, a.velocity)?;
     let fix_file = a.fixes.as_deref().map(crate::fixes::read).transpose()?;

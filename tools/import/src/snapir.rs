@@ -6,7 +6,7 @@ use super::*;
 /// Command-line arguments of `auvnav import snapir`.
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
-pub struct SnapirArgs {
+pub struct SnapirOptions {
     /// The data set folder (with imu_NN.csv, dvl_NN.csv, ref_NN.csv).
     pub dir: PathBuf,
     /// Segment number (1..13).
@@ -292,7 +292,7 @@ pub fn snapir_messages(
 }
 
 /// Imports one segment into a log at `out` (written atomically).
-pub fn snapir(a: &SnapirArgs) -> anyhow::Result<SnapirSummary> {
+pub fn snapir(a: &SnapirOptions) -> anyhow::Result<SnapirSummary> {
     let (messages, summary) = snapir_messages(&a.dir, a.segment, a.time_base, !a.no_align)?;
     let mut header = LogHeader::new("auvnav import snapir", "");
     header

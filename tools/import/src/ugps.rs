@@ -6,7 +6,7 @@ use super::*;
 /// Command-line arguments of `auvnav import ugps-g2`.
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
-pub struct UgpsArgs {
+pub struct UgpsOptions {
     /// The Water Linked Underwater GPS G2 acoustic log (`…_g2_acoustic.csv`), or a folder with one.
     pub input: PathBuf,
     /// Output log (written atomically).
@@ -214,7 +214,7 @@ pub fn ugps_messages(
 }
 
 /// Imports a UGPS G2 acoustic log into a log at `out` (written atomically).
-pub fn ugps(a: &UgpsArgs) -> anyhow::Result<UgpsSummary> {
+pub fn ugps(a: &UgpsOptions) -> anyhow::Result<UgpsSummary> {
     use auvnav_shm_schema::AcousticRangesV1;
     let (messages, summary) = ugps_messages(&a.input)?;
     let mut header = LogHeader::new("auvnav import ugps-g2", "");

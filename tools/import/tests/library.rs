@@ -1,7 +1,7 @@
 //! Import as a library, without the command line (and without clap): a magnetometer CSV
 //! recording into a log, with a typed summary, a bad row counted, and the log readable.
 
-use auvnav_import::{MagCsvArgs, mag::CsvColumnArgs, mag_csv};
+use auvnav_import::{MagCsvOptions, mag::CsvColumnOptions, mag_csv};
 
 #[test]
 fn a_magnetometer_csv_imports_through_the_library() {
@@ -21,10 +21,10 @@ fn a_magnetometer_csv_imports_through_the_library() {
     text.push_str("5.00,not,a,number,0,0,-9.81\n");
     std::fs::write(&csv, text).expect("CSV");
     let out = dir.join("mag.mcap");
-    let summary = mag_csv(&MagCsvArgs {
+    let summary = mag_csv(&MagCsvOptions {
         file: csv,
         out: out.clone(),
-        columns: CsvColumnArgs::default(),
+        columns: CsvColumnOptions::default(),
         json: false,
     })
     .expect("import");

@@ -37,7 +37,7 @@ pub const NAV_SOLUTION_SMOOTHED: &str = "nav/solution_smoothed";
 /// Command-line arguments of `auvnav smooth`.
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
-pub struct SmoothArgs {
+pub struct SmoothOptions {
     /// The logs to smooth (MCAP written by the recorder, `auvnav import` or `auvnav sim`); each
     /// is smoothed on its own.
     #[cfg_attr(feature = "clap", arg(required = true))]
@@ -317,7 +317,7 @@ fn stem(log: &Path) -> String {
         .unwrap_or_else(|| "log".into())
 }
 
-fn replay_options(a: &SmoothArgs, log: &Path) -> ReplayOptions {
+fn replay_options(a: &SmoothOptions, log: &Path) -> ReplayOptions {
     ReplayOptions {
         config: a.config.clone(),
         usbl: a.usbl,
@@ -363,7 +363,7 @@ fn parameters(
 
 /// Smooths one log with the fixes of `fix_file` (those inside the log's time span).
 pub fn smooth_log(
-    a: &SmoothArgs,
+    a: &SmoothOptions,
     log: &Path,
     fix_file: Option<&fixes::FixFile>,
 ) -> anyhow::Result<LogSmoothReport> {
@@ -375,7 +375,7 @@ pub fn smooth_log(
 // Long on purpose: the two replays and the smoothing between them over one log share the replay
 // configuration, the recorded epochs and the output writers.
 pub fn smooth_log_with(
-    a: &SmoothArgs,
+    a: &SmoothOptions,
     log: &Path,
     fix_file: Option<&fixes::FixFile>,
     adjust: &dyn Fn(&mut auvnav_replay::ReplayConfig),
@@ -676,7 +676,7 @@ fn fix_innovation(d: &AidDiagnosticsV1) -> Option<FixInnovation> {
 }
 
 /// Runs `auvnav smooth`.
-pub fn run(a: &SmoothArgs) -> anyhow::Result<SmoothReport> {
+pub fn run(a: &SmoothOptions) -> anyhow::Result<SmoothReport> {
     if !(a.export_rate.is_finite() && a.export_rate > 0.0) {
         return Err(auvnav_replay::Failure::Usage(format!(
             "--export-rate {}: must be > 0 points per second",

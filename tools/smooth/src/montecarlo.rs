@@ -27,7 +27,7 @@ use serde::Serialize;
 
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
-pub struct SmootherMonteCarloArgs {
+pub struct SmootherMonteCarloOptions {
     /// Number of Monte Carlo runs.
     #[cfg_attr(feature = "clap", arg(long, default_value_t = 50))]
     pub runs: usize,
@@ -217,7 +217,7 @@ enum Item<'a> {
 }
 
 fn one_run(
-    a: &SmootherMonteCarloArgs,
+    a: &SmootherMonteCarloOptions,
     scenario: &Scenario,
     cfg: &NavConfig,
     k: usize,
@@ -309,7 +309,7 @@ fn one_run(
 
 /// Runs the Monte Carlo.
 pub fn smoother_monte_carlo(
-    a: &SmootherMonteCarloArgs,
+    a: &SmootherMonteCarloOptions,
     cfg: &NavConfig,
 ) -> anyhow::Result<SmootherMonteCarloReport> {
     if a.runs == 0 {

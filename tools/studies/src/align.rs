@@ -19,7 +19,7 @@ use serde::Serialize;
 
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
-pub struct AlignArgs {
+pub struct AlignOptions {
     /// Error model(s): 1 (body-frame velocity), 2 (navigation frame + mounting states),
     /// 3 (navigation frame); repeatable; default all three.
     #[cfg_attr(feature = "clap", arg(long = "model"))]
@@ -59,7 +59,7 @@ pub struct AlignArgs {
 /// heading offset, per model.
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
-pub struct AlignMeasuredArgs {
+pub struct AlignMeasuredOptions {
     /// The Snapir data set directory (../shared/data/snapir-auv).
     pub dir: std::path::PathBuf,
     /// Heading offsets of the start (deg; repeatable; default +20 and -45).
@@ -155,7 +155,7 @@ pub fn align_measured(
 }
 
 /// `auvnav align-measured`: every segment, every offset, every model.
-pub fn measured_rows(a: &AlignMeasuredArgs) -> anyhow::Result<Vec<MeasuredRow>> {
+pub fn measured_rows(a: &AlignMeasuredOptions) -> anyhow::Result<Vec<MeasuredRow>> {
     let offsets = if a.heading_offsets.is_empty() {
         vec![20.0, -45.0]
     } else {
@@ -269,7 +269,7 @@ fn attitude_errors(state: &NavState, t: &TruthStateV1) -> [f64; 3] {
 
 /// One Monte Carlo run: simulate, then run each model.
 fn run_one(
-    a: &AlignArgs,
+    a: &AlignOptions,
     scenario: &Scenario,
     models: &[ErrorModel],
     mount: Option<[f64; 3]>,
@@ -403,7 +403,7 @@ fn rms(v: impl Iterator<Item = f64>) -> f64 {
 
 /// The alignment study: its options checked, its scenario and models resolved.
 pub struct AlignStudy {
-    args: AlignArgs,
+    args: AlignOptions,
     scenario: Scenario,
     models: Vec<ErrorModel>,
     mount: Option<[f64; 3]>,
@@ -411,7 +411,7 @@ pub struct AlignStudy {
 
 impl AlignStudy {
     /// Checks the options and loads the scenario.
-    pub fn new(a: &AlignArgs) -> anyhow::Result<AlignStudy> {
+    pub fn new(a: &AlignOptions) -> anyhow::Result<AlignStudy> {
         if a.runs == 0 {
             bail!("--runs must be at least 1");
         }
@@ -517,7 +517,7 @@ impl crate::runs::RunStudy for AlignStudy {
 }
 
 /// Runs the Monte Carlo study on this machine's cores.
-pub fn run(a: &AlignArgs) -> anyhow::Result<AlignReport> {
+pub fn run(a: &AlignOptions) -> anyhow::Result<AlignReport> {
     let study = AlignStudy::new(a)?;
     let threads = a.threads.unwrap_or_else(crate::parallel::default_threads);
     let bar = crate::progress::Progress::new(!a.json).runs("alignment Monte Carlo", a.runs);

@@ -22,7 +22,7 @@ use serde::Serialize;
 
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
-pub struct NeesArgs {
+pub struct NeesOptions {
     /// Number of Monte Carlo runs.
     #[cfg_attr(feature = "clap", arg(long, default_value_t = 50))]
     pub runs: usize,
@@ -150,14 +150,14 @@ pub fn matched_effects(
 }
 
 /// Runs the Monte Carlo and returns the report.
-pub fn nees_monte_carlo(a: &NeesArgs, cfg: &NavConfig) -> anyhow::Result<NeesReport> {
+pub fn nees_monte_carlo(a: &NeesOptions, cfg: &NavConfig) -> anyhow::Result<NeesReport> {
     nees_monte_carlo_with(a, cfg, cfg)
 }
 
 /// The Monte Carlo with the simulated errors drawn from `truth_cfg` and the filter run with
 /// `filter_cfg` (to show what a mis-tuned filter looks like), on this machine's cores.
 pub fn nees_monte_carlo_with(
-    a: &NeesArgs,
+    a: &NeesOptions,
     truth_cfg: &NavConfig,
     filter_cfg: &NavConfig,
 ) -> anyhow::Result<NeesReport> {
@@ -186,7 +186,7 @@ pub struct NeesRun {
 
 /// The NEES study: the scenario loaded, the configurations of the truth and the filter.
 pub struct NeesStudy {
-    args: NeesArgs,
+    args: NeesOptions,
     scenario: Scenario,
     truth_cfg: NavConfig,
     filter_cfg: NavConfig,
@@ -195,7 +195,7 @@ pub struct NeesStudy {
 impl NeesStudy {
     /// Checks the options and loads the scenario.
     pub fn new(
-        a: &NeesArgs,
+        a: &NeesOptions,
         truth_cfg: &NavConfig,
         filter_cfg: &NavConfig,
     ) -> anyhow::Result<NeesStudy> {

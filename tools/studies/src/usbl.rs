@@ -25,7 +25,7 @@ use serde::Serialize;
 
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
-pub struct UsblArgs {
+pub struct UsblOptions {
     /// loose (the device's position fix) or tight (slant range and range differences).
     #[cfg_attr(feature = "clap", arg(long, default_value = "tight", value_parser = crate::args::config_enum::<Coupling>(Coupling::NAMES)))]
     pub coupling: Coupling,
@@ -200,7 +200,7 @@ pub fn apply_settings(base: &UsblConfig, settings: &[String]) -> anyhow::Result<
 // Long on purpose: one S-USBL run: the voyage simulated, outliers and array error injected, the
 // filter fed and scored at every epoch, in one loop over the run's messages.
 fn run_one(
-    a: &UsblArgs,
+    a: &UsblOptions,
     scenario: &Scenario,
     station: &StationGeometry,
     seed: u64,
@@ -366,14 +366,14 @@ fn run_one(
 
 /// The USBL study of one configuration: its options checked, its scenario and station loaded.
 pub struct UsblStudy {
-    args: UsblArgs,
+    args: UsblOptions,
     scenario: Scenario,
     station: StationGeometry,
 }
 
 impl UsblStudy {
     /// Checks the options and loads the scenario.
-    pub fn new(a: &UsblArgs) -> anyhow::Result<UsblStudy> {
+    pub fn new(a: &UsblOptions) -> anyhow::Result<UsblStudy> {
         if a.runs == 0 {
             bail!("--runs must be at least 1");
         }
@@ -473,7 +473,7 @@ impl crate::runs::RunStudy for UsblStudy {
 }
 
 /// Runs the Monte Carlo for one configuration on this machine's cores.
-pub fn run(a: &UsblArgs) -> anyhow::Result<UsblReport> {
+pub fn run(a: &UsblOptions) -> anyhow::Result<UsblReport> {
     let study = UsblStudy::new(a)?;
     let threads = a.threads.unwrap_or_else(crate::parallel::default_threads);
     let bar = crate::progress::Progress::new(!a.json).runs("USBL Monte Carlo", a.runs);
@@ -482,12 +482,12 @@ pub fn run(a: &UsblArgs) -> anyhow::Result<UsblReport> {
 
 /// The comparison table: {loose, tight} × {ukf, akf, aukf} × {clean, 5 % outliers, 1° array
 /// yaw error}.
-pub fn run_table(a: &UsblArgs) -> anyhow::Result<Vec<UsblReport>> {
+pub fn run_table(a: &UsblOptions) -> anyhow::Result<Vec<UsblReport>> {
     let mut out = Vec::new();
     for (outliers, yaw) in [(0.0, 0.0), (0.05, 0.0), (0.0, 1.0)] {
         for coupling in [Coupling::Loose, Coupling::Tight] {
             for filter in [UsblFilter::Ukf, UsblFilter::Akf, UsblFilter::Aukf] {
-                out.push(run(&UsblArgs {
+                out.push(run(&UsblOptions {
                     coupling,
                     filter,
                     outliers,

@@ -2,11 +2,11 @@
 //! typed report whose runs do not depend on the number of threads.
 
 use auvnav_core::navigator::NavConfig;
-use auvnav_studies::nees::{NeesArgs, nees_monte_carlo};
+use auvnav_studies::nees::{NeesOptions, nees_monte_carlo};
 
 #[test]
 fn a_nees_study_runs_through_the_library() {
-    let args = NeesArgs {
+    let args = NeesOptions {
         runs: 3,
         scenario: "lawnmower".into(),
         seconds: Some(60.0),

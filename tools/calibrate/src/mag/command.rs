@@ -2,7 +2,7 @@
 //! recording and evaluation on the rest, verdict.
 
 use super::fit::{self, Calibration, MagSample, Model, SwarmSettings};
-use super::input::{self, CsvColumnArgs, Recording};
+use super::input::{self, CsvColumnOptions, Recording};
 use super::{Coverage, MagMethod, ReferenceField, Spreads, Thresholds};
 use anyhow::{Context, bail};
 use serde::Serialize;
@@ -22,7 +22,7 @@ pub enum ModelChoice {
 
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
-pub struct CalibrateMagArgs {
+pub struct CalibrateMagOptions {
     /// Recordings: auvnav logs (.mcap; the magnetometer topic, the IMU for gravity) or CSV files.
     #[cfg_attr(feature = "clap", arg(required = true))]
     pub inputs: Vec<PathBuf>,
@@ -55,7 +55,7 @@ pub struct CalibrateMagArgs {
     #[cfg_attr(feature = "clap", arg(long, default_value_t = 150))]
     pub iterations: usize,
     #[cfg_attr(feature = "clap", command(flatten))]
-    pub columns: CsvColumnArgs,
+    pub columns: CsvColumnOptions,
     /// Print the report as JSON.
     #[cfg_attr(feature = "clap", arg(long))]
     pub json: bool,
@@ -67,10 +67,10 @@ pub struct CalibrateMagArgs {
     pub report: Option<PathBuf>,
 }
 
-impl CalibrateMagArgs {
+impl CalibrateMagOptions {
     /// The defaults, on `inputs`.
     pub fn new(inputs: Vec<PathBuf>) -> Self {
-        CalibrateMagArgs {
+        CalibrateMagOptions {
             inputs,
             method: MagMethod::Lm,
             model: ModelChoice::Auto,
@@ -82,7 +82,7 @@ impl CalibrateMagArgs {
             date: None,
             seed: 1,
             iterations: 150,
-            columns: CsvColumnArgs::default(),
+            columns: CsvColumnOptions::default(),
             json: false,
             write_config: None,
             report: None,
@@ -153,7 +153,7 @@ pub struct MagReport {
 }
 
 fn reference_field(
-    a: &CalibrateMagArgs,
+    a: &CalibrateMagOptions,
     rec: &Recording,
     radius_ut: f64,
 ) -> anyhow::Result<ReferenceField> {
@@ -280,7 +280,7 @@ fn effects(c: &Calibration, lm: Option<&fit::LmFit>, model: Model) -> Vec<Effect
 /// Runs the calibration (no file written).
 // Long on purpose: reads the recordings, splits fit and held-out samples, runs the method and every
 // comparison the report shows; the steps share the sample sets.
-pub fn calibrate_mag(a: &CalibrateMagArgs) -> anyhow::Result<MagReport> {
+pub fn calibrate_mag(a: &CalibrateMagOptions) -> anyhow::Result<MagReport> {
     if !(a.fit_fraction > 0.0 && a.fit_fraction <= 1.0) {
         bail!("--fit-fraction {}: expected 0 < f <= 1", a.fit_fraction);
     }

@@ -16,11 +16,11 @@ use fit::{Calibration, FitError, LmFit, MagSample, Model, SwarmSettings};
 use nalgebra::Vector3;
 use serde::Serialize;
 
-pub use command::{CalibrateMagArgs, calibrate_mag};
+pub use command::{CalibrateMagOptions, calibrate_mag};
 
 /// `auvnav calibrate mag` as a function: the calibration, then the files it asks for (the
 /// `[navigation.magnetometer]` table, the report directory).
-pub fn run(a: &CalibrateMagArgs) -> anyhow::Result<command::MagReport> {
+pub fn run(a: &CalibrateMagOptions) -> anyhow::Result<command::MagReport> {
     let r = calibrate_mag(a)?;
     if let Some(p) = &a.write_config {
         report::write_config(p, &r)?;

@@ -4,7 +4,7 @@
 
 #[allow(unused_imports)]
 use super::*;
-use crate::calibrate::{CalibrateDvlArgs, Holdout, Method, calibrate_dvl, voyage::VoyageSpec};
+use crate::calibrate::{CalibrateDvlOptions, Holdout, Method, calibrate_dvl, voyage::VoyageSpec};
 
 /// One method's cost and result.
 #[derive(Debug, Clone, Serialize)]
@@ -63,7 +63,7 @@ pub fn calibrate(seed: u64, methods: &[Method], json: bool) -> anyhow::Result<()
         }
         let mut out = Vec::new();
         for &method in methods {
-            let mut a = CalibrateDvlArgs::new(specs.clone());
+            let mut a = CalibrateDvlOptions::new(specs.clone());
             a.method = method;
             a.holdout = Holdout::None;
             a.json = true;

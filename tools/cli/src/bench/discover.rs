@@ -208,11 +208,12 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
     let total = hidden + null;
     let progress = Mutex::new((Progress::new(!json), 0usize));
     // The hidden and null trials are the library's trial study (the runs a cluster runs too).
-    let study = crate::discover::trials::TrialsStudy::new(&crate::discover::trials::TrialsArgs {
-        hidden,
-        null,
-        per_run: false,
-    })?;
+    let study =
+        crate::discover::trials::TrialsStudy::new(&crate::discover::trials::TrialsOptions {
+            hidden,
+            null,
+            per_run: false,
+        })?;
     let results = map_runs(total, threads, |k| {
         let t0 = std::time::Instant::now();
         let t = auvnav_studies::runs::RunStudy::run(&study, k)?;

@@ -19,7 +19,7 @@ pub fn align(runs: usize, json: bool) -> anyhow::Result<()> {
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let mut out = Vec::new();
     for model in [1u8, 2, 3] {
-        let a = crate::align::AlignArgs {
+        let a = crate::align::AlignOptions {
             models: vec![model],
             scenario: "turning".into(),
             runs,
