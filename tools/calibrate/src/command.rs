@@ -24,7 +24,7 @@ fn load_session_config(
     first_voyage: Option<&std::path::Path>,
 ) -> anyhow::Result<SessionConfig> {
     if let Some(p) = path {
-        return auvnav_replay::load_config(p);
+        return Ok(auvnav_replay::load_config(p)?);
     }
     if let Some(log) = first_voyage {
         let header = auvnav_log::LogReader::open(log)?

@@ -473,7 +473,7 @@ pub fn config_toml(r: &CalibrationReport) -> anyhow::Result<String> {
 pub use auvnav_replay::write_atomically;
 
 pub fn write_config(path: &Path, r: &CalibrationReport) -> anyhow::Result<()> {
-    write_atomically(path, &config_toml(r)?)
+    Ok(write_atomically(path, &config_toml(r)?)?)
 }
 
 fn ne_track(v: &Voyage, run: &VoyageRun) -> Vec<(f64, f64)> {

@@ -35,6 +35,12 @@ pub fn exit_status(e: &anyhow::Error) -> u8 {
             Some(Failure::CheckFailed(_)) => return 3,
             None => {}
         }
+        if cause
+            .downcast_ref::<auvnav_replay::ReplayError>()
+            .is_some_and(auvnav_replay::ReplayError::is_usage)
+        {
+            return 2;
+        }
         if cause.downcast_ref::<toml::de::Error>().is_some()
             || cause
                 .downcast_ref::<auvnav_recorder::WouldOverwrite>()

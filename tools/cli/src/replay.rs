@@ -61,7 +61,7 @@ pub fn run(a: &ReplayArgs) -> anyhow::Result<ReplayReport> {
         ))
         .into());
     }
-    replay(&a.options())
+    Ok(replay(&a.options())?)
 }
 
 /// Prints a replay report for people.

@@ -18,13 +18,15 @@
 #![forbid(unsafe_code)]
 
 pub mod accuracy;
+mod error;
 pub mod json;
 pub mod order;
 mod run;
+pub use error::{ReplayError, Source};
 pub use run::*;
 
 use crate::accuracy::{Accuracy, AccuracyTracker, SolutionPoint};
-use anyhow::{Context, bail};
+use anyhow::Context;
 use auvnav_core::feed::SensorMessage;
 use auvnav_core::navigator::{NavCounters, Navigator};
 use auvnav_core::session::{Session, SessionOutput};
@@ -53,13 +55,14 @@ pub enum Failure {
 pub type ReplayConfig = auvnav_core::session::SessionConfig;
 
 /// Reads a replay configuration file and validates it as the daemon does.
-pub fn load_config(path: &Path) -> anyhow::Result<ReplayConfig> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("reading configuration {}", path.display()))?;
-    let cfg: ReplayConfig =
-        toml::from_str(&text).with_context(|| format!("configuration {}", path.display()))?;
-    cfg.validate()
-        .with_context(|| format!("configuration {}", path.display()))?;
+pub fn load_config(path: &Path) -> Result<ReplayConfig, ReplayError> {
+    let config = |source: Source| ReplayError::Config {
+        path: path.to_path_buf(),
+        source,
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| config(e.into()))?;
+    let cfg: ReplayConfig = toml::from_str(&text).map_err(|e| config(e.into()))?;
+    cfg.validate().map_err(|e| config(e.into()))?;
     Ok(cfg)
 }
 

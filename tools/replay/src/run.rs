@@ -115,9 +115,9 @@ fn reader_corruption<R: std::io::Read>(reader: &LogReader<R>) -> Option<String> 
 
 /// Writes `text` to `path` atomically: into `path.partial`, synced, then renamed into place; on
 /// failure nothing is left behind.
-pub fn write_atomically(path: &Path, text: &str) -> anyhow::Result<()> {
+pub fn write_atomically(path: &Path, text: &str) -> Result<(), ReplayError> {
     let tmp = partial_path(path);
-    let result = (|| -> anyhow::Result<()> {
+    let result = (|| -> std::io::Result<()> {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(text.as_bytes())?;
         f.sync_all()?;
@@ -127,7 +127,10 @@ pub fn write_atomically(path: &Path, text: &str) -> anyhow::Result<()> {
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }
-    result.with_context(|| format!("writing {}", path.display()))
+    result.map_err(|e| ReplayError::Output {
+        path: path.to_path_buf(),
+        source: e.into(),
+    })
 }
 
 /// `path` + `.partial`: where a file is written before it is renamed into place.
@@ -163,23 +166,30 @@ pub fn session_config_from_toml(text: &str) -> anyhow::Result<ReplayConfig> {
     Ok(cfg)
 }
 
+/// The log's header, or why it cannot be read.
+fn log_header(log: &Path) -> Result<LogHeader, ReplayError> {
+    let read = || -> Result<LogHeader, LogError> { LogReader::open(log)?.read_header() };
+    read().map_err(|e| ReplayError::Log {
+        path: log.to_path_buf(),
+        source: e.into(),
+    })
+}
+
 /// The configuration a replay runs with, and where it came from.
-pub fn replay_config(a: &ReplayOptions) -> anyhow::Result<(ReplayConfig, String)> {
+pub fn replay_config(a: &ReplayOptions) -> Result<(ReplayConfig, String), ReplayError> {
     let (mut cfg, mut source) = base_replay_config(a)?;
     if let Some(coupling) = a.usbl {
         match cfg.navigation.usbl.as_mut() {
             Some(u) => u.coupling = coupling,
             None => {
-                let header = LogReader::open(&a.log)?
-                    .read_header()
-                    .with_context(|| format!("reading {}", a.log.display()))?;
+                let header = log_header(&a.log)?;
                 let station =
-                    auvnav_sim::StationGeometry::from_notes(&header.notes).with_context(|| {
-                        format!(
+                    auvnav_sim::StationGeometry::from_notes(&header.notes).ok_or_else(|| {
+                        ReplayError::Input(format!(
                             "--usbl: {} has no station survey in its header; give the station \
                              in [navigation.usbl] of --config",
                             a.log.display()
-                        )
+                        ))
                     })?;
                 cfg.navigation.usbl = Some(auvnav_core::aid::usbl::UsblConfig {
                     coupling,
@@ -192,17 +202,20 @@ pub fn replay_config(a: &ReplayOptions) -> anyhow::Result<(ReplayConfig, String)
     Ok((cfg, source))
 }
 
-fn base_replay_config(a: &ReplayOptions) -> anyhow::Result<(ReplayConfig, String)> {
+fn base_replay_config(a: &ReplayOptions) -> Result<(ReplayConfig, String), ReplayError> {
     if let Some(p) = &a.config {
         return Ok((load_config(p)?, p.display().to_string()));
     }
     // A recording carries the daemon's configuration: replay with it, as the daemon ran.
-    let header = LogReader::open(&a.log)?
-        .read_header()
-        .with_context(|| format!("reading {}", a.log.display()))?;
+    let header = log_header(&a.log)?;
     if header.producer == "auvnav record" && !header.config.trim().is_empty() {
+        let cfg =
+            session_config_from_toml(&header.config).map_err(|e| ReplayError::EmbeddedConfig {
+                log: a.log.clone(),
+                source: crate::error::boxed(e),
+            })?;
         return Ok((
-            session_config_from_toml(&header.config)?,
+            cfg,
             "the log header (embedded by auvnav record)".to_string(),
         ));
     }
@@ -210,11 +223,14 @@ fn base_replay_config(a: &ReplayOptions) -> anyhow::Result<(ReplayConfig, String
 }
 
 /// Replays a log: the configuration, the outputs, the report.
-pub fn replay(a: &ReplayOptions) -> anyhow::Result<ReplayReport> {
-    let (cfg, config_source) = replay_config(a)?;
+pub fn replay(a: &ReplayOptions) -> Result<ReplayReport, ReplayError> {
     if !(a.min_distance.is_finite() && a.min_distance >= 0.0) {
-        bail!("min_distance {}: must be >= 0 m", a.min_distance);
+        return Err(ReplayError::Options(format!(
+            "min_distance {}: must be >= 0 m",
+            a.min_distance
+        )));
     }
+    let (cfg, config_source) = replay_config(a)?;
     let decimate = a.decimate.max(1);
     let mut replay = Replay::new(&cfg, a.min_distance);
     if a.compare_recorded {
@@ -226,7 +242,9 @@ pub fn replay(a: &ReplayOptions) -> anyhow::Result<ReplayReport> {
     let config_text = toml::to_string(&cfg).unwrap_or_default();
     match &a.out {
         None => {
-            log_error = run_log(&a.log, &mut replay, &mut |_| Ok(()))?.1;
+            log_error = run_log(&a.log, &mut replay, &mut |_| Ok(()))
+                .map_err(|e| read_failure(&a.log, e))?
+                .1;
         }
         Some(path) if path.extension().is_some_and(|e| e == "csv") => {
             let diag_path = diagnostics_csv_path(path);
@@ -247,14 +265,18 @@ pub fn replay(a: &ReplayOptions) -> anyhow::Result<ReplayReport> {
                         Output::Solution(s) => {
                             solutions += 1;
                             if (solutions - 1).is_multiple_of(decimate) {
-                                auvnav_core::csv::write_nav_row(&mut nav_w, s)?;
+                                auvnav_core::csv::write_nav_row(&mut nav_w, s)
+                                    .context(WritingOutput)?;
                             }
                         }
-                        Output::Diagnostics(d) => write_diagnostics_row(&mut diag_w, d)?,
+                        Output::Diagnostics(d) => {
+                            write_diagnostics_row(&mut diag_w, d).context(WritingOutput)?
+                        }
                         Output::Truth(_) | Output::LateAid(_) => {}
                     }
                     Ok(())
-                })?
+                })
+                .context(ReadingLog)?
                 .1;
                 nav_w.flush()?;
                 diag_w.flush()?;
@@ -266,7 +288,7 @@ pub fn replay(a: &ReplayOptions) -> anyhow::Result<ReplayReport> {
                 let _ = std::fs::remove_file(&nav_partial);
                 let _ = std::fs::remove_file(&diag_partial);
             }
-            result?;
+            result.map_err(|e| output_or_read_failure(&a.log, path, e))?;
         }
         Some(path) => {
             let mut header = LogHeader::new("auvnav replay", &config_text);
@@ -275,31 +297,35 @@ pub fn replay(a: &ReplayOptions) -> anyhow::Result<ReplayReport> {
                 .insert("replay.source_log".into(), a.log.display().to_string());
             write_log_atomically(path, &header, |w| {
                 log_error = run_log(&a.log, &mut replay, &mut |o| {
-                    match o {
+                    let written = match o {
                         Output::Solution(s) => {
                             solutions += 1;
                             if (solutions - 1).is_multiple_of(decimate) {
-                                w.write(topic::NAV_SOLUTION, s)?;
+                                w.write(topic::NAV_SOLUTION, s)
+                            } else {
+                                Ok(())
                             }
                         }
-                        Output::Diagnostics(d) => w.write(topic::NAV_AID_DIAGNOSTICS, d)?,
-                        Output::Truth(t) => w.write(topic::TRUTH, t)?,
-                        Output::LateAid(r) => w.write(topic::NAV_LATE_AIDS, r)?,
-                    }
-                    Ok(())
-                })?
+                        Output::Diagnostics(d) => w.write(topic::NAV_AID_DIAGNOSTICS, d),
+                        Output::Truth(t) => w.write(topic::TRUTH, t),
+                        Output::LateAid(r) => w.write(topic::NAV_LATE_AIDS, r),
+                    };
+                    written.context(WritingOutput)
+                })
+                .context(ReadingLog)?
                 .1;
                 Ok(())
-            })?;
+            })
+            .map_err(|e| output_or_read_failure(&a.log, path, e))?;
         }
     }
     let wall = start.elapsed().as_secs_f64();
     // With [alignment] the solutions are the alignment's, also when it did not finish.
     if replay.initial().is_none() && !replay.has_alignment() {
-        bail!(
+        return Err(ReplayError::Input(format!(
             "{}: no initial state: the log has no truth channel and the configuration no [initial] table",
             a.log.display()
-        );
+        )));
     }
     let log_duration_s = replay.duration_s();
     Ok(ReplayReport {
@@ -321,4 +347,45 @@ pub fn replay(a: &ReplayOptions) -> anyhow::Result<ReplayReport> {
         log_error,
         recorded_comparison: replay.recorded_comparison().cloned(),
     })
+}
+
+/// Marks an error of an output sink (a CSV row, an MCAP record) inside `run_log`'s error.
+#[derive(Debug)]
+struct WritingOutput;
+
+impl std::fmt::Display for WritingOutput {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("writing the output")
+    }
+}
+
+/// Marks `run_log`'s own error (reading the log, or a sink's error marked [`WritingOutput`]).
+#[derive(Debug)]
+struct ReadingLog;
+
+impl std::fmt::Display for ReadingLog {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("replaying the log")
+    }
+}
+
+/// A failure while reading the log (`run_log`'s error when no output is written).
+fn read_failure(log: &Path, e: anyhow::Error) -> ReplayError {
+    ReplayError::Log {
+        path: log.to_path_buf(),
+        source: crate::error::boxed(e),
+    }
+}
+
+/// A failure of a replay that writes `out`: the output's when a sink or the file failed, the
+/// log's when the reader did.
+fn output_or_read_failure(log: &Path, out: &Path, e: anyhow::Error) -> ReplayError {
+    if e.downcast_ref::<WritingOutput>().is_none() && e.downcast_ref::<ReadingLog>().is_some() {
+        read_failure(log, e)
+    } else {
+        ReplayError::Output {
+            path: out.to_path_buf(),
+            source: crate::error::boxed(e),
+        }
+    }
 }

@@ -56,3 +56,74 @@ fn a_log_replays_through_the_library_with_a_typed_report() {
     assert!(format!("{e:#}").contains("bad.toml"), "{e:#}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn failures_are_typed_the_callers_apart_from_the_environments() {
+    use auvnav_replay::ReplayError;
+    let dir = std::env::temp_dir().join(format!("auvnav-replay-errors-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("scratch folder");
+    let log = dir.join("short.mcap");
+    let scenario = Scenario::load("straight").expect("scenario");
+    let effects = scenario.effects().expect("effects");
+    auvnav_sim::simulate_to_log(
+        &SimConfig {
+            scenario,
+            effects,
+            seed: 4502,
+            duration_s: Some(20.0),
+        },
+        &log,
+    )
+    .expect("simulation");
+
+    // An option out of range: the caller's.
+    let e = replay(&ReplayOptions {
+        min_distance: -1.0,
+        ..ReplayOptions::new(&log)
+    })
+    .expect_err("negative distance");
+    assert!(
+        matches!(e, ReplayError::Options(_)) && e.is_usage(),
+        "{e:?}"
+    );
+
+    // A configuration that does not parse, and one that fails validation: the caller's, with
+    // the parser's or the check's error as the source.
+    let bad = dir.join("bad.toml");
+    std::fs::write(&bad, "[navigation\n").expect("write");
+    let e = replay(&ReplayOptions {
+        config: Some(bad.clone()),
+        ..ReplayOptions::new(&log)
+    })
+    .expect_err("unparsable configuration");
+    assert!(matches!(&e, ReplayError::Config { path, .. } if *path == bad) && e.is_usage());
+    let source = std::error::Error::source(&e).expect("the parser's error");
+    assert!(
+        source.downcast_ref::<toml::de::Error>().is_some(),
+        "{source:?}"
+    );
+    std::fs::write(&bad, "[navigation]\ncovariance_interval_s = -1.0\n").expect("write");
+    let e = auvnav_replay::load_config(&bad).expect_err("invalid configuration");
+    assert!(
+        matches!(e, ReplayError::Config { .. }) && e.is_usage(),
+        "{e:?}"
+    );
+
+    // A log that is not one, and an output that cannot be written: the environment's.
+    let junk = dir.join("junk.mcap");
+    std::fs::write(&junk, b"not a log").expect("write");
+    let e = replay(&ReplayOptions::new(&junk)).expect_err("not a log");
+    assert!(matches!(&e, ReplayError::Log { path, .. } if *path == junk) && !e.is_usage());
+    let out = dir.join("missing-folder").join("nav.csv");
+    let e = replay(&ReplayOptions {
+        out: Some(out.clone()),
+        ..ReplayOptions::new(&log)
+    })
+    .expect_err("unwritable output");
+    assert!(
+        matches!(&e, ReplayError::Output { path, .. } if *path == out),
+        "{e:?}"
+    );
+    assert!(!out.exists());
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -131,7 +131,7 @@ pub fn config_toml(r: &MagReport) -> anyhow::Result<String> {
 }
 
 pub fn write_config(path: &Path, r: &MagReport) -> anyhow::Result<()> {
-    write_atomically(path, &config_toml(r)?)
+    Ok(write_atomically(path, &config_toml(r)?)?)
 }
 
 /// Every n-th sample so a plot holds at most `max` points.
