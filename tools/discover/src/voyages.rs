@@ -289,8 +289,6 @@ fn held_out(
 /// Discovery on several voyages (see the module's text): each voyage's own report, the shared
 /// installation effects and their agreement, in one report whose `effects` are the shared
 /// effects the voyages agree on.
-// Long on purpose: per-voyage analyses, the shared selection with voyages left out, the combination
-// and the agreement test share the per-voyage tables, in the module text's order.
 pub fn discover_voyages(
     data: &[VoyageData],
     nominal: &Effects,
@@ -326,12 +324,7 @@ pub fn discover_voyages(
             continue;
         }
         // Per-voyage effects named by each voyage alone.
-        let named = |i: usize, name: &str| {
-            reports[i]
-                .effects
-                .iter()
-                .find(|e| e.channel == kind && e.name == name)
-        };
+        let named = |i: usize, name: &str| named_alone(&reports, i, kind, name);
         let candidates: Vec<usize> = (0..CANDIDATES.len())
             .filter(|&c| CANDIDATES[c].channel == kind)
             .collect();
@@ -402,298 +395,232 @@ pub fn discover_voyages(
             .filter(|&c| !per_voyage(CANDIDATES[c].name))
             .collect();
         // Forward selection with the voyages as the held-out folds.
-        let mut shared: Vec<usize> = Vec::new();
-        let mut gains: Vec<f64> = Vec::new();
-        let base = {
-            let fits = fit_voyages(&cv, &shared);
-            held_out(&cv, &shared, &shared_estimates(&cv, &shared, &fits)).0
-        };
-        let mut current = base;
-        let mut rejected: Vec<usize> = Vec::new();
-        loop {
-            let mut trials: Vec<(usize, f64, Vec<VoyageFit>)> = installation
-                .iter()
-                .copied()
-                .filter(|c| !shared.contains(c) && !rejected.contains(c))
-                .map(|c| {
-                    let mut set = shared.clone();
-                    set.push(c);
-                    let fits = fit_voyages(&cv, &set);
-                    let (score, _) = held_out(&cv, &set, &shared_estimates(&cv, &set, &fits));
-                    (c, score, fits)
-                })
-                .collect();
-            trials.sort_by(|a, b| a.1.total_cmp(&b.1));
-            let mut added = false;
-            for (c, score, fits) in trials {
-                if !(score.is_finite() && 1.0 - score / current >= sel.min_gain) {
-                    break;
-                }
+        let (mut shared, mut gains) =
+            select_shared(&mut cv, data, &installation, sel, &mut v.inconsistent);
+        settle_agreement(&mut cv, data, &mut shared, &mut gains, &mut v.inconsistent);
+        record_shared(
+            &cv,
+            data,
+            nominal,
+            kind,
+            &shared,
+            &gains,
+            &mut v,
+            &mut model,
+            &mut out.effects,
+        );
+        // Installation effects voyages named alone that the voyages together do not confirm:
+        // disagreement or too little held-out gain.
+        not_confirmed(
+            &cv,
+            data,
+            &reports,
+            kind,
+            &installation,
+            &shared,
+            &mut v,
+            &mut out.notes,
+        );
+        // Pairs no voyage's motion separates.
+        out.unseparable
+            .extend(unseparable_pairs(&cv, &reports, kind));
+    }
+    out.noise = pooled_noise(&reports);
+    for r in &reports {
+        for n in &r.notes {
+            out.notes.push(format!("{}: {n}", r.inputs.join(", ")));
+        }
+    }
+    out.model = model;
+    out.held_out_model = nominal.clone();
+    v.voyages = reports;
+    out.voyages = Some(Box::new(v));
+    out.wall_s = start.elapsed().as_secs_f64();
+    out
+}
+
+/// Forward selection of the installation effects with the voyages as the held-out folds: the
+/// shared set and each one's held-out gain. An effect the voyages disagree on goes to
+/// `inconsistent` and stays in the data as each voyage's own, so that it does not bias the
+/// effects the voyages do share.
+fn select_shared(
+    cv: &mut [ChannelVoyage],
+    data: &[VoyageData],
+    installation: &[usize],
+    sel: &Selection,
+    inconsistent: &mut Vec<SharedEffect>,
+) -> (Vec<usize>, Vec<f64>) {
+    let mut shared: Vec<usize> = Vec::new();
+    let mut gains: Vec<f64> = Vec::new();
+    let base = {
+        let fits = fit_voyages(cv, &shared);
+        held_out(cv, &shared, &shared_estimates(cv, &shared, &fits)).0
+    };
+    let mut current = base;
+    let mut rejected: Vec<usize> = Vec::new();
+    loop {
+        let mut trials: Vec<(usize, f64, Vec<VoyageFit>)> = installation
+            .iter()
+            .copied()
+            .filter(|c| !shared.contains(c) && !rejected.contains(c))
+            .map(|c| {
                 let mut set = shared.clone();
                 set.push(c);
-                let (off, len) = offset_in(&set, c);
-                let ests = shared_estimates(&cv, &set, &fits);
-                let joint = combine(&ests.iter().collect::<Vec<_>>(), components(&set));
-                let (alone, agreement) = agreement_of(&ests, off, len);
-                // The voyages' own scatter, when larger than their deviations say (the Birge
-                // ratio), widens the combined deviation: a slowly varying error gives each voyage
-                // an estimate of its own sign that its deviation does not cover.
-                let birge = birge_ratio(&agreement);
-                let significant = (0..len).any(|k| {
-                    let s = joint.std[off + k] * birge;
-                    s.is_finite() && joint.delta[off + k].abs() >= sel.min_sigma * s
+                let fits = fit_voyages(cv, &set);
+                let (score, _) = held_out(cv, &set, &shared_estimates(cv, &set, &fits));
+                (c, score, fits)
+            })
+            .collect();
+        trials.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let mut added = false;
+        for (c, score, fits) in trials {
+            if !(score.is_finite() && 1.0 - score / current >= sel.min_gain) {
+                break;
+            }
+            let mut set = shared.clone();
+            set.push(c);
+            let (off, len) = offset_in(&set, c);
+            let ests = shared_estimates(cv, &set, &fits);
+            let joint = combine(&ests.iter().collect::<Vec<_>>(), components(&set));
+            let (alone, agreement) = agreement_of(&ests, off, len);
+            // The voyages' own scatter, when larger than their deviations say (the Birge
+            // ratio), widens the combined deviation: a slowly varying error gives each voyage
+            // an estimate of its own sign that its deviation does not cover.
+            let birge = birge_ratio(&agreement);
+            let significant = (0..len).any(|k| {
+                let s = joint.std[off + k] * birge;
+                s.is_finite() && joint.delta[off + k].abs() >= sel.min_sigma * s
+            });
+            if !significant {
+                continue;
+            }
+            if agreement.disagrees() {
+                let (verdict, agreeing) = disagreement(cv, data, c, &alone, &agreement);
+                inconsistent.push(SharedEffect {
+                    agreeing,
+                    ..shared_effect(
+                        cv,
+                        data,
+                        &set,
+                        c,
+                        &fits,
+                        &agreement,
+                        1.0 - score / current,
+                        verdict,
+                    )
                 });
-                if !significant {
-                    continue;
+                // Still in the data: each voyage fits its own value, so that it does not
+                // bias the effects the voyages do share.
+                rejected.push(c);
+                for x in cv.iter_mut() {
+                    x.own.push(c);
                 }
-                if agreement.disagrees() {
-                    let (verdict, agreeing) = disagreement(&cv, data, c, &alone, &agreement);
-                    v.inconsistent.push(SharedEffect {
-                        agreeing,
-                        ..shared_effect(
-                            &cv,
-                            data,
-                            &set,
-                            c,
-                            &fits,
-                            &agreement,
-                            1.0 - score / current,
-                            verdict,
-                        )
-                    });
-                    // Still in the data: each voyage fits its own value, so that it does not
-                    // bias the effects the voyages do share.
-                    rejected.push(c);
-                    for x in cv.iter_mut() {
-                        x.own.push(c);
-                    }
-                    let fits = fit_voyages(&cv, &shared);
-                    current = held_out(&cv, &shared, &shared_estimates(&cv, &shared, &fits)).0;
-                    added = true;
-                    break;
-                }
-                shared.push(c);
-                gains.push(1.0 - score / current);
-                current = score;
+                let fits = fit_voyages(cv, &shared);
+                current = held_out(cv, &shared, &shared_estimates(cv, &shared, &fits)).0;
                 added = true;
                 break;
             }
-            if !added {
-                break;
-            }
+            shared.push(c);
+            gains.push(1.0 - score / current);
+            current = score;
+            added = true;
+            break;
         }
-        // Effects set aside as each voyage's own change the others' estimates: the shared set
-        // must still agree at the end; the one that departs most goes to the inconsistent ones
-        // until the rest agree.
-        loop {
-            let fits = fit_voyages(&cv, &shared);
-            let ests = shared_estimates(&cv, &shared, &fits);
-            let worst = shared
-                .iter()
-                .enumerate()
-                .map(|(n, &c)| {
-                    let (off, len) = offset_in(&shared, c);
-                    let (alone, a) = agreement_of(&ests, off, len);
-                    let ratio = if a.dof > 0 { a.chi2 / a.limit() } else { 0.0 };
-                    (n, c, ratio, a, alone)
-                })
-                .filter(|x| x.2 > 1.0)
-                .max_by(|a, b| a.2.total_cmp(&b.2));
-            let Some((n, c, _, agreement, alone)) = worst else {
-                break;
-            };
-            let (verdict, agreeing) = disagreement(&cv, data, c, &alone, &agreement);
-            v.inconsistent.push(SharedEffect {
-                agreeing,
-                ..shared_effect(
-                    &cv,
-                    data,
-                    &shared,
-                    c,
-                    &fits,
-                    &agreement,
-                    gains[n],
-                    format!(
-                        "{verdict} (once the effects the voyages disagree on are each voyage's own)"
-                    ),
-                )
-            });
-            shared.remove(n);
-            gains.remove(n);
-            for x in cv.iter_mut() {
-                x.own.push(c);
-            }
+        if !added {
+            break;
         }
-        // The shared set on all voyages, and each voyage's held-out values.
-        let fits = fit_voyages(&cv, &shared);
-        let ests = shared_estimates(&cv, &shared, &fits);
-        let joint = combine(&ests.iter().collect::<Vec<_>>(), components(&shared));
-        let (score, held_thetas) = held_out(&cv, &shared, &ests);
-        // Against the nominal installation with the same per-voyage effects.
-        let base = held_out(
-            &cv,
-            &[],
-            &shared_estimates(&cv, &[], &fit_voyages(&cv, &[])),
-        )
-        .0;
-        v.scores.push(VoyageScore {
-            channel: kind,
-            voyages: cv.len(),
-            mse_nominal: base,
-            mse_shared: score,
-        });
-        let nominal_theta = nominal_theta(nominal, &shared);
-        let theta_all: Vec<f64> = nominal_theta
+    }
+    (shared, gains)
+}
+
+/// Effects set aside as each voyage's own change the others' estimates: the shared set must
+/// still agree at the end; the one that departs most goes to `inconsistent` until the rest agree.
+fn settle_agreement(
+    cv: &mut [ChannelVoyage],
+    data: &[VoyageData],
+    shared: &mut Vec<usize>,
+    gains: &mut Vec<f64>,
+    inconsistent: &mut Vec<SharedEffect>,
+) {
+    // Effects set aside as each voyage's own change the others' estimates: the shared set
+    // must still agree at the end; the one that departs most goes to the inconsistent ones
+    // until the rest agree.
+    loop {
+        let fits = fit_voyages(cv, shared);
+        let ests = shared_estimates(cv, shared, &fits);
+        let worst = shared
             .iter()
-            .zip(joint.delta.iter())
-            .map(|(a, b)| a + b)
-            .collect();
-        let at = cv[0].p.effects(&shared, &theta_all);
-        for (k, c) in cv.iter().enumerate() {
-            let e = c.p.effects(&shared, &held_thetas[k]);
-            set_all(&mut v.held_out_models[c.voyage], &e, &shared);
-        }
-        // Voyages without this channel take the values of all voyages.
-        for (i, m) in v.held_out_models.iter_mut().enumerate() {
-            if !cv.iter().any(|c| c.voyage == i) {
-                set_all(m, &at, &shared);
-            }
-        }
-        set_all(&mut model, &at, &shared);
-        for (n, &c) in shared.iter().enumerate() {
-            let (off, len) = offset_in(&shared, c);
-            let (_, agreement) = agreement_of(&ests, off, len);
-            let limit = agreement.limit();
-            let name = CANDIDATES[c].name;
-            let value = at.get(name).unwrap_or_default();
-            let std = &joint.std[off..off + len];
-            let mut s = shared_effect(
-                &cv,
+            .enumerate()
+            .map(|(n, &c)| {
+                let (off, len) = offset_in(shared, c);
+                let (alone, a) = agreement_of(&ests, off, len);
+                let ratio = if a.dof > 0 { a.chi2 / a.limit() } else { 0.0 };
+                (n, c, ratio, a, alone)
+            })
+            .filter(|x| x.2 > 1.0)
+            .max_by(|a, b| a.2.total_cmp(&b.2));
+        let Some((n, c, _, agreement, alone)) = worst else {
+            break;
+        };
+        let (verdict, agreeing) = disagreement(cv, data, c, &alone, &agreement);
+        inconsistent.push(SharedEffect {
+            agreeing,
+            ..shared_effect(
+                cv,
                 data,
-                &shared,
+                shared,
                 c,
                 &fits,
                 &agreement,
                 gains[n],
                 format!(
-                    "shared by {} voyages; they agree (χ² {:.1} ≤ {limit:.1}, {} dof)",
-                    cv.len(),
-                    agreement.chi2,
-                    agreement.dof
+                    "{verdict} (once the effects the voyages disagree on are each voyage's own)"
                 ),
-            );
-            let birge = birge_ratio(&agreement);
-            let std: Vec<f64> = std.iter().map(|x| x * birge).collect();
-            s.value = json_of(&value);
-            s.std = json_of(&std);
-            if birge > 1.0 {
-                s.verdict.push_str(&format!(
-                    "; deviation widened ×{birge:.2} to the voyages' scatter (Birge ratio)"
-                ));
-            }
-            out.effects.push(FoundEffect {
-                name: name.into(),
-                value: s.value.clone(),
-                std: s.std.clone(),
-                nominal: json_of(&nominal.get(name).unwrap_or_default()),
-                unit: spec(name).map_or("", |s| s.unit).into(),
-                channel: kind,
-                evidence: format!(
-                    "{}; leave-one-voyage-out mean squared residual {:.1} % lower",
-                    s.verdict,
-                    100.0 * gains[n]
-                ),
-                gain: gains[n],
-                equivalent: None,
-            });
-            v.shared.push(s);
+            )
+        });
+        shared.remove(n);
+        gains.remove(n);
+        for x in cv.iter_mut() {
+            x.own.push(c);
         }
-        // Installation effects voyages named alone that the voyages together do not confirm:
-        // disagreement or too little held-out gain.
-        for &c in &installation {
-            if shared.contains(&c) {
-                continue;
-            }
-            let name = CANDIDATES[c].name;
-            let alone_count = cv
-                .iter()
-                .filter(|x| named(x.voyage, name).is_some())
-                .count();
-            if alone_count > 0 && !v.inconsistent.iter().any(|s| s.name == name) {
-                let mut set = shared.clone();
-                set.push(c);
-                let fits = fit_voyages(&cv, &set);
-                let (off, len) = offset_in(&set, c);
-                let (alone, agreement) =
-                    agreement_of(&shared_estimates(&cv, &set, &fits), off, len);
-                if agreement.disagrees() {
-                    let (verdict, agreeing) = disagreement(&cv, data, c, &alone, &agreement);
-                    v.inconsistent.push(SharedEffect {
-                        agreeing,
-                        ..shared_effect(&cv, data, &set, c, &fits, &agreement, 0.0, verdict)
-                    });
-                }
-            }
-            let by: Vec<VoyageEstimate> = cv
-                .iter()
-                .filter_map(|x| {
-                    named(x.voyage, name).map(|e| VoyageEstimate {
-                        log: data[x.voyage].log.clone(),
-                        value: e.value.clone(),
-                        std: e.std.clone(),
-                    })
-                })
-                .collect();
-            if !by.is_empty() {
-                let inconsistent = v.inconsistent.iter().any(|s| s.name == name);
-                out.notes.push(format!(
-                    "{name} ({}): named by {} of {} voyages alone, not by the voyages together \
-                     ({})",
-                    kind.name(),
-                    by.len(),
-                    cv.len(),
-                    if inconsistent {
-                        "they disagree"
-                    } else {
-                        "not significant or no held-out gain across voyages"
-                    }
-                ));
-                v.not_confirmed.push(NamedAlone {
-                    name: name.into(),
-                    channel: kind,
-                    unit: spec(name).map_or("", |s| s.unit).into(),
-                    voyages: by,
-                });
-            }
-        }
-        // Pairs no voyage's motion separates.
-        let mut pairs: Option<Vec<Unseparable>> = None;
-        for c in &cv {
-            let mine: Vec<Unseparable> = reports[c.voyage]
-                .unseparable
-                .iter()
-                .filter(|u| {
-                    u.effects.iter().all(|n| {
-                        CANDIDATES
-                            .iter()
-                            .any(|x| x.channel == kind && x.name == n.as_str())
-                    })
-                })
-                .cloned()
-                .collect();
-            pairs = Some(match pairs {
-                None => mine,
-                Some(p) => p
-                    .into_iter()
-                    .filter(|u| mine.iter().any(|m| same_effects(m, u)))
-                    .collect(),
-            });
-        }
-        out.unseparable.extend(pairs.unwrap_or_default());
     }
-    // Each channel's noise over the voyages (RMS of the voyages' values).
+}
+
+/// The pairs of `kind`'s effects that no voyage's motion separates.
+fn unseparable_pairs(
+    cv: &[ChannelVoyage],
+    reports: &[DiscoverReport],
+    kind: ChannelKind,
+) -> Vec<Unseparable> {
+    let mut pairs: Option<Vec<Unseparable>> = None;
+    for c in cv {
+        let mine: Vec<Unseparable> = reports[c.voyage]
+            .unseparable
+            .iter()
+            .filter(|u| {
+                u.effects.iter().all(|n| {
+                    CANDIDATES
+                        .iter()
+                        .any(|x| x.channel == kind && x.name == n.as_str())
+                })
+            })
+            .cloned()
+            .collect();
+        pairs = Some(match pairs {
+            None => mine,
+            Some(p) => p
+                .into_iter()
+                .filter(|u| mine.iter().any(|m| same_effects(m, u)))
+                .collect(),
+        });
+    }
+    pairs.unwrap_or_default()
+}
+
+/// Each channel's noise over the voyages: the RMS of the voyages' values.
+fn pooled_noise(reports: &[DiscoverReport]) -> Vec<NoiseEstimate> {
     let mut noise: Vec<(NoiseEstimate, f64, usize)> = Vec::new();
-    for r in &reports {
+    for r in reports {
         for n in &r.noise {
             match noise
                 .iter_mut()
@@ -707,25 +634,194 @@ pub fn discover_voyages(
             }
         }
     }
-    out.noise = noise
+    noise
         .into_iter()
         .map(|(mut n, sum, count)| {
             n.value = (sum / count as f64).sqrt();
             n.note = format!("RMS over {count} voyages of: {}", n.note);
             n
         })
+        .collect()
+}
+
+/// The shared set of `kind` on all voyages: its held-out score against the nominal installation,
+/// each voyage's held-out model, the combined values (widened by the voyages' scatter) into the
+/// model, the found effects and `v.shared`.
+#[allow(clippy::too_many_arguments)]
+fn record_shared(
+    cv: &[ChannelVoyage],
+    data: &[VoyageData],
+    nominal: &Effects,
+    kind: ChannelKind,
+    shared: &[usize],
+    gains: &[f64],
+    v: &mut Voyages,
+    model: &mut Effects,
+    effects: &mut Vec<FoundEffect>,
+) {
+    // The shared set on all voyages, and each voyage's held-out values.
+    let fits = fit_voyages(cv, shared);
+    let ests = shared_estimates(cv, shared, &fits);
+    let joint = combine(&ests.iter().collect::<Vec<_>>(), components(shared));
+    let (score, held_thetas) = held_out(cv, shared, &ests);
+    // Against the nominal installation with the same per-voyage effects.
+    let base = held_out(cv, &[], &shared_estimates(cv, &[], &fit_voyages(cv, &[]))).0;
+    v.scores.push(VoyageScore {
+        channel: kind,
+        voyages: cv.len(),
+        mse_nominal: base,
+        mse_shared: score,
+    });
+    let nominal_theta = nominal_theta(nominal, shared);
+    let theta_all: Vec<f64> = nominal_theta
+        .iter()
+        .zip(joint.delta.iter())
+        .map(|(a, b)| a + b)
         .collect();
-    for r in &reports {
-        for n in &r.notes {
-            out.notes.push(format!("{}: {n}", r.inputs.join(", ")));
+    let at = cv[0].p.effects(shared, &theta_all);
+    for (k, c) in cv.iter().enumerate() {
+        let e = c.p.effects(shared, &held_thetas[k]);
+        set_all(&mut v.held_out_models[c.voyage], &e, shared);
+    }
+    // Voyages without this channel take the values of all voyages.
+    for (i, m) in v.held_out_models.iter_mut().enumerate() {
+        if !cv.iter().any(|c| c.voyage == i) {
+            set_all(m, &at, shared);
         }
     }
-    out.model = model;
-    out.held_out_model = nominal.clone();
-    v.voyages = reports;
-    out.voyages = Some(Box::new(v));
-    out.wall_s = start.elapsed().as_secs_f64();
-    out
+    set_all(model, &at, shared);
+    for (n, &c) in shared.iter().enumerate() {
+        let (off, len) = offset_in(shared, c);
+        let (_, agreement) = agreement_of(&ests, off, len);
+        let limit = agreement.limit();
+        let name = CANDIDATES[c].name;
+        let value = at.get(name).unwrap_or_default();
+        let std = &joint.std[off..off + len];
+        let mut s = shared_effect(
+            cv,
+            data,
+            shared,
+            c,
+            &fits,
+            &agreement,
+            gains[n],
+            format!(
+                "shared by {} voyages; they agree (χ² {:.1} ≤ {limit:.1}, {} dof)",
+                cv.len(),
+                agreement.chi2,
+                agreement.dof
+            ),
+        );
+        let birge = birge_ratio(&agreement);
+        let std: Vec<f64> = std.iter().map(|x| x * birge).collect();
+        s.value = json_of(&value);
+        s.std = json_of(&std);
+        if birge > 1.0 {
+            s.verdict.push_str(&format!(
+                "; deviation widened ×{birge:.2} to the voyages' scatter (Birge ratio)"
+            ));
+        }
+        effects.push(FoundEffect {
+            name: name.into(),
+            value: s.value.clone(),
+            std: s.std.clone(),
+            nominal: json_of(&nominal.get(name).unwrap_or_default()),
+            unit: spec(name).map_or("", |s| s.unit).into(),
+            channel: kind,
+            evidence: format!(
+                "{}; leave-one-voyage-out mean squared residual {:.1} % lower",
+                s.verdict,
+                100.0 * gains[n]
+            ),
+            gain: gains[n],
+            equivalent: None,
+        });
+        v.shared.push(s);
+    }
+}
+
+/// An effect of `kind` that voyage `i` named when analysed alone.
+fn named_alone<'r>(
+    reports: &'r [DiscoverReport],
+    i: usize,
+    kind: ChannelKind,
+    name: &str,
+) -> Option<&'r FoundEffect> {
+    reports[i]
+        .effects
+        .iter()
+        .find(|e| e.channel == kind && e.name == name)
+}
+
+/// The installation effects of `kind` some voyages named alone that the voyages together do
+/// not confirm (they disagree, or the shared effect has too little held-out gain): into
+/// `v.inconsistent` and `v.not_confirmed`, with a note each.
+#[allow(clippy::too_many_arguments)]
+fn not_confirmed(
+    cv: &[ChannelVoyage],
+    data: &[VoyageData],
+    reports: &[DiscoverReport],
+    kind: ChannelKind,
+    installation: &[usize],
+    shared: &[usize],
+    v: &mut Voyages,
+    notes: &mut Vec<String>,
+) {
+    for &c in installation {
+        if shared.contains(&c) {
+            continue;
+        }
+        let name = CANDIDATES[c].name;
+        let alone_count = cv
+            .iter()
+            .filter(|x| named_alone(reports, x.voyage, kind, name).is_some())
+            .count();
+        if alone_count > 0 && !v.inconsistent.iter().any(|s| s.name == name) {
+            let mut set = shared.to_vec();
+            set.push(c);
+            let fits = fit_voyages(cv, &set);
+            let (off, len) = offset_in(&set, c);
+            let (alone, agreement) = agreement_of(&shared_estimates(cv, &set, &fits), off, len);
+            if agreement.disagrees() {
+                let (verdict, agreeing) = disagreement(cv, data, c, &alone, &agreement);
+                v.inconsistent.push(SharedEffect {
+                    agreeing,
+                    ..shared_effect(cv, data, &set, c, &fits, &agreement, 0.0, verdict)
+                });
+            }
+        }
+        let by: Vec<VoyageEstimate> = cv
+            .iter()
+            .filter_map(|x| {
+                named_alone(reports, x.voyage, kind, name).map(|e| VoyageEstimate {
+                    log: data[x.voyage].log.clone(),
+                    value: e.value.clone(),
+                    std: e.std.clone(),
+                })
+            })
+            .collect();
+        if !by.is_empty() {
+            let inconsistent = v.inconsistent.iter().any(|s| s.name == name);
+            notes.push(format!(
+                "{name} ({}): named by {} of {} voyages alone, not by the voyages together \
+                 ({})",
+                kind.name(),
+                by.len(),
+                cv.len(),
+                if inconsistent {
+                    "they disagree"
+                } else {
+                    "not significant or no held-out gain across voyages"
+                }
+            ));
+            v.not_confirmed.push(NamedAlone {
+                name: name.into(),
+                channel: kind,
+                unit: spec(name).map_or("", |s| s.unit).into(),
+                voyages: by,
+            });
+        }
+    }
 }
 
 /// The verdict on voyages that disagree: which voyages depart most, and what the others agree
