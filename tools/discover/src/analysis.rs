@@ -257,9 +257,401 @@ pub(crate) fn json_of(v: &[f64]) -> serde_json::Value {
     }
 }
 
+/// The detection floor of every candidate of `p` not in `set`: fitted with the effects found,
+/// the smaller of `min_sigma` deviations and the held-out gain's floor, per component (none where
+/// the motion does not excite it).
+fn record_floors(
+    p: &Problem,
+    set: &[usize],
+    sep: &fit::Separability,
+    sel: &Selection,
+    kind: ChannelKind,
+    floors: &mut Vec<DetectionFloor>,
+) {
+    for c in p.candidates() {
+        if set.contains(&c) {
+            continue;
+        }
+        let mut with = set.to_vec();
+        with.push(c);
+        let fc = p.fit(&with, &p.epochs);
+        let (off, len) = fit::offset_of(&with, c);
+        let dead = sep
+            .unexcited
+            .iter()
+            .find(|(u, _)| *u == c)
+            .map(|(_, comps)| comps.clone())
+            .unwrap_or_default();
+        // Named takes both tests: min_sigma deviations, and a held-out score lower by
+        // min_gain.
+        let gain = p.gain_floor(set, c, sel.min_gain);
+        let floor = (0..len)
+            .map(|k| {
+                let s = fc.std[off + k];
+                (!dead.contains(&k) && s.is_finite() && s > 0.0)
+                    .then(|| (sel.min_sigma * s).max(gain[k]))
+            })
+            .collect();
+        floors.push(DetectionFloor {
+            name: fit::name(c).into(),
+            channel: kind,
+            floor,
+            unit: spec(fit::name(c)).map_or("", |s| s.unit).into(),
+            sigmas: sel.min_sigma,
+        });
+    }
+}
+
+/// The effects selected on `ch` (`steps`, fitted as `f` into the model `full`) into the report,
+/// with their evidence: held-out gain, rivals the motion cannot separate, groups of other
+/// candidates that mimic a component together, and the sound-speed equivalent of a DVL scale.
+#[allow(clippy::too_many_arguments)]
+fn record_effects(
+    ch: &Channel,
+    reference: &Reference,
+    nominal: &Effects,
+    sel: &Selection,
+    steps: &[fit::Step],
+    set: &[usize],
+    f: &fit::Fit,
+    full: &Effects,
+    r: &mut DiscoverReport,
+) {
+    let kind = ch.kind;
+    // Effects a group of other candidates mimics together, at the fitted model.
+    let confounded = {
+        let at_fit = Problem::new(ch, reference, full.clone());
+        fit::confounded(&fit::separability(&at_fit), set, sel.max_correlation)
+    };
+    for s in steps {
+        let (off, len) = fit::offset_of(set, s.candidate);
+        let name = fit::name(s.candidate);
+        let std: Vec<f64> = f.std[off..off + len].to_vec();
+        let gain = 1.0 - s.mse_after / s.mse_before;
+        let mut evidence = format!(
+            "held-out mean squared residual {:.4e} -> {:.4e} ({:.1} % lower)",
+            s.mse_before,
+            s.mse_after,
+            100.0 * gain
+        );
+        for (rival, corr) in &s.rivals {
+            evidence.push_str(&format!(
+                "; {} explains the data about as well (correlation {corr:.3})",
+                fit::name(*rival)
+            ));
+            r.unseparable.push(Unseparable {
+                effects: vec![name.into(), fit::name(*rival).into()],
+                correlation: *corr,
+                note: format!(
+                    "the motion cannot separate them; reported as {name}, which scored best"
+                ),
+            });
+        }
+        for c in confounded.iter().filter(|c| c.candidate == s.candidate) {
+            let group: Vec<&str> = c.group.iter().map(|&g| fit::name(g)).collect();
+            let held: Vec<String> = group
+                .iter()
+                .map(|g| {
+                    let v = full.get(g).unwrap_or_default();
+                    format!("{g} = {}", json_of(&v))
+                })
+                .collect();
+            evidence.push_str(&format!(
+                "; component {} is mimicked by {} together (correlation {:.3}): its estimate \
+                 and std hold only with {}",
+                c.component,
+                group.join(" and "),
+                c.correlation,
+                held.join(", ")
+            ));
+            let mut effects = vec![name.to_string()];
+            effects.extend(group.iter().map(|g| g.to_string()));
+            let same_set = |u: &Unseparable| {
+                let (mut a, mut b) = (u.effects.clone(), effects.clone());
+                a.sort();
+                b.sort();
+                a == b
+            };
+            if r.unseparable.iter().any(same_set) {
+                continue;
+            }
+            r.unseparable.push(Unseparable {
+                effects,
+                correlation: c.correlation,
+                note: format!(
+                    "component {} of {name} is a combination of the others on this motion: \
+                     the data cannot determine them together; {name} is reported with the \
+                     others at the model's values",
+                    c.component
+                ),
+            });
+        }
+        let equivalent = if name == "dvl.scale_factor" {
+            let first = |n: &str, default: f64| {
+                nominal
+                    .get(n)
+                    .and_then(|v| v.first().copied())
+                    .unwrap_or(default)
+            };
+            sound_speed_equivalent(
+                f.theta[off],
+                std.first().copied().unwrap_or(f64::NAN),
+                first("dvl.scale_factor", 1.0),
+                first("dvl.sound_speed", auvnav_sim::sensors::ASSUMED_SOUND_SPEED),
+            )
+        } else {
+            None
+        };
+        r.effects.push(FoundEffect {
+            name: name.into(),
+            value: json_of(&f.theta[off..off + len]),
+            std: json_of(&std),
+            nominal: json_of(&nominal.get(name).unwrap_or_default()),
+            unit: spec(name).map_or("", |s| s.unit).into(),
+            channel: kind,
+            evidence,
+            gain,
+            equivalent,
+        });
+    }
+}
+
+/// The pairs of candidates the motion cannot separate (correlation above `max_correlation`), not
+/// already reported.
+fn record_unseparable_pairs(
+    sep: &fit::Separability,
+    sel: &Selection,
+    unseparable: &mut Vec<Unseparable>,
+) {
+    for &(a, b, c) in &sep.pairs {
+        if c > sel.max_correlation
+            && !unseparable.iter().any(|u| {
+                (u.effects[0] == fit::name(a) && u.effects[1] == fit::name(b))
+                    || (u.effects[0] == fit::name(b) && u.effects[1] == fit::name(a))
+            })
+        {
+            unseparable.push(Unseparable {
+                effects: vec![fit::name(a).into(), fit::name(b).into()],
+                correlation: c,
+                note: "not separable on this motion".into(),
+            });
+        }
+    }
+}
+
+/// What a channel's residuals are compared with: the motion (speed, turn and pitch rates,
+/// forward specific force, depth, time), the acoustic fix's geometry, or the field's own terms.
+fn regressors(
+    ch: &Channel,
+    epochs: &[usize],
+    times: &[f64],
+    reference: &Reference,
+    nominal: &Effects,
+) -> Vec<(&'static str, Vec<f64>)> {
+    let states: Vec<_> = times.iter().map(|&t| reference.at(t)).collect();
+    let reg = |g: &dyn Fn(&super::RefState) -> f64| -> Vec<f64> {
+        states.iter().map(|s| s.as_ref().map_or(0.0, g)).collect()
+    };
+    if ch.kind == ChannelKind::MagneticField {
+        field_regressors(ch, epochs, times, nominal)
+    } else if ch.kind == ChannelKind::AcousticRanges {
+        let fix = |g: &dyn Fn(&[f64; 3]) -> f64| -> Vec<f64> {
+            epochs.iter().map(|&i| g(&ch.auxiliary[i])).collect()
+        };
+        vec![
+            ("slant_range", fix(&|x| x[0].hypot(x[1]).hypot(x[2]))),
+            ("horizontal_range", fix(&|x| x[0].hypot(x[1]))),
+            ("fix_depth", fix(&|x| x[2])),
+            ("fix_x", fix(&|x| x[0])),
+            ("fix_y", fix(&|x| x[1])),
+            ("time", times.iter().map(|t| t - times[0]).collect()),
+        ]
+    } else {
+        vec![
+            ("speed", reg(&|s| s.velocity_ned.norm())),
+            ("yaw_rate", reg(&|s| s.omega_eb_body.z)),
+            ("pitch_rate", reg(&|s| s.omega_eb_body.y)),
+            ("forward_specific_force", reg(&|s| s.specific_force_body.x)),
+            ("depth", reg(&|s| -s.height_m)),
+            ("time", times.iter().map(|t| t - times[0]).collect()),
+        ]
+    }
+}
+
+/// Which of `epochs` hold component `k` (a partial reading, a receiver without a range, lacks
+/// some; those are left out).
+fn present(ch: &Channel, epochs: &[usize], k: usize) -> Vec<bool> {
+    epochs
+        .iter()
+        .map(|&i| ch.values[i][k].is_finite())
+        .collect()
+}
+
+/// A note for every component whose residual, with the effects found, is not white: how far
+/// from white, anti-correlation, a periodic part, correlation with the motion.
+fn record_unexplained(
+    selected_desc: &[Description],
+    kind: ChannelKind,
+    unexplained: &mut Vec<Unexplained>,
+) {
+    for (k, desc) in selected_desc.iter().enumerate() {
+        if desc.white {
+            continue;
+        }
+        let mut note = format!(
+            "not white (Ljung-Box Q {:.0} > {:.1}; lag-1 autocorrelation {:.2}); rms {:.4} {}",
+            desc.ljung_box_q,
+            super::residuals::CHI2_20_99,
+            desc.lag1,
+            desc.rms,
+            kind.unit()
+        );
+        if desc.lag1 < -0.25 {
+            note.push_str(
+                "; successive residuals anti-correlated: the noise of a difference (a \
+                 reference's attitude or velocity noise enters neighbouring intervals with \
+                 opposite signs)",
+            );
+        }
+        if let Some(f) = desc.peak_hz {
+            note.push_str(&format!("; periodic at {f:.4} Hz"));
+        }
+        for (name, c) in &desc.correlated_with {
+            note.push_str(&format!("; correlated with {name} ({c:+.2})"));
+        }
+        unexplained.push(Unexplained {
+            channel: kind,
+            component: k,
+            note,
+        });
+    }
+}
+
+/// The held-out gain of the selected `set` on `ch`: fitted on the first `fit_fraction` of the
+/// epochs, scored on the rest; the report's model takes the values of the fit on every epoch
+/// (`full`), its held-out model those of the first part.
+fn record_gain(
+    ch: &Channel,
+    p: &Problem,
+    set: &[usize],
+    nominal: &Effects,
+    full: &Effects,
+    fit_fraction: f64,
+    r: &mut DiscoverReport,
+) {
+    let kind = ch.kind;
+    let d = kind.dims();
+    let cut = ((p.epochs.len() as f64) * fit_fraction).round() as usize;
+    let (train, test) = p.epochs.split_at(cut.clamp(1, p.epochs.len() - 1));
+    let ft = p.fit(set, train);
+    let rms = |res: Vec<f64>| -> Vec<f64> {
+        (0..d)
+            .map(|k| {
+                let v: Vec<f64> = component(&res, d, k)
+                    .into_iter()
+                    .zip(present(ch, test, k))
+                    .filter(|x| x.1)
+                    .map(|x| x.0)
+                    .collect();
+                (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
+            })
+            .collect()
+    };
+    let held_out = p.effects(set, &ft.theta);
+    r.gain.push(ChannelGain {
+        channel: kind,
+        fit_fraction,
+        rms_before: rms(p.residuals(nominal, test)),
+        rms_after: rms(p.residuals(&held_out, test)),
+    });
+    for &c in set {
+        let name = fit::name(c);
+        for (model, from) in [(&mut r.model, full), (&mut r.held_out_model, &held_out)] {
+            if let Some(v) = from.get(name) {
+                // In range: the fit clamps to the effect's range.
+                let _ = model.set(name, &v);
+            }
+        }
+    }
+}
+
+/// Each component of a residual series (`res`, over `p`'s epochs at `times`) described: level,
+/// spread, whiteness, periodic part and correlation with the motion, on the readings that hold
+/// the component.
+fn describe_components(
+    ch: &Channel,
+    p: &Problem,
+    times: &[f64],
+    reference: &Reference,
+    nominal: &Effects,
+    res: &[f64],
+) -> Vec<Description> {
+    let d = ch.kind.dims();
+    let regressors = regressors(ch, &p.epochs, times, reference, nominal);
+    (0..d)
+        .map(|k| {
+            let keep = present(ch, &p.epochs, k);
+            let pick = |v: &[f64]| -> Vec<f64> {
+                v.iter().zip(&keep).filter(|x| *x.1).map(|x| *x.0).collect()
+            };
+            let regs: Vec<(&str, Vec<f64>)> =
+                regressors.iter().map(|(n, v)| (*n, pick(v))).collect();
+            describe(&pick(times), &pick(&component(res, d, k)), &regs)
+        })
+        .collect()
+}
+
+/// Whether `ch` is left out of the analysis, with the reason in the report's notes: the field's
+/// magnitude when the full field vector is analysed, a channel without valid readings, the DVL
+/// channel the beams replace (or the other way round), a channel that needs a reference motion
+/// the logs lack.
+fn skipped(ch: &Channel, channels: &[Channel], no_reference: bool, r: &mut DiscoverReport) -> bool {
+    let kind = ch.kind;
+    if kind == ChannelKind::MagneticField
+        && r.channels
+            .iter()
+            .any(|c| c.channel == ChannelKind::Magnetometer)
+    {
+        // The full field vector against the reference attitude says more.
+        return true;
+    }
+    if ch.is_empty() {
+        let beams_mode = channels
+            .iter()
+            .any(|c| c.kind == ChannelKind::DvlBeams && (!c.is_empty() || c.skipped > 0));
+        if (kind == ChannelKind::Dvl && beams_mode)
+            || (kind == ChannelKind::DvlBeams && !beams_mode)
+        {
+            // The DVL is analysed through one of its two channels.
+            return true;
+        }
+        if kind != ChannelKind::MagneticField {
+            r.notes
+                .push(format!("{}: no valid readings in the logs", kind.name()));
+        } else if channels
+            .iter()
+            .any(|c| c.kind == ChannelKind::Magnetometer && !c.is_empty())
+        {
+            r.notes.push(
+                "magnetic_field: no accelerometer readings with the magnetometer's: the \
+                 field's dip cannot be formed"
+                    .into(),
+            );
+        }
+        return true;
+    }
+    if no_reference && kind.needs_reference() {
+        r.notes.push(format!(
+            "{}: {} readings, but no reference motion to compare them with",
+            kind.name(),
+            ch.len()
+        ));
+        return true;
+    }
+    false
+}
+
 /// Runs discovery on channels against a reference with a nominal model.
-// Long on purpose: one voyage's discovery in the order the report is built (channels, candidates,
-// fit and selection, floors, gain, description); the steps share the per-channel tables.
 pub fn discover(
     channels: &[Channel],
     reference: &Reference,
@@ -280,45 +672,7 @@ pub fn discover(
     }
     for ch in channels {
         let kind = ch.kind;
-        if kind == ChannelKind::MagneticField
-            && r.channels
-                .iter()
-                .any(|c| c.channel == ChannelKind::Magnetometer)
-        {
-            // The full field vector against the reference attitude says more.
-            continue;
-        }
-        if ch.is_empty() {
-            let beams_mode = channels
-                .iter()
-                .any(|c| c.kind == ChannelKind::DvlBeams && (!c.is_empty() || c.skipped > 0));
-            if (kind == ChannelKind::Dvl && beams_mode)
-                || (kind == ChannelKind::DvlBeams && !beams_mode)
-            {
-                // The DVL is analysed through one of its two channels.
-                continue;
-            }
-            if kind != ChannelKind::MagneticField {
-                r.notes
-                    .push(format!("{}: no valid readings in the logs", kind.name()));
-            } else if channels
-                .iter()
-                .any(|c| c.kind == ChannelKind::Magnetometer && !c.is_empty())
-            {
-                r.notes.push(
-                    "magnetic_field: no accelerometer readings with the magnetometer's: the \
-                     field's dip cannot be formed"
-                        .into(),
-                );
-            }
-            continue;
-        }
-        if no_reference && kind.needs_reference() {
-            r.notes.push(format!(
-                "{}: {} readings, but no reference motion to compare them with",
-                kind.name(),
-                ch.len()
-            ));
+        if skipped(ch, channels, no_reference, &mut r) {
             continue;
         }
         if kind == ChannelKind::AcousticRanges && ch.receivers.iter().all(|x| *x == 0.0) {
@@ -376,38 +730,7 @@ pub fn discover(
         let f = p.fit(&set, &p.epochs);
         let full = p.effects(&set, &f.theta);
         // The floor of every candidate not named: fitted with the effects found.
-        for c in p.candidates() {
-            if set.contains(&c) {
-                continue;
-            }
-            let mut with = set.clone();
-            with.push(c);
-            let fc = p.fit(&with, &p.epochs);
-            let (off, len) = fit::offset_of(&with, c);
-            let dead = sep
-                .unexcited
-                .iter()
-                .find(|(u, _)| *u == c)
-                .map(|(_, comps)| comps.clone())
-                .unwrap_or_default();
-            // Named takes both tests: min_sigma deviations, and a held-out score lower by
-            // min_gain.
-            let gain = p.gain_floor(&set, c, sel.min_gain);
-            let floor = (0..len)
-                .map(|k| {
-                    let s = fc.std[off + k];
-                    (!dead.contains(&k) && s.is_finite() && s > 0.0)
-                        .then(|| (sel.min_sigma * s).max(gain[k]))
-                })
-                .collect();
-            r.floors.push(DetectionFloor {
-                name: fit::name(c).into(),
-                channel: kind,
-                floor,
-                unit: spec(fit::name(c)).map_or("", |s| s.unit).into(),
-                sigmas: sel.min_sigma,
-            });
-        }
+        record_floors(&p, &set, &sep, sel, kind, &mut r.floors);
         let lags = fit::correlation_lags(&p.residuals(&full, &p.epochs), d);
         if lags > 0 {
             r.notes.push(format!(
@@ -422,235 +745,21 @@ pub fn discover(
             ));
         }
         // Effects a group of other candidates mimics together, at the fitted model.
-        let confounded = {
-            let at_fit = Problem::new(ch, reference, full.clone());
-            fit::confounded(&fit::separability(&at_fit), &set, sel.max_correlation)
-        };
-        for s in &steps {
-            let (off, len) = fit::offset_of(&set, s.candidate);
-            let name = fit::name(s.candidate);
-            let std: Vec<f64> = f.std[off..off + len].to_vec();
-            let gain = 1.0 - s.mse_after / s.mse_before;
-            let mut evidence = format!(
-                "held-out mean squared residual {:.4e} -> {:.4e} ({:.1} % lower)",
-                s.mse_before,
-                s.mse_after,
-                100.0 * gain
-            );
-            for (rival, corr) in &s.rivals {
-                evidence.push_str(&format!(
-                    "; {} explains the data about as well (correlation {corr:.3})",
-                    fit::name(*rival)
-                ));
-                r.unseparable.push(Unseparable {
-                    effects: vec![name.into(), fit::name(*rival).into()],
-                    correlation: *corr,
-                    note: format!(
-                        "the motion cannot separate them; reported as {name}, which scored best"
-                    ),
-                });
-            }
-            for c in confounded.iter().filter(|c| c.candidate == s.candidate) {
-                let group: Vec<&str> = c.group.iter().map(|&g| fit::name(g)).collect();
-                let held: Vec<String> = group
-                    .iter()
-                    .map(|g| {
-                        let v = full.get(g).unwrap_or_default();
-                        format!("{g} = {}", json_of(&v))
-                    })
-                    .collect();
-                evidence.push_str(&format!(
-                    "; component {} is mimicked by {} together (correlation {:.3}): its estimate \
-                     and std hold only with {}",
-                    c.component,
-                    group.join(" and "),
-                    c.correlation,
-                    held.join(", ")
-                ));
-                let mut effects = vec![name.to_string()];
-                effects.extend(group.iter().map(|g| g.to_string()));
-                let same_set = |u: &Unseparable| {
-                    let (mut a, mut b) = (u.effects.clone(), effects.clone());
-                    a.sort();
-                    b.sort();
-                    a == b
-                };
-                if r.unseparable.iter().any(same_set) {
-                    continue;
-                }
-                r.unseparable.push(Unseparable {
-                    effects,
-                    correlation: c.correlation,
-                    note: format!(
-                        "component {} of {name} is a combination of the others on this motion: \
-                         the data cannot determine them together; {name} is reported with the \
-                         others at the model's values",
-                        c.component
-                    ),
-                });
-            }
-            let equivalent = if name == "dvl.scale_factor" {
-                let first = |n: &str, default: f64| {
-                    nominal
-                        .get(n)
-                        .and_then(|v| v.first().copied())
-                        .unwrap_or(default)
-                };
-                sound_speed_equivalent(
-                    f.theta[off],
-                    std.first().copied().unwrap_or(f64::NAN),
-                    first("dvl.scale_factor", 1.0),
-                    first("dvl.sound_speed", auvnav_sim::sensors::ASSUMED_SOUND_SPEED),
-                )
-            } else {
-                None
-            };
-            r.effects.push(FoundEffect {
-                name: name.into(),
-                value: json_of(&f.theta[off..off + len]),
-                std: json_of(&std),
-                nominal: json_of(&nominal.get(name).unwrap_or_default()),
-                unit: spec(name).map_or("", |s| s.unit).into(),
-                channel: kind,
-                evidence,
-                gain,
-                equivalent,
-            });
-        }
+        record_effects(ch, reference, nominal, sel, &steps, &set, &f, &full, &mut r);
         // Pairs the motion cannot separate among the channel's candidates (for the reader, even
         // when neither was selected).
-        for &(a, b, c) in &sep.pairs {
-            if c > sel.max_correlation
-                && !r.unseparable.iter().any(|u| {
-                    (u.effects[0] == fit::name(a) && u.effects[1] == fit::name(b))
-                        || (u.effects[0] == fit::name(b) && u.effects[1] == fit::name(a))
-                })
-            {
-                r.unseparable.push(Unseparable {
-                    effects: vec![fit::name(a).into(), fit::name(b).into()],
-                    correlation: c,
-                    note: "not separable on this motion".into(),
-                });
-            }
-        }
+        record_unseparable_pairs(&sep, sel, &mut r.unseparable);
         // Describe the residuals before and after.
         let d = kind.dims();
         let times: Vec<f64> = p.epochs.iter().map(|&i| ch.times[i]).collect();
-        let states: Vec<_> = times.iter().map(|&t| reference.at(t)).collect();
-        let reg = |g: &dyn Fn(&super::RefState) -> f64| -> Vec<f64> {
-            states.iter().map(|s| s.as_ref().map_or(0.0, g)).collect()
-        };
-        let regressors: Vec<(&str, Vec<f64>)> = if kind == ChannelKind::MagneticField {
-            field_regressors(ch, &p.epochs, &times, nominal)
-        } else if kind == ChannelKind::AcousticRanges {
-            let fix = |g: &dyn Fn(&[f64; 3]) -> f64| -> Vec<f64> {
-                p.epochs.iter().map(|&i| g(&ch.auxiliary[i])).collect()
-            };
-            vec![
-                ("slant_range", fix(&|x| x[0].hypot(x[1]).hypot(x[2]))),
-                ("horizontal_range", fix(&|x| x[0].hypot(x[1]))),
-                ("fix_depth", fix(&|x| x[2])),
-                ("fix_x", fix(&|x| x[0])),
-                ("fix_y", fix(&|x| x[1])),
-                ("time", times.iter().map(|t| t - times[0]).collect()),
-            ]
-        } else {
-            vec![
-                ("speed", reg(&|s| s.velocity_ned.norm())),
-                ("yaw_rate", reg(&|s| s.omega_eb_body.z)),
-                ("pitch_rate", reg(&|s| s.omega_eb_body.y)),
-                ("forward_specific_force", reg(&|s| s.specific_force_body.x)),
-                ("depth", reg(&|s| -s.height_m)),
-                ("time", times.iter().map(|t| t - times[0]).collect()),
-            ]
-        };
-        // Components a partial reading lacks (a receiver without a range) are left out.
-        let present = |epochs: &[usize], k: usize| -> Vec<bool> {
-            epochs
-                .iter()
-                .map(|&i| ch.values[i][k].is_finite())
-                .collect()
-        };
-        let split = |res: &[f64]| -> Vec<Description> {
-            (0..d)
-                .map(|k| {
-                    let keep = present(&p.epochs, k);
-                    let pick = |v: &[f64]| -> Vec<f64> {
-                        v.iter().zip(&keep).filter(|x| *x.1).map(|x| *x.0).collect()
-                    };
-                    let regs: Vec<(&str, Vec<f64>)> =
-                        regressors.iter().map(|(n, v)| (*n, pick(v))).collect();
-                    describe(&pick(&times), &pick(&component(res, d, k)), &regs)
-                })
-                .collect()
-        };
-        let nominal_desc = split(&r0);
+        let describe_all =
+            |res: &[f64]| describe_components(ch, &p, &times, reference, nominal, res);
+        let nominal_desc = describe_all(&r0);
         let r1 = p.residuals(&full, &p.epochs);
-        let selected_desc = split(&r1);
-        for (k, desc) in selected_desc.iter().enumerate() {
-            if desc.white {
-                continue;
-            }
-            let mut note = format!(
-                "not white (Ljung-Box Q {:.0} > {:.1}; lag-1 autocorrelation {:.2}); rms {:.4} {}",
-                desc.ljung_box_q,
-                super::residuals::CHI2_20_99,
-                desc.lag1,
-                desc.rms,
-                kind.unit()
-            );
-            if desc.lag1 < -0.25 {
-                note.push_str(
-                    "; successive residuals anti-correlated: the noise of a difference (a \
-                     reference's attitude or velocity noise enters neighbouring intervals with \
-                     opposite signs)",
-                );
-            }
-            if let Some(f) = desc.peak_hz {
-                note.push_str(&format!("; periodic at {f:.4} Hz"));
-            }
-            for (name, c) in &desc.correlated_with {
-                note.push_str(&format!("; correlated with {name} ({c:+.2})"));
-            }
-            r.unexplained.push(Unexplained {
-                channel: kind,
-                component: k,
-                note,
-            });
-        }
+        let selected_desc = describe_all(&r1);
+        record_unexplained(&selected_desc, kind, &mut r.unexplained);
         // Held-out gain: the selected set fitted on the first part, scored on the rest.
-        let cut = ((p.epochs.len() as f64) * fit_fraction).round() as usize;
-        let (train, test) = p.epochs.split_at(cut.clamp(1, p.epochs.len() - 1));
-        let ft = p.fit(&set, train);
-        let rms = |res: Vec<f64>| -> Vec<f64> {
-            (0..d)
-                .map(|k| {
-                    let v: Vec<f64> = component(&res, d, k)
-                        .into_iter()
-                        .zip(present(test, k))
-                        .filter(|x| x.1)
-                        .map(|x| x.0)
-                        .collect();
-                    (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
-                })
-                .collect()
-        };
-        let held_out = p.effects(&set, &ft.theta);
-        r.gain.push(ChannelGain {
-            channel: kind,
-            fit_fraction,
-            rms_before: rms(p.residuals(nominal, test)),
-            rms_after: rms(p.residuals(&held_out, test)),
-        });
-        for &c in &set {
-            let name = fit::name(c);
-            for (model, from) in [(&mut r.model, &full), (&mut r.held_out_model, &held_out)] {
-                if let Some(v) = from.get(name) {
-                    // In range: the fit clamps to the effect's range.
-                    let _ = model.set(name, &v);
-                }
-            }
-        }
+        record_gain(ch, &p, &set, nominal, &full, fit_fraction, &mut r);
         let rms_all: Vec<f64> = selected_desc.iter().map(|d| d.rms).collect();
         let spacing_s = median_spacing(&times);
         let allan = if matches!(kind, ChannelKind::Gyro | ChannelKind::Accelerometer) {
