@@ -27,6 +27,7 @@ Example::
 
 from __future__ import annotations
 
+import os
 import time
 import uuid
 from collections.abc import Iterable, Sequence
@@ -71,8 +72,6 @@ def map_logs(
     apply to every log; ``options_per_log`` adds each log's own (an output path, say). A log whose
     operation fails raises its error here.
     """
-    import os
-
     paths = [os.fspath(p) for p in logs]
     per_log = list(options_per_log) if options_per_log is not None else [{} for _ in paths]
     if len(per_log) != len(paths):

@@ -183,15 +183,6 @@ fn replay(
     if let Some(u) = usbl {
         o.usbl = Some(u.parse().map_err(|e: String| AuvnavError::new_err(e))?);
     }
-    if !(o.min_distance.is_finite() && o.min_distance >= 0.0) {
-        return Err(AuvnavError::new_err(format!(
-            "min_distance {}: must be >= 0 m",
-            o.min_distance
-        )));
-    }
-    if o.decimate == 0 {
-        return Err(AuvnavError::new_err("decimate must be at least 1"));
-    }
     py.detach(|| -> anyhow::Result<String> {
         let r = auvnav_replay::replay(&o)?;
         Ok(auvnav_replay::json::to_string_pretty(&r)?)

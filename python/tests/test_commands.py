@@ -55,6 +55,8 @@ def test_library_errors_are_auvnav_errors_with_the_library_message(tmp_path):
         auvnav.align(scenario="turning", runs="many")
     with pytest.raises(auvnav.AuvnavError):
         auvnav.replay(tmp_path / "missing.mcap")
+    with pytest.raises(auvnav.AuvnavError, match="min_distance -1"):
+        auvnav.replay(tmp_path / "missing.mcap", min_distance=-1)
     with pytest.raises(auvnav.AuvnavError, match="unknown effect|dvl.scale_facter"):
         auvnav.simulate("lawnmower", tmp_path / "x.mcap", effects={"dvl.scale_facter": 0.01})
 

@@ -576,18 +576,16 @@ fn record_gain(
 }
 
 /// Each component of a residual series (`res`, over `p`'s epochs at `times`) described: level,
-/// spread, whiteness, periodic part and correlation with the motion, on the readings that hold
-/// the component.
+/// spread, whiteness, periodic part and correlation with the motion (`regressors`), on the
+/// readings that hold the component.
 fn describe_components(
     ch: &Channel,
     p: &Problem,
     times: &[f64],
-    reference: &Reference,
-    nominal: &Effects,
+    regressors: &[(&'static str, Vec<f64>)],
     res: &[f64],
 ) -> Vec<Description> {
     let d = ch.kind.dims();
-    let regressors = regressors(ch, &p.epochs, times, reference, nominal);
     (0..d)
         .map(|k| {
             let keep = present(ch, &p.epochs, k);
@@ -752,8 +750,8 @@ pub fn discover(
         // Describe the residuals before and after.
         let d = kind.dims();
         let times: Vec<f64> = p.epochs.iter().map(|&i| ch.times[i]).collect();
-        let describe_all =
-            |res: &[f64]| describe_components(ch, &p, &times, reference, nominal, res);
+        let regressors = regressors(ch, &p.epochs, &times, reference, nominal);
+        let describe_all = |res: &[f64]| describe_components(ch, &p, &times, &regressors, res);
         let nominal_desc = describe_all(&r0);
         let r1 = p.residuals(&full, &p.epochs);
         let selected_desc = describe_all(&r1);

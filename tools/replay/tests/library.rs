@@ -4,23 +4,29 @@
 use auvnav_replay::{ReplayOptions, replay};
 use auvnav_sim::{SimConfig, scenario::Scenario};
 
-#[test]
-fn a_log_replays_through_the_library_with_a_typed_report() {
-    let dir = std::env::temp_dir().join(format!("auvnav-replay-lib-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("scratch folder");
-    let log = dir.join("straight.mcap");
+/// `seconds` of the straight scenario simulated into `dir/name`.
+fn simulated(dir: &std::path::Path, name: &str, seed: u64, seconds: f64) -> std::path::PathBuf {
+    let log = dir.join(name);
     let scenario = Scenario::load("straight").expect("scenario");
     let effects = scenario.effects().expect("effects");
     auvnav_sim::simulate_to_log(
         &SimConfig {
             scenario,
             effects,
-            seed: 4501,
-            duration_s: Some(60.0),
+            seed,
+            duration_s: Some(seconds),
         },
         &log,
     )
     .expect("simulation");
+    log
+}
+
+#[test]
+fn a_log_replays_through_the_library_with_a_typed_report() {
+    let dir = std::env::temp_dir().join(format!("auvnav-replay-lib-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("scratch folder");
+    let log = simulated(&dir, "straight.mcap", 4501, 60.0);
 
     let csv = dir.join("nav.csv");
     let report = replay(&ReplayOptions {
@@ -62,19 +68,7 @@ fn failures_are_typed_the_callers_apart_from_the_environments() {
     use auvnav_replay::ReplayError;
     let dir = std::env::temp_dir().join(format!("auvnav-replay-errors-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("scratch folder");
-    let log = dir.join("short.mcap");
-    let scenario = Scenario::load("straight").expect("scenario");
-    let effects = scenario.effects().expect("effects");
-    auvnav_sim::simulate_to_log(
-        &SimConfig {
-            scenario,
-            effects,
-            seed: 4502,
-            duration_s: Some(20.0),
-        },
-        &log,
-    )
-    .expect("simulation");
+    let log = simulated(&dir, "short.mcap", 4502, 20.0);
 
     // An option out of range: the caller's.
     let e = replay(&ReplayOptions {
