@@ -38,6 +38,9 @@ pub fn exit_status(e: &anyhow::Error) -> u8 {
         if cause
             .downcast_ref::<auvnav_replay::ReplayError>()
             .is_some_and(auvnav_replay::ReplayError::is_usage)
+            || cause
+                .downcast_ref::<auvnav_import::ImportError>()
+                .is_some_and(auvnav_import::ImportError::is_usage)
         {
             return 2;
         }

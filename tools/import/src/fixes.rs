@@ -8,6 +8,7 @@
 //! comment. A line that does not parse or holds a value out of range is not used: it is counted
 //! with its line number, never guessed at.
 
+use crate::Result;
 use auvnav_shm_schema::GnssFixV1;
 use serde::Serialize;
 use std::path::Path;
@@ -50,7 +51,7 @@ impl Fix {
     }
 }
 
-fn parse_line(line: &str) -> Result<Fix, String> {
+fn parse_line(line: &str) -> std::result::Result<Fix, String> {
     let fields: Vec<&str> = line.split(',').map(str::trim).collect();
     if fields.len() != 5 {
         return Err(format!("{} fields, expected 5", fields.len()));
@@ -119,10 +120,10 @@ pub fn parse(path: &str, text: &str) -> FixFile {
 }
 
 /// Reads and parses a fix file.
-pub fn read(path: &Path) -> anyhow::Result<FixFile> {
-    use anyhow::Context;
+pub fn read(path: &Path) -> Result<FixFile> {
+    use crate::ReadContext;
     let text = std::fs::read_to_string(path)
-        .with_context(|| format!("reading the fix file {}", path.display()))?;
+        .read_context(|| format!("reading the fix file {}", path.display()))?;
     Ok(parse(&path.display().to_string(), &text))
 }
 

@@ -14,7 +14,20 @@
 //!   file) as samples for calibration.
 #![forbid(unsafe_code)]
 
-use anyhow::{Context, bail};
+/// Returns [`ImportError::Malformed`] with a formatted message.
+macro_rules! malformed {
+    ($($t:tt)*) => {
+        return Err($crate::ImportError::Malformed(format!($($t)*)))
+    };
+}
+
+/// Returns [`ImportError::Options`] with a formatted message.
+macro_rules! bad_option {
+    ($($t:tt)*) => {
+        return Err($crate::ImportError::Options(format!($($t)*)))
+    };
+}
+
 use auvnav_log::{LogHeader, LogMessage, LogWriter, write_log_atomically};
 use auvnav_shm_schema::{DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, TruthStateV1, topic};
 use nalgebra::UnitQuaternion;
@@ -22,12 +35,18 @@ use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+/// The result of an import.
+pub type Result<T> = std::result::Result<T, ImportError>;
+
+mod error;
 pub mod fixes;
 pub mod mag;
 mod mag_csv;
 mod pd0;
 mod snapir;
 mod ugps;
+use error::ReadContext;
+pub use error::{ImportError, Source};
 pub use mag_csv::*;
 pub use pd0::*;
 pub use snapir::*;
@@ -41,12 +60,12 @@ struct Table<const N: usize> {
 
 /// A reader of a CSV file as the import tools want it: fields trimmed, rows of any length
 /// accepted (a row of the wrong length is the caller's to count, not a fatal error).
-fn csv_reader(path: &Path) -> anyhow::Result<csv::Reader<std::fs::File>> {
+fn csv_reader(path: &Path) -> Result<csv::Reader<std::fs::File>> {
     csv::ReaderBuilder::new()
         .flexible(true)
         .trim(csv::Trim::All)
         .from_path(path)
-        .with_context(|| format!("reading {}", path.display()))
+        .read_context(|| format!("reading {}", path.display()))
 }
 
 /// The next record of `reader`: `Ok(None)` at the end, `Ok(Some(Err(())))` for a row the CSV
@@ -55,27 +74,27 @@ fn next_record(
     reader: &mut csv::Reader<std::fs::File>,
     record: &mut csv::StringRecord,
     path: &Path,
-) -> anyhow::Result<Option<Result<(), ()>>> {
+) -> Result<Option<std::result::Result<(), ()>>> {
     match reader.read_record(record) {
         Ok(true) => Ok(Some(Ok(()))),
         Ok(false) => Ok(None),
         Err(e) if matches!(e.kind(), csv::ErrorKind::Io(_)) => {
-            Err(e).with_context(|| format!("reading {}", path.display()))
+            Err(e).read_context(|| format!("reading {}", path.display()))
         }
         Err(_) => Ok(Some(Err(()))),
     }
 }
 
-fn read_table<const N: usize>(path: &Path, header: &str) -> anyhow::Result<Table<N>> {
+fn read_table<const N: usize>(path: &Path, header: &str) -> Result<Table<N>> {
     let mut reader = csv_reader(path)?;
     let found = reader
         .headers()
-        .with_context(|| format!("reading the header of {}", path.display()))?
+        .read_context(|| format!("reading the header of {}", path.display()))?
         .iter()
         .collect::<Vec<_>>()
         .join(",");
     if found != header {
-        bail!(
+        malformed!(
             "{}: header is {found:?}, expected {header:?}",
             path.display()
         );
@@ -115,7 +134,7 @@ fn read_table<const N: usize>(path: &Path, header: &str) -> anyhow::Result<Table
         t.rows.push(row);
     }
     if t.rows.is_empty() {
-        bail!("{}: no usable rows", path.display());
+        malformed!("{}: no usable rows", path.display());
     }
     Ok(t)
 }

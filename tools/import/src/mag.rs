@@ -2,7 +2,8 @@
 //! averaged over each magnetometer interval and, in simulated logs, the true attitude) and from
 //! CSV files (columns named by options or recognised from the header).
 
-use anyhow::{Context, bail};
+use crate::ReadContext;
+use crate::Result;
 use auvnav_log::{LogMessage, LogReader};
 use auvnav_shm_schema::{ImuSampleV1, MagnetometerV1};
 use nalgebra::Vector3;
@@ -41,11 +42,12 @@ pub struct Recording {
 }
 
 /// Reads the magnetometer channel of an auvnav log.
-pub fn read_log(path: &Path) -> anyhow::Result<Recording> {
-    let mut reader = LogReader::open(path)?;
+pub fn read_log(path: &Path) -> Result<Recording> {
+    let mut reader =
+        LogReader::open(path).read_context(|| format!("reading {}", path.display()))?;
     reader
         .read_header()
-        .with_context(|| format!("{}: reading the log header", path.display()))?;
+        .read_context(|| format!("{}: reading the log header", path.display()))?;
     let mut out = Recording {
         unit_note: "tesla (the log's unit), shown in µT".into(),
         ..Default::default()
@@ -57,7 +59,7 @@ pub fn read_log(path: &Path) -> anyhow::Result<Recording> {
     let mut imu_seen = false;
     while let Some(raw) = reader
         .next_message()
-        .with_context(|| format!("reading {}", path.display()))?
+        .read_context(|| format!("reading {}", path.display()))?
     {
         let Ok(m) = raw.decode_any() else {
             continue;
@@ -104,7 +106,7 @@ pub fn read_log(path: &Path) -> anyhow::Result<Recording> {
         }
     }
     if out.samples.is_empty() {
-        bail!(
+        malformed!(
             "{}: no valid magnetometer messages (topic `magnetometer`){}",
             path.display(),
             if out.skipped > 0 {
@@ -183,12 +185,14 @@ pub struct CsvColumnOptions {
 
 impl CsvColumnOptions {
     /// The column choice, refusing a column list that does not name three columns.
-    pub fn columns(&self) -> anyhow::Result<CsvColumns> {
-        let three = |v: &Option<Vec<String>>, what: &str| -> anyhow::Result<Option<[String; 3]>> {
+    pub fn columns(&self) -> Result<CsvColumns> {
+        let three = |v: &Option<Vec<String>>, what: &str| -> Result<Option<[String; 3]>> {
             match v {
                 None => Ok(None),
                 Some(v) => <[String; 3]>::try_from(v.clone()).map(Some).map_err(|v| {
-                    anyhow::anyhow!("--{what}-columns takes three names X,Y,Z, got {v:?}")
+                    crate::ImportError::Options(format!(
+                        "--{what}-columns takes three names X,Y,Z, got {v:?}"
+                    ))
                 }),
             }
         };
@@ -239,7 +243,7 @@ fn decimal_year_from_unix(seconds: f64) -> Option<f64> {
 /// comments; the first other line names the columns.
 // Long on purpose: a parser over one file's state: header, column lookup, units and rows, each
 // error counted.
-pub fn read_csv(path: &Path, cols: &CsvColumns) -> anyhow::Result<Recording> {
+pub fn read_csv(path: &Path, cols: &CsvColumns) -> Result<Recording> {
     // The `csv` crate: quoted fields, CRLF line ends; `#` lines are comments, rows may have
     // fewer or more fields than the header (counted as skipped when a needed one is missing).
     let mut reader = csv::ReaderBuilder::new()
@@ -248,7 +252,7 @@ pub fn read_csv(path: &Path, cols: &CsvColumns) -> anyhow::Result<Recording> {
         .flexible(true)
         .trim(csv::Trim::All)
         .from_path(path)
-        .with_context(|| format!("opening {}", path.display()))?;
+        .read_context(|| format!("opening {}", path.display()))?;
     let mut lines = reader.records().filter_map(|r| match r {
         // Line index from 0, as the time of a row when there is no time column.
         Ok(rec) if !(rec.len() == 1 && rec[0].is_empty()) => {
@@ -265,17 +269,17 @@ pub fn read_csv(path: &Path, cols: &CsvColumns) -> anyhow::Result<Recording> {
         match lines.next() {
             Some((_, Some(h))) => break h,
             Some((_, None)) => continue,
-            None => bail!("{}: no header line", path.display()),
+            None => malformed!("{}: no header line", path.display()),
         }
     };
     let names: Vec<String> = header.iter().map(str::to_string).collect();
-    let find = |want: &str| -> anyhow::Result<usize> {
-        names.iter().position(|n| n == want).with_context(|| {
-            format!(
+    let find = |want: &str| -> Result<usize> {
+        names.iter().position(|n| n == want).ok_or_else(|| {
+            crate::ImportError::Options(format!(
                 "{}: no column {want:?}; the columns are {}",
                 path.display(),
                 names.join(", ")
-            )
+            ))
         })
     };
     let guess3 = |key: &str| -> Option<[usize; 3]> {
@@ -290,13 +294,13 @@ pub fn read_csv(path: &Path, cols: &CsvColumns) -> anyhow::Result<Recording> {
     };
     let mag = match &cols.mag {
         Some([a, b, c]) => [find(a)?, find(b)?, find(c)?],
-        None => guess3("mag").with_context(|| {
-            format!(
+        None => guess3("mag").ok_or_else(|| {
+            crate::ImportError::Malformed(format!(
                 "{}: no three magnetometer columns (names containing \"mag\"); name them with \
                  --mag-columns X,Y,Z. The columns are {}",
                 path.display(),
                 names.join(", ")
-            )
+            ))
         })?,
     };
     let accel = match &cols.accel {
@@ -352,7 +356,7 @@ pub fn read_csv(path: &Path, cols: &CsvColumns) -> anyhow::Result<Recording> {
         raw.push((t, h, a));
     }
     if raw.is_empty() {
-        bail!(
+        malformed!(
             "{}: no row with three numeric magnetometer values ({} skipped)",
             path.display(),
             out.skipped
@@ -366,7 +370,7 @@ pub fn read_csv(path: &Path, cols: &CsvColumns) -> anyhow::Result<Recording> {
         Some("ut") | Some("µt") => (1.0, "µT (given)".to_string()),
         Some("nt") => (1e-3, "nT (given)".to_string()),
         Some("gauss") | Some("g") => (100.0, "gauss (given)".to_string()),
-        Some(other) => bail!("unknown field unit {other:?}: give T, uT, nT or gauss"),
+        Some(other) => bad_option!("unknown field unit {other:?}: give T, uT, nT or gauss"),
         None => {
             // The Earth's field is 22–67 µT: the unit is the one that puts the readings there.
             let (s, u) = if median < 1e-3 {

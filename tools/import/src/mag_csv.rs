@@ -45,7 +45,7 @@ const STANDARD_GRAVITY: f64 = 9.80665;
 /// magnetometer reading, per row; time 0 = first row) and the summary.
 pub fn mag_csv_messages(
     a: &MagCsvOptions,
-) -> anyhow::Result<(Vec<(&'static str, LogMessage)>, MagCsvSummary)> {
+) -> Result<(Vec<(&'static str, LogMessage)>, MagCsvSummary)> {
     use auvnav_shm_schema::MagnetometerV1;
     let cols = a.columns.columns()?;
     let rec = crate::mag::read_csv(&a.file, &cols)?;
@@ -77,7 +77,7 @@ pub fn mag_csv_messages(
         }
     };
     let Some(t0) = rec.samples.first().map(|x| x.time_s) else {
-        bail!("{}: no magnetometer rows", a.file.display());
+        malformed!("{}: no magnetometer rows", a.file.display());
     };
     let mut out = Vec::with_capacity(2 * rec.samples.len());
     let mut last_ns: Option<u64> = None;
@@ -126,7 +126,7 @@ pub fn mag_csv_messages(
 }
 
 /// Imports a magnetometer CSV recording into a log at `out` (written atomically).
-pub fn mag_csv(a: &MagCsvOptions) -> anyhow::Result<MagCsvSummary> {
+pub fn mag_csv(a: &MagCsvOptions) -> Result<MagCsvSummary> {
     use auvnav_shm_schema::MagnetometerV1;
     let (messages, summary) = mag_csv_messages(a)?;
     let mut header = LogHeader::new("auvnav import mag-csv", "");
@@ -144,9 +144,10 @@ pub fn mag_csv(a: &MagCsvOptions) -> anyhow::Result<MagCsvSummary> {
                 .map_or(String::new(), |d| format!(" (decimal year {d:.4})"))
         ),
     );
-    header
-        .notes
-        .insert("import.counts".into(), serde_json::to_string(&summary)?);
+    header.notes.insert(
+        "import.counts".into(),
+        serde_json::to_string(&summary).unwrap_or_default(),
+    );
     write_log_atomically(&a.out, &header, |w: &mut LogWriter<_>| {
         w.declare::<ImuSampleV1>(
             topic::IMU,
@@ -168,6 +169,6 @@ pub fn mag_csv(a: &MagCsvOptions) -> anyhow::Result<MagCsvSummary> {
         }
         Ok(())
     })
-    .with_context(|| format!("writing {}", a.out.display()))?;
+    .map_err(crate::error::output(&a.out))?;
     Ok(summary)
 }

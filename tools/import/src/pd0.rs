@@ -115,7 +115,7 @@ fn velocity_from_positions(s: &[GpsSample], t: f64, half: f64) -> Option<(f64, f
 pub fn pd0_messages(
     bytes: &[u8],
     velocity: GpsVelocity,
-) -> anyhow::Result<(Vec<(&'static str, LogMessage)>, Pd0Summary)> {
+) -> Result<(Vec<(&'static str, LogMessage)>, Pd0Summary)> {
     use auvnav_protocols::pd0::{NmeaBlock, decode_all};
     use auvnav_protocols::to_schema::{pd0_rtc_ns, pd0_velocity};
     let (ensembles, stats) = decode_all(bytes);
@@ -212,7 +212,7 @@ pub fn pd0_messages(
         GpsVelocity::Auto => vtg.len() >= 2,
     };
     if use_vtg && vtg.len() < 2 {
-        bail!("--velocity vtg: the file has {} VTG sentences", vtg.len());
+        bad_option!("--velocity vtg: the file has {} VTG sentences", vtg.len());
     }
     // Local north/east (m) of the fixes around the first one.
     let origin = fixes.first().map(|f| (f.1.to_radians(), f.2.to_radians()));
@@ -294,8 +294,8 @@ pub fn pd0_messages(
 }
 
 /// Imports a PD0 file with GPS into a log at `out` (written atomically).
-pub fn pd0(a: &Pd0Options) -> anyhow::Result<Pd0Summary> {
-    let bytes = std::fs::read(&a.file).with_context(|| format!("reading {}", a.file.display()))?;
+pub fn pd0(a: &Pd0Options) -> Result<Pd0Summary> {
+    let bytes = std::fs::read(&a.file).read_context(|| format!("reading {}", a.file.display()))?;
     let (messages, mut summary) = pd0_messages(&bytes, a.velocity)?;
     let fix_file = a.fixes.as_deref().map(crate::fixes::read).transpose()?;
     let mut gnss = Vec::new();
@@ -311,7 +311,7 @@ pub fn pd0(a: &Pd0Options) -> anyhow::Result<Pd0Summary> {
         summary.fixes_written = gnss.len() as u64;
     }
     if summary.reference == 0 && gnss.is_empty() {
-        bail!(
+        malformed!(
             "{}: no ensemble has GPS on both sides ({} GGA fixes, {} VTG) and no --fixes inside \
              its time span: nothing to compare the bottom track with",
             a.file.display(),
@@ -329,9 +329,10 @@ pub fn pd0(a: &Pd0Options) -> anyhow::Result<Pd0Summary> {
          on the DVL's clock"
             .into(),
     );
-    header
-        .notes
-        .insert("import.counts".into(), serde_json::to_string(&summary)?);
+    header.notes.insert(
+        "import.counts".into(),
+        serde_json::to_string(&summary).unwrap_or_default(),
+    );
     write_log_atomically(&a.out, &header, |w: &mut LogWriter<_>| {
         w.declare::<DvlVelocityV1>(
             topic::DVL,
@@ -378,7 +379,7 @@ pub fn pd0(a: &Pd0Options) -> anyhow::Result<Pd0Summary> {
         }
         Ok(())
     })
-    .with_context(|| format!("writing {}", a.out.display()))?;
+    .map_err(crate::error::output(&a.out))?;
     Ok(summary)
 }
 

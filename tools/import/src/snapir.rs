@@ -155,9 +155,9 @@ pub fn snapir_messages(
     segment: u32,
     time_base: TimeBase,
     align: bool,
-) -> anyhow::Result<(Vec<(&'static str, LogMessage)>, SnapirSummary)> {
+) -> Result<(Vec<(&'static str, LogMessage)>, SnapirSummary)> {
     if !(1..=99).contains(&segment) {
-        bail!("--segment {segment}: segments are numbered 1..13");
+        bad_option!("--segment {segment}: segments are numbered 1..13");
     }
     let file = |kind: &str| dir.join(format!("{kind}_{segment:02}.csv"));
     let imu = read_table::<7>(
@@ -187,7 +187,7 @@ pub fn snapir_messages(
             keep
         });
         if reference.rows.is_empty() {
-            bail!("segment {segment}: no reference row is left after the clock alignment");
+            malformed!("segment {segment}: no reference row is left after the clock alignment");
         }
     }
     let mut out: Vec<(u64, u8, &'static str, LogMessage)> = Vec::new();
@@ -292,7 +292,7 @@ pub fn snapir_messages(
 }
 
 /// Imports one segment into a log at `out` (written atomically).
-pub fn snapir(a: &SnapirOptions) -> anyhow::Result<SnapirSummary> {
+pub fn snapir(a: &SnapirOptions) -> Result<SnapirSummary> {
     let (messages, summary) = snapir_messages(&a.dir, a.segment, a.time_base, !a.no_align)?;
     let mut header = LogHeader::new("auvnav import snapir", "");
     header
@@ -309,7 +309,7 @@ pub fn snapir(a: &SnapirOptions) -> anyhow::Result<SnapirSummary> {
         "replay.initial_state".into(),
         "from the reference (truth channel) at the segment start".into(),
     );
-    let counts = serde_json::to_string(&summary)?;
+    let counts = serde_json::to_string(&summary).unwrap_or_default();
     header.notes.insert("import.counts".into(), counts);
     write_log_atomically(&a.out, &header, |w: &mut LogWriter<_>| {
         w.declare::<ImuSampleV1>(
@@ -351,6 +351,6 @@ pub fn snapir(a: &SnapirOptions) -> anyhow::Result<SnapirSummary> {
         }
         Ok(())
     })
-    .with_context(|| format!("writing {}", a.out.display()))?;
+    .map_err(crate::error::output(&a.out))?;
     Ok(summary)
 }

@@ -40,12 +40,12 @@ pub struct UgpsSummary {
 }
 
 /// The acoustic CSV of `input` (the file itself, or the one `*_g2_acoustic.csv` in a folder).
-fn ugps_acoustic_file(input: &Path) -> anyhow::Result<PathBuf> {
+fn ugps_acoustic_file(input: &Path) -> Result<PathBuf> {
     if !input.is_dir() {
         return Ok(input.to_path_buf());
     }
     let mut found: Vec<PathBuf> = std::fs::read_dir(input)
-        .with_context(|| format!("reading {}", input.display()))?
+        .read_context(|| format!("reading {}", input.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| {
             p.file_name()
@@ -56,8 +56,8 @@ fn ugps_acoustic_file(input: &Path) -> anyhow::Result<PathBuf> {
     found.sort();
     match found.len() {
         1 => Ok(found.remove(0)),
-        0 => bail!("{}: no *_g2_acoustic.csv file", input.display()),
-        _ => bail!(
+        0 => malformed!("{}: no *_g2_acoustic.csv file", input.display()),
+        _ => malformed!(
             "{}: {} *_g2_acoustic.csv files; name one",
             input.display(),
             found.len()
@@ -68,24 +68,21 @@ fn ugps_acoustic_file(input: &Path) -> anyhow::Result<PathBuf> {
 /// The messages of a UGPS G2 acoustic log (time 0 = first row) and the summary. The position
 /// (x, y, z down, relative to the topside) becomes the device's fix in the array frame; the
 /// receivers' configured positions are not in the log (flag not set).
-pub fn ugps_messages(
-    input: &Path,
-) -> anyhow::Result<(Vec<(&'static str, LogMessage)>, UgpsSummary)> {
+pub fn ugps_messages(input: &Path) -> Result<(Vec<(&'static str, LogMessage)>, UgpsSummary)> {
     use auvnav_shm_schema::AcousticRangesV1;
     let file = ugps_acoustic_file(input)?;
     let mut reader = csv_reader(&file)?;
     let names = reader
         .headers()
-        .with_context(|| format!("reading the header of {}", file.display()))?
+        .read_context(|| format!("reading the header of {}", file.display()))?
         .clone();
     if names.iter().all(str::is_empty) {
-        bail!("{}: empty file", file.display());
+        malformed!("{}: empty file", file.display());
     }
-    let col = |n: &str| -> anyhow::Result<usize> {
-        names
-            .iter()
-            .position(|x| x == n)
-            .with_context(|| format!("{}: no column {n:?}", file.display()))
+    let col = |n: &str| -> Result<usize> {
+        names.iter().position(|x| x == n).ok_or_else(|| {
+            crate::ImportError::Malformed(format!("{}: no column {n:?}", file.display()))
+        })
     };
     let t_col = col("timestamp")?;
     let valid_col = col("position_valid")?;
@@ -203,7 +200,7 @@ pub fn ugps_messages(
     }
     s.start_unix_s = t0.unwrap_or(f64::NAN);
     if s.updates == 0 {
-        bail!(
+        malformed!(
             "{}: no acoustic update ({} rows, {} malformed)",
             file.display(),
             s.rows,
@@ -214,7 +211,7 @@ pub fn ugps_messages(
 }
 
 /// Imports a UGPS G2 acoustic log into a log at `out` (written atomically).
-pub fn ugps(a: &UgpsOptions) -> anyhow::Result<UgpsSummary> {
+pub fn ugps(a: &UgpsOptions) -> Result<UgpsSummary> {
     use auvnav_shm_schema::AcousticRangesV1;
     let (messages, summary) = ugps_messages(&a.input)?;
     let mut header = LogHeader::new("auvnav import ugps-g2", "");
@@ -228,9 +225,10 @@ pub fn ugps(a: &UgpsOptions) -> anyhow::Result<UgpsSummary> {
             summary.start_unix_s
         ),
     );
-    header
-        .notes
-        .insert("import.counts".into(), serde_json::to_string(&summary)?);
+    header.notes.insert(
+        "import.counts".into(),
+        serde_json::to_string(&summary).unwrap_or_default(),
+    );
     write_log_atomically(&a.out, &header, |w: &mut LogWriter<_>| {
         w.declare::<AcousticRangesV1>(
             topic::ACOUSTIC_RANGES,
@@ -246,6 +244,6 @@ pub fn ugps(a: &UgpsOptions) -> anyhow::Result<UgpsSummary> {
         }
         Ok(())
     })
-    .with_context(|| format!("writing {}", a.out.display()))?;
+    .map_err(crate::error::output(&a.out))?;
     Ok(summary)
 }

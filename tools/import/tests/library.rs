@@ -41,3 +41,37 @@ fn a_magnetometer_csv_imports_through_the_library() {
     assert_eq!(recording.samples.len(), 50);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn failures_are_typed_the_callers_apart_from_the_inputs() {
+    use auvnav_import::{ImportError, TimeBase, snapir_messages};
+    let dir = std::env::temp_dir().join(format!("auvnav-import-errors-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("scratch folder");
+
+    // A segment number no data set has: the caller's.
+    let e = snapir_messages(&dir, 0, TimeBase::Nominal, true).expect_err("segment 0");
+    assert!(
+        matches!(e, ImportError::Options(_)) && e.is_usage(),
+        "{e:?}"
+    );
+
+    // A file that is not there: a read error with the file's name and the I/O error as source.
+    let e =
+        snapir_messages(&dir.join("missing"), 1, TimeBase::Nominal, true).expect_err("no data set");
+    assert!(
+        matches!(e, ImportError::Read { .. }) && !e.is_usage(),
+        "{e:?}"
+    );
+    assert!(std::error::Error::source(&e).is_some());
+
+    // A file in another form: malformed, with what was expected.
+    for name in ["imu_01.csv", "dvl_01.csv", "ref_01.csv"] {
+        std::fs::write(dir.join(name), "a,b,c\n1,2,3\n").expect("write");
+    }
+    let e = snapir_messages(&dir, 1, TimeBase::Nominal, true).expect_err("wrong header");
+    assert!(
+        matches!(&e, ImportError::Malformed(m) if m.contains("expected")),
+        "{e:?}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
