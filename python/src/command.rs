@@ -5,7 +5,6 @@
 //! a repeatable option. Results are the versioned JSON documents of `--json` (docs/json.md).
 
 use anyhow::Context;
-use auvnav_core::navigator::NavConfig;
 use auvnav_studies::runs::{RunStudy, decode_run, encode_run};
 use clap::{ArgAction, Args, FromArgMatches};
 use serde::Serialize;
@@ -54,13 +53,6 @@ fn parsed<T: FromArgMatches>(m: &clap::ArgMatches) -> anyhow::Result<T> {
 
 fn document<T: Serialize>(value: &T) -> anyhow::Result<String> {
     Ok(auvnav_replay::json::to_string_pretty(value)?)
-}
-
-fn nav_config(path: Option<&std::path::Path>) -> anyhow::Result<NavConfig> {
-    Ok(match path {
-        Some(p) => auvnav_replay::load_config(p)?.navigation,
-        None => NavConfig::default(),
-    })
 }
 
 macro_rules! spec {
@@ -140,7 +132,7 @@ fn specs() -> Vec<Spec> {
             "auvnav montecarlo nees: filter consistency",
             NeesOptions,
             |a| {
-                let cfg = nav_config(a.config.as_deref())?;
+                let cfg = auvnav_replay::load_navigation(a.config.as_deref())?;
                 let r = auvnav_studies::nees::nees_monte_carlo(&a, &cfg)?;
                 if let Some(p) = &a.series {
                     auvnav_studies::nees::write_series(p, &r)?;
@@ -355,7 +347,7 @@ fn study(name: &str, options_given: &[(String, OptionValue)]) -> anyhow::Result<
         }
         "nees" => {
             let a: auvnav_studies::nees::NeesOptions = parsed(&m)?;
-            let cfg = nav_config(a.config.as_deref())?;
+            let cfg = auvnav_replay::load_navigation(a.config.as_deref())?;
             Study::Nees(Box::new(auvnav_studies::nees::NeesStudy::new(
                 &a, &cfg, &cfg,
             )?))

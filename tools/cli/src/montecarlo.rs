@@ -1,15 +1,11 @@
 //! `auvnav montecarlo nees`: the command line around `auvnav_studies::nees`, whose items are
 //! re-exported here.
 
-use auvnav_core::navigator::NavConfig;
 pub use auvnav_studies::nees::*;
 
 /// Runs `auvnav montecarlo nees` and prints the report.
 pub fn run_nees(a: &NeesOptions) -> anyhow::Result<()> {
-    let cfg = match &a.config {
-        Some(p) => crate::replay::load_config(p)?.navigation,
-        None => NavConfig::default(),
-    };
+    let cfg = auvnav_replay::load_navigation(a.config.as_deref())?;
     let start = std::time::Instant::now();
     let r = nees_monte_carlo(a, &cfg)?;
     if let Some(path) = &a.series {

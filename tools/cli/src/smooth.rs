@@ -6,15 +6,11 @@ pub use auvnav_smooth::*;
 /// `auvnav montecarlo smoother`.
 pub mod montecarlo {
     use anyhow::Context;
-    use auvnav_core::navigator::NavConfig;
     pub use auvnav_smooth::montecarlo::*;
 
     /// Runs `auvnav montecarlo smoother` and prints the report.
     pub fn run(a: &SmootherMonteCarloOptions) -> anyhow::Result<()> {
-        let cfg = match &a.config {
-            Some(p) => auvnav_replay::load_config(p)?.navigation,
-            None => NavConfig::default(),
-        };
+        let cfg = auvnav_replay::load_navigation(a.config.as_deref())?;
         let r = smoother_monte_carlo(a, &cfg)?;
         if let Some(path) = &a.series {
             let mut text = String::from(

@@ -66,6 +66,17 @@ pub fn load_config(path: &Path) -> Result<ReplayConfig, ReplayError> {
     Ok(cfg)
 }
 
+/// The `[navigation]` table of the configuration file at `path`, or the defaults without one
+/// (the studies' `--config`).
+pub fn load_navigation(
+    path: Option<&Path>,
+) -> Result<auvnav_core::navigator::NavConfig, ReplayError> {
+    Ok(match path {
+        Some(p) => load_config(p)?.navigation,
+        None => auvnav_core::navigator::NavConfig::default(),
+    })
+}
+
 /// One output of the navigator.
 #[derive(Debug, Clone, Copy)]
 pub enum Output<'a> {
