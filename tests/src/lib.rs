@@ -221,7 +221,7 @@ pub mod grade {
     /// The voyage's messages, in memory.
     pub fn simulate(cfg: &SimConfig) -> Vec<LogMessage> {
         let mut messages = Vec::new();
-        auvnav_sim::simulate(cfg, |m| {
+        auvnav_sim::simulate(cfg, |m| -> Result<(), auvnav_sim::SimError> {
             messages.push(*m);
             Ok(())
         })

@@ -212,7 +212,7 @@ fn the_adaptive_noise_estimate_converges_to_the_simulated_usbl_noise() {
                 seed,
                 duration_s: None,
             },
-            |m| {
+            |m| -> anyhow::Result<()> {
                 if let LogMessage::Truth(t) = m
                     && !session.started()
                 {

@@ -79,7 +79,7 @@ pub fn first_truth(cfg: &SimConfig) -> anyhow::Result<TruthStateV1> {
         ..cfg.clone()
     };
     let mut first = None;
-    sim::simulate(&short, |m| {
+    sim::simulate(&short, |m| -> anyhow::Result<()> {
         if let (None, auvnav_log::LogMessage::Truth(t)) = (&first, m) {
             first = Some(*t);
         }
@@ -146,7 +146,7 @@ pub fn run_session_voyage(
         Ok(())
     };
     let mut first_imu_ns = None;
-    let summary = sim::simulate(cfg, |m| {
+    let summary = sim::simulate(cfg, |m| -> anyhow::Result<()> {
         if let auvnav_log::LogMessage::Imu(x) = m {
             first_imu_ns.get_or_insert(x.host_time_ns);
         }

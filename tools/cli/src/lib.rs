@@ -26,8 +26,9 @@ pub mod usbl;
 
 pub use auvnav_replay::Failure;
 
-/// The exit status for an error: the first [`Failure`] in its chain, a configuration file that
-/// does not parse (2), otherwise a runtime failure (1).
+/// The exit status for an error: the first [`Failure`] in its chain, a usage error of a library
+/// (its typed error's `is_usage`), a configuration file that does not parse (2), otherwise a
+/// runtime failure (1).
 pub fn exit_status(e: &anyhow::Error) -> u8 {
     for cause in e.chain() {
         match cause.downcast_ref::<Failure>() {
@@ -35,16 +36,8 @@ pub fn exit_status(e: &anyhow::Error) -> u8 {
             Some(Failure::CheckFailed(_)) => return 3,
             None => {}
         }
-        if cause
-            .downcast_ref::<auvnav_replay::ReplayError>()
-            .is_some_and(auvnav_replay::ReplayError::is_usage)
-            || cause
-                .downcast_ref::<auvnav_import::ImportError>()
-                .is_some_and(auvnav_import::ImportError::is_usage)
-        {
-            return 2;
-        }
-        if cause.downcast_ref::<toml::de::Error>().is_some()
+        if is_usage(cause)
+            || cause.downcast_ref::<toml::de::Error>().is_some()
             || cause
                 .downcast_ref::<auvnav_recorder::WouldOverwrite>()
                 .is_some()
@@ -56,4 +49,18 @@ pub fn exit_status(e: &anyhow::Error) -> u8 {
         }
     }
     1
+}
+
+/// Whether `cause` is one of the libraries' typed errors that is the caller's to fix.
+fn is_usage(cause: &(dyn std::error::Error + 'static)) -> bool {
+    if let Some(e) = cause.downcast_ref::<auvnav_replay::ReplayError>() {
+        return e.is_usage();
+    }
+    if let Some(e) = cause.downcast_ref::<auvnav_import::ImportError>() {
+        return e.is_usage();
+    }
+    if let Some(e) = cause.downcast_ref::<auvnav_sim::SimError>() {
+        return e.is_usage();
+    }
+    false
 }

@@ -9,10 +9,10 @@
 //! be found are added by the caller (`--effect`). IMU 100 Hz, DVL 1 Hz, depth 1 Hz, GNSS 1 Hz at
 //! the surface, truth 1 Hz.
 
-use crate::SimConfig;
 use crate::effects::Effects;
 use crate::rng::Rng;
 use crate::scenario::{EffectValue, Leg, Rates, Scenario, Start};
+use crate::{SimConfig, SimError};
 use std::collections::BTreeMap;
 
 /// The campaign families.
@@ -27,14 +27,14 @@ pub enum CampaignKind {
 impl CampaignKind {
     pub const NAMES: &[&str] = &["scal", "scal-turns"];
 
-    pub fn parse(name: &str) -> anyhow::Result<CampaignKind> {
+    pub fn parse(name: &str) -> Result<CampaignKind, SimError> {
         match name {
             "scal" => Ok(CampaignKind::Scal),
             "scal-turns" => Ok(CampaignKind::ScalTurns),
-            _ => anyhow::bail!(
+            _ => Err(SimError::Options(format!(
                 "unknown campaign {name:?}; known: {}",
                 CampaignKind::NAMES.join(", ")
-            ),
+            ))),
         }
     }
 
@@ -138,7 +138,7 @@ pub fn campaign(
     kind: CampaignKind,
     seed: u64,
     installation: &[(String, Vec<f64>)],
-) -> anyhow::Result<Vec<SimConfig>> {
+) -> Result<Vec<SimConfig>, SimError> {
     let mut rng = Rng::new(seed, "campaign");
     let mut effects_table = sensor_effects(&mut rng);
     for (name, v) in installation {

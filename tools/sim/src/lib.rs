@@ -7,6 +7,7 @@
 
 pub mod campaign;
 pub mod effects;
+pub mod error;
 pub mod perturb;
 pub mod rng;
 pub mod scenario;
@@ -17,6 +18,7 @@ use auvnav_core::earth::{self, Geodetic};
 use auvnav_log::{LogHeader, LogMessage, write_log_atomically};
 use auvnav_shm_schema::{SoundVelocityV1, TruthStateV1, topic};
 use effects::Effects;
+pub use error::SimError;
 use nalgebra::Vector3;
 use scenario::Scenario;
 use sensors::*;
@@ -198,23 +200,26 @@ fn divider(imu_hz: u32, hz: u32) -> u64 {
 }
 
 /// Runs the simulation and keeps every message in memory, in time order.
-pub fn simulate_to_vec(cfg: &SimConfig) -> anyhow::Result<(Vec<LogMessage>, SimSummary)> {
+pub fn simulate_to_vec(cfg: &SimConfig) -> Result<(Vec<LogMessage>, SimSummary), SimError> {
     let mut out = Vec::new();
     let summary = simulate(cfg, |m| {
         out.push(*m);
-        Ok(())
+        Ok::<(), SimError>(())
     })?;
     Ok((out, summary))
 }
 
 /// Runs the simulation, handing every message to `sink` in time order (truth on [`LogMessage::Truth`]).
-pub fn simulate<F>(cfg: &SimConfig, mut sink: F) -> anyhow::Result<SimSummary>
+/// The first error of `sink` ends the run and is returned; a scenario the trajectory cannot fly
+/// is returned as `E` from [`SimError::Trajectory`].
+pub fn simulate<F, E>(cfg: &SimConfig, mut sink: F) -> Result<SimSummary, E>
 where
-    F: FnMut(&LogMessage) -> anyhow::Result<()>,
+    F: FnMut(&LogMessage) -> Result<(), E>,
+    E: From<SimError>,
 {
     let s = &cfg.scenario;
     let e = &cfg.effects;
-    let traj = Trajectory::from_scenario(s)?;
+    let traj = Trajectory::from_scenario(s).map_err(SimError::from)?;
     let duration = cfg.duration_s.unwrap_or(traj.duration_s);
     let rates = &s.rates;
     let imu_hz = f64::from(rates.imu_hz);
@@ -390,10 +395,13 @@ pub fn log_header(cfg: &SimConfig) -> LogHeader {
 }
 
 /// Simulates into a log file, atomically (no file at `out` on error).
-pub fn simulate_to_log(cfg: &SimConfig, out: &Path) -> anyhow::Result<SimSummary> {
+pub fn simulate_to_log(cfg: &SimConfig, out: &Path) -> Result<SimSummary, SimError> {
+    if let Err(e) = Trajectory::from_scenario(&cfg.scenario) {
+        return Err(e.into());
+    }
     let mut summary = SimSummary::default();
     write_log_atomically(out, &log_header(cfg), |w| {
-        summary = simulate(cfg, |m| {
+        summary = simulate(cfg, |m| -> anyhow::Result<()> {
             match m {
                 LogMessage::Imu(x) => w.write(topic::IMU, x)?,
                 LogMessage::Dvl(x) => w.write(topic::DVL, x)?,
@@ -408,6 +416,10 @@ pub fn simulate_to_log(cfg: &SimConfig, out: &Path) -> anyhow::Result<SimSummary
             Ok(())
         })?;
         Ok(())
+    })
+    .map_err(|e| SimError::Output {
+        path: out.to_path_buf(),
+        source: e.into(),
     })?;
     Ok(summary)
 }

@@ -19,9 +19,9 @@
 //! carries the input's header plus notes saying what was applied (`perturb.effects`,
 //! `perturb.seed`, `perturb.source`, `perturb.counts`).
 
+use crate::SimError;
 use crate::effects::{self, Effects};
 use crate::rng::Rng;
-use anyhow::{Context, bail};
 use auvnav_log::{LogMessage, LogReader, RawLogMessage, write_log_atomically};
 use auvnav_shm_schema::{DepthV1, DvlVelocityV1, ImuSampleV1};
 use nalgebra::{Rotation3, Vector3};
@@ -66,22 +66,24 @@ pub struct Perturbation {
 
 impl Perturbation {
     /// Parses `NAME=VALUE` settings, checking names, arity, ranges and applicability.
-    pub fn parse(settings: &[String], seed: u64) -> anyhow::Result<Perturbation> {
+    pub fn parse(settings: &[String], seed: u64) -> Result<Perturbation, SimError> {
         let mut effects = Effects::default();
         let mut parsed = Vec::new();
         for s in settings {
             let (name, values) = effects::parse_setting(s)?;
             if !APPLICABLE.contains(&name.as_str()) {
-                bail!(
+                return Err(SimError::Options(format!(
                     "effect {name} cannot be applied to a recorded log; perturb applies: {}",
                     APPLICABLE.join(", ")
-                );
+                )));
             }
             effects.set(&name, &values)?;
             parsed.push((name, values));
         }
         if parsed.is_empty() {
-            bail!("no effect given (--effect NAME=VALUE; see `auvnav sim --list-effects`)");
+            return Err(SimError::Options(
+                "no effect given (--effect NAME=VALUE; see `auvnav sim --list-effects`)".into(),
+            ));
         }
         Ok(Perturbation {
             settings: parsed,
@@ -141,25 +143,31 @@ fn at_time(epochs: &[DvlEpoch], t: f64, max_gap: f64) -> Option<(Vector3<f64>, V
     }
 }
 
-fn read_all(input: &Path) -> anyhow::Result<(auvnav_log::LogHeader, Vec<RawLogMessage>)> {
-    let mut r = LogReader::open(input)?;
-    let header = r
-        .read_header()
-        .with_context(|| format!("reading the header of {}", input.display()))?;
+fn read_all(input: &Path) -> Result<(auvnav_log::LogHeader, Vec<RawLogMessage>), SimError> {
+    let failed = |e: auvnav_log::LogError| SimError::Log {
+        path: input.to_path_buf(),
+        source: e.into(),
+    };
+    let mut r = LogReader::open(input).map_err(failed)?;
+    let header = r.read_header().map_err(failed)?;
     let mut out = Vec::new();
-    while let Some(m) = r
-        .next_message()
-        .with_context(|| format!("reading {}", input.display()))?
-    {
+    while let Some(m) = r.next_message().map_err(failed)? {
         out.push(m);
     }
     Ok((header, out))
 }
 
 /// Reads `input`, applies `p` and writes `output` atomically.
-pub fn perturb_log(input: &Path, output: &Path, p: &Perturbation) -> anyhow::Result<PerturbCounts> {
+pub fn perturb_log(
+    input: &Path,
+    output: &Path,
+    p: &Perturbation,
+) -> Result<PerturbCounts, SimError> {
     if input == output {
-        bail!("--out must differ from the input log {}", input.display());
+        return Err(SimError::Options(format!(
+            "--out must differ from the input log {}",
+            input.display()
+        )));
     }
     let (mut header, raw) = read_all(input)?;
     let e = &p.effects;
@@ -260,7 +268,10 @@ pub fn perturb_log(input: &Path, output: &Path, p: &Perturbation) -> anyhow::Res
         }
         Ok(())
     })
-    .with_context(|| format!("writing {}", output.display()))?;
+    .map_err(|e| SimError::Output {
+        path: output.to_path_buf(),
+        source: e.into(),
+    })?;
     Ok(counts)
 }
 

@@ -238,7 +238,7 @@ impl crate::runs::RunStudy for NeesStudy {
         let mut epochs = Vec::new();
         let mut last_imu_ns = None;
         let mut start_ns = 0u64;
-        let summary = sim::simulate(&sim_cfg, |m| {
+        let summary = sim::simulate(&sim_cfg, |m| -> anyhow::Result<()> {
             match m {
                 LogMessage::Truth(t) => {
                     let truth_q = UnitQuaternion::from_euler_angles(

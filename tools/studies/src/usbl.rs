@@ -258,7 +258,7 @@ fn run_one(
         rejected_clean: 0,
     };
     let (mut sh, mut sv, mut svel, mut n) = (0.0, 0.0, 0.0, 0usize);
-    sim::simulate(&sim_cfg, |m| {
+    sim::simulate(&sim_cfg, |m| -> anyhow::Result<()> {
         match m {
             LogMessage::Truth(t) => {
                 let truth_pos = truth_position(t);
