@@ -89,7 +89,7 @@ impl<'a> Problem<'a> {
 
     /// Scores `x` (voyages in parallel).
     pub fn evaluate(&self, x: &[f64; 8], record: Record) -> anyhow::Result<Evaluation> {
-        let runs = map_runs(self.voyages.len(), self.threads, |k| {
+        let runs = map_runs(self.voyages.len(), self.threads, |k| -> anyhow::Result<_> {
             run_voyage(&self.voyages[k], &self.nav, x, record)
         })?;
         self.replays.fetch_add(1, Ordering::Relaxed);
@@ -99,7 +99,7 @@ impl<'a> Problem<'a> {
     /// The objectives of many candidates (every candidate × voyage pair in parallel).
     pub fn objectives(&self, xs: &[[f64; 8]]) -> anyhow::Result<Vec<f64>> {
         let nv = self.voyages.len();
-        let cep = map_runs(xs.len() * nv, self.threads, |k| {
+        let cep = map_runs(xs.len() * nv, self.threads, |k| -> anyhow::Result<_> {
             let (c, v) = (k / nv, k % nv);
             let run = run_voyage(&self.voyages[v], &self.nav, &xs[c], Record::default())?;
             Ok(run.cep50(&self.voyages[v].fixes, self.threshold_m))

@@ -268,7 +268,7 @@ pub fn calibrate(
     for pass in 0..MAX_PASSES {
         progress("smoothing the voyages", pass * nv, MAX_PASSES * nv);
         let (nav, filter_prior) = filter_config(&problem.nav, params, &x);
-        let estimates = map_runs(nv, problem.threads, |k| {
+        let estimates = map_runs(nv, problem.threads, |k| -> anyhow::Result<_> {
             smooth_voyage(&problem.voyages[k], &nav)
         })?;
         problem.replays.fetch_add(1, Ordering::Relaxed);

@@ -649,14 +649,16 @@ fn main() -> std::process::ExitCode {
         Command::Sim(a) => run_sim(a),
         Command::Demo(a) => auvnav_tools::demo::run(&a),
         Command::Replay(a) => run_replay(&a),
-        Command::Smooth(a) => auvnav_tools::smooth::run(&a).and_then(|r| {
-            if a.json {
-                Ok(auvnav_tools::json::print(&r)?)
-            } else {
-                auvnav_tools::smooth::print_report(&r);
-                Ok(())
-            }
-        }),
+        Command::Smooth(a) => auvnav_tools::smooth::run(&a)
+            .map_err(anyhow::Error::from)
+            .and_then(|r| {
+                if a.json {
+                    Ok(auvnav_tools::json::print(&r)?)
+                } else {
+                    auvnav_tools::smooth::print_report(&r);
+                    Ok(())
+                }
+            }),
         Command::Info(a) => auvnav_tools::log_info::run(&a).map(|_| ()),
         Command::Completions { shell, out } => completions(shell, out.as_deref()),
         Command::Man { out } => man_pages(&out),

@@ -16,17 +16,18 @@
 //! types, which export, report and montecarlo build on.
 #![forbid(unsafe_code)]
 
+pub mod error;
 pub mod export;
 pub use auvnav_import::fixes;
 pub mod montecarlo;
 pub mod report;
 
-use anyhow::{Context, bail};
 use auvnav_core::ekf;
 use auvnav_core::smoother::{SmoothedParameters, SmoothedTrack, SmoothedValue, SmootherLog};
 use auvnav_log::{LogHeader, LogMessage, write_log_atomically};
 use auvnav_replay::{Output, Replay, ReplayOptions, replay_config, run_log};
 use auvnav_shm_schema::{AidDiagnosticsV1, AidSource, NavSolutionV1, TruthStateV1, topic};
+pub use error::SmoothError;
 use serde::Serialize;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -366,7 +367,7 @@ pub fn smooth_log(
     a: &SmoothOptions,
     log: &Path,
     fix_file: Option<&fixes::FixFile>,
-) -> anyhow::Result<LogSmoothReport> {
+) -> Result<LogSmoothReport, SmoothError> {
     smooth_log_with(a, log, fix_file, &|_| {})
 }
 
@@ -379,7 +380,7 @@ pub fn smooth_log_with(
     log: &Path,
     fix_file: Option<&fixes::FixFile>,
     adjust: &dyn Fn(&mut auvnav_replay::ReplayConfig),
-) -> anyhow::Result<LogSmoothReport> {
+) -> Result<LogSmoothReport, SmoothError> {
     let (mut cfg, configuration) = replay_config(&replay_options(a, log))?;
     adjust(&mut cfg);
     let name = stem(log);
@@ -423,29 +424,37 @@ pub fn smooth_log_with(
             _ => {}
         }
         Ok(())
+    })
+    .map_err(|e| SmoothError::Log {
+        path: log.to_path_buf(),
+        source: e.into(),
     })?;
     if first.counts.imu == 0 {
-        bail!(
+        return Err(SmoothError::Input(format!(
             "{}: the log has no IMU samples: nothing to smooth",
             log.display()
-        );
+        )));
     }
     if first.initial().is_none() && !first.has_alignment() {
-        bail!(
+        return Err(SmoothError::Input(format!(
             "{}: no initial state: the log has no truth channel and the configuration no [initial] table",
             log.display()
-        );
+        )));
     }
     let Some(run) = first.finish_recording() else {
-        bail!("{}: the navigation filter never started", log.display());
+        return Err(SmoothError::Input(format!(
+            "{}: the navigation filter never started",
+            log.display()
+        )));
     };
     let chains = run.log.chains;
     let spilled_bytes = run.log.spilled_bytes();
     let forward_wall_s = t_start.elapsed().as_secs_f64();
     let t_back = std::time::Instant::now();
-    let mut track = run
-        .smooth()
-        .with_context(|| format!("smoothing {}", log.display()))?;
+    let mut track = run.smooth().map_err(|e| SmoothError::Backward {
+        log: log.to_path_buf(),
+        source: e.into(),
+    })?;
     let backward_wall_s = t_back.elapsed().as_secs_f64();
 
     // Second pass: the same forward run, each solution written as it was and smoothed.
@@ -467,10 +476,10 @@ pub fn smooth_log_with(
     let mcap_path = a.out.join(format!("{name}.smoothed.mcap"));
     let csv_partial = auvnav_replay::partial_path(&csv_path);
     let mut csv = std::io::BufWriter::new(
-        std::fs::File::create(&csv_partial)
-            .with_context(|| format!("creating {}", csv_partial.display()))?,
+        std::fs::File::create(&csv_partial).map_err(|e| SmoothError::output(&csv_path, e))?,
     );
-    writeln!(csv, "{}", auvnav_core::csv::NAV_HEADER)?;
+    writeln!(csv, "{}", auvnav_core::csv::NAV_HEADER)
+        .map_err(|e| SmoothError::output(&csv_path, e))?;
     let mut header = LogHeader::new("auvnav smooth", &toml::to_string(&cfg).unwrap_or_default());
     header
         .notes
@@ -523,14 +532,19 @@ pub fn smooth_log_with(
     })();
     if let Err(e) = finish_csv {
         let _ = std::fs::remove_file(&csv_partial);
-        return Err(e.context(format!("writing the outputs of {}", log.display())));
+        return Err(SmoothError::Output {
+            path: a.out.clone(),
+            source: e
+                .context(format!("writing the outputs of {}", log.display()))
+                .into(),
+        });
     }
     if second_solutions != forward_solutions {
-        bail!(
+        return Err(SmoothError::NotRepeatable(format!(
             "{}: the second pass gave {second_solutions} solutions, the first {forward_solutions}: \
              the replay is not deterministic here, the smoothed track would not match",
             log.display()
-        );
+        )));
     }
     let second_pass_wall_s = t_second.elapsed().as_secs_f64();
 
@@ -573,10 +587,9 @@ pub fn smooth_log_with(
         &export::plain_csv(&points, unix_offset),
     )?;
     let params = parameters(&track, first_smoothed.as_ref(), last_smoothed.as_ref());
-    write(
-        Path::new(&outputs.parameters_json),
-        &serde_json::to_string_pretty(&params)?,
-    )?;
+    let params_json = serde_json::to_string_pretty(&params)
+        .map_err(|e| SmoothError::output(Path::new(&outputs.parameters_json), e))?;
+    write(Path::new(&outputs.parameters_json), &params_json)?;
     let nav = second.nav_counters();
     let duration = second.duration_s();
     let wall = forward_wall_s + backward_wall_s + second_pass_wall_s;
@@ -622,18 +635,20 @@ struct LogScan {
     unix_time_of_log_zero: Option<f64>,
 }
 
-fn scan_log(log: &Path) -> anyhow::Result<LogScan> {
+fn scan_log(log: &Path) -> Result<LogScan, SmoothError> {
     const GPS_EPOCH_UNIX_S: f64 = 315_964_800.0;
     const LEAP_S: f64 = 18.0;
-    let mut r =
-        auvnav_log::LogReader::open(log).with_context(|| format!("opening {}", log.display()))?;
-    r.read_header()
-        .with_context(|| format!("reading {}", log.display()))?;
+    let failed = |e: auvnav_log::LogError| SmoothError::Log {
+        path: log.to_path_buf(),
+        source: e.into(),
+    };
+    let mut r = auvnav_log::LogReader::open(log).map_err(failed)?;
+    r.read_header().map_err(failed)?;
     let mut span: Option<(u64, u64)> = None;
     let mut unix_offset = None;
     while let Ok(Some(step)) = r.next_decoded_with(|m| {
         let Ok(m) = m else {
-            return Ok::<(), anyhow::Error>(());
+            return Ok::<(), SmoothError>(());
         };
         if let Some(s) = m.sensor() {
             let t = s.host_time_ns();
@@ -676,23 +691,21 @@ fn fix_innovation(d: &AidDiagnosticsV1) -> Option<FixInnovation> {
 }
 
 /// Runs `auvnav smooth`.
-pub fn run(a: &SmoothOptions) -> anyhow::Result<SmoothReport> {
+pub fn run(a: &SmoothOptions) -> Result<SmoothReport, SmoothError> {
     if !(a.export_rate.is_finite() && a.export_rate > 0.0) {
-        return Err(auvnav_replay::Failure::Usage(format!(
+        return Err(SmoothError::Options(format!(
             "--export-rate {}: must be > 0 points per second",
             a.export_rate
-        ))
-        .into());
+        )));
     }
     if let Some(hz) = a.solution_rate
         && !(hz.is_finite() && hz > 0.0)
     {
-        return Err(auvnav_replay::Failure::Usage(format!(
+        return Err(SmoothError::Options(format!(
             "--solution-rate {hz}: must be > 0 solutions per second"
-        ))
-        .into());
+        )));
     }
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    std::fs::create_dir_all(&a.out).map_err(|e| SmoothError::output(&a.out, e))?;
     let fix_file = a.fixes.as_deref().map(fixes::read).transpose()?;
     let mut logs = Vec::new();
     let mut progress = auvnav_studies::progress::Progress::new(!a.json);
@@ -707,7 +720,7 @@ pub fn run(a: &SmoothOptions) -> anyhow::Result<SmoothReport> {
         peak_memory_mib: peak_memory_mib(),
     };
     if let Some(dir) = &a.report {
-        report::write(dir, &r)?;
+        report::write(dir, &r).map_err(|e| SmoothError::output(dir, e))?;
     }
     Ok(r)
 }

@@ -11,7 +11,7 @@
 //! the correlation between the axes. The smoother keeps per-epoch variances, not the full
 //! covariance, so per-axis NEES is the test it can give exactly.
 
-use anyhow::{Context, bail};
+use crate::SmoothError;
 use auvnav_core::earth;
 use auvnav_core::feed::SensorMessage;
 use auvnav_core::navigator::NavConfig;
@@ -154,7 +154,7 @@ fn pass(
     end_fix: &GnssFixV1,
     log: Option<SmootherLog>,
     on: &mut dyn FnMut(Item),
-) -> anyhow::Result<Session> {
+) -> Session {
     let mut session = Session::new(&SessionConfig {
         navigation: cfg.clone(),
         ..Default::default()
@@ -185,7 +185,7 @@ fn pass(
         let Ok(()) = session.feed(&SensorMessage::Gnss(f), &mut sink(on));
     }
     let Ok(()) = session.finish(&mut sink(on));
-    Ok(session)
+    session
 }
 
 /// The session's outputs as items for `on`.
@@ -221,10 +221,14 @@ fn one_run(
     scenario: &Scenario,
     cfg: &NavConfig,
     k: usize,
-) -> anyhow::Result<RunResult> {
+) -> Result<RunResult, SmoothError> {
+    let failed = |e: Box<dyn std::error::Error + Send + Sync>| SmoothError::Run {
+        index: k,
+        source: e,
+    };
     let seed = a.seed.wrapping_add(k as u64);
     let mut rng = Rng::new(seed, "montecarlo.smoother");
-    let effects = matched_effects(cfg, a.dvl_beam_noise, &mut rng)?;
+    let effects = matched_effects(cfg, a.dvl_beam_noise, &mut rng).map_err(|e| failed(e.into()))?;
     let (messages, summary) = sim::simulate_to_vec(&SimConfig {
         scenario: scenario.clone(),
         effects,
@@ -239,7 +243,7 @@ fn one_run(
         })
         .collect();
     let (Some(first), Some(last)) = (truths.first(), truths.last()) else {
-        bail!("run {k}: the simulation has no truth records");
+        return Err(failed("the simulation has no truth records".into()));
     };
     let start = auvnav_studies::perturbed_start::perturbed_start(cfg, first, &mut rng);
     let end = truth_position(last);
@@ -272,12 +276,12 @@ fn one_run(
                 end_fix_fused = true;
             }
         },
-    )?;
+    );
     let mut track: SmoothedTrack = first_pass
         .finish_recording()
-        .context("the session recorded nothing")?
+        .ok_or_else(|| failed("the session recorded nothing".into()))?
         .smooth()
-        .context("smoothing")?;
+        .map_err(|e| failed(e.into()))?;
     let mut rows = Vec::new();
     let mut last: Option<(NavSolutionV1, NavSolutionV1)> = None;
     pass(cfg, &messages, start, &end_fix, None, &mut |i| match i {
@@ -299,7 +303,7 @@ fn one_run(
             rows.push(row);
         }
         Item::Diagnostics(_) => {}
-    })?;
+    });
     Ok(RunResult {
         rows,
         duration_s: summary.duration_s,
@@ -311,15 +315,15 @@ fn one_run(
 pub fn smoother_monte_carlo(
     a: &SmootherMonteCarloOptions,
     cfg: &NavConfig,
-) -> anyhow::Result<SmootherMonteCarloReport> {
+) -> Result<SmootherMonteCarloReport, SmoothError> {
     if a.runs == 0 {
-        bail!("--runs must be at least 1");
+        return Err(SmoothError::Options("--runs must be at least 1".into()));
     }
     if !(a.end_fix_std.is_finite() && a.end_fix_std > 0.0) {
-        bail!("--end-fix-std must be > 0 m");
+        return Err(SmoothError::Options("--end-fix-std must be > 0 m".into()));
     }
     let started = std::time::Instant::now();
-    let scenario = Scenario::load(&a.scenario)?;
+    let scenario = Scenario::load(&a.scenario).map_err(auvnav_sim::SimError::from)?;
     let threads = a
         .threads
         .unwrap_or_else(auvnav_studies::parallel::default_threads)
@@ -330,7 +334,7 @@ pub fn smoother_monte_carlo(
     bar.finish_and_clear();
     let epochs = results.iter().map(|r| r.rows.len()).min().unwrap_or(0);
     if epochs == 0 {
-        bail!("no truth epoch to evaluate");
+        return Err(SmoothError::Input("no truth epoch to evaluate".into()));
     }
     let n = a.runs as f64;
     let lower = chi2_quantile(n, -1.959_964) / n;

@@ -8,39 +8,42 @@ pub fn default_threads() -> usize {
 
 /// Runs `f(0) .. f(runs - 1)` on `threads` workers and returns the results in index order, or the
 /// first error by index.
-pub fn map_runs<T, F>(runs: usize, threads: usize, f: F) -> anyhow::Result<Vec<T>>
+pub fn map_runs<T, E, F>(runs: usize, threads: usize, f: F) -> Result<Vec<T>, E>
 where
     T: Send,
-    F: Fn(usize) -> anyhow::Result<T> + Sync,
+    E: Send,
+    F: Fn(usize) -> Result<T, E> + Sync,
 {
     map_runs_with_progress(runs, threads, &indicatif::ProgressBar::hidden(), f)
 }
 
-/// [`map_runs`], advancing `bar` by one as each run finishes.
-pub fn map_runs_with_progress<T, F>(
+/// [`map_runs`], advancing `bar` by one as each run finishes. Where no worker thread can be
+/// started, the runs go one after the other on the calling thread (the results are the same:
+/// each run depends only on its index).
+pub fn map_runs_with_progress<T, E, F>(
     runs: usize,
     threads: usize,
     bar: &indicatif::ProgressBar,
     f: F,
-) -> anyhow::Result<Vec<T>>
+) -> Result<Vec<T>, E>
 where
     T: Send,
-    F: Fn(usize) -> anyhow::Result<T> + Sync,
+    E: Send,
+    F: Fn(usize) -> Result<T, E> + Sync,
 {
     use rayon::prelude::*;
-    let pool = rayon::ThreadPoolBuilder::new()
+    let one = |k| {
+        let r = f(k);
+        bar.inc(1);
+        r
+    };
+    let results: Vec<Result<T, E>> = match rayon::ThreadPoolBuilder::new()
         .num_threads(threads.clamp(1, 64))
-        .build()?;
-    let results: Vec<anyhow::Result<T>> = pool.install(|| {
-        (0..runs)
-            .into_par_iter()
-            .map(|k| {
-                let r = f(k);
-                bar.inc(1);
-                r
-            })
-            .collect()
-    });
+        .build()
+    {
+        Ok(pool) => pool.install(|| (0..runs).into_par_iter().map(one).collect()),
+        Err(_) => (0..runs).map(one).collect(),
+    };
     bar.finish();
     results.into_iter().collect()
 }
@@ -52,7 +55,7 @@ mod tests {
     #[test]
     fn results_come_in_index_order_whatever_the_threads() {
         for threads in [1, 2, 7] {
-            let r = map_runs(100, threads, |k| Ok(k * k)).expect("runs");
+            let r = map_runs(100, threads, |k| Ok::<_, String>(k * k)).expect("runs");
             assert_eq!(r, (0..100).map(|k| k * k).collect::<Vec<_>>());
         }
     }

@@ -214,7 +214,7 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
             null,
             per_run: false,
         })?;
-    let results = map_runs(total, threads, |k| {
+    let results = map_runs(total, threads, |k| -> anyhow::Result<_> {
         let t0 = std::time::Instant::now();
         let t = auvnav_studies::runs::RunStudy::run(&study, k)?;
         if let Ok(mut p) = progress.lock() {
@@ -225,7 +225,7 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
         Ok((t, t0.elapsed().as_secs_f64()))
     });
     let results = results?;
-    let set_results = map_runs(extra, threads, |k| {
+    let set_results = map_runs(extra, threads, |k| -> anyhow::Result<_> {
         let floor_end = o.pairs + floor_jobs.len();
         let t = if k < o.pairs {
             let seed = 200_001 + k as u64;
