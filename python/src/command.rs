@@ -383,7 +383,7 @@ pub fn study_run(
 ) -> anyhow::Result<Vec<u8>> {
     fn one<S: RunStudy>(s: &S, k: usize) -> anyhow::Result<Vec<u8>> {
         anyhow::ensure!(k < s.runs(), "run {k} of a study of {} runs", s.runs());
-        encode_run(&s.run(k)?)
+        Ok(encode_run(&s.run(k)?)?)
     }
     match study(name, options_given)? {
         Study::Align(s) => one(&s, k),
@@ -404,7 +404,7 @@ pub fn study_report(
         let runs = runs
             .iter()
             .map(|b| decode_run(b))
-            .collect::<anyhow::Result<Vec<S::Run>>>()?;
+            .collect::<Result<Vec<S::Run>, auvnav_studies::StudyError>>()?;
         document(&s.report(runs, wall_s)?)
     }
     match study(name, options_given)? {

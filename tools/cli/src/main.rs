@@ -642,6 +642,21 @@ fn run_import_snapir(a: &auvnav_tools::import::SnapirOptions) -> anyhow::Result<
     Ok(())
 }
 
+/// A library's report printed as JSON or, for people, as text.
+fn print_report<R, E>(r: Result<R, E>, json: bool, text: fn(&R)) -> anyhow::Result<()>
+where
+    R: serde::Serialize,
+    E: Into<anyhow::Error>,
+{
+    let r = r.map_err(Into::into)?;
+    if json {
+        auvnav_tools::json::print(&r)?;
+    } else {
+        text(&r);
+    }
+    Ok(())
+}
+
 // Long on purpose: the dispatch of the `auvnav` subcommands: one arm per command.
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
@@ -649,16 +664,11 @@ fn main() -> std::process::ExitCode {
         Command::Sim(a) => run_sim(a),
         Command::Demo(a) => auvnav_tools::demo::run(&a),
         Command::Replay(a) => run_replay(&a),
-        Command::Smooth(a) => auvnav_tools::smooth::run(&a)
-            .map_err(anyhow::Error::from)
-            .and_then(|r| {
-                if a.json {
-                    Ok(auvnav_tools::json::print(&r)?)
-                } else {
-                    auvnav_tools::smooth::print_report(&r);
-                    Ok(())
-                }
-            }),
+        Command::Smooth(a) => print_report(
+            auvnav_tools::smooth::run(&a),
+            a.json,
+            auvnav_tools::smooth::print_report,
+        ),
         Command::Info(a) => auvnav_tools::log_info::run(&a).map(|_| ()),
         Command::Completions { shell, out } => completions(shell, out.as_deref()),
         Command::Man { out } => man_pages(&out),
@@ -667,30 +677,21 @@ fn main() -> std::process::ExitCode {
         Command::Emulate(a) => auvnav_tools::emulate_ptys::run(&a).map(|_| ()),
         Command::Record(a) => auvnav_recorder::run(&a).map(|_| ()),
         Command::AlignMeasured(a) => auvnav_tools::align::run_measured(&a).map(|_| ()),
-        Command::Align(a) => auvnav_tools::align::run(&a).and_then(|r| {
-            if a.json {
-                auvnav_tools::json::print(&r)?;
-            } else {
-                auvnav_tools::align::print(&r);
-            }
-            Ok(())
-        }),
-        Command::Usbl(a) if a.table => auvnav_tools::usbl::run_table(&a).and_then(|r| {
-            if a.json {
-                auvnav_tools::json::print(&r)?;
-            } else {
-                auvnav_tools::usbl::print_table(&r);
-            }
-            Ok(())
-        }),
-        Command::Usbl(a) => auvnav_tools::usbl::run(&a).and_then(|r| {
-            if a.json {
-                auvnav_tools::json::print(&r)?;
-            } else {
-                auvnav_tools::usbl::print(&r);
-            }
-            Ok(())
-        }),
+        Command::Align(a) => print_report(
+            auvnav_tools::align::run(&a),
+            a.json,
+            auvnav_tools::align::print,
+        ),
+        Command::Usbl(a) if a.table => {
+            print_report(auvnav_tools::usbl::run_table(&a), a.json, |r| {
+                auvnav_tools::usbl::print_table(r)
+            })
+        }
+        Command::Usbl(a) => print_report(
+            auvnav_tools::usbl::run(&a),
+            a.json,
+            auvnav_tools::usbl::print,
+        ),
         Command::Montecarlo { what } => match what {
             MonteCarloWhat::Nees(a) => auvnav_tools::montecarlo::run_nees(&a),
             MonteCarloWhat::Smoother(a) => auvnav_tools::smooth::montecarlo::run(&a),

@@ -4,6 +4,7 @@
 //! distributed engine (the Python package's `auvnav.fleet`) run the same trials.
 
 use super::hidden_effects::{Trial, draw, trial};
+use auvnav_studies::StudyError;
 use serde::Serialize;
 
 /// How many trials of each kind.
@@ -46,7 +47,7 @@ pub struct TrialsStudy {
 }
 
 impl TrialsStudy {
-    pub fn new(a: &TrialsOptions) -> anyhow::Result<TrialsStudy> {
+    pub fn new(a: &TrialsOptions) -> Result<TrialsStudy, StudyError> {
         Ok(TrialsStudy { args: a.clone() })
     }
 
@@ -68,27 +69,28 @@ impl auvnav_studies::runs::RunStudy for TrialsStudy {
         self.args.hidden + self.args.null
     }
 
-    fn run(&self, k: usize) -> anyhow::Result<Trial> {
+    fn run(&self, k: usize) -> Result<Trial, StudyError> {
         let (seed, hide) = self.seed_of(k);
         let dir = std::env::temp_dir().join(format!(
             "auvnav-trial-{}-{seed}-{}",
             std::process::id(),
             if hide { "hidden" } else { "null" }
         ));
-        std::fs::create_dir_all(&dir)?;
+        std::fs::create_dir_all(&dir).map_err(|e| StudyError::run(k, e))?;
         let result = trial(seed, hide.then(|| draw(seed)), &dir);
         let _ = std::fs::remove_dir_all(&dir);
-        Ok(result?.0)
+        Ok(result.map_err(|e| StudyError::run(k, e))?.0)
     }
 
-    fn report(&self, runs: Vec<Trial>, wall_s: f64) -> anyhow::Result<TrialsReport> {
+    fn report(&self, runs: Vec<Trial>, wall_s: f64) -> Result<TrialsReport, StudyError> {
         let a = &self.args;
-        anyhow::ensure!(
-            runs.len() == a.hidden + a.null,
-            "{} trial results for {} trials",
-            runs.len(),
-            a.hidden + a.null
-        );
+        if runs.len() != a.hidden + a.null {
+            return Err(StudyError::Results(format!(
+                "{} trial results for {} trials",
+                runs.len(),
+                a.hidden + a.null
+            )));
+        }
         let (hidden, null) = runs.split_at(a.hidden);
         let correct = hidden.iter().filter(|t| t.correct).count();
         let named = hidden

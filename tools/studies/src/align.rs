@@ -5,7 +5,9 @@
 //! perturbed initial state. Runs are spread over the available cores; each run depends only on
 //! its seed, so the result does not depend on the number of threads.
 
-use anyhow::{Context, bail};
+use crate::StudyError;
+use crate::error::usage;
+use anyhow::Context;
 use auvnav_core::align::fine::{ErrorModel, FineAlignConfig};
 use auvnav_core::earth::{Geodetic, ned_offset, offset_position};
 use auvnav_core::session::{Session, SessionConfig};
@@ -95,14 +97,14 @@ pub type MeasuredErrors = Vec<(u8, Vec<(f64, f64)>)>;
 pub fn align_measured(
     messages: &[LogMessage],
     heading_offset_deg: f64,
-) -> anyhow::Result<MeasuredErrors> {
+) -> Result<MeasuredErrors, StudyError> {
     let t0 = messages
         .iter()
         .find_map(|m| match m {
             LogMessage::Truth(t) => Some(*t),
             _ => None,
         })
-        .context("the log has no reference (truth) channel")?;
+        .ok_or_else(|| StudyError::Input("the log has no reference (truth) channel".into()))?;
     let cfg = FineAlignConfig {
         initial_heading_std_deg: heading_offset_deg.abs().max(1.0),
         ..FineAlignConfig::default()
@@ -141,12 +143,12 @@ pub fn align_measured(
                 while next < MEASURED_CHECKPOINTS.len() && el >= MEASURED_CHECKPOINTS[next] - 1.0 {
                     let f = session
                         .fine_aligner()
-                        .context("the alignment filter stopped")?;
+                        .ok_or_else(|| StudyError::Input("the alignment filter stopped".into()))?;
                     errs.push((MEASURED_CHECKPOINTS[next], attitude_errors(f.state(), t)[2]));
                     next += 1;
                 }
             } else if let Some(x) = m.sensor() {
-                session.feed(&x, &mut |_| Ok::<(), anyhow::Error>(()))?;
+                let Ok(()) = session.feed(&x, &mut |_| Ok::<(), std::convert::Infallible>(()));
             }
         }
         out.push((model.number(), errs));
@@ -155,7 +157,7 @@ pub fn align_measured(
 }
 
 /// `auvnav align-measured`: every segment, every offset, every model.
-pub fn measured_rows(a: &AlignMeasuredOptions) -> anyhow::Result<Vec<MeasuredRow>> {
+pub fn measured_rows(a: &AlignMeasuredOptions) -> Result<Vec<MeasuredRow>, StudyError> {
     let offsets = if a.heading_offsets.is_empty() {
         vec![20.0, -45.0]
     } else {
@@ -234,27 +236,29 @@ pub struct AlignReport {
     pub wall_s: f64,
 }
 
-fn scenario_name(s: &str) -> anyhow::Result<&'static str> {
+fn scenario_name(s: &str) -> Result<&'static str, StudyError> {
     Ok(match s {
         "moored" => "align_moored",
         "straight" => "align_straight",
         "turning" => "align_turning",
-        _ => bail!("--scenario {s:?}: expected moored, straight or turning"),
+        _ => usage!("--scenario {s:?}: expected moored, straight or turning"),
     })
 }
 
-fn parse_mount(s: &str) -> anyhow::Result<Option<[f64; 3]>> {
+fn parse_mount(s: &str) -> Result<Option<[f64; 3]>, StudyError> {
     if s == "random" {
         return Ok(None);
     }
-    let v: Vec<f64> = s
+    let Ok(v) = s
         .split(',')
         .map(|x| x.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .with_context(|| format!("--mount {s:?}: expected DEG,DEG,DEG or random"))?;
+        .collect::<Result<Vec<f64>, _>>()
+    else {
+        usage!("--mount {s:?}: expected DEG,DEG,DEG or random")
+    };
     match v[..] {
         [r, p, y] if v.iter().all(|x| x.is_finite() && x.abs() <= 10.0) => Ok(Some([r, p, y])),
-        _ => bail!("--mount {s:?}: expected three angles within ±10 deg, or random"),
+        _ => usage!("--mount {s:?}: expected three angles within ±10 deg, or random"),
     }
 }
 
@@ -411,15 +415,15 @@ pub struct AlignStudy {
 
 impl AlignStudy {
     /// Checks the options and loads the scenario.
-    pub fn new(a: &AlignOptions) -> anyhow::Result<AlignStudy> {
+    pub fn new(a: &AlignOptions) -> Result<AlignStudy, StudyError> {
         if a.runs == 0 {
-            bail!("--runs must be at least 1");
+            usage!("--runs must be at least 1");
         }
         if !(a.heading_error.is_finite() && a.heading_error.abs() <= 90.0) {
-            bail!("--heading-error {}: expected -90..=90 deg", a.heading_error);
+            usage!("--heading-error {}: expected -90..=90 deg", a.heading_error);
         }
         if !(a.seconds.is_finite() && (60.0..=1200.0).contains(&a.seconds)) {
-            bail!("--seconds {}: expected 60..=1200", a.seconds);
+            usage!("--seconds {}: expected 60..=1200", a.seconds);
         }
         let mut models = Vec::new();
         for n in if a.models.is_empty() {
@@ -427,10 +431,10 @@ impl AlignStudy {
         } else {
             a.models.clone()
         } {
-            models.push(
-                ErrorModel::from_number(n)
-                    .with_context(|| format!("--model {n}: expected 1, 2 or 3"))?,
-            );
+            let Some(model) = ErrorModel::from_number(n) else {
+                usage!("--model {n}: expected 1, 2 or 3")
+            };
+            models.push(model);
         }
         Ok(AlignStudy {
             scenario: Scenario::load(scenario_name(&a.scenario)?)?,
@@ -449,20 +453,21 @@ impl crate::runs::RunStudy for AlignStudy {
         self.args.runs
     }
 
-    fn run(&self, k: usize) -> anyhow::Result<Vec<RunResult>> {
+    fn run(&self, k: usize) -> Result<Vec<RunResult>, StudyError> {
         let seed = self.args.seed.wrapping_add(k as u64);
         run_one(&self.args, &self.scenario, &self.models, self.mount, seed)
+            .map_err(|e| StudyError::run(k, e))
     }
 
-    fn report(&self, runs: Vec<Vec<RunResult>>, wall_s: f64) -> anyhow::Result<AlignReport> {
+    fn report(&self, runs: Vec<Vec<RunResult>>, wall_s: f64) -> Result<AlignReport, StudyError> {
         let a = &self.args;
         if runs.len() != a.runs || runs.iter().any(|r| r.len() != self.models.len()) {
-            bail!(
+            return Err(StudyError::Results(format!(
                 "{} run results for {} runs of {} models",
                 runs.len(),
                 a.runs,
                 self.models.len()
-            );
+            )));
         }
         let mut reports = Vec::new();
         for (mi, model) in self.models.iter().enumerate() {
@@ -517,7 +522,7 @@ impl crate::runs::RunStudy for AlignStudy {
 }
 
 /// Runs the Monte Carlo study on this machine's cores.
-pub fn run(a: &AlignOptions) -> anyhow::Result<AlignReport> {
+pub fn run(a: &AlignOptions) -> Result<AlignReport, StudyError> {
     let study = AlignStudy::new(a)?;
     let threads = a.threads.unwrap_or_else(crate::parallel::default_threads);
     let bar = crate::progress::Progress::new(!a.json).runs("alignment Monte Carlo", a.runs);

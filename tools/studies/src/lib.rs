@@ -5,7 +5,7 @@
 //!   the filter's own model that the smoother's study shares;
 //! - [`usbl`]: loose against tight USBL coupling on the docking scenario (S-USBL);
 //! - [`align`]: the fine-alignment error models of S-ALIGN, simulated and on the Snapir segments;
-//! - [`study`]: how a run's navigation starts (the truth perturbed by a draw of the initial
+//! - [`perturbed_start`]: how a run's navigation starts (the truth perturbed by a draw of the initial
 //!   covariance), [`parallel`]: the one runner (each run depends only on its seed, so results do
 //!   not depend on the number of threads), [`progress`]: the progress bars (standard error, a
 //!   terminal only), [`runs`]: a study as independent runs (plan, run by index, report) that the
@@ -15,9 +15,12 @@
 
 pub mod align;
 pub mod args;
+mod error;
 pub mod nees;
 pub mod parallel;
 pub mod perturbed_start;
 pub mod progress;
 pub mod runs;
 pub mod usbl;
+
+pub use error::{Source, StudyError};

@@ -9,7 +9,8 @@
 //! runs, `N * ANEES` of a consistent filter is chi-square with `3 N` degrees of freedom; the report
 //! gives the two-sided 95 % bounds and the fraction of epochs inside them per block.
 
-use anyhow::{Context, bail};
+use crate::StudyError;
+use crate::error::usage;
 use auvnav_core::earth;
 use auvnav_core::ekf as filter;
 use auvnav_core::navigator::NavConfig;
@@ -108,7 +109,7 @@ pub fn matched_effects(
     cfg: &NavConfig,
     dvl_beam_noise: f64,
     rng: &mut Rng,
-) -> anyhow::Result<Effects> {
+) -> Result<Effects, StudyError> {
     let mut e = Effects::default();
     // A Gauss-Markov bias with sigma s and correlation time T grows like a random walk of
     // density sqrt(2 s^2 / T) for t << T: pick s so the densities agree. The simulator starts
@@ -119,7 +120,7 @@ pub fn matched_effects(
     let gyro_gm = cfg.gyro_bias_walk_deg_h_sqrt_h / 60.0 * (tau / 2.0).sqrt();
     let accel_gm = cfg.accel_bias_walk_ug_sqrt_h / 60.0 * (tau / 2.0).sqrt();
     if gyro_gm > cfg.initial_gyro_bias_std_deg_h || accel_gm > cfg.initial_accel_bias_std_ug {
-        bail!(
+        usage!(
             "the bias walk over the correlation time exceeds the initial bias uncertainty; \
              raise initial_gyro_bias_std_deg_h / initial_accel_bias_std_ug"
         );
@@ -150,7 +151,7 @@ pub fn matched_effects(
 }
 
 /// Runs the Monte Carlo and returns the report.
-pub fn nees_monte_carlo(a: &NeesOptions, cfg: &NavConfig) -> anyhow::Result<NeesReport> {
+pub fn nees_monte_carlo(a: &NeesOptions, cfg: &NavConfig) -> Result<NeesReport, StudyError> {
     nees_monte_carlo_with(a, cfg, cfg)
 }
 
@@ -160,19 +161,22 @@ pub fn nees_monte_carlo_with(
     a: &NeesOptions,
     truth_cfg: &NavConfig,
     filter_cfg: &NavConfig,
-) -> anyhow::Result<NeesReport> {
+) -> Result<NeesReport, StudyError> {
     let study = NeesStudy::new(a, truth_cfg, filter_cfg)?;
     let bar = crate::progress::Progress::new(!a.json).runs("NEES Monte Carlo", a.runs);
     crate::runs::run_local(&study, crate::parallel::default_threads(), &bar)
 }
 
 /// Writes the run-averaged NEES per epoch as CSV (time_s, position, velocity, attitude).
-pub fn write_series(path: &std::path::Path, r: &NeesReport) -> anyhow::Result<()> {
+pub fn write_series(path: &std::path::Path, r: &NeesReport) -> Result<(), StudyError> {
     let mut text = String::from("time_s,anees_position,anees_velocity,anees_attitude\n");
     for e in &r.series {
         text.push_str(&format!("{},{},{},{}\n", e[0], e[1], e[2], e[3]));
     }
-    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+    std::fs::write(path, text).map_err(|e| StudyError::Output {
+        path: path.to_path_buf(),
+        source: e.into(),
+    })
 }
 
 /// One run of the NEES study.
@@ -198,10 +202,13 @@ impl NeesStudy {
         a: &NeesOptions,
         truth_cfg: &NavConfig,
         filter_cfg: &NavConfig,
-    ) -> anyhow::Result<NeesStudy> {
+    ) -> Result<NeesStudy, StudyError> {
         if a.runs == 0 {
-            bail!("--runs must be at least 1");
+            usage!("--runs must be at least 1");
         }
+        // The errors the runs draw must be simulatable (a caller's configuration, checked once
+        // here rather than failing every run).
+        matched_effects(truth_cfg, a.dvl_beam_noise, &mut Rng::new(a.seed, "check"))?;
         Ok(NeesStudy {
             args: a.clone(),
             scenario: Scenario::load(&a.scenario)?,
@@ -219,7 +226,17 @@ impl crate::runs::RunStudy for NeesStudy {
         self.args.runs
     }
 
-    fn run(&self, k: usize) -> anyhow::Result<NeesRun> {
+    fn run(&self, k: usize) -> Result<NeesRun, StudyError> {
+        self.one_run(k).map_err(|e| StudyError::run(k, e))
+    }
+
+    fn report(&self, runs: Vec<NeesRun>, wall_s: f64) -> Result<NeesReport, StudyError> {
+        self.report_runs(runs, wall_s)
+    }
+}
+
+impl NeesStudy {
+    fn one_run(&self, k: usize) -> anyhow::Result<NeesRun> {
         let (a, truth_cfg, filter_cfg) = (&self.args, &self.truth_cfg, &self.filter_cfg);
         let seed = a.seed.wrapping_add(k as u64);
         let mut rng = Rng::new(seed, "montecarlo.nees");
@@ -297,10 +314,14 @@ impl crate::runs::RunStudy for NeesStudy {
         })
     }
 
-    fn report(&self, runs: Vec<NeesRun>, _wall_s: f64) -> anyhow::Result<NeesReport> {
+    fn report_runs(&self, runs: Vec<NeesRun>, _wall_s: f64) -> Result<NeesReport, StudyError> {
         let a = &self.args;
         if runs.len() != a.runs {
-            bail!("{} run results for {} runs", runs.len(), a.runs);
+            return Err(StudyError::Results(format!(
+                "{} run results for {} runs",
+                runs.len(),
+                a.runs
+            )));
         }
         // Sums over runs per epoch index (in run order): time, position, velocity, attitude NEES.
         let mut sums: Vec<[f64; 4]> = Vec::new();
@@ -329,7 +350,9 @@ impl crate::runs::RunStudy for NeesStudy {
             })
             .collect();
         if series.is_empty() {
-            bail!("no epoch to evaluate (is the run shorter than --skip-seconds?)");
+            return Err(StudyError::Results(
+                "no epoch to evaluate (is the run shorter than --skip-seconds?)".into(),
+            ));
         }
         let dof = 3.0 * a.runs as f64;
         let lower = chi2_quantile(dof, -1.959_964) / a.runs as f64;

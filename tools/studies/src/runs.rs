@@ -7,6 +7,7 @@
 //! A run's result travels between processes as bytes ([`encode_run`], [`decode_run`]: postcard,
 //! exact for every `f64`, NaN included, which JSON is not).
 
+use crate::StudyError;
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
@@ -19,9 +20,9 @@ pub trait RunStudy: Sync {
     /// How many runs the options ask for.
     fn runs(&self) -> usize;
     /// Run `k` (0-based; its seed is the first seed plus `k`).
-    fn run(&self, k: usize) -> anyhow::Result<Self::Run>;
+    fn run(&self, k: usize) -> Result<Self::Run, StudyError>;
     /// The report from every run's result, in index order, and the wall time the runs took.
-    fn report(&self, runs: Vec<Self::Run>, wall_s: f64) -> anyhow::Result<Self::Report>;
+    fn report(&self, runs: Vec<Self::Run>, wall_s: f64) -> Result<Self::Report, StudyError>;
 }
 
 /// Runs every run of `study` on `threads` workers of this machine, advancing `bar`.
@@ -29,7 +30,7 @@ pub fn run_local<S: RunStudy>(
     study: &S,
     threads: usize,
     bar: &indicatif::ProgressBar,
-) -> anyhow::Result<S::Report> {
+) -> Result<S::Report, StudyError> {
     let start = std::time::Instant::now();
     let runs =
         crate::parallel::map_runs_with_progress(study.runs(), threads, bar, |k| study.run(k))?;
@@ -37,13 +38,13 @@ pub fn run_local<S: RunStudy>(
 }
 
 /// A run's result as bytes.
-pub fn encode_run<T: Serialize>(run: &T) -> anyhow::Result<Vec<u8>> {
-    Ok(postcard::to_allocvec(run)?)
+pub fn encode_run<T: Serialize>(run: &T) -> Result<Vec<u8>, StudyError> {
+    postcard::to_allocvec(run).map_err(StudyError::RunBytes)
 }
 
 /// A run's result from [`encode_run`]'s bytes.
-pub fn decode_run<T: DeserializeOwned>(bytes: &[u8]) -> anyhow::Result<T> {
-    postcard::from_bytes(bytes).map_err(|e| anyhow::anyhow!("a run's result does not decode: {e}"))
+pub fn decode_run<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, StudyError> {
+    postcard::from_bytes(bytes).map_err(StudyError::RunBytes)
 }
 
 #[cfg(test)]

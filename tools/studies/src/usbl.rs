@@ -9,7 +9,9 @@
 //! error of the array's surveyed yaw (`--array-yaw-error`) are effects of the simulated device;
 //! the filter knows the array as surveyed. Each run depends only on its seed.
 
-use anyhow::{Context, bail};
+use crate::StudyError;
+use crate::error::usage;
+use anyhow::Context;
 use auvnav_core::aid::usbl::{Coupling, UsblConfig, UsblFilter};
 use auvnav_core::earth::{ned_offset, offset_position};
 use auvnav_core::feed::SensorMessage;
@@ -175,24 +177,31 @@ struct PendingFix {
 }
 
 /// The USBL configuration with `settings` (`key=value`, TOML values) applied.
-pub fn apply_settings(base: &UsblConfig, settings: &[String]) -> anyhow::Result<UsblConfig> {
-    let mut table = toml::Table::try_from(base)?;
+pub fn apply_settings(base: &UsblConfig, settings: &[String]) -> Result<UsblConfig, StudyError> {
+    let mut table = match toml::Table::try_from(base) {
+        Ok(t) => t,
+        Err(e) => usage!("the USBL configuration as a table: {e}"),
+    };
     for s in settings {
-        let (k, v) = s
-            .split_once('=')
-            .with_context(|| format!("--set {s:?}: expected KEY=VALUE"))?;
-        let value: toml::Table = toml::from_str(&format!("x = {}", v.trim()))
-            .with_context(|| format!("--set {s:?}: the value is not a TOML value"))?;
+        let Some((k, v)) = s.split_once('=') else {
+            usage!("--set {s:?}: expected KEY=VALUE")
+        };
+        let Ok(value) = toml::from_str::<toml::Table>(&format!("x = {}", v.trim())) else {
+            usage!("--set {s:?}: the value is not a TOML value")
+        };
         let k = k.trim();
         if !table.contains_key(k) {
-            bail!("--set {s:?}: no USBL setting {k:?}");
+            usage!("--set {s:?}: no USBL setting {k:?}");
         }
         table.insert(k.to_owned(), value["x"].clone());
     }
-    let cfg: UsblConfig = table.try_into()?;
+    let cfg: UsblConfig = match table.try_into() {
+        Ok(c) => c,
+        Err(e) => usage!("--set: {e}"),
+    };
     let problems = cfg.problems();
     if !problems.is_empty() {
-        bail!("{}", problems.join("; "));
+        usage!("{}", problems.join("; "));
     }
     Ok(cfg)
 }
@@ -373,15 +382,15 @@ pub struct UsblStudy {
 
 impl UsblStudy {
     /// Checks the options and loads the scenario.
-    pub fn new(a: &UsblOptions) -> anyhow::Result<UsblStudy> {
+    pub fn new(a: &UsblOptions) -> Result<UsblStudy, StudyError> {
         if a.runs == 0 {
-            bail!("--runs must be at least 1");
+            usage!("--runs must be at least 1");
         }
         if !(0.0..=0.5).contains(&a.outliers) {
-            bail!("--outliers {}: expected a fraction 0..=0.5", a.outliers);
+            usage!("--outliers {}: expected a fraction 0..=0.5", a.outliers);
         }
         if !(a.array_yaw_error.is_finite() && a.array_yaw_error.abs() <= 30.0) {
-            bail!(
+            usage!(
                 "--array-yaw-error {}: expected -30..=30 deg",
                 a.array_yaw_error
             );
@@ -389,21 +398,21 @@ impl UsblStudy {
         if let Some(s) = a.seconds
             && !(s.is_finite() && s >= 10.0 + a.settle_s)
         {
-            bail!("--seconds {s}: expected at least --settle-s + 10");
+            usage!("--seconds {s}: expected at least --settle-s + 10");
         }
         if !(0.0..=5.0).contains(&a.latency) {
-            bail!("--latency {}: expected 0..=5 s", a.latency);
+            usage!("--latency {}: expected 0..=5 s", a.latency);
         }
         if !(a.settle_s.is_finite() && a.settle_s >= 0.0) {
-            bail!("--settle-s {}: expected zero or more", a.settle_s);
+            usage!("--settle-s {}: expected zero or more", a.settle_s);
         }
         let scenario = Scenario::load(&a.scenario)?;
-        let station = StationGeometry::from_scenario(&scenario).with_context(|| {
-            format!(
+        let Some(station) = StationGeometry::from_scenario(&scenario) else {
+            usage!(
                 "scenario {} has no [station]: the USBL Monte Carlo needs one",
                 scenario.name
             )
-        })?;
+        };
         Ok(UsblStudy {
             args: a.clone(),
             scenario,
@@ -420,15 +429,19 @@ impl crate::runs::RunStudy for UsblStudy {
         self.args.runs
     }
 
-    fn run(&self, k: usize) -> anyhow::Result<RunResult> {
+    fn run(&self, k: usize) -> Result<RunResult, StudyError> {
         let seed = self.args.seed.wrapping_add(k as u64);
-        run_one(&self.args, &self.scenario, &self.station, seed)
+        run_one(&self.args, &self.scenario, &self.station, seed).map_err(|e| StudyError::run(k, e))
     }
 
-    fn report(&self, per_run: Vec<RunResult>, wall_s: f64) -> anyhow::Result<UsblReport> {
+    fn report(&self, per_run: Vec<RunResult>, wall_s: f64) -> Result<UsblReport, StudyError> {
         let a = &self.args;
         if per_run.len() != a.runs {
-            bail!("{} run results for {} runs", per_run.len(), a.runs);
+            return Err(StudyError::Results(format!(
+                "{} run results for {} runs",
+                per_run.len(),
+                a.runs
+            )));
         }
         let pooled = |f: fn(&RunResult) -> f64| {
             (per_run.iter().map(|r| f(r).powi(2)).sum::<f64>() / per_run.len() as f64).sqrt()
@@ -437,7 +450,11 @@ impl crate::runs::RunStudy for UsblStudy {
         let sum = |f: fn(&RunResult) -> u64| per_run.iter().map(f).sum::<u64>();
         let seconds = match a.seconds {
             Some(s) => s,
-            None => auvnav_sim::trajectory::Trajectory::from_scenario(&self.scenario)?.duration_s,
+            None => {
+                auvnav_sim::trajectory::Trajectory::from_scenario(&self.scenario)
+                    .map_err(auvnav_sim::SimError::from)?
+                    .duration_s
+            }
         };
         Ok(UsblReport {
             scenario: self.scenario.name.clone(),
@@ -473,7 +490,7 @@ impl crate::runs::RunStudy for UsblStudy {
 }
 
 /// Runs the Monte Carlo for one configuration on this machine's cores.
-pub fn run(a: &UsblOptions) -> anyhow::Result<UsblReport> {
+pub fn run(a: &UsblOptions) -> Result<UsblReport, StudyError> {
     let study = UsblStudy::new(a)?;
     let threads = a.threads.unwrap_or_else(crate::parallel::default_threads);
     let bar = crate::progress::Progress::new(!a.json).runs("USBL Monte Carlo", a.runs);
@@ -482,7 +499,7 @@ pub fn run(a: &UsblOptions) -> anyhow::Result<UsblReport> {
 
 /// The comparison table: {loose, tight} × {ukf, akf, aukf} × {clean, 5 % outliers, 1° array
 /// yaw error}.
-pub fn run_table(a: &UsblOptions) -> anyhow::Result<Vec<UsblReport>> {
+pub fn run_table(a: &UsblOptions) -> Result<Vec<UsblReport>, StudyError> {
     let mut out = Vec::new();
     for (outliers, yaw) in [(0.0, 0.0), (0.05, 0.0), (0.0, 1.0)] {
         for coupling in [Coupling::Loose, Coupling::Tight] {
