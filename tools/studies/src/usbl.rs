@@ -212,13 +212,10 @@ fn run_one(
     a: &UsblOptions,
     scenario: &Scenario,
     station: &StationGeometry,
+    cfg: &NavConfig,
     seed: u64,
 ) -> anyhow::Result<RunResult> {
     let mut rng = Rng::new(seed, "montecarlo.usbl");
-    let mut cfg = navigation_config(station, a.coupling, a.filter);
-    if let Some(u) = cfg.usbl.as_mut() {
-        *u = apply_settings(u, &a.settings)?;
-    }
     let mut effects = scenario.effects()?;
     let draw3 = |rng: &mut Rng, s: f64| [rng.gauss(s), rng.gauss(s), rng.gauss(s)];
     effects.set(
@@ -272,7 +269,7 @@ fn run_one(
             LogMessage::Truth(t) => {
                 let truth_pos = truth_position(t);
                 let Some(nv) = session.navigator() else {
-                    let start = crate::perturbed_start::perturbed_start(&cfg, t, &mut rng);
+                    let start = crate::perturbed_start::perturbed_start(cfg, t, &mut rng);
                     session.start(start, "truth perturbed by a draw of P0", &mut |_| {
                         Ok::<(), anyhow::Error>(())
                     })?;
@@ -378,6 +375,8 @@ pub struct UsblStudy {
     args: UsblOptions,
     scenario: Scenario,
     station: StationGeometry,
+    /// The filter's configuration (the station's, the coupling and filter, `--set` applied).
+    navigation: NavConfig,
 }
 
 impl UsblStudy {
@@ -413,10 +412,16 @@ impl UsblStudy {
                 scenario.name
             )
         };
+        // The filter's configuration, the same for every run (`--set` checked once, here).
+        let mut navigation = navigation_config(&station, a.coupling, a.filter);
+        if let Some(u) = navigation.usbl.as_mut() {
+            *u = apply_settings(u, &a.settings)?;
+        }
         Ok(UsblStudy {
             args: a.clone(),
             scenario,
             station,
+            navigation,
         })
     }
 }
@@ -431,7 +436,14 @@ impl crate::runs::RunStudy for UsblStudy {
 
     fn run(&self, k: usize) -> Result<RunResult, StudyError> {
         let seed = self.args.seed.wrapping_add(k as u64);
-        run_one(&self.args, &self.scenario, &self.station, seed).map_err(|e| StudyError::run(k, e))
+        run_one(
+            &self.args,
+            &self.scenario,
+            &self.station,
+            &self.navigation,
+            seed,
+        )
+        .map_err(|e| StudyError::run(k, e))
     }
 
     fn report(&self, per_run: Vec<RunResult>, wall_s: f64) -> Result<UsblReport, StudyError> {
