@@ -330,8 +330,8 @@ pub fn run(
 
 /// A Monte Carlo study built from its command's options.
 enum Study {
-    Align(auvnav_studies::align::AlignStudy),
-    Usbl(auvnav_studies::usbl::UsblStudy),
+    Align(Box<auvnav_studies::align::AlignStudy>),
+    Usbl(Box<auvnav_studies::usbl::UsblStudy>),
     Nees(Box<auvnav_studies::nees::NeesStudy>),
     Trials(auvnav_discover::trials::TrialsStudy),
 }
@@ -339,11 +339,13 @@ enum Study {
 fn study(name: &str, options_given: &[(String, OptionValue)]) -> anyhow::Result<Study> {
     let (_, m) = argv(name, &[], options_given)?;
     Ok(match name {
-        "align" => Study::Align(auvnav_studies::align::AlignStudy::new(&parsed(&m)?)?),
+        "align" => Study::Align(Box::new(auvnav_studies::align::AlignStudy::new(&parsed(
+            &m,
+        )?)?)),
         "usbl" => {
             let a: auvnav_studies::usbl::UsblOptions = parsed(&m)?;
             anyhow::ensure!(!a.table, "usbl(table=True) is eighteen studies, not one");
-            Study::Usbl(auvnav_studies::usbl::UsblStudy::new(&a)?)
+            Study::Usbl(Box::new(auvnav_studies::usbl::UsblStudy::new(&a)?))
         }
         "nees" => {
             let a: auvnav_studies::nees::NeesOptions = parsed(&m)?;
@@ -386,8 +388,8 @@ pub fn study_run(
         Ok(encode_run(&s.run(k)?)?)
     }
     match study(name, options_given)? {
-        Study::Align(s) => one(&s, k),
-        Study::Usbl(s) => one(&s, k),
+        Study::Align(s) => one(s.as_ref(), k),
+        Study::Usbl(s) => one(s.as_ref(), k),
         Study::Nees(s) => one(s.as_ref(), k),
         Study::Trials(s) => one(&s, k),
     }
@@ -408,8 +410,8 @@ pub fn study_report(
         document(&s.report(runs, wall_s)?)
     }
     match study(name, options_given)? {
-        Study::Align(s) => report(&s, runs, wall_s),
-        Study::Usbl(s) => report(&s, runs, wall_s),
+        Study::Align(s) => report(s.as_ref(), runs, wall_s),
+        Study::Usbl(s) => report(s.as_ref(), runs, wall_s),
         Study::Nees(s) => report(s.as_ref(), runs, wall_s),
         Study::Trials(s) => report(&s, runs, wall_s),
     }

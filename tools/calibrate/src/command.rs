@@ -10,7 +10,8 @@ use super::scal::SeedSettings;
 use super::two_point;
 use super::voyage::{DistanceSource, FixSource, Voyage, VoyageSpec};
 use super::{Evaluation, MethodResult, Problem};
-use anyhow::{Context, bail};
+use crate::CalibrationError;
+use crate::error::{unusable, usage};
 use auvnav_core::session::SessionConfig;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -22,27 +23,42 @@ pub use auvnav_studies::progress::Progress;
 fn load_session_config(
     path: Option<&PathBuf>,
     first_voyage: Option<&std::path::Path>,
-) -> anyhow::Result<SessionConfig> {
+) -> Result<SessionConfig, CalibrationError> {
     if let Some(p) = path {
         return Ok(auvnav_replay::load_config(p)?);
     }
     if let Some(log) = first_voyage {
-        let header = auvnav_log::LogReader::open(log)?
+        let failed = |e: auvnav_log::LogError| CalibrationError::Read {
+            path: log.to_path_buf(),
+            source: e.into(),
+        };
+        let header = auvnav_log::LogReader::open(log)
+            .map_err(failed)?
             .read_header()
-            .with_context(|| format!("reading {}", log.display()))?;
+            .map_err(failed)?;
         if header.producer == "auvnav record" && !header.config.trim().is_empty() {
-            return auvnav_replay::session_config_from_toml(&header.config)
-                .with_context(|| format!("{}", log.display()));
+            return auvnav_replay::session_config_from_toml(&header.config).map_err(|e| {
+                auvnav_replay::ReplayError::EmbeddedConfig {
+                    log: log.to_path_buf(),
+                    source: e.into(),
+                }
+                .into()
+            });
         }
     }
     Ok(SessionConfig::default())
 }
 
-fn parameter_set(args: &CalibrateDvlOptions, cfg: &SessionConfig) -> anyhow::Result<ParameterSet> {
+fn parameter_set(
+    args: &CalibrateDvlOptions,
+    cfg: &SessionConfig,
+) -> Result<ParameterSet, CalibrationError> {
     let mut params = ParameterSet::new(&cfg.navigation.dvl_installation());
     if let Some(path) = &args.limits {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("reading --limits {}", path.display()))?;
+        let text = match std::fs::read_to_string(path) {
+            Ok(t) => t,
+            Err(e) => usage!("reading --limits {}: {e}", path.display()),
+        };
         params.apply_limits(&text, &path.display().to_string())?;
     }
     if !args.params.is_empty() {
@@ -66,23 +82,20 @@ fn run_method(
     settings: &SeedSettings,
     baseline: &Evaluation,
     progress: &mut Progress,
-) -> anyhow::Result<(MethodResult, Vec<two_point::TwoPointVoyage>)> {
+) -> Result<(MethodResult, Vec<two_point::TwoPointVoyage>), CalibrationError> {
     let mut p = |l: &str, d: usize, t: usize| progress.update(l, d, t);
-    match method {
-        Method::Fast => Ok((
-            gauss_newton::calibrate(problem, params, &mut p)?,
-            Vec::new(),
-        )),
-        Method::Seed => Ok((
-            super::scal::calibrate(problem, params, settings, &mut p)?,
-            Vec::new(),
-        )),
+    let (result, voyages) = match method {
+        Method::Fast => gauss_newton::calibrate(problem, params, &mut p).map(|r| (r, Vec::new())),
+        Method::Seed => {
+            super::scal::calibrate(problem, params, settings, &mut p).map(|r| (r, Vec::new()))
+        }
         Method::TwoPoint => two_point::calibrate(problem, params, baseline),
-        Method::Smoother => Ok((
-            super::smoother::calibrate(problem, params, &mut p)?,
-            Vec::new(),
-        )),
+        Method::Smoother => {
+            super::smoother::calibrate(problem, params, &mut p).map(|r| (r, Vec::new()))
+        }
     }
+    .map_err(CalibrationError::method)?;
+    Ok((result, voyages))
 }
 
 /// Loads the voyages and checks that each can be scored.
@@ -90,17 +103,17 @@ pub fn load_voyages(
     specs: &[VoyageSpec],
     fixes: FixSource,
     cfg: &SessionConfig,
-) -> anyhow::Result<Vec<Voyage>> {
+) -> Result<Vec<Voyage>, CalibrationError> {
     specs.iter().map(|s| Voyage::load(s, fixes, cfg)).collect()
 }
 
 /// The whole calibration: returns the report (also what `--json` prints).
 // Long on purpose: the calibration as the recipe the report documents (options checked, voyages
 // read, method, held-out evaluation, report); each step is a function.
-pub fn calibrate_dvl(args: &CalibrateDvlOptions) -> anyhow::Result<CalibrationReport> {
+pub fn calibrate_dvl(args: &CalibrateDvlOptions) -> Result<CalibrationReport, CalibrationError> {
     let started = Instant::now();
     if !(args.threshold.is_finite() && args.threshold >= 0.0) {
-        bail!(
+        usage!(
             "--threshold {}: expected a distance in metres >= 0",
             args.threshold
         );
@@ -124,7 +137,10 @@ pub fn calibrate_dvl(args: &CalibrateDvlOptions) -> anyhow::Result<CalibrationRe
     // its track (the errors at the fixes do not depend on them, so the runs are only re-scored).
     let runs = {
         let problem = Problem::new(&voyages, cfg.navigation.clone(), args.threshold, threads);
-        problem.evaluate(&prior, record_all)?.runs
+        problem
+            .evaluate(&prior, record_all)
+            .map_err(CalibrationError::navigation)?
+            .runs
     };
     for (v, r) in voyages.iter_mut().zip(&runs) {
         if v.distance_source == DistanceSource::StartingDeadReckoning {
@@ -133,7 +149,7 @@ pub fn calibrate_dvl(args: &CalibrateDvlOptions) -> anyhow::Result<CalibrationRe
     }
     for v in &voyages {
         if !v.fixes.iter().any(|f| f.distance_m >= args.threshold) {
-            bail!(
+            unusable!(
                 "voyage {}: no fix at or beyond the distance threshold {} m (its last fix is {:.0} m along the track); lower --threshold",
                 v.name,
                 args.threshold,
@@ -160,11 +176,14 @@ pub fn calibrate_dvl(args: &CalibrateDvlOptions) -> anyhow::Result<CalibrationRe
         &baseline,
         &mut progress,
     )?;
-    let after = problem.evaluate(&result.x, record_all)?;
+    let after = problem
+        .evaluate(&result.x, record_all)
+        .map_err(CalibrationError::navigation)?;
     let fit_wall_s = fit_started.elapsed().as_secs_f64();
     // The smoother's standard deviations are its own; the others get the fast method's analysis.
     if !matches!(args.method, Method::Fast | Method::Smoother) {
-        let a = gauss_newton::analyse(&problem, &params, &after.runs, &result.x)?;
+        let a = gauss_newton::analyse(&problem, &params, &after.runs, &result.x)
+            .map_err(CalibrationError::method)?;
         result.std = a.std;
         result.determined = a.determined;
         result.inseparable = a.inseparable;
@@ -173,8 +192,11 @@ pub fn calibrate_dvl(args: &CalibrateDvlOptions) -> anyhow::Result<CalibrationRe
 
     // The two-point method on the same voyages, for comparison.
     let two_point_cmp = if args.method != Method::TwoPoint {
-        let (tp, _) = two_point::calibrate(&problem, &params, &baseline)?;
-        let e = problem.objectives(&[tp.x])?;
+        let (tp, _) =
+            two_point::calibrate(&problem, &params, &baseline).map_err(CalibrationError::method)?;
+        let e = problem
+            .objectives(&[tp.x])
+            .map_err(CalibrationError::navigation)?;
         Some((tp.x, e[0]))
     } else {
         None
@@ -187,7 +209,7 @@ pub fn calibrate_dvl(args: &CalibrateDvlOptions) -> anyhow::Result<CalibrationRe
         Holdout::Auto => voyages.len() >= 3,
     };
     if loo && voyages.len() < 2 {
-        bail!("--holdout loo needs at least 2 voyages");
+        usage!("--holdout loo needs at least 2 voyages");
     }
     let mut holdout = Vec::new();
     if loo {
@@ -220,10 +242,13 @@ pub fn calibrate_dvl(args: &CalibrateDvlOptions) -> anyhow::Result<CalibrationRe
                 &sub_baseline,
                 &mut quiet,
             )?;
-            let (tp, _) = two_point::calibrate(&sub, &params, &sub_baseline)?;
+            let (tp, _) = two_point::calibrate(&sub, &params, &sub_baseline)
+                .map_err(CalibrationError::method)?;
             let held = std::slice::from_ref(&voyages[k]);
             let test = Problem::new(held, cfg.navigation.clone(), args.threshold, threads);
-            let scores = test.objectives(&[fit.x, tp.x])?;
+            let scores = test
+                .objectives(&[fit.x, tp.x])
+                .map_err(CalibrationError::navigation)?;
             holdout.push(report::HoldoutRow {
                 voyage: voyages[k].name.clone(),
                 before: baseline.cep50[k],
@@ -251,10 +276,11 @@ pub fn calibrate_dvl(args: &CalibrateDvlOptions) -> anyhow::Result<CalibrationRe
         threads,
     });
     if let Some(path) = &args.write_config {
-        report::write_config(path, &report)?;
+        report::write_config(path, &report).map_err(|e| CalibrationError::output(path, e))?;
     }
     if let Some(dir) = &args.report {
-        report::write_report_dir(dir, &report, &voyages, &baseline, &after, &result)?;
+        report::write_report_dir(dir, &report, &voyages, &baseline, &after, &result)
+            .map_err(|e| CalibrationError::output(dir, e))?;
     }
     Ok(report)
 }

@@ -14,6 +14,7 @@
 #![forbid(unsafe_code)]
 
 pub mod command;
+mod error;
 pub mod gauss_newton;
 pub mod mag;
 pub mod objective;
@@ -27,6 +28,7 @@ pub mod two_point;
 pub mod voyage;
 
 pub use command::*;
+pub use error::{CalibrationError, Source};
 pub use options::*;
 pub use report::{installation_of, recommended};
 

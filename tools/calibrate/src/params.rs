@@ -3,7 +3,8 @@
 //! Defaults: the S-CAL seed's four parameters (mounting roll, pitch, yaw and scale factor) with
 //! its bounds (angles ±0.875 rad, scale 0.99..1.01); the lever arm and time offset are off.
 
-use anyhow::{Context, bail};
+use crate::CalibrationError;
+use crate::error::usage;
 use auvnav_core::config::DvlInstallation;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -87,27 +88,24 @@ impl ParameterSet {
         }
     }
 
-    fn index(name: &str) -> anyhow::Result<Vec<usize>> {
+    fn index(name: &str) -> Result<Vec<usize>, CalibrationError> {
         if name == "dvl.lever_arm" {
             return Ok(vec![4, 5, 6]);
         }
         if name == "dvl.mounting" {
             return Ok(vec![0, 1, 2]);
         }
-        NAMES
-            .iter()
-            .position(|n| *n == name)
-            .map(|i| vec![i])
-            .with_context(|| {
-                format!(
-                    "unknown parameter {name:?}; known: {}, dvl.lever_arm (all three), dvl.mounting (all three)",
-                    NAMES.join(", ")
-                )
-            })
+        match NAMES.iter().position(|n| *n == name) {
+            Some(i) => Ok(vec![i]),
+            None => usage!(
+                "unknown parameter {name:?}; known: {}, dvl.lever_arm (all three), dvl.mounting (all three)",
+                NAMES.join(", ")
+            ),
+        }
     }
 
     /// Estimates exactly the listed parameters (`--params`).
-    pub fn select(&mut self, list: &[String]) -> anyhow::Result<()> {
+    pub fn select(&mut self, list: &[String]) -> Result<(), CalibrationError> {
         let mut on = [false; 8];
         for name in list {
             for i in Self::index(name.trim())? {
@@ -115,7 +113,7 @@ impl ParameterSet {
             }
         }
         if !on.iter().any(|x| *x) {
-            bail!("--params selects no parameter");
+            usage!("--params selects no parameter");
         }
         for (p, on) in self.all.iter_mut().zip(on) {
             p.estimate = on;
@@ -124,7 +122,7 @@ impl ParameterSet {
     }
 
     /// `--bound NAME=MIN,MAX`.
-    pub fn set_bound(&mut self, setting: &str) -> anyhow::Result<()> {
+    pub fn set_bound(&mut self, setting: &str) -> Result<(), CalibrationError> {
         let (name, v) = two_numbers(setting, "--bound", "MIN,MAX")?;
         for i in Self::index(name)? {
             self.all[i].min = v.0;
@@ -134,7 +132,7 @@ impl ParameterSet {
     }
 
     /// `--prior NAME=MEAN,STD`.
-    pub fn set_prior(&mut self, setting: &str) -> anyhow::Result<()> {
+    pub fn set_prior(&mut self, setting: &str) -> Result<(), CalibrationError> {
         let (name, v) = two_numbers(setting, "--prior", "MEAN,STD")?;
         for i in Self::index(name)? {
             self.all[i].prior = v.0;
@@ -144,11 +142,17 @@ impl ParameterSet {
     }
 
     /// Applies a `--limits` TOML file: one table per parameter name.
-    pub fn apply_limits(&mut self, text: &str, origin: &str) -> anyhow::Result<()> {
-        let table: BTreeMap<String, ParameterLimits> =
-            toml::from_str(text).with_context(|| format!("limits file {origin}"))?;
+    pub fn apply_limits(&mut self, text: &str, origin: &str) -> Result<(), CalibrationError> {
+        let table: BTreeMap<String, ParameterLimits> = match toml::from_str(text) {
+            Ok(t) => t,
+            Err(e) => usage!("limits file {origin}: {e}"),
+        };
         for (name, l) in table {
-            for i in Self::index(&name).with_context(|| format!("limits file {origin}"))? {
+            let indices = match Self::index(&name) {
+                Ok(i) => i,
+                Err(e) => usage!("limits file {origin}: {e}"),
+            };
+            for i in indices {
                 let p = &mut self.all[i];
                 if let Some(x) = l.estimate {
                     p.estimate = x;
@@ -163,10 +167,10 @@ impl ParameterSet {
     }
 
     /// Checks bounds and priors; errors name the parameter and the option.
-    pub fn validate(&self) -> anyhow::Result<()> {
+    pub fn validate(&self) -> Result<(), CalibrationError> {
         for p in &self.all {
             if !(p.min.is_finite() && p.max.is_finite() && p.min < p.max) {
-                bail!(
+                usage!(
                     "parameter {}: bounds {}..{} are inverted or empty (--bound {}=MIN,MAX with MIN < MAX)",
                     p.name,
                     p.min,
@@ -175,7 +179,7 @@ impl ParameterSet {
                 );
             }
             if !(p.prior_std.is_finite() && p.prior_std > 0.0) {
-                bail!(
+                usage!(
                     "parameter {}: prior standard deviation {} must be positive (--prior {}=MEAN,STD)",
                     p.name,
                     p.prior_std,
@@ -183,7 +187,7 @@ impl ParameterSet {
                 );
             }
             if !(p.prior >= p.min && p.prior <= p.max) {
-                bail!(
+                usage!(
                     "parameter {}: the prior / starting value {} is outside its bounds {}..{}",
                     p.name,
                     p.prior,
@@ -193,7 +197,7 @@ impl ParameterSet {
             }
         }
         if p_estimated(self).is_empty() {
-            bail!("no parameter is estimated");
+            usage!("no parameter is estimated");
         }
         Ok(())
     }
@@ -213,17 +217,23 @@ fn p_estimated(s: &ParameterSet) -> Vec<usize> {
     (0..8).filter(|&i| s.all[i].estimate).collect()
 }
 
-fn two_numbers<'a>(s: &'a str, option: &str, form: &str) -> anyhow::Result<(&'a str, (f64, f64))> {
-    let (name, v) = s
-        .split_once('=')
-        .with_context(|| format!("{option} {s:?}: expected NAME={form}"))?;
-    let nums: Vec<f64> = v
+fn two_numbers<'a>(
+    s: &'a str,
+    option: &str,
+    form: &str,
+) -> Result<(&'a str, (f64, f64)), CalibrationError> {
+    let Some((name, v)) = s.split_once('=') else {
+        usage!("{option} {s:?}: expected NAME={form}")
+    };
+    let Ok(nums) = v
         .split(',')
         .map(|x| x.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .with_context(|| format!("{option} {s:?}: expected NAME={form}"))?;
+        .collect::<Result<Vec<f64>, _>>()
+    else {
+        usage!("{option} {s:?}: expected NAME={form}")
+    };
     if nums.len() != 2 {
-        bail!("{option} {s:?}: expected NAME={form}");
+        usage!("{option} {s:?}: expected NAME={form}");
     }
     Ok((name.trim(), (nums[0], nums[1])))
 }

@@ -2,7 +2,8 @@
 //! sensor messages the dead reckoning uses (IMU, DVL, depth), the start state and the fixes that
 //! score it. GNSS and USBL messages are never fed: fixes only score a candidate.
 
-use anyhow::{Context, bail};
+use crate::CalibrationError;
+use crate::error::unusable;
 use auvnav_core::earth::{self, Geodetic};
 use auvnav_core::feed::SensorMessage;
 use auvnav_core::session::SessionConfig;
@@ -129,12 +130,14 @@ impl Voyage {
         spec: &VoyageSpec,
         fixes: FixSource,
         cfg: &SessionConfig,
-    ) -> anyhow::Result<Voyage> {
+    ) -> Result<Voyage, CalibrationError> {
         let name = spec.name();
-        let mut reader = LogReader::open(&spec.path).with_context(|| format!("voyage {name}"))?;
-        reader
-            .read_header()
-            .with_context(|| format!("voyage {name}: reading the log header"))?;
+        let failed = |e: auvnav_log::LogError| CalibrationError::Read {
+            path: spec.path.clone(),
+            source: format!("voyage {name}: {e}").into(),
+        };
+        let mut reader = LogReader::open(&spec.path).map_err(failed)?;
+        reader.read_header().map_err(failed)?;
         let mut first_ns: Option<u64> = None;
         let mut inputs = Vec::new();
         let mut truth = Vec::new();
@@ -142,10 +145,7 @@ impl Voyage {
         let mut first_navigating: Option<auvnav_shm_schema::NavSolutionV1> = None;
         let mut dvl_any = 0usize;
         let mut dvl_valid = 0usize;
-        while let Some(raw) = reader
-            .next_message()
-            .with_context(|| format!("voyage {name}: reading {}", spec.path.display()))?
-        {
+        while let Some(raw) = reader.next_message().map_err(failed)? {
             let Ok(m) = raw.decode_any() else { continue };
             let t_ns = match m {
                 LogMessage::Truth(x) => x.host_time_ns,
@@ -195,10 +195,10 @@ impl Voyage {
             }
         }
         if dvl_any == 0 {
-            bail!("voyage {name}: the log has no DVL messages; nothing to calibrate");
+            unusable!("voyage {name}: the log has no DVL messages; nothing to calibrate");
         }
         if dvl_valid == 0 {
-            bail!("voyage {name}: none of its {dvl_any} DVL messages carries a valid velocity");
+            unusable!("voyage {name}: none of its {dvl_any} DVL messages carries a valid velocity");
         }
         let (start, start_source) = match (truth.first(), &cfg.initial, &first_navigating) {
             (Some(t), _, _) => (NavState::from_truth(t), "first truth record of the voyage"),
@@ -222,7 +222,7 @@ impl Voyage {
                 ),
                 "the recorded navigation's first solution after alignment",
             ),
-            (None, None, None) => bail!(
+            (None, None, None) => unusable!(
                 "voyage {name}: no start state (the log has no truth channel and no recorded \
                  solution in mode navigating; give --config with an [initial] table)"
             ),
@@ -233,7 +233,7 @@ impl Voyage {
         let (mut fix_list, distance_source) = match fixes {
             FixSource::Truth => {
                 if truth.is_empty() {
-                    bail!("voyage {name}: --fixes truth, but the log has no truth channel");
+                    unusable!("voyage {name}: --fixes truth, but the log has no truth channel");
                 }
                 let f = truth
                     .iter()
@@ -275,7 +275,7 @@ impl Voyage {
         };
         fix_list.retain(|f| f.time_ns >= start_ns);
         if fix_list.is_empty() {
-            bail!(
+            unusable!(
                 "voyage {name}: no {} fixes after the start; fixes score the calibration",
                 match fixes {
                     FixSource::Gnss => "GNSS",

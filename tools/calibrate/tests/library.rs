@@ -42,3 +42,74 @@ fn a_magnetometer_recording_calibrates_through_the_library() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn failures_are_typed_the_callers_apart_from_the_data() {
+    use auvnav_calibrate::voyage::VoyageSpec;
+    use auvnav_calibrate::{CalibrateDvlOptions, CalibrationError, calibrate_dvl};
+    let dir = std::env::temp_dir().join(format!("auvnav-calibrate-errors-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("scratch folder");
+    let spec = |name: &str| VoyageSpec {
+        path: dir.join(name),
+        window_s: None,
+    };
+
+    // A log with a header and no message.
+    auvnav_log::write_log_atomically(
+        &dir.join("empty.mcap"),
+        &auvnav_log::LogHeader::new("test", ""),
+        |_| Ok(()),
+    )
+    .expect("an empty log");
+
+    // The caller's: a negative threshold, an unknown parameter, inverted bounds.
+    let mut a = CalibrateDvlOptions::new(vec![spec("empty.mcap")]);
+    a.threshold = -1.0;
+    let e = calibrate_dvl(&a).expect_err("negative threshold");
+    assert!(
+        matches!(e, CalibrationError::Options(_)) && e.is_usage(),
+        "{e:?}"
+    );
+    let mut a = CalibrateDvlOptions::new(vec![spec("empty.mcap")]);
+    a.params = vec!["dvl.colour".into()];
+    let e = calibrate_dvl(&a).expect_err("unknown parameter");
+    assert!(matches!(e, CalibrationError::Options(_)), "{e:?}");
+    let mut a = CalibrateDvlOptions::new(vec![spec("empty.mcap")]);
+    a.bounds = vec!["dvl.mount_yaw=2,-2".into()];
+    let e = calibrate_dvl(&a).expect_err("inverted bounds");
+    assert!(matches!(e, CalibrationError::Options(_)), "{e:?}");
+
+    // The data's: a voyage log that is not there, a log without any DVL message.
+    let e =
+        calibrate_dvl(&CalibrateDvlOptions::new(vec![spec("missing.mcap")])).expect_err("no log");
+    assert!(
+        matches!(&e, CalibrationError::Read { path, .. } if path.ends_with("missing.mcap"))
+            && !e.is_usage(),
+        "{e:?}"
+    );
+    let e = calibrate_dvl(&CalibrateDvlOptions::new(vec![spec("empty.mcap")])).expect_err("no DVL");
+    assert!(
+        matches!(&e, CalibrationError::Input(m) if m.contains("no DVL messages")),
+        "{e:?}"
+    );
+
+    // The magnetometer: a recording that is not there, one too short to fit.
+    let e = calibrate_mag(&CalibrateMagOptions::new(vec![dir.join("missing.csv")]))
+        .expect_err("no CSV");
+    assert!(
+        matches!(e, CalibrationError::Import(_)) && !e.is_usage(),
+        "{e:?}"
+    );
+    let short = dir.join("short.csv");
+    std::fs::write(
+        &short,
+        "time_s,mag_x,mag_y,mag_z\n0.0,20,0,45\n0.1,20,1,45\n",
+    )
+    .expect("CSV");
+    let e = calibrate_mag(&CalibrateMagOptions::new(vec![short])).expect_err("too short");
+    assert!(
+        matches!(&e, CalibrationError::Input(m) if m.contains("too few samples")),
+        "{e:?}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -4,7 +4,8 @@
 use super::fit::{self, Calibration, MagSample, Model, SwarmSettings};
 use super::input::{self, CsvColumnOptions, Recording};
 use super::{Coverage, MagMethod, ReferenceField, Spreads, Thresholds};
-use anyhow::{Context, bail};
+use crate::CalibrationError;
+use crate::error::{unusable, usage};
 use serde::Serialize;
 use std::path::PathBuf;
 
@@ -156,17 +157,17 @@ fn reference_field(
     a: &CalibrateMagOptions,
     rec: &Recording,
     radius_ut: f64,
-) -> anyhow::Result<ReferenceField> {
+) -> Result<ReferenceField, CalibrationError> {
     let lat = a.latitude.or(rec.whereabouts.latitude_deg);
     let lon = a.longitude.or(rec.whereabouts.longitude_deg);
     let date = a.date.or(rec.whereabouts.date);
     let model = match (lat, lon, date) {
         (Some(lat), Some(lon), Some(date)) if a.field_ut.is_none() || a.dip_deg.is_none() => {
             let m = auvnav_core::wmm::WorldMagneticModel::builtin();
-            Some(
-                m.field(lat, lon, 0.0, date)
-                    .with_context(|| format!("field model at {lat:.4}°, {lon:.4}° on {date:.3}"))?,
-            )
+            match m.field(lat, lon, 0.0, date) {
+                Ok(f) => Some(f),
+                Err(e) => unusable!("field model at {lat:.4}°, {lon:.4}° on {date:.3}: {e}"),
+            }
         }
         _ => None,
     };
@@ -280,9 +281,9 @@ fn effects(c: &Calibration, lm: Option<&fit::LmFit>, model: Model) -> Vec<Effect
 /// Runs the calibration (no file written).
 // Long on purpose: reads the recordings, splits fit and held-out samples, runs the method and every
 // comparison the report shows; the steps share the sample sets.
-pub fn calibrate_mag(a: &CalibrateMagOptions) -> anyhow::Result<MagReport> {
+pub fn calibrate_mag(a: &CalibrateMagOptions) -> Result<MagReport, CalibrationError> {
     if !(a.fit_fraction > 0.0 && a.fit_fraction <= 1.0) {
-        bail!("--fit-fraction {}: expected 0 < f <= 1", a.fit_fraction);
+        usage!("--fit-fraction {}: expected 0 < f <= 1", a.fit_fraction);
     }
     let cols = a.columns.columns()?;
     let mut fit_set = Vec::new();
@@ -306,9 +307,11 @@ pub fn calibrate_mag(a: &CalibrateMagOptions) -> anyhow::Result<MagReport> {
             first = Some(rec);
         }
     }
-    let first = first.context("no input")?;
+    let Some(first) = first else {
+        usage!("no input recording")
+    };
     if fit_set.len() < 20 {
-        bail!(
+        unusable!(
             "too few samples to fit: {} (at least 20; the fit uses --fit-fraction {} of each \
              recording)",
             fit_set.len(),
@@ -316,7 +319,7 @@ pub fn calibrate_mag(a: &CalibrateMagOptions) -> anyhow::Result<MagReport> {
         );
     }
     let started = std::time::Instant::now();
-    let (_, radius) = fit::sphere(&fit_set).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let (_, radius) = fit::sphere(&fit_set).map_err(CalibrationError::method)?;
     let reference = reference_field(a, &first, radius)?;
     let limits = Thresholds::default();
     let forced = match a.model {
@@ -338,7 +341,7 @@ pub fn calibrate_mag(a: &CalibrateMagOptions) -> anyhow::Result<MagReport> {
         },
         forced,
     )
-    .map_err(|e| anyhow::anyhow!("{e}"))?;
+    .map_err(CalibrationError::method)?;
     let wall = started.elapsed().as_secs_f64();
     let c = outcome.calibration;
     let id = Calibration::identity();

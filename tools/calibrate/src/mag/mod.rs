@@ -20,13 +20,14 @@ pub use command::{CalibrateMagOptions, calibrate_mag};
 
 /// `auvnav calibrate mag` as a function: the calibration, then the files it asks for (the
 /// `[navigation.magnetometer]` table, the report directory).
-pub fn run(a: &CalibrateMagOptions) -> anyhow::Result<command::MagReport> {
+pub fn run(a: &CalibrateMagOptions) -> Result<command::MagReport, crate::CalibrationError> {
     let r = calibrate_mag(a)?;
     if let Some(p) = &a.write_config {
-        report::write_config(p, &r)?;
+        report::write_config(p, &r).map_err(|e| crate::CalibrationError::output(p, e))?;
     }
     if let Some(d) = &a.report {
-        report::write_report_dir(d, &r, &r.samples)?;
+        report::write_report_dir(d, &r, &r.samples)
+            .map_err(|e| crate::CalibrationError::output(d, e))?;
     }
     Ok(r)
 }
