@@ -71,5 +71,8 @@ fn is_usage(cause: &(dyn std::error::Error + 'static)) -> bool {
     if let Some(e) = cause.downcast_ref::<auvnav_calibrate::CalibrationError>() {
         return e.is_usage();
     }
+    if let Some(e) = cause.downcast_ref::<auvnav_discover::DiscoverError>() {
+        return e.is_usage();
+    }
     false
 }

@@ -10,7 +10,7 @@ pub use super::findings::*;
 use super::fit::{self, Problem, Selection};
 use super::residuals::{Description, describe};
 use super::{Channel, ChannelKind, Reference, spec};
-use anyhow::Context;
+use crate::DiscoverError;
 use auvnav_log::{LogMessage, LogReader};
 use auvnav_shm_schema::{AcousticRangesV1, DepthV1, DvlVelocityV1, ImuSampleV1, MagnetometerV1};
 use auvnav_sim::effects::Effects;
@@ -205,7 +205,7 @@ pub fn discover_messages_with<'a>(
 }
 
 /// The channels and the reference of the logs, and the number of messages that did not decode.
-pub fn read_logs(paths: &[PathBuf]) -> anyhow::Result<(Vec<Channel>, Reference, usize)> {
+pub fn read_logs(paths: &[PathBuf]) -> Result<(Vec<Channel>, Reference, usize), DiscoverError> {
     read_logs_with(paths, Collector::new())
 }
 
@@ -213,14 +213,14 @@ pub fn read_logs(paths: &[PathBuf]) -> anyhow::Result<(Vec<Channel>, Reference, 
 pub fn read_logs_with(
     paths: &[PathBuf],
     collector: Collector,
-) -> anyhow::Result<(Vec<Channel>, Reference, usize)> {
+) -> Result<(Vec<Channel>, Reference, usize), DiscoverError> {
     let mut c = collector;
     let mut undecodable = 0;
     for p in paths {
-        let mut reader = LogReader::open(p)?;
+        let mut reader = LogReader::open(p).map_err(|e| DiscoverError::read(p, e))?;
         while let Some(raw) = reader
             .next_message()
-            .with_context(|| format!("reading {}", p.display()))?
+            .map_err(|e| DiscoverError::read(p, e))?
         {
             match raw.decode_any() {
                 Ok(m) => c.add(&m),

@@ -3,7 +3,7 @@
 pub use super::analysis::*;
 use super::fit::Selection;
 use super::{Channel, ChannelKind, Reference};
-use anyhow::{Context, bail};
+use crate::{DiscoverError, Source};
 use auvnav_calibrate::report::write_atomically;
 use auvnav_sim::effects::{Effects, parse_setting};
 use std::path::PathBuf;
@@ -67,46 +67,51 @@ pub struct DiscoverOptions {
 }
 
 /// Sets the effects a discover JSON report found, or those of an effect set file (`.toml`).
-pub fn nominal_from_report(nominal: &mut Effects, path: &std::path::Path) -> anyhow::Result<()> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+pub fn nominal_from_report(
+    nominal: &mut Effects,
+    path: &std::path::Path,
+) -> Result<(), DiscoverError> {
+    let bad = |e: Source| DiscoverError::Nominal {
+        path: path.to_path_buf(),
+        source: e,
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| bad(e.into()))?;
     if path.extension().is_some_and(|x| x == "toml") {
-        let settings = auvnav_sim::effects::set::parse(&text)
-            .with_context(|| format!("effect set {}", path.display()))?;
-        auvnav_sim::effects::set::apply(nominal, &settings)?;
-        return Ok(());
+        let settings = auvnav_sim::effects::set::parse(&text).map_err(|e| bad(e.into()))?;
+        return auvnav_sim::effects::set::apply(nominal, &settings).map_err(|e| bad(e.into()));
     }
     let v: serde_json::Value = serde_json::from_str(&text)
-        .with_context(|| format!("{}: not a discover JSON report", path.display()))?;
+        .map_err(|e| bad(format!("not a discover JSON report: {e}").into()))?;
     let Some(effects) = v.get("effects").and_then(|e| e.as_array()) else {
-        bail!(
-            "{}: no `effects` list (not a discover report)",
-            path.display()
-        );
+        return Err(bad("no `effects` list (not a discover report)".into()));
     };
     for e in effects {
         let name = e.get("name").and_then(|n| n.as_str()).unwrap_or_default();
         let Some(values) = e.get("value").and_then(values_of) else {
-            bail!("{}: effect {name:?} has no numeric value", path.display());
+            return Err(bad(format!("effect {name:?} has no numeric value").into()));
         };
         nominal
             .set(name, &values)
-            .with_context(|| format!("{}: effect {name:?}", path.display()))?;
+            .map_err(|e| bad(format!("effect {name:?}: {e}").into()))?;
     }
     Ok(())
 }
 
 /// `auvnav discover`.
-pub fn run(a: &DiscoverOptions) -> anyhow::Result<DiscoverReport> {
+pub fn run(a: &DiscoverOptions) -> Result<DiscoverReport, DiscoverError> {
     let smoothed = a.reference == "smoothed";
     if smoothed && a.one_voyage && a.logs.len() > 1 {
-        bail!(
+        return Err(DiscoverError::Options(
             "--reference smoothed smooths each log on its own: give the pieces of one voyage as \
              one log, or leave out --one-voyage"
-        );
+                .into(),
+        ));
     }
     if !(a.fit_fraction > 0.0 && a.fit_fraction < 1.0) {
-        bail!("--fit-fraction {}: expected 0 < f < 1", a.fit_fraction);
+        return Err(DiscoverError::Options(format!(
+            "--fit-fraction {}: expected 0 < f < 1",
+            a.fit_fraction
+        )));
     }
     let mut nominal = Effects::default();
     if let Some(p) = &a.nominal_from {
@@ -120,7 +125,7 @@ pub fn run(a: &DiscoverOptions) -> anyhow::Result<DiscoverReport> {
     let mut against = Vec::new();
     let mut smoothed_logs = 0;
     // One log's channels against its reference (the smoothed motion with --reference smoothed).
-    let mut read_one = |log: &PathBuf| -> anyhow::Result<(Vec<Channel>, Reference, usize)> {
+    let mut read_one = |log: &PathBuf| -> Result<(Vec<Channel>, Reference, usize), DiscoverError> {
         let (mut channels, reference, u) = read_logs_with(
             std::slice::from_ref(log),
             Collector::new().with_dvl_beams(a.dvl_beams),
@@ -210,10 +215,20 @@ pub fn run(a: &DiscoverOptions) -> anyhow::Result<DiscoverReport> {
         write_atomically(p, &super::outputs::effect_set_toml(&r))?;
     }
     if let Some(p) = &a.write_config {
-        write_atomically(p, &super::outputs::navigator_toml(&r)?)?;
+        let text =
+            super::outputs::navigator_toml(&r).map_err(|e| auvnav_replay::ReplayError::Output {
+                path: p.clone(),
+                source: e.into(),
+            })?;
+        write_atomically(p, &text)?;
     }
     if let Some(dir) = &a.report {
-        super::report::write_report_dir(dir, &r)?;
+        super::report::write_report_dir(dir, &r).map_err(|e| {
+            auvnav_replay::ReplayError::Output {
+                path: dir.clone(),
+                source: e.into(),
+            }
+        })?;
     }
     Ok(r)
 }

@@ -17,6 +17,7 @@
 
 pub mod analysis;
 pub mod command;
+mod error;
 pub mod findings;
 pub mod fit;
 pub mod hidden_effects;
@@ -27,6 +28,8 @@ pub mod residuals;
 pub mod smoothed;
 pub mod trials;
 pub mod voyages;
+
+pub use error::{DiscoverError, Source};
 
 use auvnav_core::earth;
 use auvnav_shm_schema::TruthStateV1;

@@ -14,7 +14,7 @@
 use super::analysis::{DiscoverReport, discover, json_of};
 use super::fit::Selection;
 use super::{Channel, ChannelKind, Reference};
-use anyhow::Context;
+use crate::DiscoverError;
 use auvnav_log::LogReader;
 use auvnav_shm_schema::{NavMode, NavSolutionV1, TruthStateV1};
 use auvnav_sim::effects::Effects;
@@ -47,8 +47,11 @@ impl Smoothed {
 }
 
 /// Smooths `log` (outputs into `work`, a scratch folder) and returns its smoothed motion.
-pub fn smooth(log: &Path, work: &Path) -> anyhow::Result<Smoothed> {
-    std::fs::create_dir_all(work).with_context(|| format!("creating {}", work.display()))?;
+pub fn smooth(log: &Path, work: &Path) -> Result<Smoothed, DiscoverError> {
+    std::fs::create_dir_all(work).map_err(|e| auvnav_smooth::SmoothError::Output {
+        path: work.to_path_buf(),
+        source: e.into(),
+    })?;
     let args = SmoothOptions {
         logs: vec![log.to_path_buf()],
         out: work.to_path_buf(),
@@ -74,20 +77,19 @@ pub fn smooth(log: &Path, work: &Path) -> anyhow::Result<Smoothed> {
         n.initial_dvl_mounting_axis_std_deg = None;
         n.estimate_dvl_scale = true;
         n.initial_dvl_scale_std = SCALE_STD;
-    })
-    .with_context(|| format!("smoothing {}", log.display()))?;
+    })?;
     let path = Path::new(&r.outputs.mcap);
-    let mut reader = LogReader::open(path)?;
+    let mut reader = LogReader::open(path).map_err(|e| DiscoverError::read(path, e))?;
     let mut motion = Vec::new();
     let mut heading_std_deg = Vec::new();
     while let Some(raw) = reader
         .next_message()
-        .with_context(|| format!("reading {}", path.display()))?
+        .map_err(|e| DiscoverError::read(path, e))?
     {
         if &*raw.topic != NAV_SOLUTION_SMOOTHED {
             continue;
         }
-        let s: NavSolutionV1 = raw.decode()?;
+        let s: NavSolutionV1 = raw.decode().map_err(|e| DiscoverError::read(path, e))?;
         if !matches!(s.nav_mode(), Ok(NavMode::Navigating | NavMode::Degraded)) {
             continue;
         }

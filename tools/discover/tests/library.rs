@@ -32,3 +32,59 @@ fn a_hidden_dvl_scale_is_discovered_through_the_library() {
     let value = scale.value.as_f64().expect("a number");
     assert!((value - 1.008).abs() < 0.0005, "{value}");
 }
+
+#[test]
+fn failures_are_typed_the_callers_apart_from_the_logs() {
+    use auvnav_discover::DiscoverError;
+    use auvnav_discover::command::{DiscoverOptions, run};
+    let dir = std::env::temp_dir().join(format!("auvnav-discover-errors-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("scratch folder");
+    let options = |logs: Vec<std::path::PathBuf>| DiscoverOptions {
+        logs,
+        reference: "truth".into(),
+        effects: Vec::new(),
+        nominal_from: None,
+        fit_fraction: 0.7,
+        json: true,
+        report: None,
+        write_effects: None,
+        write_config: None,
+        no_navigation: true,
+        dvl_beams: false,
+        one_voyage: false,
+    };
+    let missing = dir.join("missing.mcap");
+
+    let mut a = options(vec![missing.clone()]);
+    a.fit_fraction = 1.0;
+    let e = run(&a).expect_err("fit fraction 1");
+    assert!(
+        matches!(e, DiscoverError::Options(_)) && e.is_usage(),
+        "{e:?}"
+    );
+
+    let mut a = options(vec![missing.clone()]);
+    a.effects = vec!["dvl.no_such_effect=1".into()];
+    let e = run(&a).expect_err("unknown effect");
+    assert!(
+        matches!(e, DiscoverError::Effect(_)) && e.is_usage(),
+        "{e:?}"
+    );
+
+    let not_a_report = dir.join("not-a-report.json");
+    std::fs::write(&not_a_report, "{\"colour\": 1}").expect("JSON");
+    let mut a = options(vec![missing.clone()]);
+    a.nominal_from = Some(not_a_report.clone());
+    let e = run(&a).expect_err("not a report");
+    assert!(
+        matches!(&e, DiscoverError::Nominal { path, .. } if path == &not_a_report) && e.is_usage(),
+        "{e:?}"
+    );
+
+    let e = run(&options(vec![missing.clone()])).expect_err("no log");
+    assert!(
+        matches!(&e, DiscoverError::Read { path, .. } if path == &missing) && !e.is_usage(),
+        "{e:?}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
