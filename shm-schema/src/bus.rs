@@ -192,11 +192,7 @@ pub struct BusPublisher<T: Message> {
     service: String,
 }
 
-/// What a message type needs so the bus can number it.
-pub trait Sequenced {
-    fn set_sequence(&mut self, sequence: u64);
-    fn sequence(&self) -> u64;
-}
+pub use crate::Sequenced;
 
 impl<T: Message + Sequenced> BusPublisher<T> {
     /// Numbers `msg` with the next sequence number, sends it and notifies. Returns the sequence

@@ -20,12 +20,21 @@
 //! Two clock domains exist and are never mixed: host time (`CLOCK_MONOTONIC` of the machine the
 //! process runs on, or simulated time in a simulated log) and device time (the sensor's own clock).
 //!
-//! The zero-copy derive of iceoryx2 emits `unsafe impl`, so this crate cannot forbid unsafe code;
-//! its one hand-written `unsafe` sets SIGHUP to be ignored (`logging::ignore_hangup`). The host
-//! clock is read through `nix` (safe wrappers).
+//! The bus ([`bus`]) and the on-board processes' logging ([`logging`]) are behind the `bus`
+//! feature, which the processes turn on; without it the crate links neither iceoryx2 nor
+//! tracing-subscriber, and the log, the navigation core, the protocol decoders and the offline
+//! tools use the message types alone.
+//!
+//! With the `bus` feature, the zero-copy derive of iceoryx2 emits `unsafe impl`, so the crate
+//! cannot forbid unsafe code; its one hand-written `unsafe` sets SIGHUP to be ignored
+//! (`logging::ignore_hangup`). Without the feature, unsafe code is forbidden. The host clock is
+//! read through `nix` (safe wrappers).
+#![cfg_attr(not(feature = "bus"), forbid(unsafe_code))]
 
+#[cfg(feature = "bus")]
 pub mod bus;
 pub mod clock;
+#[cfg(feature = "bus")]
 pub mod logging;
 pub mod qos;
 pub mod sensor;
@@ -33,7 +42,21 @@ pub mod stage_times;
 pub mod topic;
 
 pub use bytemuck::{Pod, Zeroable};
+#[cfg(feature = "bus")]
 use iceoryx2::prelude::ZeroCopySend;
+
+/// What a message type needs to travel through the bus: iceoryx2's zero-copy marker with the
+/// `bus` feature, nothing without it.
+#[cfg(feature = "bus")]
+pub trait BusPayload: ZeroCopySend {}
+#[cfg(feature = "bus")]
+impl<T: ZeroCopySend> BusPayload for T {}
+/// What a message type needs to travel through the bus: iceoryx2's zero-copy marker with the
+/// `bus` feature, nothing without it.
+#[cfg(not(feature = "bus"))]
+pub trait BusPayload {}
+#[cfg(not(feature = "bus"))]
+impl<T> BusPayload for T {}
 
 /// A time in the host clock domain: nanoseconds of `CLOCK_MONOTONIC` (or simulated time).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default)]
@@ -58,8 +81,14 @@ impl HostTime {
     }
 }
 
+/// What a message type needs so the bus can number it (every message carries a `sequence`).
+pub trait Sequenced {
+    fn set_sequence(&mut self, sequence: u64);
+    fn sequence(&self) -> u64;
+}
+
 /// A message type that can travel through shared memory and be written to a log.
-pub trait Message: Pod + ZeroCopySend + Default + std::fmt::Debug {
+pub trait Message: Pod + BusPayload + Default + std::fmt::Debug {
     /// iceoryx2 type name, versioned (`auvnav/ImuSample/v1`).
     const TYPE_NAME: &'static str;
     /// Schema name in the log (`auvnav_msgs/msg/ImuSampleV1`).
@@ -141,9 +170,9 @@ macro_rules! message {
         }
     ) => {
         $(#[doc = $doc])*
-        #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, Pod, Zeroable)]
+        #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+        #[cfg_attr(feature = "bus", derive(ZeroCopySend), type_name($tn))]
         #[repr(C)]
-        #[type_name($tn)]
         pub struct $name {
             $( $(#[doc = $fdoc])* pub $field: $ty, )*
         }
@@ -177,7 +206,7 @@ macro_rules! message {
             }
         }
 
-        impl crate::bus::Sequenced for $name {
+        impl crate::Sequenced for $name {
             fn set_sequence(&mut self, sequence: u64) {
                 self.sequence = sequence;
             }

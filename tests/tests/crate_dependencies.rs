@@ -81,11 +81,21 @@ fn crates_depend_only_on_what_the_architecture_allows() {
             .as_str()
             .expect("name")
             .to_string();
-        let deps: BTreeSet<String> = manifest
-            .get("dependencies")
-            .and_then(|d| d.as_table())
+        let table = manifest.get("dependencies").and_then(|d| d.as_table());
+        let mut deps: BTreeSet<String> = table
             .map(|d| d.keys().cloned().collect())
             .unwrap_or_default();
+        // The schema's `bus` feature is iceoryx2: a crate that turns it on links iceoryx2.
+        let schema_features = table
+            .and_then(|d| d.get("auvnav-shm-schema"))
+            .and_then(|d| d.get("features"))
+            .and_then(|f| f.as_array())
+            .into_iter()
+            .flatten()
+            .filter_map(|f| f.as_str());
+        if schema_features.into_iter().any(|f| f == "bus") {
+            deps.insert("iceoryx2".to_string());
+        }
         crates.insert(name, deps);
     }
     let workspace_names: BTreeSet<String> = crates.keys().cloned().collect();
@@ -121,7 +131,8 @@ fn crates_depend_only_on_what_the_architecture_allows() {
 const UNSAFE_WITH_A_REASON: [(&str, &str); 2] = [
     (
         "shm-schema",
-        "iceoryx2's zero-copy derive emits `unsafe impl`; SIGHUP is ignored through libc",
+        "with its `bus` feature, iceoryx2's zero-copy derive emits `unsafe impl` and SIGHUP is \
+         ignored through libc (without it, the root forbids unsafe code)",
     ),
     (
         "daemon/core",
