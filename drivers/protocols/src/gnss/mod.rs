@@ -20,6 +20,8 @@
 //! **Velocity.** `NAV-PVT` gives NED velocity; NMEA only speed and course over ground (north and
 //! east; down is 0), and only while the course is reported (receivers leave it empty when still).
 
+pub mod to_device;
+
 use crate::nmea::{Date, Gga, Gst, NmeaSentence, Rmc, TimeOfDay, Vtg};
 use crate::ubx::NavPvt;
 use auvnav_shm_schema::GnssFixV1;

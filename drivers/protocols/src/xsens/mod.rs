@@ -7,6 +7,9 @@
 //! floating-point data (bits 0–1: f32, fixed 12.20, fixed 16.32, f64) and the frame (bits 2–3:
 //! ENU, NED, NWU).
 
+pub mod to_device;
+pub mod to_schema;
+
 use crate::framing::{DecoderStats, FrameBuffer};
 use serde::Serialize;
 

@@ -15,6 +15,9 @@
 //! without bottom lock). Other records with good checksums (water track, current profiles,
 //! configuration replies) are returned as [`NortekFrame::Other`].
 
+pub mod to_device;
+pub mod to_schema;
+
 use crate::framing::{DecoderStats, FrameBuffer, ReadLe};
 use serde::Serialize;
 

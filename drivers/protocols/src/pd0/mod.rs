@@ -22,6 +22,9 @@
 //! velocity over the ground is the negative: [`BottomTrack::vehicle_velocity_m_s`] returns it.
 //! Raw values are kept as recorded; -32768 (velocity) and 0 (range) mean "no value" and are `None`.
 
+pub mod to_device;
+pub mod to_schema;
+
 use crate::framing::{DecoderStats, FrameBuffer, ReadLe};
 use serde::Serialize;
 

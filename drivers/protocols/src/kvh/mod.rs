@@ -7,6 +7,9 @@
 //! rates or angle increments, in radians or degrees, is the unit's configuration (=ROTFMT,
 //! =ROTUNITS), not part of the message: the driver configuration says which.
 
+pub mod to_device;
+pub mod to_schema;
+
 use crate::framing::{DecoderStats, FrameBuffer};
 use serde::Serialize;
 

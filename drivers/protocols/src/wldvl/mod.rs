@@ -7,6 +7,10 @@
 //! Other `w` lines with a good checksum (command responses such as `wrc`, `wrv`) are returned as
 //! [`WlFrame::Other`]. The DVL frame is x forward, y right, z down, velocities of the vehicle.
 
+pub mod json;
+pub mod to_device;
+pub mod to_schema;
+
 use crate::framing::{DecoderStats, FrameBuffer};
 use serde::Serialize;
 
