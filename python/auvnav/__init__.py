@@ -237,6 +237,7 @@ def replay(
     min_distance: float | None = None,
     usbl: str | None = None,
     compare_recorded: bool = False,
+    reference_lever_arm: tuple[float, float, float] | None = None,
 ) -> dict[str, Any]:
     """Runs a log through the navigation core, as ``auvnav replay --json``.
 
@@ -247,6 +248,8 @@ def replay(
     default 100).
     usbl: fuse the USBL fixes with this coupling (``"loose"`` or ``"tight"``).
     compare_recorded: compare with the solutions the log recorded on ``nav/solution``.
+    reference_lever_arm: where the log's reference sits from the IMU (x, y, z in body axes, m);
+    the reference is moved to the IMU before it starts and scores the navigation.
     """
     return _document(
         _native.replay(
@@ -257,6 +260,7 @@ def replay(
             min_distance,
             usbl,
             compare_recorded,
+            None if reference_lever_arm is None else tuple(reference_lever_arm),
         )
     )
 

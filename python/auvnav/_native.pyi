@@ -23,6 +23,7 @@ def replay(
     min_distance: float | None = None,
     usbl: str | None = None,
     compare_recorded: bool = False,
+    reference_lever_arm: tuple[float, float, float] | None = None,
 ) -> str: ...
 def simulate(
     scenario: str,

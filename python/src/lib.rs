@@ -162,7 +162,7 @@ fn study_report(
 
 /// Replays a log through the navigation core (`auvnav replay`); its JSON report.
 #[pyfunction]
-#[pyo3(signature = (log, config=None, out=None, decimate=None, min_distance=None, usbl=None, compare_recorded=false))]
+#[pyo3(signature = (log, config=None, out=None, decimate=None, min_distance=None, usbl=None, compare_recorded=false, reference_lever_arm=None))]
 #[allow(clippy::too_many_arguments)]
 fn replay(
     py: Python<'_>,
@@ -173,8 +173,10 @@ fn replay(
     min_distance: Option<f64>,
     usbl: Option<String>,
     compare_recorded: bool,
+    reference_lever_arm: Option<[f64; 3]>,
 ) -> PyResult<String> {
     let mut o = auvnav_replay::ReplayOptions::new(log);
+    o.reference_lever_arm = reference_lever_arm;
     o.config = config;
     o.out = out;
     o.decimate = decimate.unwrap_or(o.decimate);

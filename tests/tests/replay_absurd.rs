@@ -57,6 +57,7 @@ fn absurd_imu_samples_in_a_log_replay_to_finite_solutions() {
         usbl: None,
         json: false,
         compare_recorded: false,
+        reference_lever_arm: None,
     })
     .expect("replay");
     let text = std::fs::read_to_string(&csv).expect("csv");

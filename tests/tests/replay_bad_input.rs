@@ -47,6 +47,7 @@ fn replay(path: &Path) -> anyhow::Result<ReplayReport> {
         usbl: None,
         json: false,
         compare_recorded: false,
+        reference_lever_arm: None,
     })
 }
 

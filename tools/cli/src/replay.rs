@@ -32,6 +32,12 @@ pub struct ReplayArgs {
     /// recorded solution is reproduced.
     #[arg(long)]
     pub compare_recorded: bool,
+    /// Where the log's truth / reference channel sits from the IMU, X,Y,Z in body axes (forward,
+    /// starboard, down; m): a post-processed reference is often another sensor's position. The
+    /// reference is moved to the IMU before it starts the navigation and is compared with it
+    /// (`auvnav discover --reference smoothed` reports this lever arm).
+    #[arg(long, value_name = "X,Y,Z", value_parser = three_numbers)]
+    pub reference_lever_arm: Option<[f64; 3]>,
     /// Print the result as JSON.
     #[arg(long)]
     pub json: bool,
@@ -48,8 +54,19 @@ impl ReplayArgs {
             min_distance: self.min_distance,
             usbl: self.usbl,
             compare_recorded: self.compare_recorded,
+            reference_lever_arm: self.reference_lever_arm,
         }
     }
+}
+
+/// `X,Y,Z` as three numbers.
+fn three_numbers(s: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{s:?}: {e}"))?;
+    <[f64; 3]>::try_from(v).map_err(|_| format!("{s:?}: expected X,Y,Z"))
 }
 
 /// Runs `auvnav replay` (the library's [`replay`]); a negative `--min-distance` is a usage error.

@@ -296,6 +296,10 @@ pub struct NavigationGain {
     pub dvl_rejected_before: u64,
     pub dvl_fused_after: u64,
     pub dvl_rejected_after: u64,
+    /// The reference was moved to the IMU by this lever arm (body axes, m) before it scored
+    /// either run: where `--reference smoothed` found the log's reference to sit on the vehicle.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reference_lever_arm_m: Option<[f64; 3]>,
 }
 
 /// One voyage's estimate of an effect.

@@ -261,6 +261,15 @@ pub fn navigation_gain(logs: &[PathBuf], r: &mut DiscoverReport) {
     if !kinds.contains(&ChannelKind::Dvl) && !kinds.contains(&ChannelKind::Magnetometer) {
         return;
     }
+    let shared_lever_arm = reference_lever_arm(r);
+    if let Some(l) = shared_lever_arm {
+        r.notes.push(format!(
+            "navigation scored at the IMU: the logs' reference moved by ({:.2}, {:.2}, {:.2}) m \
+             (body axes), where the logs found it against their smoothed motion (combined over \
+             the logs)",
+            l[0], l[1], l[2]
+        ));
+    }
     for (i, log) in logs.iter().enumerate() {
         // Several voyages: each is replayed with the installation fitted on the others (held
         // out); one voyage: with the effects fitted on the first part of each channel.
@@ -268,7 +277,8 @@ pub fn navigation_gain(logs: &[PathBuf], r: &mut DiscoverReport) {
             Some(v) => v.held_out_models.get(i).unwrap_or(&r.model),
             None => &r.held_out_model,
         };
-        match navigation_of(log, &r.nominal_model, after, &kinds) {
+        let lever_arm = shared_lever_arm.or_else(|| own_reference_lever_arm(r, log));
+        match navigation_of(log, &r.nominal_model, after, &kinds, lever_arm) {
             Ok(Some(g)) => {
                 let (b, a) = (&g.before, &g.after);
                 if a.horizontal_error_final_m > b.horizontal_error_final_m
@@ -277,8 +287,8 @@ pub fn navigation_gain(logs: &[PathBuf], r: &mut DiscoverReport) {
                     let why = if r.reference == "smoothed" {
                         "they describe the sensors against the IMU's own (smoothed) motion, yet \
                          the navigation does not gain from them on this log (its error is taken \
-                         against the log's reference, which may sit at another point of the \
-                         vehicle)"
+                         against the log's reference, moved to the IMU where its lever arm was \
+                         found)"
                     } else {
                         "they describe the sensors against the reference, and the reference is \
                          not the IMU's motion (its velocity at another point or time; compare \
@@ -309,11 +319,50 @@ pub fn navigation_gain(logs: &[PathBuf], r: &mut DiscoverReport) {
     }
 }
 
+/// A log's reference lever arm (value, one sigma) as `--reference smoothed` found it: its
+/// velocity read as a DVL on the vehicle against the smoothed motion.
+fn lever_arm_of(found: &super::findings::ReferenceAgainstImu) -> Option<([f64; 3], [f64; 3])> {
+    let (_, value, std) = found
+        .effects
+        .iter()
+        .find(|(n, _, _)| n == "dvl.lever_arm")?;
+    let v = <[f64; 3]>::try_from(super::analysis::values_of(value)?).ok()?;
+    let s = <[f64; 3]>::try_from(super::analysis::values_of(std)?).ok()?;
+    Some((v, s))
+}
+
+/// Where the log's own reference sits from the IMU, when `--reference smoothed` found it.
+fn own_reference_lever_arm(r: &DiscoverReport, log: &Path) -> Option<[f64; 3]> {
+    let name = log.display().to_string();
+    let found = r.reference_against_imu.iter().find(|x| x.log == name)?;
+    lever_arm_of(found).map(|(v, _)| v)
+}
+
+/// Where the reference sits from the IMU, combined over the logs that found it (the reference
+/// is the vehicle's: one point for every voyage): each component the information-weighted mean
+/// of the logs' estimates. None with fewer than two logs' estimates.
+fn reference_lever_arm(r: &DiscoverReport) -> Option<[f64; 3]> {
+    let found: Vec<([f64; 3], [f64; 3])> = r
+        .reference_against_imu
+        .iter()
+        .filter_map(lever_arm_of)
+        .filter(|(v, s)| v.iter().chain(s).all(|x| x.is_finite()) && s.iter().all(|x| *x > 0.0))
+        .collect();
+    if found.len() < 2 {
+        return None;
+    }
+    Some(std::array::from_fn(|i| {
+        let w: f64 = found.iter().map(|(_, s)| s[i].powi(-2)).sum();
+        found.iter().map(|(v, s)| v[i] * s[i].powi(-2)).sum::<f64>() / w
+    }))
+}
+
 fn navigation_of(
     log: &Path,
     nominal: &Effects,
     after: &Effects,
     kinds: &[ChannelKind],
+    reference_lever_arm: Option<[f64; 3]>,
 ) -> anyhow::Result<Option<NavigationGain>> {
     let options = ReplayOptions::new(log);
     let (base, source) = auvnav_replay::replay_config(&options)?;
@@ -337,6 +386,9 @@ fn navigation_of(
     };
     let run = |cfg: &ReplayConfig| -> anyhow::Result<Option<(Accuracy, u64, u64)>> {
         let mut replay = Replay::new(cfg, options.min_distance);
+        if let Some(l) = reference_lever_arm {
+            replay.set_reference_lever_arm(l);
+        }
         auvnav_replay::run_log(log, &mut replay, &mut |_| Ok(()))
             .with_context(|| format!("replaying {}", log.display()))?;
         if replay.counts.imu == 0 {
@@ -363,6 +415,7 @@ fn navigation_of(
         dvl_rejected_before: rb,
         dvl_fused_after: fa,
         dvl_rejected_after: ra,
+        reference_lever_arm_m: reference_lever_arm,
     }))
 }
 

@@ -243,6 +243,8 @@ pub struct Replay {
     /// Messages from outside the log (position fixes of a file), fed in time order among the
     /// log's.
     injected: std::collections::VecDeque<LogMessage>,
+    /// Where the truth channel's point sits from the IMU, body axes (m); zero: at the IMU.
+    reference_lever_arm_m: [f64; 3],
 }
 
 impl Replay {
@@ -259,7 +261,40 @@ impl Replay {
             last_time_ns: 0,
             recorded: None,
             injected: std::collections::VecDeque::new(),
+            reference_lever_arm_m: [0.0; 3],
         }
+    }
+
+    /// The point of the vehicle the truth channel describes, from the IMU in body axes (m, FRD):
+    /// a post-processed reference is often the position of another sensor. Each truth record is
+    /// moved to the IMU (position by the record's attitude times the lever arm, velocity by the
+    /// lever arm's rotation where the record has its angular rate) before it starts the
+    /// navigation or is compared with it, so a heading change does not read as navigation error.
+    pub fn set_reference_lever_arm(&mut self, lever_arm_m: [f64; 3]) {
+        self.reference_lever_arm_m = lever_arm_m;
+    }
+
+    /// `t` moved from the reference's point to the IMU.
+    fn at_imu(&self, t: &TruthStateV1) -> TruthStateV1 {
+        let l = nalgebra::Vector3::from(self.reference_lever_arm_m);
+        if l == nalgebra::Vector3::zeros() {
+            return *t;
+        }
+        let [w, x, y, z] = t.quaternion_body_to_ned;
+        let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
+        let mut moved = *t;
+        let p = auvnav_core::earth::offset_position(
+            &auvnav_core::strapdown::truth_position(t),
+            &-(q * l),
+        );
+        (moved.latitude_rad, moved.longitude_rad, moved.height_m) =
+            (p.latitude_rad, p.longitude_rad, p.height_m);
+        let omega = nalgebra::Vector3::from(t.angular_rate_rad_s);
+        if omega.iter().all(|x| x.is_finite()) {
+            let v = nalgebra::Vector3::from(t.velocity_ned_m_s) - q * omega.cross(&l);
+            moved.velocity_ned_m_s = [v.x, v.y, v.z];
+        }
+        moved
     }
 
     /// Feeds `messages` (aids from outside the log, e.g. position fixes of a file) among the
@@ -403,7 +438,9 @@ impl Replay {
             order::Held::Other(m) => m,
         };
         match *m {
-            LogMessage::Truth(ref t) => {
+            LogMessage::Truth(ref reference) => {
+                let moved = self.at_imu(reference);
+                let t = &moved;
                 self.counts.truth += 1;
                 self.has_truth = true;
                 out(Output::Truth(t))?;

@@ -23,6 +23,10 @@ pub struct ReplayOptions {
     pub usbl: Option<auvnav_core::aid::usbl::Coupling>,
     /// Compare the solutions with those the log recorded on `nav/solution`.
     pub compare_recorded: bool,
+    /// Where the truth channel's point sits from the IMU (body axes FRD, m): each truth record is
+    /// moved to the IMU before it starts the navigation or is compared with it (and so written
+    /// to the outputs). None: the truth describes the IMU.
+    pub reference_lever_arm: Option<[f64; 3]>,
 }
 
 impl ReplayOptions {
@@ -36,6 +40,7 @@ impl ReplayOptions {
             min_distance: 100.0,
             usbl: None,
             compare_recorded: false,
+            reference_lever_arm: None,
         }
     }
 }
@@ -230,9 +235,19 @@ pub fn replay(a: &ReplayOptions) -> Result<ReplayReport, ReplayError> {
             a.min_distance
         )));
     }
+    if let Some(l) = a.reference_lever_arm
+        && !l.iter().all(|x| x.is_finite() && x.abs() <= 100.0)
+    {
+        return Err(ReplayError::Options(format!(
+            "reference_lever_arm {l:?}: expected three finite distances within ±100 m"
+        )));
+    }
     let (cfg, config_source) = replay_config(a)?;
     let decimate = a.decimate.max(1);
     let mut replay = Replay::new(&cfg, a.min_distance);
+    if let Some(l) = a.reference_lever_arm {
+        replay.set_reference_lever_arm(l);
+    }
     if a.compare_recorded {
         replay.compare_with_recorded();
     }

@@ -121,3 +121,83 @@ fn failures_are_typed_the_callers_apart_from_the_environments() {
     assert!(!out.exists());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A reference that describes another point of the vehicle (2 m forward, 0.3 m down) scores the
+/// navigation as if it had drifted by the lever arm's turn; moved back to the IMU
+/// (`reference_lever_arm`), it scores it as the IMU's own truth does.
+#[test]
+fn a_reference_at_another_point_is_moved_to_the_imu() {
+    use auvnav_log::{LogMessage, write_log_atomically};
+    use auvnav_shm_schema::topic;
+    use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+    let dir = std::env::temp_dir().join(format!("auvnav-replay-lever-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("scratch folder");
+    let scenario = Scenario::load("lawnmower").expect("scenario");
+    let cfg = SimConfig {
+        effects: scenario.effects().expect("effects"),
+        scenario,
+        seed: 4511,
+        duration_s: Some(600.0),
+    };
+    let (messages, _) = auvnav_sim::simulate_to_vec(&cfg).expect("simulation");
+    let lever = [2.0, 0.0, 0.3];
+    let at_imu = dir.join("imu.mcap");
+    let at_point = dir.join("point.mcap");
+    for (path, moved) in [(&at_imu, false), (&at_point, true)] {
+        write_log_atomically(path, &auvnav_sim::log_header(&cfg), |w| {
+            for m in &messages {
+                match m {
+                    LogMessage::Truth(t) if moved => {
+                        let [qw, qx, qy, qz] = t.quaternion_body_to_ned;
+                        let q = UnitQuaternion::from_quaternion(Quaternion::new(qw, qx, qy, qz));
+                        let p = auvnav_core::earth::offset_position(
+                            &auvnav_core::strapdown::truth_position(t),
+                            &(q * Vector3::from(lever)),
+                        );
+                        let mut x = *t;
+                        (x.latitude_rad, x.longitude_rad, x.height_m) =
+                            (p.latitude_rad, p.longitude_rad, p.height_m);
+                        let omega = Vector3::from(t.angular_rate_rad_s);
+                        let v = Vector3::from(t.velocity_ned_m_s)
+                            + q * omega.cross(&Vector3::from(lever));
+                        x.velocity_ned_m_s = [v.x, v.y, v.z];
+                        w.write(topic::TRUTH, &x)?;
+                    }
+                    LogMessage::Truth(x) => w.write(topic::TRUTH, x)?,
+                    LogMessage::Imu(x) => w.write(topic::IMU, x)?,
+                    LogMessage::Dvl(x) => w.write(topic::DVL, x)?,
+                    LogMessage::Depth(x) => w.write(topic::DEPTH, x)?,
+                    _ => {}
+                }
+            }
+            Ok(())
+        })
+        .expect("log");
+    }
+    let rms = |log: &std::path::Path, lever: Option<[f64; 3]>| {
+        let r = replay(&ReplayOptions {
+            reference_lever_arm: lever,
+            ..ReplayOptions::new(log)
+        })
+        .expect("replay");
+        r.accuracy.expect("truth").horizontal_error_rms_m
+    };
+    let own = rms(&at_imu, None);
+    let unmoved = rms(&at_point, None);
+    let moved = rms(&at_point, Some(lever));
+    assert!(
+        (moved - own).abs() < 0.02 * own.max(0.5),
+        "IMU truth {own:.3} m, moved reference {moved:.3} m"
+    );
+    assert!(
+        unmoved > own + 1.0,
+        "a reference 2 m forward, not moved: {unmoved:.3} m against {own:.3} m"
+    );
+    let e = replay(&ReplayOptions {
+        reference_lever_arm: Some([f64::NAN, 0.0, 0.0]),
+        ..ReplayOptions::new(&at_point)
+    })
+    .expect_err("not a lever arm");
+    assert!(e.is_usage(), "{e:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

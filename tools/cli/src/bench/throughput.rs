@@ -143,6 +143,7 @@ pub fn replay(hours: f64, repeat: usize, json: bool) -> anyhow::Result<()> {
             usbl: None,
             json: false,
             compare_recorded: false,
+            reference_lever_arm: None,
         };
         let mut runs = Vec::new();
         let mut log_duration_s = 0.0;
