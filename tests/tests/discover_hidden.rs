@@ -73,6 +73,46 @@ fn an_effect_the_motion_does_not_excite_is_reported_not_fitted() {
     );
 }
 
+/// A moving bed under bottom track (the DVL measures the vehicle's velocity relative to a bed
+/// that moves, an error fixed on the Earth), with `--moving-bed`: named with its north and east
+/// velocity within 10 % and nothing else on the trial voyages' turns, either sign; with the
+/// option on, a hidden yaw is still a yaw and a voyage with nothing hidden names nothing.
+#[test]
+fn a_moving_bed_under_bottom_track_is_named() {
+    use auvnav_tools::discover::analysis::{Collector, read_logs_with};
+    let d = dir("discover-bed");
+    let run = |seed: u64, settings: &[(String, Vec<f64>)]| {
+        let log = simulate(seed, settings, &d.0).expect("simulation");
+        let (channels, reference, _) =
+            read_logs_with(&[log], Collector::new().with_moving_bed(true)).expect("read");
+        discover(
+            &channels,
+            &reference,
+            &Effects::default(),
+            0.7,
+            &Selection::default(),
+        )
+    };
+    for (seed, value) in [(9211, vec![0.03, -0.02]), (9212, vec![-0.015, 0.04])] {
+        let r = run(seed, &[("dvl.bed_velocity".into(), value.clone())]);
+        let names: Vec<&str> = r.effects.iter().map(|e| e.name.as_str()).collect();
+        assert_eq!(names, ["dvl.bed_velocity"], "seed {seed}: {:#?}", r.effects);
+        let got = auvnav_tools::discover::analysis::values_of(&r.effects[0].value).expect("value");
+        let err = ((got[0] - value[0]).powi(2) + (got[1] - value[1]).powi(2)).sqrt()
+            / value[0].hypot(value[1]);
+        println!(
+            "seed {seed}: hidden bed {value:?}, found {got:?} ({:.1} %)",
+            100.0 * err
+        );
+        assert!(err < 0.1, "seed {seed}: {got:?} against {value:?}");
+    }
+    let r = run(9213, &[("dvl.mount_yaw".into(), vec![1.3])]);
+    let names: Vec<&str> = r.effects.iter().map(|e| e.name.as_str()).collect();
+    assert_eq!(names, ["dvl.mount_yaw"], "{:#?}", r.effects);
+    let r = run(9214, &[]);
+    assert!(r.effects.is_empty(), "{:#?}", r.effects);
+}
+
 /// What discovery writes as the extended model (`effects.toml`) simulates data that discovery,
 /// started from that model, finds nothing more in, with residuals of the size the first data
 /// showed: the extension reproduces the residual statistics (on another trajectory and seed).

@@ -213,3 +213,53 @@ fn usbl_range_differences_match_the_array_geometry() {
     check(0.0);
     check(1.0);
 }
+
+/// A moving bed under bottom track: dead reckoning on the bottom-track velocity drifts against
+/// the bed's motion (the DVL measures the vehicle relative to the bed), whatever the turns, by
+/// the bed's velocity times the time; water track does not see it.
+#[test]
+fn dvl_bed_velocity_drifts_bottom_track_dead_reckoning_against_the_bed() {
+    let bed = [0.02, -0.03];
+    let base = run("turns", &[], None);
+    let moved = run("turns", &[("dvl.bed_velocity", &bed)], None);
+    let (dr0, _, _) = dead_reckon(&base);
+    let (dr1, _, _) = dead_reckon(&moved);
+    let seconds = moved
+        .iter()
+        .filter_map(|m| match m {
+            LogMessage::Dvl(d) => Some(d.host_time_ns as f64 * 1e-9),
+            _ => None,
+        })
+        .fold((f64::INFINITY, 0.0f64), |(a, b), t| (a.min(t), b.max(t)));
+    let span = seconds.1 - seconds.0;
+    let drift = dr1 - dr0;
+    for (axis, want) in [(0, -bed[0] * span), (1, -bed[1] * span)] {
+        assert!(
+            (drift[axis] - want).abs() < 0.01 * want.abs() + 0.05,
+            "axis {axis}: drift {:.3} m, expected {want:.3} m over {span:.0} s",
+            drift[axis]
+        );
+    }
+    assert!(drift.z.abs() < 0.05, "vertical drift {:.3} m", drift.z);
+    // Water track (the vehicle against the water) is not affected.
+    let water = |msgs: &[LogMessage]| -> Vec<[f64; 3]> {
+        msgs.iter()
+            .filter_map(|m| match m {
+                LogMessage::Dvl(d) if d.is_water_track() => Some(d.velocity_dvl_m_s),
+                _ => None,
+            })
+            .collect()
+    };
+    let settings: &[(&str, &[f64])] = &[("dvl.water_track_noise", &[0.01])];
+    let with_bed: Vec<(&str, &[f64])> = settings
+        .iter()
+        .copied()
+        .chain([("dvl.bed_velocity", &bed[..])])
+        .collect();
+    let (a, b) = (
+        water(&run("turns", settings, Some(60.0))),
+        water(&run("turns", &with_bed, Some(60.0))),
+    );
+    assert!(!a.is_empty());
+    assert_eq!(a, b);
+}

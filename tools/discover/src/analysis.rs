@@ -40,6 +40,16 @@ impl Collector {
         self
     }
 
+    /// Let the DVL's bottom track see a moving bed: `dvl.bed_velocity` becomes a candidate.
+    pub fn with_moving_bed(mut self, on: bool) -> Collector {
+        for c in &mut self.channels {
+            if matches!(c.kind, ChannelKind::Dvl | ChannelKind::DvlBeams) {
+                c.moving_bed = on;
+            }
+        }
+        self
+    }
+
     pub fn new() -> Collector {
         Collector {
             truth: Vec::new(),

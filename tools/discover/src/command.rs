@@ -64,6 +64,11 @@ pub struct DiscoverOptions {
     /// voyages and tested for agreement.
     #[cfg_attr(feature = "clap", arg(long))]
     pub one_voyage: bool,
+    /// The DVL's bottom track may see a moving bed (a river, soft sediment that the current
+    /// carries): add `dvl.bed_velocity` (the bed's north and east velocity, fitted per voyage)
+    /// to the candidates.
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub moving_bed: bool,
 }
 
 /// Sets the effects a discover JSON report found, or those of an effect set file (`.toml`).
@@ -128,7 +133,9 @@ pub fn run(a: &DiscoverOptions) -> Result<DiscoverReport, DiscoverError> {
     let mut read_one = |log: &PathBuf| -> Result<(Vec<Channel>, Reference, usize), DiscoverError> {
         let (mut channels, reference, u) = read_logs_with(
             std::slice::from_ref(log),
-            Collector::new().with_dvl_beams(a.dvl_beams),
+            Collector::new()
+                .with_dvl_beams(a.dvl_beams)
+                .with_moving_bed(a.moving_bed),
         )?;
         if !smoothed {
             return Ok((channels, reference, u));
@@ -176,7 +183,12 @@ pub fn run(a: &DiscoverOptions) -> Result<DiscoverReport, DiscoverError> {
         let (channels, reference, undecodable) = if smoothed {
             read_one(&a.logs[0])?
         } else {
-            read_logs_with(&a.logs, Collector::new().with_dvl_beams(a.dvl_beams))?
+            read_logs_with(
+                &a.logs,
+                Collector::new()
+                    .with_dvl_beams(a.dvl_beams)
+                    .with_moving_bed(a.moving_bed),
+            )?
         };
         let r = discover(
             &channels,

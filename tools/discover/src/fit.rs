@@ -64,6 +64,7 @@ impl<'a> Problem<'a> {
     pub fn candidates(&self) -> Vec<usize> {
         (0..CANDIDATES.len())
             .filter(|&i| CANDIDATES[i].channel == self.channel.kind)
+            .filter(|&i| CANDIDATES[i].name != "dvl.bed_velocity" || self.channel.moving_bed)
             .collect()
     }
 

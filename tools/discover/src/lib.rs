@@ -297,7 +297,7 @@ impl ChannelKind {
         match self {
             ChannelKind::Dvl => {
                 let r = reference.at(t_s - e.dvl_time_offset)?;
-                let v = DvlInstallation::from_effects(e).velocity(
+                let v = DvlInstallation::from_effects(e).bottom_track_velocity(
                     &r.c_body_to_ned,
                     &r.velocity_ned,
                     &r.omega_eb_body,
@@ -343,6 +343,9 @@ pub struct Channel {
     pub receivers: [f64; 12],
     /// Readings left out (invalid, non-finite).
     pub skipped: usize,
+    /// The DVL's bottom track may see a moving bed (a river, soft sediment): `dvl.bed_velocity`
+    /// is a candidate of this channel ([`Collector::with_moving_bed`]).
+    pub moving_bed: bool,
 }
 
 impl Channel {
@@ -354,6 +357,7 @@ impl Channel {
             auxiliary: Vec::new(),
             receivers: [0.0; 12],
             skipped: 0,
+            moving_bed: false,
         }
     }
 
@@ -430,7 +434,7 @@ impl Channel {
         }
         if self.kind == ChannelKind::DvlBeams {
             let r = reference.at(self.times[i] - e.dvl_time_offset)?;
-            let v = DvlInstallation::from_effects(e).velocity(
+            let v = DvlInstallation::from_effects(e).bottom_track_velocity(
                 &r.c_body_to_ned,
                 &r.velocity_ned,
                 &r.omega_eb_body,
@@ -512,7 +516,10 @@ pub struct Candidate {
 /// `depth.density`'s twin would be exact aliases (`dvl.sound_speed` scales the velocity exactly
 /// as `dvl.scale_factor` does, reported under that name); noise, outlier and lock-loss effects
 /// are statistics of the residual, described rather than fitted; `mag.soft_iron` is calibrated by
-/// `auvnav calibrate mag`. Without a reference attitude (the magnetic-field channel)
+/// `auvnav calibrate mag`. `dvl.bed_velocity` (a moving bed under bottom track) is a candidate
+/// only where the caller says the bed may move (`--moving-bed`): on long straight legs it is
+/// hard to tell from the DVL's yaw and scale, and a per-voyage effect that can absorb them would
+/// weaken the evidence for the installation. Without a reference attitude (the magnetic-field channel)
 /// `mag.declination` does not act on the reading at all. On the beams (`dvl_beams`) a scale
 /// common to the four beams is `dvl.scale_factor`; `dvl.beam_scale_factor` is each beam's own.
 pub const CANDIDATES: &[Candidate] = &[
@@ -547,6 +554,11 @@ pub const CANDIDATES: &[Candidate] = &[
         step: 0.005,
     },
     Candidate {
+        name: "dvl.bed_velocity",
+        channel: ChannelKind::Dvl,
+        step: 0.001,
+    },
+    Candidate {
         name: "dvl.scale_factor",
         channel: ChannelKind::DvlBeams,
         step: 1e-4,
@@ -575,6 +587,11 @@ pub const CANDIDATES: &[Candidate] = &[
         name: "dvl.time_offset",
         channel: ChannelKind::DvlBeams,
         step: 0.005,
+    },
+    Candidate {
+        name: "dvl.bed_velocity",
+        channel: ChannelKind::DvlBeams,
+        step: 0.001,
     },
     Candidate {
         name: "dvl.beam_scale_factor",

@@ -33,6 +33,7 @@ pub fn per_voyage(name: &str) -> bool {
             | "imu.accel_bias"
             | "depth.density"
             | "dvl.sound_speed"
+            | "dvl.bed_velocity"
             | "usbl.sound_speed"
             | "mag.declination"
             | "mag.inclination"

@@ -52,6 +52,7 @@ fn failures_are_typed_the_callers_apart_from_the_logs() {
         no_navigation: true,
         dvl_beams: false,
         one_voyage: false,
+        moving_bed: false,
     };
     let missing = dir.join("missing.mcap");
 

@@ -223,6 +223,8 @@ effects! {
     dvl_velocity_error_instability: f64 = "dvl.velocity_error_instability", unit "m/s", range 0.0..=1.0, default [0.0];
     /// Correlation time of dvl.velocity_error_instability.
     dvl_velocity_error_correlation_time: f64 = "dvl.velocity_error_correlation_time", unit "s", range 0.1..=1.0e5, default [60.0];
+    /// Velocity of the bed under bottom track, north and east: a moving bed (sediment the current carries) or a bottom track locked on something that moves. The DVL measures the vehicle's velocity relative to it, so the error is fixed on the Earth and turns with the heading in the DVL's frame; water track is not affected.
+    dvl_bed_velocity: [f64; 2] = "dvl.bed_velocity", unit "m/s", range -3.0..=3.0, default [0.0, 0.0];
 
     /// The water current at the surface, north and east (the vehicle's velocity relative to the water is its velocity over the ground minus the current).
     water_current: [f64; 2] = "water.current", unit "m/s", range -5.0..=5.0, default [0.0, 0.0];

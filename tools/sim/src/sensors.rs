@@ -208,6 +208,8 @@ pub struct DvlInstallation {
     pub lever_arm: Vector3<f64>,
     /// Velocity scale: `dvl.scale_factor` × assumed / true sound speed.
     pub scale: f64,
+    /// The bed's velocity under bottom track (NED; `dvl.bed_velocity`, no vertical part).
+    pub bed_velocity_ned: Vector3<f64>,
 }
 
 impl DvlInstallation {
@@ -221,7 +223,23 @@ impl DvlInstallation {
             c_body_to_dvl: c_dvl_to_body.inverse().into_inner(),
             lever_arm: Vector3::from(e.dvl_lever_arm),
             scale: e.dvl_scale_factor * ASSUMED_SOUND_SPEED / e.dvl_sound_speed,
+            bed_velocity_ned: Vector3::new(e.dvl_bed_velocity[0], e.dvl_bed_velocity[1], 0.0),
         }
+    }
+
+    /// The bottom-track velocity in the DVL frame: [`DvlInstallation::velocity`] relative to the
+    /// bed (`dvl.bed_velocity`).
+    pub fn bottom_track_velocity(
+        &self,
+        c_body_to_ned: &Matrix3<f64>,
+        velocity_ned: &Vector3<f64>,
+        omega_eb_body: &Vector3<f64>,
+    ) -> Vector3<f64> {
+        self.velocity(
+            c_body_to_ned,
+            &(velocity_ned - self.bed_velocity_ned),
+            omega_eb_body,
+        )
     }
 
     /// The velocity in the DVL frame for the body's attitude, velocity w.r.t. the Earth (NED) and
@@ -402,7 +420,7 @@ impl DvlModel {
             return m;
         }
         let blocked = self.beam_blocked(t, interval);
-        let mut v_dvl = self.install.velocity(
+        let mut v_dvl = self.install.bottom_track_velocity(
             &truth.c_body_to_ned,
             &truth.velocity_ned,
             &truth.omega_eb_body,
