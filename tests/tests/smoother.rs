@@ -62,18 +62,8 @@ fn fix_line(t: &TruthStateV1, north_m: f64, east_m: f64, std_m: f64) -> String {
 
 fn args(out: &Path, fixes: Option<PathBuf>) -> SmoothOptions {
     SmoothOptions {
-        logs: Vec::new(),
-        out: out.to_path_buf(),
-        config: None,
         fixes,
-        usbl: None,
-        export_rate: 1.0,
-        solution_rate: None,
-        unix_time_of_log_zero: None,
-        memory_budget_mib: 1024,
-        spill_dir: None,
-        report: None,
-        json: false,
+        ..SmoothOptions::new(Vec::new(), out)
     }
 }
 

@@ -53,26 +53,23 @@ pub fn exit_status(e: &anyhow::Error) -> u8 {
 
 /// Whether `cause` is one of the libraries' typed errors that is the caller's to fix.
 fn is_usage(cause: &(dyn std::error::Error + 'static)) -> bool {
-    if let Some(e) = cause.downcast_ref::<auvnav_replay::ReplayError>() {
-        return e.is_usage();
+    macro_rules! usage_of {
+        ($($error:ty),+) => {
+            $(
+                if let Some(e) = cause.downcast_ref::<$error>() {
+                    return e.is_usage();
+                }
+            )+
+        };
     }
-    if let Some(e) = cause.downcast_ref::<auvnav_import::ImportError>() {
-        return e.is_usage();
-    }
-    if let Some(e) = cause.downcast_ref::<auvnav_sim::SimError>() {
-        return e.is_usage();
-    }
-    if let Some(e) = cause.downcast_ref::<auvnav_smooth::SmoothError>() {
-        return e.is_usage();
-    }
-    if let Some(e) = cause.downcast_ref::<auvnav_studies::StudyError>() {
-        return e.is_usage();
-    }
-    if let Some(e) = cause.downcast_ref::<auvnav_calibrate::CalibrationError>() {
-        return e.is_usage();
-    }
-    if let Some(e) = cause.downcast_ref::<auvnav_discover::DiscoverError>() {
-        return e.is_usage();
-    }
+    usage_of!(
+        auvnav_replay::ReplayError,
+        auvnav_import::ImportError,
+        auvnav_sim::SimError,
+        auvnav_smooth::SmoothError,
+        auvnav_studies::StudyError,
+        auvnav_calibrate::CalibrationError,
+        auvnav_discover::DiscoverError
+    );
     false
 }

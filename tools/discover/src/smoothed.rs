@@ -53,18 +53,8 @@ pub fn smooth(log: &Path, work: &Path) -> Result<Smoothed, DiscoverError> {
         source: e.into(),
     })?;
     let args = SmoothOptions {
-        logs: vec![log.to_path_buf()],
-        out: work.to_path_buf(),
-        config: None,
-        fixes: None,
-        usbl: None,
-        export_rate: 1.0,
-        solution_rate: None,
-        unix_time_of_log_zero: None,
-        memory_budget_mib: 1024,
-        spill_dir: None,
-        report: None,
         json: true,
+        ..SmoothOptions::new(vec![log.to_path_buf()], work)
     };
     let r = smooth_log_with(&args, log, None, &|cfg| {
         let n = &mut cfg.navigation;

@@ -85,6 +85,27 @@ pub struct SmoothOptions {
     pub json: bool,
 }
 
+impl SmoothOptions {
+    /// `logs` smoothed into `out` with the command's defaults (no fix file, one exported point
+    /// per second, every solution, 1 GiB in memory before spilling, no report, progress shown).
+    pub fn new(logs: Vec<PathBuf>, out: impl Into<PathBuf>) -> SmoothOptions {
+        SmoothOptions {
+            logs,
+            out: out.into(),
+            config: None,
+            fixes: None,
+            usbl: None,
+            export_rate: 1.0,
+            solution_rate: None,
+            unix_time_of_log_zero: None,
+            memory_budget_mib: 1024,
+            spill_dir: None,
+            report: None,
+            json: false,
+        }
+    }
+}
+
 /// Horizontal error figures against the reference (m).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
 pub struct ErrorFigures {

@@ -7,18 +7,9 @@ use std::path::{Path, PathBuf};
 
 fn options(out: &Path, logs: Vec<PathBuf>) -> SmoothOptions {
     SmoothOptions {
-        logs,
-        out: out.to_path_buf(),
-        config: None,
-        fixes: None,
-        usbl: None,
-        export_rate: 1.0,
-        solution_rate: None,
-        unix_time_of_log_zero: None,
         memory_budget_mib: 64,
-        spill_dir: None,
-        report: None,
         json: true,
+        ..SmoothOptions::new(logs, out)
     }
 }
 
