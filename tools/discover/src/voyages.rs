@@ -273,6 +273,7 @@ fn held_out(
             nominal: v.p.effects(shared, &theta),
             epochs: v.p.epochs.clone(),
             noise_lags: v.p.noise_lags,
+            noise_model: v.p.noise_model.clone(),
         };
         let r = if v.own.is_empty() {
             q.residuals(&q.nominal, &q.epochs)
