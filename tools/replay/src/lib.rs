@@ -280,8 +280,9 @@ impl Replay {
         if l == nalgebra::Vector3::zeros() {
             return *t;
         }
-        let [w, x, y, z] = t.quaternion_body_to_ned;
-        let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
+        // The attitude the replay starts from (`NavState::from_truth` reads the Euler angles).
+        let [roll, pitch, yaw] = t.euler_rad;
+        let q = nalgebra::UnitQuaternion::from_euler_angles(roll, pitch, yaw);
         let mut moved = *t;
         let p = auvnav_core::earth::offset_position(
             &auvnav_core::strapdown::truth_position(t),
