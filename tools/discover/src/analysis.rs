@@ -242,14 +242,7 @@ pub fn read_logs_with(
     Ok((channels, reference, undecodable))
 }
 
-/// The numbers of an effect value as the report writes it ([`json_of`]: a number or an array);
-/// None when a component is not a number.
-pub fn values_of(v: &serde_json::Value) -> Option<Vec<f64>> {
-    match v {
-        serde_json::Value::Array(a) => a.iter().map(|x| x.as_f64()).collect(),
-        x => x.as_f64().map(|x| vec![x]),
-    }
-}
+pub use super::findings::values_of;
 
 /// Component `k` of residuals interleaved `d` per epoch.
 fn component(res: &[f64], d: usize, k: usize) -> Vec<f64> {

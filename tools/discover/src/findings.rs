@@ -400,3 +400,12 @@ pub struct ReferenceAgainstImu {
     /// The smoother's own estimate of the DVL installation (against the IMU).
     pub smoothed_installation: Option<serde_json::Value>,
 }
+
+/// The numbers of an effect value as the report writes it (a number or an array); None when a
+/// component is not a number.
+pub fn values_of(v: &serde_json::Value) -> Option<Vec<f64>> {
+    match v {
+        serde_json::Value::Array(a) => a.iter().map(|x| x.as_f64()).collect(),
+        x => x.as_f64().map(|x| vec![x]),
+    }
+}

@@ -326,8 +326,8 @@ fn lever_arm_of(found: &super::findings::ReferenceAgainstImu) -> Option<([f64; 3
         .effects
         .iter()
         .find(|(n, _, _)| n == "dvl.lever_arm")?;
-    let v = <[f64; 3]>::try_from(super::analysis::values_of(value)?).ok()?;
-    let s = <[f64; 3]>::try_from(super::analysis::values_of(std)?).ok()?;
+    let v = <[f64; 3]>::try_from(super::findings::values_of(value)?).ok()?;
+    let s = <[f64; 3]>::try_from(super::findings::values_of(std)?).ok()?;
     Some((v, s))
 }
 
