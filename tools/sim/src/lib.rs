@@ -396,9 +396,6 @@ pub fn log_header(cfg: &SimConfig) -> LogHeader {
 
 /// Simulates into a log file, atomically (no file at `out` on error).
 pub fn simulate_to_log(cfg: &SimConfig, out: &Path) -> Result<SimSummary, SimError> {
-    if let Err(e) = Trajectory::from_scenario(&cfg.scenario) {
-        return Err(e.into());
-    }
     let mut summary = SimSummary::default();
     write_log_atomically(out, &log_header(cfg), |w| {
         summary = simulate(cfg, |m| -> anyhow::Result<()> {
@@ -417,9 +414,14 @@ pub fn simulate_to_log(cfg: &SimConfig, out: &Path) -> Result<SimSummary, SimErr
         })?;
         Ok(())
     })
-    .map_err(|e| SimError::Output {
-        path: out.to_path_buf(),
-        source: e.into(),
+    // The simulation's own error (a scenario the trajectory cannot fly) comes back as itself;
+    // anything else is the output's.
+    .map_err(|e| {
+        e.downcast::<SimError>()
+            .unwrap_or_else(|e| SimError::Output {
+                path: out.to_path_buf(),
+                source: e.into(),
+            })
     })?;
     Ok(summary)
 }

@@ -50,6 +50,22 @@ fn failures_are_typed_the_callers_apart_from_the_environments() {
     );
     assert!(!out.exists());
 
+    // A scenario the trajectory cannot fly (a depth change while stopped): the caller's, and no
+    // file.
+    let mut stopped = cfg.clone();
+    stopped.scenario.start.speed_m_s = 0.0;
+    stopped.scenario.legs = vec![auvnav_sim::scenario::Leg::Depth {
+        change_m: 5.0,
+        pitch_deg: 10.0,
+    }];
+    let flown = dir.join("stopped.mcap");
+    let e = simulate_to_log(&stopped, &flown).expect_err("cannot fly");
+    assert!(
+        matches!(e, SimError::Trajectory(_)) && e.is_usage(),
+        "{e:?}"
+    );
+    assert!(!flown.exists());
+
     // The same simulation into a writable place succeeds and perturbs.
     let good = dir.join("sim.mcap");
     let summary = simulate_to_log(&cfg, &good).expect("simulate");
