@@ -93,6 +93,12 @@ pub const HIDDEN: &[(&str, f64, f64)] = &[
     ("mag.declination", 1.0, 10.0),
     ("mag.inclination", 1.0, 5.0),
     ("mag.intensity", 1.0, 5.0),
+    ("imu.gyro_bias", 2.0, 20.0),
+    ("imu.accel_bias", 200.0, 2000.0),
+    ("imu.gyro_scale_factor", 500.0, 5000.0),
+    ("imu.accel_scale_factor", 500.0, 5000.0),
+    ("imu.gyro_misalignment", 0.5, 3.0),
+    ("imu.accel_misalignment", 0.5, 3.0),
 ];
 
 /// One hidden effect.
@@ -171,19 +177,129 @@ pub struct SetTrial {
     pub correct: bool,
     /// Some effect reported that was not hidden.
     pub false_discovery: bool,
+    /// Every hidden effect named (whatever its value), and nothing else.
+    pub named_right: bool,
+    /// Per hidden effect that was not named: what the report says of it at the hidden size
+    /// ([`Miss`]); None where it was named.
+    pub misses: Vec<Option<Miss>>,
+    /// Per hidden effect named: its estimate within three of its reported standard deviations
+    /// of the hidden value, on every component the motion determines.
+    pub within_3_sigma: Vec<Option<bool>>,
+}
+
+/// How a report accounts for a hidden effect it does not name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Miss {
+    /// The report says the motion does not excite it.
+    NotExcited,
+    /// The report's detection floor is above the hidden size on every excited component.
+    BelowTheFloor,
+    /// Several voyages disagree on it beyond their uncertainties (reported as inconsistent).
+    Inconsistent,
+    /// The report's floor says an effect of the hidden size would have been named, yet it was
+    /// not: a miss the report does not account for.
+    Silent,
+}
+
+/// What `report` says of the hidden effect `h` it did not name: an effect several voyages
+/// disagree on is reported as such; otherwise its detection floors against the hidden departure
+/// from nominal (over several voyages, the voyages' floors combined as their information adds).
+fn miss_of(h: &Hidden, report: &DiscoverReport) -> Miss {
+    if let Some(v) = &report.voyages
+        && v.inconsistent.iter().any(|e| e.name == h.name)
+    {
+        return Miss::Inconsistent;
+    }
+    let nominal = Effects::default().get(&h.name).unwrap_or_default();
+    let floors = match &report.voyages {
+        Some(v) => {
+            let each: Vec<Vec<Option<f64>>> =
+                v.voyages.iter().map(|r| floors_of(&h.name, r)).collect();
+            (0..nominal.len())
+                .map(|i| {
+                    let info: f64 = each
+                        .iter()
+                        .filter_map(|f| f.get(i).copied().flatten())
+                        .map(|f| 1.0 / (f * f))
+                        .sum();
+                    (info > 0.0).then(|| 1.0 / info.sqrt())
+                })
+                .collect()
+        }
+        None => floors_of(&h.name, report),
+    };
+    if floors.iter().all(Option::is_none) {
+        return Miss::NotExcited;
+    }
+    let silent = floors.iter().enumerate().any(|(i, f)| {
+        f.is_some_and(|f| {
+            (h.value.get(i).copied().unwrap_or(0.0) - nominal.get(i).copied().unwrap_or(0.0)).abs()
+                >= f
+        })
+    });
+    if silent {
+        Miss::Silent
+    } else {
+        Miss::BelowTheFloor
+    }
+}
+
+/// Per component, the smallest detection floor `report` gives effect `name` over its channels
+/// (None where no channel's motion excites the component).
+fn floors_of(name: &str, report: &DiscoverReport) -> Vec<Option<f64>> {
+    let mut out: Vec<Option<f64>> = Vec::new();
+    for f in report.floors.iter().filter(|f| f.name == name) {
+        if out.len() < f.floor.len() {
+            out.resize(f.floor.len(), None);
+        }
+        for (o, x) in out.iter_mut().zip(&f.floor) {
+            if let Some(x) = x {
+                *o = Some(o.map_or(*x, |v| v.min(*x)));
+            }
+        }
+    }
+    out
+}
+
+/// Names a noise setting puts into the data without their being hidden: a slowly drifting IMU
+/// bias has, over one voyage, a mean that is a bias like any other (a per-voyage effect), so
+/// naming it is describing the data, not a false discovery.
+pub fn realised_by(noise: &[(String, Vec<f64>)]) -> Vec<String> {
+    let on = |name: &str| {
+        noise
+            .iter()
+            .any(|(n, v)| n == name && v.iter().any(|x| *x != 0.0))
+    };
+    let mut out = Vec::new();
+    if on("imu.gyro_bias_instability") {
+        out.push("imu.gyro_bias".to_string());
+    }
+    if on("imu.accel_bias_instability") {
+        out.push("imu.accel_bias".to_string());
+    }
+    out
 }
 
 /// Coloured noise for trial `seed`, on top of the trial's white noise: a Gauss–Markov DVL
 /// velocity error (instability 5–15 mm/s per axis, correlation time 30–120 s, drawn per seed) —
 /// the slowly varying disagreement between a DVL and the vehicle's motion that measured logs show
-/// and white-noise trials do not.
+/// and white-noise trials do not — and a slowly drifting IMU bias (Gauss–Markov, gyro 0.5–5
+/// deg/h and accelerometer 20–200 µg per axis, correlation time 120–900 s), which makes the
+/// gyro and accelerometer residuals coloured the same way.
 pub fn coloured(seed: u64) -> Vec<(String, Vec<f64>)> {
     let mut rng = Rng::new(seed, "discover.coloured");
     let instability = 0.005 + 0.01 * rng.uniform();
     let tau = 30.0 + 90.0 * rng.uniform();
+    let gyro = 0.5 + 4.5 * rng.uniform();
+    let accel = 20.0 + 180.0 * rng.uniform();
+    let bias_tau = 120.0 + 780.0 * rng.uniform();
     vec![
         ("dvl.velocity_error_instability".into(), vec![instability]),
         ("dvl.velocity_error_correlation_time".into(), vec![tau]),
+        ("imu.gyro_bias_instability".into(), vec![gyro]),
+        ("imu.accel_bias_instability".into(), vec![accel]),
+        ("imu.bias_correlation_time".into(), vec![bias_tau]),
     ]
 }
 
@@ -217,7 +333,10 @@ pub fn trial_set_with(
         &Selection::default(),
     );
     let found: Vec<String> = report.effects.iter().map(|e| e.name.clone()).collect();
-    Ok((score(seed, hidden, found, &report), report))
+    Ok((
+        score(seed, hidden, found, &realised_by(noise), &report),
+        report,
+    ))
 }
 
 /// What one trial gave.
@@ -236,6 +355,9 @@ pub struct Trial {
     pub correct: bool,
     /// Some effect reported that was not hidden.
     pub false_discovery: bool,
+    /// What the report says of the hidden effect when it does not name it.
+    #[serde(default)]
+    pub miss: Option<Miss>,
 }
 
 /// Simulates the voyage of trial `seed` with its scenario's noise and `settings` on top, into
@@ -275,6 +397,7 @@ pub fn trial(
             found: t.found,
             correct: t.correct,
             false_discovery: t.false_discovery,
+            miss: t.misses.first().copied().flatten(),
         },
         report,
     ))
@@ -303,9 +426,16 @@ pub fn trial_voyages(
         .map(|h| (h.name.clone(), h.value.clone()))
         .collect();
     let mut data = Vec::with_capacity(voyages);
+    let mut realised = Vec::new();
     for i in 0..voyages {
         let s = seed * 16 + i as u64;
         let mut all = coloured(s);
+        for name in realised_by(&all) {
+            if !realised.contains(&name) {
+                realised.push(name.clone());
+                realised.push(format!("{name} (per voyage)"));
+            }
+        }
         all.extend(settings.iter().cloned());
         let log = simulate(s, &all, dir)?;
         let read = read_logs(std::slice::from_ref(&log));
@@ -325,13 +455,20 @@ pub fn trial_voyages(
             found.push(format!("{} (per voyage)", p.name));
         }
     }
-    Ok(score(seed, hidden, found, &report))
+    Ok(score(seed, hidden, found, &realised, &report))
 }
 
 /// A trial's score: each hidden effect's estimate and relative error |estimate − hidden| /
-/// |hidden − nominal| (vector norms) where `report` names it; correct when every hidden effect
-/// is named within 10 % and nothing else is in `found`.
-fn score(seed: u64, hidden: &[Hidden], found: Vec<String>, report: &DiscoverReport) -> SetTrial {
+/// |hidden − nominal| (vector norms) where `report` names it, or what the report says of it
+/// where it does not; correct when every hidden effect is named within 10 % and nothing else is
+/// in `found` but the names in `realised` (what the trial's noise put into the data).
+fn score(
+    seed: u64,
+    hidden: &[Hidden],
+    found: Vec<String>,
+    realised: &[String],
+    report: &DiscoverReport,
+) -> SetTrial {
     let norm = |a: &[f64], b: &[f64]| -> f64 {
         a.iter()
             .zip(b)
@@ -340,6 +477,7 @@ fn score(seed: u64, hidden: &[Hidden], found: Vec<String>, report: &DiscoverRepo
             .sqrt()
     };
     let (mut estimates, mut relative_errors) = (Vec::new(), Vec::new());
+    let (mut misses, mut within_3_sigma) = (Vec::new(), Vec::new());
     for h in hidden {
         match report.effects.iter().find(|e| e.name == h.name) {
             Some(e) => {
@@ -347,17 +485,25 @@ fn score(seed: u64, hidden: &[Hidden], found: Vec<String>, report: &DiscoverRepo
                 let est = values_of(&e.value).unwrap_or_else(|| vec![f64::NAN; h.value.len()]);
                 let nominal = Effects::default().get(&h.name).unwrap_or_default();
                 relative_errors.push(Some(norm(&est, &h.value) / norm(&h.value, &nominal)));
+                within_3_sigma.push(Some(covers(&est, &e.std, &h.value)));
                 estimates.push(Some(est));
+                misses.push(None);
             }
             None => {
                 relative_errors.push(None);
                 estimates.push(None);
+                within_3_sigma.push(None);
+                misses.push(Some(miss_of(h, report)));
             }
         }
     }
-    let false_discovery = found.iter().any(|n| !hidden.iter().any(|h| &h.name == n));
+    let hidden_name = |n: &String| hidden.iter().any(|h| &h.name == n);
+    let false_discovery = found
+        .iter()
+        .any(|n| !hidden_name(n) && !realised.contains(n));
+    let all_named = hidden.iter().all(|h| found.contains(&h.name));
     let correct = !false_discovery
-        && found.len() == hidden.len()
+        && all_named
         && relative_errors.iter().all(|r| r.is_some_and(|r| r <= 0.1));
     SetTrial {
         seed,
@@ -367,5 +513,22 @@ fn score(seed: u64, hidden: &[Hidden], found: Vec<String>, report: &DiscoverRepo
         relative_errors,
         correct,
         false_discovery,
+        named_right: !false_discovery && all_named,
+        misses,
+        within_3_sigma,
     }
+}
+
+/// The estimate `est` within three of its standard deviations `std` (a number or an array,
+/// null where the motion does not determine a component) of `hidden` on every component the
+/// motion determines.
+fn covers(est: &[f64], std: &serde_json::Value, hidden: &[f64]) -> bool {
+    let stds: Vec<Option<f64>> = match std {
+        serde_json::Value::Array(a) => a.iter().map(|x| x.as_f64()).collect(),
+        x => vec![x.as_f64()],
+    };
+    est.iter()
+        .zip(hidden)
+        .zip(&stds)
+        .all(|((e, h), s)| s.is_none_or(|s| (e - h).abs() <= 3.0 * s))
 }

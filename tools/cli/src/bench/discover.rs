@@ -6,8 +6,8 @@
 
 use crate::calibrate::Progress;
 use crate::discover::hidden_effects::{
-    HIDDEN, SetTrial, Trial, coloured, draw, draw_of, draw_pair, installation_effects, scaled,
-    trial_set, trial_set_with, trial_voyages,
+    HIDDEN, Miss, SetTrial, Trial, coloured, draw, draw_of, draw_pair, installation_effects,
+    scaled, trial_set, trial_set_with, trial_voyages,
 };
 use crate::parallel::{default_threads, map_runs};
 use serde::Serialize;
@@ -32,6 +32,8 @@ struct Summary {
     correct_rate: f64,
     /// Hidden trials where an effect other than the hidden one was reported.
     false_discoveries_with_effect: usize,
+    /// How the hidden trials that did not name the hidden effect accounted for it.
+    misses: Misses,
     null_trials: usize,
     null_false_discoveries: usize,
     null_false_discovery_rate: f64,
@@ -56,6 +58,13 @@ struct Summary {
     coloured_hidden_correct_rate: f64,
     /// Coloured hidden trials where an effect that was not hidden was reported.
     coloured_hidden_false_discoveries: usize,
+    /// Coloured hidden trials with the hidden name and nothing else, whatever the value.
+    coloured_hidden_named_right: usize,
+    /// Coloured hidden trials whose named estimate lies within three reported standard
+    /// deviations of the hidden value (of those named).
+    coloured_hidden_within_3_sigma: usize,
+    /// How the coloured hidden trials that did not name the hidden effect accounted for it.
+    coloured_hidden_misses: Misses,
     coloured: Vec<SetTrial>,
     /// The same noise over three voyages of one vehicle discovered together (each voyage its
     /// own noise realisation; an installation effect hidden in all three, or nothing).
@@ -64,6 +73,8 @@ struct Summary {
     voyages_hidden_trials: usize,
     voyages_hidden_correct: usize,
     voyages_hidden_false_discoveries: usize,
+    voyages_hidden_named_right: usize,
+    voyages_hidden_misses: Misses,
     voyages: Vec<SetTrial>,
     /// Discovery on the measured data sets (import in memory and discovery, per item).
     measured: Vec<MeasuredTiming>,
@@ -71,6 +82,40 @@ struct Summary {
     threads: usize,
     trials: Vec<Trial>,
     pairs: Vec<SetTrial>,
+}
+
+/// Hidden effects not named, by what the report says of them at the hidden size.
+#[derive(Debug, Default, Serialize)]
+struct Misses {
+    not_excited: usize,
+    below_the_floor: usize,
+    /// Several voyages disagree on it (reported as inconsistent).
+    inconsistent: usize,
+    /// The report's floor says the hidden size would have been named: unaccounted for.
+    silent: usize,
+}
+
+impl Misses {
+    fn of<'a>(misses: impl Iterator<Item = &'a Miss>) -> Misses {
+        let mut m = Misses::default();
+        for x in misses {
+            match x {
+                Miss::NotExcited => m.not_excited += 1,
+                Miss::BelowTheFloor => m.below_the_floor += 1,
+                Miss::Inconsistent => m.inconsistent += 1,
+                Miss::Silent => m.silent += 1,
+            }
+        }
+        m
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "not named: {} reported not excited, {} below the floor, {} inconsistent across \
+             voyages, {} silent",
+            self.not_excited, self.below_the_floor, self.inconsistent, self.silent
+        )
+    }
 }
 
 #[derive(Debug, Serialize)]
@@ -263,6 +308,8 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
     let (c_null, c_hidden) = coloured_trials.split_at(coloured_null);
     let c_null_fd = c_null.iter().filter(|t| t.false_discovery).count();
     let c_hidden_correct = c_hidden.iter().filter(|t| t.correct).count();
+    let misses_of =
+        |trials: &[SetTrial]| Misses::of(trials.iter().flat_map(|t| t.misses.iter().flatten()));
     let mut floor = Vec::new();
     for (e, (name, lo, hi)) in HIDDEN.iter().enumerate() {
         for &f in &FLOOR_FRACTIONS {
@@ -333,6 +380,7 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
         correct,
         correct_rate: correct as f64 / with.len().max(1) as f64,
         false_discoveries_with_effect: with.iter().filter(|t| t.false_discovery).count(),
+        misses: Misses::of(with.iter().filter_map(|t| t.miss.as_ref())),
         null_trials: without.len(),
         null_false_discoveries: null_fd,
         null_false_discovery_rate: null_fd as f64 / without.len().max(1) as f64,
@@ -351,12 +399,20 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
         coloured_hidden_correct: c_hidden_correct,
         coloured_hidden_correct_rate: c_hidden_correct as f64 / coloured_hidden.max(1) as f64,
         coloured_hidden_false_discoveries: c_hidden.iter().filter(|t| t.false_discovery).count(),
+        coloured_hidden_named_right: c_hidden.iter().filter(|t| t.named_right).count(),
+        coloured_hidden_within_3_sigma: c_hidden
+            .iter()
+            .filter(|t| t.within_3_sigma.iter().all(|w| w.unwrap_or(false)))
+            .count(),
+        coloured_hidden_misses: misses_of(c_hidden),
         coloured: coloured_trials.to_vec(),
         voyages_null_trials: v_null.len(),
         voyages_null_false_discoveries: v_null.iter().filter(|t| t.false_discovery).count(),
         voyages_hidden_trials: voyages_hidden,
         voyages_hidden_correct: v_hidden.iter().filter(|t| t.correct).count(),
         voyages_hidden_false_discoveries: v_hidden.iter().filter(|t| t.false_discovery).count(),
+        voyages_hidden_named_right: v_hidden.iter().filter(|t| t.named_right).count(),
+        voyages_hidden_misses: misses_of(v_hidden),
         voyages: voyage_trials.to_vec(),
         measured,
         wall_s: start.elapsed().as_secs_f64(),
@@ -376,6 +432,7 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
         100.0 * s.correct_rate,
         s.false_discoveries_with_effect
     );
+    println!("  {}", s.misses.describe());
     println!(
         "null data: {}/{} with a false discovery ({:.1} %)",
         s.null_false_discoveries,
@@ -431,12 +488,22 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
             100.0 * s.coloured_hidden_correct_rate,
             s.coloured_hidden_false_discoveries
         );
+        println!(
+            "  hidden: {}/{} the right name and nothing else (any value); {} within 3 reported \
+             standard deviations; {}",
+            s.coloured_hidden_named_right,
+            s.coloured_hidden_trials,
+            s.coloured_hidden_within_3_sigma,
+            s.coloured_hidden_misses.describe()
+        );
         for t in s.coloured.iter().filter(|t| !t.correct) {
             println!(
-                "  seed {}: hidden {:?}, found {:?}",
+                "  seed {}: hidden {:?}, found {:?}, relative errors {:?}, misses {:?}",
                 t.seed,
                 t.hidden.iter().map(|h| &h.name).collect::<Vec<_>>(),
-                t.found
+                t.found,
+                t.relative_errors,
+                t.misses
             );
         }
     }
@@ -450,6 +517,12 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
             s.voyages_hidden_correct,
             s.voyages_hidden_trials,
             s.voyages_hidden_false_discoveries
+        );
+        println!(
+            "  hidden: {}/{} the right name and nothing else (any value); {}",
+            s.voyages_hidden_named_right,
+            s.voyages_hidden_trials,
+            s.voyages_hidden_misses.describe()
         );
         for t in s.voyages.iter().filter(|t| !t.correct) {
             println!(
