@@ -475,6 +475,34 @@ fn coloured_dvl_noise_names_no_dvl_effect() {
     }
 }
 
+/// Null trial voyages with the benchmark's coloured noise (`hidden::coloured`: a Gauss–Markov
+/// DVL error and IMU biases drifting 0.5–5 deg/h and 20–200 µg over 120–900 s), twelve seeds
+/// of their own (9531–9542): the drift's mean over a voyage is a bias and may be named as one,
+/// but an IMU scale factor or misalignment is named in at most one of them. Before the drift
+/// was taken out as a nuisance and the bias preferred to what level motion cannot tell from it,
+/// four of these twelve named one (9531 an accelerometer scale factor beside the biases; 9533,
+/// 9539 and 9541 a misalignment in place of the accelerometer bias); now 9531 still does.
+#[test]
+fn a_drifting_imu_bias_is_not_taken_for_a_scale_or_misalignment() {
+    use auvnav_tools::discover::hidden_effects::{coloured, trial_set_with};
+    let d = dir("discover-drift");
+    let mut named = Vec::new();
+    for seed in 9531u64..=9542 {
+        let (t, _) = trial_set_with(seed, &[], &coloured(seed), &d.0).expect("trial");
+        let imu: Vec<String> = t
+            .found
+            .iter()
+            .filter(|n| n.starts_with("imu.") && !n.ends_with("_bias"))
+            .cloned()
+            .collect();
+        println!("seed {seed}: found {:?}", t.found);
+        if !imu.is_empty() {
+            named.push((seed, imu));
+        }
+    }
+    assert!(named.len() <= 1, "{named:?}");
+}
+
 /// What a log cannot show is said: a 0.37 s DVL time offset hidden in a docking run (seed 8803,
 /// whose accelerations sit in its last minutes, so that the held-out blocks cannot confirm an
 /// offset) is either named or reported with a floor above it. The floor is what the selection

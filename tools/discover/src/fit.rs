@@ -12,7 +12,7 @@
 //! Long on purpose: the fit, the held-out selection and the separability check share the channel's
 //! epochs, design and prior: three steps of one estimator.
 
-use super::{CANDIDATES, Candidate, Channel, Reference, spec};
+use super::{CANDIDATES, Candidate, Channel, ChannelKind, Reference, spec};
 use auvnav_sim::effects::Effects;
 use nalgebra::{DMatrix, DVector};
 
@@ -31,7 +31,14 @@ pub struct Problem<'a> {
     /// Per component, the Gauss–Markov part of the same residual ([`gauss_markov_fit`]: its
     /// variance and φ per reading; None where it shows none).
     pub noise_model: Vec<Option<(f64, f64)>>,
+    /// An IMU whose residual drifts: a slowly varying bias per axis (piecewise linear in time,
+    /// knots this many seconds apart) is taken out of every residual as a nuisance, its
+    /// constant part left to the bias candidate ([`remove_drift`]).
+    pub drift_knot_s: Option<f64>,
 }
+
+/// Knot spacing of the drifting IMU bias taken out as a nuisance (s).
+pub const DRIFT_KNOT_S: f64 = 90.0;
 
 impl<'a> Problem<'a> {
     pub fn new(channel: &'a Channel, reference: &'a Reference, nominal: Effects) -> Problem<'a> {
@@ -54,21 +61,41 @@ impl<'a> Problem<'a> {
             epochs,
             noise_lags: 0,
             noise_model: vec![None; d],
+            drift_knot_s: None,
         };
         let all = p.candidates();
         if !all.is_empty() && p.epochs.len() >= 8 {
-            let f = p.fit(&all, &p.epochs);
-            let r = p.residuals(&p.effects(&all, &f.theta), &p.epochs);
-            p.noise_lags = correlation_lags(&r, d);
-            let m = r.len() / d.max(1);
-            p.noise_model = (0..d)
-                .map(|k| {
-                    let x: Vec<f64> = (0..m).map(|t| r[t * d + k]).collect();
-                    gauss_markov_fit(&x).map(|(gm, _, phi)| (gm, phi))
-                })
-                .collect();
+            p.fit_noise(&all);
+            // An IMU's bias drifts (its datasheet's bias instability): where the residual shows
+            // a correlated part, the drift is a nuisance of the fit rather than noise whose
+            // long-run variance a few minutes of data cannot pin down, so that a scale factor
+            // or a misalignment is named only for what a slowly varying bias cannot explain.
+            if matches!(
+                p.channel.kind,
+                ChannelKind::Gyro | ChannelKind::Accelerometer
+            ) && p.noise_model.iter().any(Option::is_some)
+            {
+                p.drift_knot_s = Some(DRIFT_KNOT_S);
+                p.fit_noise(&all);
+            }
         }
         p
+    }
+
+    /// The noise model ([`Problem::noise_lags`], [`Problem::noise_model`]) of the residual with
+    /// the candidates `all` fitted.
+    fn fit_noise(&mut self, all: &[usize]) {
+        let d = self.channel.kind.dims();
+        let f = self.fit(all, &self.epochs);
+        let r = self.residuals(&self.effects(all, &f.theta), &self.epochs);
+        self.noise_lags = correlation_lags(&r, d);
+        let m = r.len() / d.max(1);
+        self.noise_model = (0..d)
+            .map(|k| {
+                let x: Vec<f64> = (0..m).map(|t| r[t * d + k]).collect();
+                gauss_markov_fit(&x).map(|(gm, _, phi)| (gm, phi))
+            })
+            .collect();
     }
 
     /// This channel's candidates (indices into [`CANDIDATES`]).
@@ -114,6 +141,10 @@ impl<'a> Problem<'a> {
                 Some(x) => r.extend(x[..d].iter().map(|v| if v.is_finite() { *v } else { 0.0 })),
                 None => r.extend(std::iter::repeat_n(0.0, d)),
             }
+        }
+        if let Some(knot) = self.drift_knot_s {
+            let times: Vec<f64> = epochs.iter().map(|&i| self.channel.times[i]).collect();
+            remove_drift(&mut r, &times, d, knot);
         }
         r
     }
@@ -378,6 +409,60 @@ impl Problem<'_> {
                 }
             })
             .collect()
+    }
+}
+
+/// Takes out of each of the `d` components of `r` (readings at `times`, in time order) its
+/// projection on a piecewise-linear function of time with knots about `knot` seconds apart (a
+/// straight line over a shorter stretch, such as a held-out block), less its mean: what varies
+/// slowly goes, the constant stays (for a bias candidate to take).
+pub fn remove_drift(r: &mut [f64], times: &[f64], d: usize, knot: f64) {
+    let m = times.len();
+    if m < 4 || d == 0 || r.len() < m * d {
+        return;
+    }
+    let (t0, t1) = (times[0], times[m - 1]);
+    let span = t1 - t0;
+    if !(span > 0.0 && knot > 0.0) {
+        return;
+    }
+    let intervals = (span / knot).round().max(1.0) as usize;
+    let q = intervals + 1;
+    let h = span / intervals as f64;
+    // Each reading lies on two hat functions: (index of the left knot, weight of the right).
+    let hats: Vec<(usize, f64)> = times
+        .iter()
+        .map(|t| {
+            let u = ((t - t0) / h).clamp(0.0, intervals as f64);
+            let j = (u.floor() as usize).min(intervals - 1);
+            (j, u - j as f64)
+        })
+        .collect();
+    let mut btb = DMatrix::<f64>::zeros(q, q);
+    for &(j, w) in &hats {
+        let (a, b) = (1.0 - w, w);
+        btb[(j, j)] += a * a;
+        btb[(j, j + 1)] += a * b;
+        btb[(j + 1, j)] += a * b;
+        btb[(j + 1, j + 1)] += b * b;
+    }
+    let Some(chol) = btb.cholesky() else {
+        return;
+    };
+    for k in 0..d {
+        let mut btr = DVector::<f64>::zeros(q);
+        let mut mean = 0.0;
+        for (t, &(j, w)) in hats.iter().enumerate() {
+            let x = r[t * d + k];
+            btr[j] += (1.0 - w) * x;
+            btr[j + 1] += w * x;
+            mean += x;
+        }
+        mean /= m as f64;
+        let c = chol.solve(&btr);
+        for (t, &(j, w)) in hats.iter().enumerate() {
+            r[t * d + k] -= (1.0 - w) * c[j] + w * c[j + 1] - mean;
+        }
     }
 }
 
@@ -699,6 +784,7 @@ pub fn select(p: &Problem, sel: &Selection, separability: &Separability) -> (Vec
     let mut current = base;
     let mut steps = Vec::new();
     let mut remaining = p.candidates();
+    let mut preferred = Vec::new();
     while !remaining.is_empty() {
         let scores: Vec<(usize, f64)> = remaining
             .iter()
@@ -708,9 +794,23 @@ pub fn select(p: &Problem, sel: &Selection, separability: &Separability) -> (Vec
                 (c, p.held_out_mse(&s))
             })
             .collect();
-        let Some(&(best, score)) = scores.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+        let Some(&(mut best, mut score)) = scores.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
             break;
         };
+        // An IMU's bias is in every run (its turn-on bias): where the motion cannot tell the
+        // best candidate from the bias (level motion couples gravity through a misalignment
+        // as through a horizontal accelerometer bias) and the bias alone explains nine tenths
+        // of what the best one does, the bias is taken first; the other must then explain what
+        // the bias leaves.
+        if let Some(&(b, s)) = scores.iter().find(|(c, s)| {
+            *c != best
+                && matches!(CANDIDATES[*c].name, "imu.gyro_bias" | "imu.accel_bias")
+                && current - *s >= 0.9 * (current - score)
+                && separability.correlation(best, *c) > sel.max_correlation
+        }) {
+            (best, score) = (b, s);
+            preferred.push(b);
+        }
         if score.is_nan() || score >= current * (1.0 - sel.min_gain) {
             break;
         }
@@ -744,6 +844,38 @@ pub fn select(p: &Problem, sel: &Selection, separability: &Separability) -> (Vec
         chosen = set;
         current = score;
         remaining.retain(|&c| c != best);
+    }
+    // A bias taken first by preference that the effects selected after it leave insignificant
+    // (a misalignment that explains the whole of it) was the wrong explanation: it goes, and the
+    // steps' scores are those of the set without it.
+    let f = p.fit(&chosen, &p.epochs);
+    let nominal = p.nominal_theta(&chosen);
+    let weak: Vec<usize> = preferred
+        .into_iter()
+        .filter(|&b| {
+            let (off, len) = offset_of(&chosen, b);
+            !(off..off + len).any(|k| {
+                let s = f.std[k];
+                s.is_finite() && s > 0.0 && (f.theta[k] - nominal[k]).abs() >= sel.min_sigma * s
+            })
+        })
+        .collect();
+    if !weak.is_empty() && chosen.len() > weak.len() {
+        let kept: Vec<Step> = steps
+            .into_iter()
+            .filter(|s| !weak.contains(&s.candidate))
+            .collect();
+        let (mut set, mut before) = (Vec::new(), base);
+        steps = kept
+            .into_iter()
+            .map(|mut s| {
+                set.push(s.candidate);
+                s.mse_before = before;
+                s.mse_after = p.held_out_mse(&set);
+                before = s.mse_after;
+                s
+            })
+            .collect();
     }
     (steps, base)
 }
@@ -1139,5 +1271,31 @@ mod tests {
             short < 0.5 * truth,
             "the autocovariance alone: {short} for {truth}"
         );
+    }
+
+    /// The drift taken out of an IMU residual: a slow wander (a ramp and a 400 s sine) goes, the
+    /// constant stays for the bias, and a quick signal (a 20 s sine) is left nearly whole.
+    #[test]
+    fn a_slow_drift_goes_and_the_constant_and_quick_signals_stay() {
+        let times: Vec<f64> = (0..400).map(f64::from).collect();
+        let quick = |t: f64| (2.0 * std::f64::consts::PI * t / 20.0).sin();
+        let slow = |t: f64| 0.01 * t + 2.0 * (2.0 * std::f64::consts::PI * t / 400.0).sin();
+        let mut r: Vec<f64> = times.iter().map(|&t| 5.0 + slow(t) + quick(t)).collect();
+        let mean_before = r.iter().sum::<f64>() / r.len() as f64;
+        remove_drift(&mut r, &times, 1, DRIFT_KNOT_S);
+        let mean_after = r.iter().sum::<f64>() / r.len() as f64;
+        assert!(
+            (mean_after - mean_before).abs() < 1e-9,
+            "the constant stays"
+        );
+        let left: f64 = times
+            .iter()
+            .zip(&r)
+            .map(|(&t, x)| (x - mean_after - quick(t)).powi(2))
+            .sum::<f64>()
+            / r.len() as f64;
+        let slow_power: f64 = times.iter().map(|&t| slow(t).powi(2)).sum::<f64>() / 400.0;
+        println!("slow part left {left:.4} of {slow_power:.4} (mean square)");
+        assert!(left < 0.05 * slow_power, "{left} of {slow_power}");
     }
 }

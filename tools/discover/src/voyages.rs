@@ -274,6 +274,7 @@ fn held_out(
             epochs: v.p.epochs.clone(),
             noise_lags: v.p.noise_lags,
             noise_model: v.p.noise_model.clone(),
+            drift_knot_s: v.p.drift_knot_s,
         };
         let r = if v.own.is_empty() {
             q.residuals(&q.nominal, &q.epochs)
