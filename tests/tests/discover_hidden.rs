@@ -503,6 +503,47 @@ fn a_drifting_imu_bias_is_not_taken_for_a_scale_or_misalignment() {
     assert!(named.len() <= 1, "{named:?}");
 }
 
+/// An estimate beyond what the IMU classes an AUV carries have is not named: a gyro z scale
+/// factor of 2 % (the turns excite it well) comes back in `implausible` with its value and a
+/// note, and the report names nothing in its place; 0.4 % is named as usual.
+#[test]
+fn an_implausible_imu_estimate_is_reported_not_named() {
+    let d = dir("discover-implausible");
+    let (t, r) = trial_set(
+        9571,
+        &[Hidden {
+            name: "imu.gyro_scale_factor".into(),
+            value: vec![0.0, 0.0, 20_000.0],
+        }],
+        &d.0,
+    )
+    .expect("trial");
+    println!("found {:?}, implausible {:?}", t.found, r.implausible);
+    assert!(t.found.is_empty(), "{:?}", t.found);
+    let i = r
+        .implausible
+        .iter()
+        .find(|i| i.name == "imu.gyro_scale_factor")
+        .expect("reported as implausible");
+    let z = i.value[2].as_f64().expect("z");
+    assert!((z - 20_000.0).abs() < 0.1 * 20_000.0, "z {z}");
+    assert!(
+        r.notes
+            .iter()
+            .any(|n| n.contains("imu.gyro_scale_factor") && n.contains("not named"))
+    );
+    let (t, _) = trial_set(
+        9572,
+        &[Hidden {
+            name: "imu.gyro_scale_factor".into(),
+            value: vec![0.0, 0.0, 4_000.0],
+        }],
+        &d.0,
+    )
+    .expect("trial");
+    assert!(t.correct, "{t:?}");
+}
+
 /// What a log cannot show is said: a 0.37 s DVL time offset hidden in a docking run (seed 8803,
 /// whose accelerations sit in its last minutes, so that the held-out blocks cannot confirm an
 /// offset) is either named or reported with a floor above it. The floor is what the selection

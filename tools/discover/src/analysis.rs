@@ -727,6 +727,7 @@ pub fn discover(
         } else {
             fit::select(&p, sel, &sep)
         };
+        let steps = drop_implausible(&p, steps, base_mse, kind, &mut r);
         let set: Vec<usize> = steps.iter().map(|s| s.candidate).collect();
         let f = p.fit(&set, &p.epochs);
         let full = p.effects(&set, &f.theta);
@@ -791,6 +792,59 @@ pub fn discover(
     }
     r.wall_s = start.elapsed().as_secs_f64();
     r
+}
+
+/// The selected `steps` without the effects whose estimate lies beyond what the sensor's class
+/// allows ([`crate::PLAUSIBLE`]), each recorded in the report with a note.
+fn drop_implausible(
+    p: &Problem,
+    steps: Vec<fit::Step>,
+    base_mse: f64,
+    kind: ChannelKind,
+    r: &mut DiscoverReport,
+) -> Vec<fit::Step> {
+    let set: Vec<usize> = steps.iter().map(|s| s.candidate).collect();
+    if set.is_empty() {
+        return steps;
+    }
+    let f = p.fit(&set, &p.epochs);
+    let nominal = p.nominal_theta(&set);
+    let mut drop = Vec::new();
+    for &c in &set {
+        let name = fit::name(c);
+        let Some(&(_, limit)) = crate::PLAUSIBLE.iter().find(|(n, _)| *n == name) else {
+            continue;
+        };
+        let (off, len) = fit::offset_of(&set, c);
+        if !(off..off + len).any(|k| (f.theta[k] - nominal[k]).abs() > limit) {
+            continue;
+        }
+        let value: Vec<f64> = f.theta[off..off + len].to_vec();
+        let unit = crate::spec(name).map_or("", |s| s.unit).to_string();
+        let shown: Vec<String> = value.iter().map(|v| super::findings::sig(*v)).collect();
+        let note = format!(
+            "{name} ({}): fitted [{}] {unit}, beyond ±{limit} {unit}, more than the IMUs an AUV \
+             carries have: not named; it points at the reference (its attitude or timing) or at \
+             an effect outside the vocabulary",
+            kind.name(),
+            shown.join(", ")
+        );
+        r.notes.push(note.clone());
+        r.implausible.push(super::findings::Implausible {
+            name: name.to_string(),
+            channel: kind,
+            value: serde_json::json!(value),
+            unit,
+            limit,
+            note,
+        });
+        drop.push(c);
+    }
+    if drop.is_empty() {
+        steps
+    } else {
+        fit::without(p, steps, base_mse, &drop)
+    }
 }
 
 /// Outliers beyond this many robust standard deviations (1.4826 × the median absolute residual)

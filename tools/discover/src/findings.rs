@@ -88,6 +88,19 @@ pub struct Unobservable {
     pub components: Vec<usize>,
 }
 
+/// An estimate beyond what the sensor's class allows.
+#[derive(Debug, Clone, Serialize)]
+pub struct Implausible {
+    pub name: String,
+    pub channel: ChannelKind,
+    /// The estimate the selection reached (the effect's unit).
+    pub value: serde_json::Value,
+    pub unit: String,
+    /// The largest departure from nominal the class allows, per component.
+    pub limit: f64,
+    pub note: String,
+}
+
 /// Structure left in a residual after the selected effects.
 #[derive(Debug, Clone, Serialize)]
 pub struct Unexplained {
@@ -172,6 +185,11 @@ pub struct DiscoverReport {
     pub navigation: Vec<NavigationGain>,
     /// What could not be analysed, and why.
     pub notes: Vec<String>,
+    /// Effects the selection would have named with an estimate beyond what the sensor's class
+    /// allows ([`crate::PLAUSIBLE`]): not named (they point at the reference or at an effect
+    /// outside the vocabulary), the other effects fitted without them.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub implausible: Vec<Implausible>,
     /// For every candidate not named: the smallest size the data would have named, so that an
     /// absent effect reads as "below the floor" or "not excited", never as silence.
     pub floors: Vec<DetectionFloor>,
@@ -212,6 +230,7 @@ impl DiscoverReport {
             noise: Vec::new(),
             navigation: Vec::new(),
             notes: Vec::new(),
+            implausible: Vec::new(),
             floors: Vec::new(),
             voyages: None,
             reference_against_imu: Vec::new(),

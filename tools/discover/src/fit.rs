@@ -861,23 +861,26 @@ pub fn select(p: &Problem, sel: &Selection, separability: &Separability) -> (Vec
         })
         .collect();
     if !weak.is_empty() && chosen.len() > weak.len() {
-        let kept: Vec<Step> = steps
-            .into_iter()
-            .filter(|s| !weak.contains(&s.candidate))
-            .collect();
-        let (mut set, mut before) = (Vec::new(), base);
-        steps = kept
-            .into_iter()
-            .map(|mut s| {
-                set.push(s.candidate);
-                s.mse_before = before;
-                s.mse_after = p.held_out_mse(&set);
-                before = s.mse_after;
-                s
-            })
-            .collect();
+        steps = without(p, steps, base, &weak);
     }
     (steps, base)
+}
+
+/// `steps` without the candidates `drop`, each remaining step's scores those of the set without
+/// them (`base`: the empty set's held-out score).
+pub fn without(p: &Problem, steps: Vec<Step>, base: f64, drop: &[usize]) -> Vec<Step> {
+    let (mut set, mut before) = (Vec::new(), base);
+    steps
+        .into_iter()
+        .filter(|s| !drop.contains(&s.candidate))
+        .map(|mut s| {
+            set.push(s.candidate);
+            s.mse_before = before;
+            s.mse_after = p.held_out_mse(&set);
+            before = s.mse_after;
+            s
+        })
+        .collect()
 }
 
 /// Most candidates [`select_parsimonious`] combines.

@@ -182,6 +182,10 @@ pub struct SetTrial {
     /// Per hidden effect that was not named: what the report says of it at the hidden size
     /// ([`Miss`]); None where it was named.
     pub misses: Vec<Option<Miss>>,
+    /// Per hidden effect not named: its size over the report's detection floor (the largest
+    /// over the excited components; a miss at 1.0–1.4 is the test's chance near its floor, far
+    /// above it a floor that promised too much).
+    pub sizes_over_floor: Vec<Option<f64>>,
     /// Per hidden effect named: its estimate within three of its reported standard deviations
     /// of the hidden value, on every component the motion determines.
     pub within_3_sigma: Vec<Option<bool>>,
@@ -205,11 +209,11 @@ pub enum Miss {
 /// What `report` says of the hidden effect `h` it did not name: an effect several voyages
 /// disagree on is reported as such; otherwise its detection floors against the hidden departure
 /// from nominal (over several voyages, the voyages' floors combined as their information adds).
-fn miss_of(h: &Hidden, report: &DiscoverReport) -> Miss {
+fn miss_of(h: &Hidden, report: &DiscoverReport) -> (Miss, Option<f64>) {
     if let Some(v) = &report.voyages
         && v.inconsistent.iter().any(|e| e.name == h.name)
     {
-        return Miss::Inconsistent;
+        return (Miss::Inconsistent, None);
     }
     let nominal = Effects::default().get(&h.name).unwrap_or_default();
     let floors = match &report.voyages {
@@ -229,20 +233,29 @@ fn miss_of(h: &Hidden, report: &DiscoverReport) -> Miss {
         }
         None => floors_of(&h.name, report),
     };
-    if floors.iter().all(Option::is_none) {
-        return Miss::NotExcited;
-    }
-    let silent = floors.iter().enumerate().any(|(i, f)| {
-        f.is_some_and(|f| {
-            (h.value.get(i).copied().unwrap_or(0.0) - nominal.get(i).copied().unwrap_or(0.0)).abs()
-                >= f
+    let ratio = size_over_floor(h, &nominal, &floors);
+    let miss = match ratio {
+        None => Miss::NotExcited,
+        Some(x) if x >= 1.0 => Miss::Silent,
+        Some(_) => Miss::BelowTheFloor,
+    };
+    (miss, ratio)
+}
+
+/// The hidden departure from nominal over the detection floor, the largest over the excited
+/// components (None where none is excited). The floor is the size whose expected estimate
+/// stands at the test's threshold: one just above it is named about half of the time.
+fn size_over_floor(h: &Hidden, nominal: &[f64], floors: &[Option<f64>]) -> Option<f64> {
+    floors
+        .iter()
+        .enumerate()
+        .filter_map(|(i, f)| {
+            let offset = (h.value.get(i).copied().unwrap_or(0.0)
+                - nominal.get(i).copied().unwrap_or(0.0))
+            .abs();
+            f.filter(|f| *f > 0.0).map(|f| offset / f)
         })
-    });
-    if silent {
-        Miss::Silent
-    } else {
-        Miss::BelowTheFloor
-    }
+        .reduce(f64::max)
 }
 
 /// Per component, the smallest detection floor `report` gives effect `name` over its channels
@@ -477,7 +490,7 @@ fn score(
             .sqrt()
     };
     let (mut estimates, mut relative_errors) = (Vec::new(), Vec::new());
-    let (mut misses, mut within_3_sigma) = (Vec::new(), Vec::new());
+    let (mut misses, mut within_3_sigma, mut sizes) = (Vec::new(), Vec::new(), Vec::new());
     for h in hidden {
         match report.effects.iter().find(|e| e.name == h.name) {
             Some(e) => {
@@ -488,12 +501,15 @@ fn score(
                 within_3_sigma.push(Some(covers(&est, &e.std, &h.value)));
                 estimates.push(Some(est));
                 misses.push(None);
+                sizes.push(None);
             }
             None => {
                 relative_errors.push(None);
                 estimates.push(None);
                 within_3_sigma.push(None);
-                misses.push(Some(miss_of(h, report)));
+                let (miss, size) = miss_of(h, report);
+                misses.push(Some(miss));
+                sizes.push(size);
             }
         }
     }
@@ -515,6 +531,7 @@ fn score(
         false_discovery,
         named_right: !false_discovery && all_named,
         misses,
+        sizes_over_floor: sizes,
         within_3_sigma,
     }
 }

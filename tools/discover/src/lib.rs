@@ -690,6 +690,20 @@ pub const CANDIDATES: &[Candidate] = &[
     },
 ];
 
+/// The largest departure from nominal an effect can plausibly have for the sensor classes an
+/// AUV carries (tactical MEMS to navigation-grade IMUs, calibrated by their maker): per
+/// component, in the effect's unit. An estimate beyond it is not a finding about the sensor —
+/// a 9 % accelerometer scale factor or a 28 mrad axis misalignment fitted against a
+/// post-processed reference points at that reference (its attitude, its timing) or at an effect
+/// outside the vocabulary. The simulator's ranges are wider (what can be simulated, not what a
+/// sensor of the class has).
+pub const PLAUSIBLE: &[(&str, f64)] = &[
+    ("imu.gyro_scale_factor", 10_000.0),
+    ("imu.accel_scale_factor", 10_000.0),
+    ("imu.gyro_misalignment", 10.0),
+    ("imu.accel_misalignment", 10.0),
+];
+
 /// The effect's specification in the simulator's vocabulary.
 pub fn spec(name: &str) -> Option<&'static auvnav_sim::effects::EffectSpec> {
     auvnav_sim::effects::SPECS.iter().find(|s| s.name == name)

@@ -498,12 +498,14 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
         );
         for t in s.coloured.iter().filter(|t| !t.correct) {
             println!(
-                "  seed {}: hidden {:?}, found {:?}, relative errors {:?}, misses {:?}",
+                "  seed {}: hidden {:?}, found {:?}, relative errors {:?}, misses {:?} (size over \
+                 the floor {:?})",
                 t.seed,
                 t.hidden.iter().map(|h| &h.name).collect::<Vec<_>>(),
                 t.found,
                 t.relative_errors,
-                t.misses
+                t.misses,
+                t.sizes_over_floor
             );
         }
     }
