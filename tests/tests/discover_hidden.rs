@@ -481,7 +481,7 @@ fn coloured_dvl_noise_names_no_dvl_effect() {
 /// but an IMU scale factor or misalignment is named in at most one of them. Before the drift
 /// was taken out as a nuisance and the bias preferred to what level motion cannot tell from it,
 /// four of these twelve named one (9531 an accelerometer scale factor beside the biases; 9533,
-/// 9539 and 9541 a misalignment in place of the accelerometer bias); now 9531 still does.
+/// 9539 and 9541 a misalignment in place of the accelerometer bias); now none does.
 #[test]
 fn a_drifting_imu_bias_is_not_taken_for_a_scale_or_misalignment() {
     use auvnav_tools::discover::hidden_effects::{coloured, trial_set_with};

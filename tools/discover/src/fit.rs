@@ -799,13 +799,11 @@ pub fn select(p: &Problem, sel: &Selection, separability: &Separability) -> (Vec
         };
         // An IMU's bias is in every run (its turn-on bias): where the motion cannot tell the
         // best candidate from the bias (level motion couples gravity through a misalignment
-        // as through a horizontal accelerometer bias) and the bias alone explains nine tenths
-        // of what the best one does, the bias is taken first; the other must then explain what
-        // the bias leaves.
-        if let Some(&(b, s)) = scores.iter().find(|(c, s)| {
+        // as through a horizontal accelerometer bias), the bias is taken first; the other must
+        // then explain what the bias leaves.
+        if let Some(&(b, s)) = scores.iter().find(|(c, _)| {
             *c != best
                 && matches!(CANDIDATES[*c].name, "imu.gyro_bias" | "imu.accel_bias")
-                && current - *s >= 0.9 * (current - score)
                 && separability.correlation(best, *c) > sel.max_correlation
         }) {
             (best, score) = (b, s);
