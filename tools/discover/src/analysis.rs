@@ -804,7 +804,8 @@ fn drop_implausible(
     r: &mut DiscoverReport,
 ) -> Vec<fit::Step> {
     let set: Vec<usize> = steps.iter().map(|s| s.candidate).collect();
-    if set.is_empty() {
+    let bounded = |c: &usize| crate::PLAUSIBLE.iter().any(|(n, _)| *n == fit::name(*c));
+    if !set.iter().any(bounded) {
         return steps;
     }
     let f = p.fit(&set, &p.epochs);
