@@ -423,8 +423,14 @@ pub struct ReferenceAgainstImu {
 /// The numbers of an effect value as the report writes it (a number or an array); None when a
 /// component is not a number.
 pub fn values_of(v: &serde_json::Value) -> Option<Vec<f64>> {
+    components_of(v).into_iter().collect()
+}
+
+/// Per component, the number of an effect value as the report writes it (a number or an
+/// array); None for a component that is not a number (a deviation the motion does not give).
+pub fn components_of(v: &serde_json::Value) -> Vec<Option<f64>> {
     match v {
         serde_json::Value::Array(a) => a.iter().map(|x| x.as_f64()).collect(),
-        x => x.as_f64().map(|x| vec![x]),
+        x => vec![x.as_f64()],
     }
 }

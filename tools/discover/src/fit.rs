@@ -824,13 +824,7 @@ pub fn select(p: &Problem, sel: &Selection, separability: &Separability) -> (Vec
         let mut set = chosen.clone();
         set.push(best);
         let f = p.fit(&set, &p.epochs);
-        let nominal = p.nominal_theta(&set);
-        let (off, len) = offset_of(&set, best);
-        let significant = (off..off + len).any(|k| {
-            let s = f.std[k];
-            s.is_finite() && s > 0.0 && (f.theta[k] - nominal[k]).abs() >= sel.min_sigma * s
-        });
-        if !significant {
+        if !stands_out(&f, &p.nominal_theta(&set), &set, best, sel.min_sigma) {
             break;
         }
         let rivals = scores
@@ -859,13 +853,7 @@ pub fn select(p: &Problem, sel: &Selection, separability: &Separability) -> (Vec
     let nominal = p.nominal_theta(&chosen);
     let weak: Vec<usize> = preferred
         .into_iter()
-        .filter(|&b| {
-            let (off, len) = offset_of(&chosen, b);
-            !(off..off + len).any(|k| {
-                let s = f.std[k];
-                s.is_finite() && s > 0.0 && (f.theta[k] - nominal[k]).abs() >= sel.min_sigma * s
-            })
-        })
+        .filter(|&b| !stands_out(&f, &nominal, &chosen, b, sel.min_sigma))
         .collect();
     if !weak.is_empty() && chosen.len() > weak.len() {
         steps = without(p, steps, base, &weak);
@@ -950,13 +938,10 @@ pub fn select_parsimonious(
     loop {
         let f = p.fit(&chosen, &p.epochs);
         let nominal = p.nominal_theta(&chosen);
-        let weak = chosen.iter().copied().find(|&c| {
-            let (off, len) = offset_of(&chosen, c);
-            !(off..off + len).any(|k| {
-                let s = f.std[k];
-                s.is_finite() && s > 0.0 && (f.theta[k] - nominal[k]).abs() >= sel.min_sigma * s
-            })
-        });
+        let weak = chosen
+            .iter()
+            .copied()
+            .find(|&c| !stands_out(&f, &nominal, &chosen, c, sel.min_sigma));
         match weak {
             Some(c) => chosen.retain(|&x| x != c),
             None => break,
@@ -1014,6 +999,16 @@ pub fn select_parsimonious(
         current = score;
     }
     (steps_out, base)
+}
+
+/// Candidate `c` of the fitted `set` lies `min_sigma` of its deviations from its nominal value
+/// (`nominal`: the set's) on some component: the significance test of the selection.
+fn stands_out(f: &Fit, nominal: &[f64], set: &[usize], c: usize, min_sigma: f64) -> bool {
+    let (off, len) = offset_of(set, c);
+    (off..off + len).any(|k| {
+        let s = f.std[k];
+        s.is_finite() && s > 0.0 && (f.theta[k] - nominal[k]).abs() >= min_sigma * s
+    })
 }
 
 /// Where a candidate's parameters sit in a set's vector: (offset, length).

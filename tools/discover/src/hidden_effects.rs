@@ -540,10 +540,7 @@ fn score(
 /// null where the motion does not determine a component) of `hidden` on every component the
 /// motion determines.
 fn covers(est: &[f64], std: &serde_json::Value, hidden: &[f64]) -> bool {
-    let stds: Vec<Option<f64>> = match std {
-        serde_json::Value::Array(a) => a.iter().map(|x| x.as_f64()).collect(),
-        x => vec![x.as_f64()],
-    };
+    let stds = super::findings::components_of(std);
     est.iter()
         .zip(hidden)
         .zip(&stds)
