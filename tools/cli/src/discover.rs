@@ -126,6 +126,9 @@ pub mod command {
                 u.name, u.components
             );
         }
+        for u in &r.undetermined {
+            println!("  undetermined: {}", u.note);
+        }
         for f in &r.floors {
             println!("  not named: {}", f.describe());
         }

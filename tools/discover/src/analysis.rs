@@ -722,12 +722,16 @@ pub fn discover(
                 components: comps.clone(),
             });
         }
-        let (steps, base_mse) = if kind == ChannelKind::DvlBeams {
+        let selected = if kind == ChannelKind::DvlBeams {
             fit::select_parsimonious(&p, sel, &sep)
         } else {
             fit::select(&p, sel, &sep)
         };
-        let steps = drop_implausible(&p, steps, base_mse, kind, &mut r);
+        if let Some(u) = &selected.undetermined {
+            record_undetermined(&p, u, sel, kind, &mut r);
+        }
+        let base_mse = selected.base;
+        let steps = drop_implausible(&p, selected.steps, base_mse, kind, &mut r);
         let set: Vec<usize> = steps.iter().map(|s| s.candidate).collect();
         let f = p.fit(&set, &p.epochs);
         let full = p.effects(&set, &f.theta);
@@ -792,6 +796,78 @@ pub fn discover(
     }
     r.wall_s = start.elapsed().as_secs_f64();
     r
+}
+
+/// A value and its deviation to the deviation's second significant digit, per component
+/// (`[a, b, c] ± [d, e, f]` for a vector).
+fn with_deviation(value: &[f64], std: &[f64]) -> String {
+    let (mut vs, mut ss) = (Vec::new(), Vec::new());
+    for (v, s) in value.iter().zip(std) {
+        let decimals = if s.is_finite() && *s > 0.0 {
+            (1 - s.log10().floor() as i64).clamp(0, 9) as usize
+        } else {
+            3
+        };
+        vs.push(format!("{v:.decimals$}"));
+        ss.push(format!("{s:.decimals$}"));
+    }
+    if vs.len() == 1 {
+        format!("{} ± {}", vs[0], ss[0])
+    } else {
+        format!("[{}] ± [{}]", vs.join(", "), ss.join(", "))
+    }
+}
+
+/// The candidate where the selection stopped for want of significance, with its estimate.
+fn record_undetermined(
+    p: &Problem,
+    u: &fit::Undetermined,
+    sel: &Selection,
+    kind: ChannelKind,
+    r: &mut DiscoverReport,
+) {
+    let name = fit::name(u.candidate);
+    let (off, len) = fit::offset_of(&u.set, u.candidate);
+    // A fit the readings cannot solve (no finite deviation) points at nothing.
+    if u.fit.std[off..off + len].iter().all(|s| !s.is_finite()) {
+        return;
+    }
+    let nominal = p.nominal_theta(&u.set);
+    let sigmas = (off..off + len)
+        .filter(|&k| u.fit.std[k].is_finite() && u.fit.std[k] > 0.0)
+        .map(|k| (u.fit.theta[k] - nominal[k]).abs() / u.fit.std[k])
+        .fold(0.0, f64::max);
+    let widening = (off..off + len)
+        .filter(|&k| u.fit.std_white[k] > 0.0 && u.fit.std_white[k].is_finite())
+        .map(|k| u.fit.std[k] / u.fit.std_white[k])
+        .fold(1.0, f64::max);
+    let value = json_of(&u.fit.theta[off..off + len]);
+    let std = json_of(&u.fit.std[off..off + len]);
+    let unit = spec(name).map_or("", |s| s.unit);
+    let note = format!(
+        "{name} ({}): {} {unit}, {sigmas:.1}σ from nominal where the test asks {}σ; it \
+         lowers the held-out score {:.3e} → {:.3e}, but the residual's correlation in time \
+         makes its deviation {widening:.1}× what white residuals would give: these data point \
+         at it without determining it (not named)",
+        kind.name(),
+        with_deviation(&u.fit.theta[off..off + len], &u.fit.std[off..off + len]),
+        sel.min_sigma,
+        u.mse_before,
+        u.mse_after
+    );
+    r.undetermined.push(super::findings::Undetermined {
+        name: name.into(),
+        channel: kind,
+        value,
+        std,
+        nominal: json_of(&nominal[off..off + len]),
+        unit: unit.into(),
+        sigmas,
+        widening,
+        held_out_before: u.mse_before,
+        held_out_after: u.mse_after,
+        note,
+    });
 }
 
 /// The selected `steps` without the effects whose estimate lies beyond what the sensor's class

@@ -101,6 +101,29 @@ pub struct Implausible {
     pub note: String,
 }
 
+/// A candidate the data point at without determining it: it lowers the held-out score, but its
+/// estimate does not stand out from nominal by the significance test once the residual's
+/// correlation in time is allowed for (a slowly varying error it cannot be told from on this
+/// motion). Not named, not written into the model.
+#[derive(Debug, Clone, Serialize)]
+pub struct Undetermined {
+    pub name: String,
+    pub channel: ChannelKind,
+    /// The estimate, fitted with the effects selected before it (the effect's unit).
+    pub value: serde_json::Value,
+    pub std: serde_json::Value,
+    pub nominal: serde_json::Value,
+    pub unit: String,
+    /// Its largest departure from nominal, in standard deviations.
+    pub sigmas: f64,
+    /// How much wider its deviations are than white residuals would give.
+    pub widening: f64,
+    /// The held-out score without it and with it.
+    pub held_out_before: f64,
+    pub held_out_after: f64,
+    pub note: String,
+}
+
 /// Structure left in a residual after the selected effects.
 #[derive(Debug, Clone, Serialize)]
 pub struct Unexplained {
@@ -190,6 +213,10 @@ pub struct DiscoverReport {
     /// outside the vocabulary), the other effects fitted without them.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub implausible: Vec<Implausible>,
+    /// Candidates the held-out score asks for and the significance test refuses, with their
+    /// estimates ([`Undetermined`]).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub undetermined: Vec<Undetermined>,
     /// For every candidate not named: the smallest size the data would have named, so that an
     /// absent effect reads as "below the floor" or "not excited", never as silence.
     pub floors: Vec<DetectionFloor>,
@@ -231,6 +258,7 @@ impl DiscoverReport {
             navigation: Vec::new(),
             notes: Vec::new(),
             implausible: Vec::new(),
+            undetermined: Vec::new(),
             floors: Vec::new(),
             voyages: None,
             reference_against_imu: Vec::new(),

@@ -12,6 +12,7 @@
 //! Long on purpose: the fit, the held-out selection and the separability check share the channel's
 //! epochs, design and prior: three steps of one estimator.
 
+use super::noise::restricted_gauss_markov;
 use super::{CANDIDATES, Candidate, Channel, ChannelKind, Reference, spec};
 use auvnav_sim::effects::Effects;
 use nalgebra::{DMatrix, DVector};
@@ -28,9 +29,10 @@ pub struct Problem<'a> {
     /// candidate fitted, so that an effect a set leaves out is not taken for correlated noise
     /// (which would widen the deviations of the effects in the set and stop the selection).
     pub noise_lags: usize,
-    /// Per component, the Gauss–Markov part of the same residual ([`gauss_markov_fit`]: its
-    /// variance and φ per reading; None where it shows none).
-    pub noise_model: Vec<Option<(f64, f64)>>,
+    /// Per component, the Gauss–Markov error and white noise of the same residual (its
+    /// variance, the white variance and φ per reading; None where it shows no correlated part):
+    /// by [`restricted_gauss_markov`] with the candidates' design and the drift nuisance's.
+    pub noise_model: Vec<Option<(f64, f64, f64)>>,
     /// An IMU whose residual drifts: a slowly varying bias per axis (piecewise linear in time,
     /// knots this many seconds apart) is taken out of every residual as a nuisance, its
     /// constant part left to the bias candidate ([`remove_drift`]).
@@ -90,10 +92,34 @@ impl<'a> Problem<'a> {
         let r = self.residuals(&self.effects(all, &f.theta), &self.epochs);
         self.noise_lags = correlation_lags(&r, d);
         let m = r.len() / d.max(1);
+        // The noise is read with what the candidates (and an IMU's drift nuisance) took from it
+        // counted (the restricted likelihood with their design): a slow sensor error on a
+        // voyage a few of its correlation times long is otherwise mostly absorbed by the
+        // installation effects and read short.
+        let jac = if f.theta.is_empty() {
+            DMatrix::zeros(r.len(), 0)
+        } else {
+            self.jacobian(all, &f.theta, &self.epochs, &r)
+        };
+        let drift = match self.drift_knot_s {
+            Some(knot) => {
+                let times: Vec<f64> = self.epochs.iter().map(|&i| self.channel.times[i]).collect();
+                drift_basis(&times, knot)
+            }
+            None => DMatrix::zeros(m, 0),
+        };
+        let (p, q) = (jac.ncols(), drift.ncols());
         self.noise_model = (0..d)
             .map(|k| {
                 let x: Vec<f64> = (0..m).map(|t| r[t * d + k]).collect();
-                gauss_markov_fit(&x).map(|(gm, _, phi)| (gm, phi))
+                let design = DMatrix::from_fn(m, p + q, |t, c| {
+                    if c < p {
+                        jac[(t * d + k, c)]
+                    } else {
+                        drift[(t, c - p)]
+                    }
+                });
+                restricted_gauss_markov(&x, &design)
             })
             .collect();
     }
@@ -418,26 +444,12 @@ impl Problem<'_> {
 /// slowly goes, the constant stays (for a bias candidate to take).
 pub fn remove_drift(r: &mut [f64], times: &[f64], d: usize, knot: f64) {
     let m = times.len();
-    if m < 4 || d == 0 || r.len() < m * d {
+    if r.len() < m * d {
         return;
     }
-    let (t0, t1) = (times[0], times[m - 1]);
-    let span = t1 - t0;
-    if !(span > 0.0 && knot > 0.0) {
+    let Some((hats, q)) = drift_hats(times, knot) else {
         return;
-    }
-    let intervals = (span / knot).round().max(1.0) as usize;
-    let q = intervals + 1;
-    let h = span / intervals as f64;
-    // Each reading lies on two hat functions: (index of the left knot, weight of the right).
-    let hats: Vec<(usize, f64)> = times
-        .iter()
-        .map(|t| {
-            let u = ((t - t0) / h).clamp(0.0, intervals as f64);
-            let j = (u.floor() as usize).min(intervals - 1);
-            (j, u - j as f64)
-        })
-        .collect();
+    };
     let mut btb = DMatrix::<f64>::zeros(q, q);
     for &(j, w) in &hats {
         let (a, b) = (1.0 - w, w);
@@ -473,6 +485,47 @@ pub fn remove_drift(r: &mut [f64], times: &[f64], d: usize, knot: f64) {
             r[t * d + k] -= f - fitted_mean;
         }
     }
+}
+
+/// The hat functions of [`remove_drift`]'s piecewise-linear drift (knots about `knot` seconds
+/// apart) at each of `times`: (index of the left knot, weight of the right) per reading, and the
+/// number of knots. None for fewer than four readings or no time span.
+fn drift_hats(times: &[f64], knot: f64) -> Option<(Vec<(usize, f64)>, usize)> {
+    let m = times.len();
+    if m < 4 {
+        return None;
+    }
+    let (t0, t1) = (times[0], times[m - 1]);
+    let span = t1 - t0;
+    if !(span > 0.0 && knot > 0.0) {
+        return None;
+    }
+    let intervals = (span / knot).round().max(1.0) as usize;
+    let h = span / intervals as f64;
+    // Each reading lies on two hat functions.
+    let hats = times
+        .iter()
+        .map(|t| {
+            let u = ((t - t0) / h).clamp(0.0, intervals as f64);
+            let j = (u.floor() as usize).min(intervals - 1);
+            (j, u - j as f64)
+        })
+        .collect();
+    Some((hats, intervals + 1))
+}
+
+/// The drift [`remove_drift`] can take out, as a design: one column per knot's hat function,
+/// one row per reading (none when it takes nothing out).
+pub fn drift_basis(times: &[f64], knot: f64) -> DMatrix<f64> {
+    let Some((hats, q)) = drift_hats(times, knot) else {
+        return DMatrix::zeros(times.len(), 0);
+    };
+    let mut b = DMatrix::zeros(times.len(), q);
+    for (t, &(j, w)) in hats.iter().enumerate() {
+        b[(t, j)] = 1.0 - w;
+        b[(t, j + 1)] = w;
+    }
+    b
 }
 
 /// Number of time blocks of the held-out score.
@@ -558,155 +611,28 @@ pub fn fixed_b_factor(lags: usize, m: usize) -> f64 {
     (1.96 + 2.9694 * b + 0.4160 * b * b - 0.5324 * b * b * b) / 1.96
 }
 
-/// A first-order Gauss–Markov error plus white noise fitted to one residual component (readings
-/// in time order): (Gauss–Markov variance, white variance, φ per reading). None when the
-/// autocorrelation shows no correlated part (fewer than two lags above the 95 % bound).
-pub fn gauss_markov_fit(x: &[f64]) -> Option<(f64, f64, f64)> {
-    let (gm, white, phi) = autocovariance_fit(x)?;
-    // On a series not many correlation times long the autocovariance is read short: the
-    // series' own mean (and the effects fitted with it) take up the slow part of the error, by
-    // a share of the order of τ/m. The variogram, ½E(x(t+h) − x(t))² = σ²_w + σ²_gm(1 − φ^h),
-    // does not see the mean; on such a series, where it gives the larger long-run variance it
-    // is taken.
-    let long_run = |g: f64, p: f64| g * (1.0 + p) / (1.0 - p);
-    let tau = -1.0 / phi.max(1e-12).ln();
-    if (x.len() as f64) < 20.0 * tau
-        && let Some((vg, vw, vp)) = variogram_fit(x)
-        && long_run(vg, vp) > long_run(gm, phi)
-    {
-        return Some((vg, vw, vp));
-    }
-    Some((gm, white, phi))
-}
-
-/// [`gauss_markov_fit`] from the autocovariance alone: log γ(j) = log σ² + j log φ over the lags
-/// whose autocovariance stands above the 95 % bound for white noise.
-fn autocovariance_fit(x: &[f64]) -> Option<(f64, f64, f64)> {
-    let m = x.len();
-    if m < 16 {
-        return None;
-    }
-    let g0 = x.iter().map(|v| v * v).sum::<f64>() / m as f64;
-    if g0 <= 0.0 {
-        return None;
-    }
-    let bound = 2.0 * g0 / (m as f64).sqrt();
-    // log γ(j) = log σ² + j log φ over the lags whose autocovariance stands above the bound,
-    // up to the first that does not.
-    let (mut sx, mut sy, mut sxx, mut sxy, mut k) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for j in 1..=m / 4 {
-        let g = (j..m).map(|t| x[t] * x[t - j]).sum::<f64>() / m as f64;
-        if g <= bound {
-            break;
-        }
-        let (jx, ly) = (j as f64, g.ln());
-        sx += jx;
-        sy += ly;
-        sxx += jx * jx;
-        sxy += jx * ly;
-        k += 1.0;
-    }
-    if k < 2.0 {
-        return None;
-    }
-    let slope = (k * sxy - sx * sy) / (k * sxx - sx * sx);
-    let phi = slope.exp().clamp(0.0, 0.9999);
-    let gm = ((sy - slope * sx) / k).exp().min(g0);
-    Some((gm, g0 - gm, phi))
-}
-
-/// A first-order Gauss–Markov error plus white noise fitted to the empirical variogram of `x`
-/// (about 40 lags, log-spaced up to half the series; weighted by the pairs each lag has over its
-/// squared value): (Gauss–Markov variance, white variance, φ per reading), the correlation time
-/// searched from one reading to a quarter of the series (the longest correlation the Newey–West
-/// window allows too). Searched up to the whole series, it read the moving bed of a river
-/// crossing as one error over the whole transect, and the 12–24° heading offset of that
-/// transect against GPS was no longer named.
-fn variogram_fit(x: &[f64]) -> Option<(f64, f64, f64)> {
-    let m = x.len();
-    let h_max = m / 2;
-    if h_max < 4 {
-        return None;
-    }
-    let mut lags: Vec<usize> = (0..40)
-        .map(|i| ((h_max as f64).ln() * i as f64 / 39.0).exp().round() as usize)
-        .filter(|&h| h >= 1 && h <= h_max)
-        .collect();
-    lags.dedup();
-    let gamma: Vec<f64> = lags
-        .iter()
-        .map(|&h| (h..m).map(|t| (x[t] - x[t - h]).powi(2)).sum::<f64>() / (2 * (m - h)) as f64)
-        .collect();
-    if gamma.iter().any(|g| !(g.is_finite() && *g > 0.0)) {
-        return None;
-    }
-    let w: Vec<f64> = lags
-        .iter()
-        .zip(&gamma)
-        .map(|(&h, g)| (m - h) as f64 / (g * g))
-        .collect();
-    let mut best: Option<(f64, f64, f64, f64)> = None;
-    for i in 0..60 {
-        let tau = ((m as f64 / 4.0).max(1.0).ln() * i as f64 / 59.0).exp();
-        let phi = (-1.0 / tau).exp();
-        let u: Vec<f64> = lags.iter().map(|&h| 1.0 - phi.powi(h as i32)).collect();
-        // Weighted least squares for γ = a + b u with a, b ≥ 0.
-        let (mut sw, mut su, mut suu, mut sg, mut sug) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for ((wi, ui), gi) in w.iter().zip(&u).zip(&gamma) {
-            sw += wi;
-            su += wi * ui;
-            suu += wi * ui * ui;
-            sg += wi * gi;
-            sug += wi * ui * gi;
-        }
-        let det = sw * suu - su * su;
-        let (mut a, mut b) = if det.abs() > 1e-300 {
-            ((suu * sg - su * sug) / det, (sw * sug - su * sg) / det)
-        } else {
-            (sg / sw, 0.0)
-        };
-        if a < 0.0 {
-            a = 0.0;
-            b = if suu > 0.0 { sug / suu } else { 0.0 };
-        }
-        if b <= 0.0 {
-            continue;
-        }
-        let sse: f64 = w
-            .iter()
-            .zip(&u)
-            .zip(&gamma)
-            .map(|((wi, ui), gi)| wi * (gi - a - b * ui).powi(2))
-            .sum();
-        if best.is_none_or(|bst| sse < bst.3) {
-            best = Some((b, a, phi, sse));
-        }
-    }
-    best.map(|(b, a, phi, _)| (b, a, phi.min(0.9999)))
-}
-
 /// The scores' long-run covariance `Jᵀ Σ J` under a Gauss–Markov-plus-white model of each
 /// residual component, `Σ` Toeplitz with `σ²_gm φ^|t−s|` off the diagonal, applied by a forward
 /// and a backward exponential filter. The Gauss–Markov part is `model`'s (fitted on the residual
 /// with every candidate, so that an effect the set leaves out is not taken for correlated
-/// noise), the white part what the residual `r` has besides. None when no component has a
-/// correlated part.
+/// noise), the white part what the residual `r` has besides, at least the model's. None when no
+/// component has a correlated part.
 fn parametric_scores(
     j: &DMatrix<f64>,
     r: &[f64],
     d: usize,
-    model: &[Option<(f64, f64)>],
+    model: &[Option<(f64, f64, f64)>],
 ) -> Option<DMatrix<f64>> {
     let p = j.ncols();
     let m = r.len() / d.max(1);
     let mut s = DMatrix::zeros(p, p);
     let mut any = false;
     for k in 0..d {
-        let Some(&Some((gm, phi))) = model.get(k) else {
+        let Some(&Some((gm, white, phi))) = model.get(k) else {
             continue;
         };
         let g0 = (0..m).map(|t| r[t * d + k].powi(2)).sum::<f64>() / m.max(1) as f64;
-        let white = (g0 - gm).max(0.0);
+        let white = (g0 - gm).max(white);
         any = true;
         let cols: Vec<Vec<f64>> = (0..p)
             .map(|c| (0..m).map(|t| j[(t * d + k, c)]).collect())
@@ -787,8 +713,9 @@ pub struct Step {
 
 /// Greedy forward selection on one channel. Returns the kept steps and the held-out score of
 /// the empty set.
-pub fn select(p: &Problem, sel: &Selection, separability: &Separability) -> (Vec<Step>, f64) {
+pub fn select(p: &Problem, sel: &Selection, separability: &Separability) -> Selected {
     let mut chosen: Vec<usize> = Vec::new();
+    let mut undetermined = None;
     let base = p.held_out_mse(&chosen);
     let mut current = base;
     let mut steps = Vec::new();
@@ -825,6 +752,13 @@ pub fn select(p: &Problem, sel: &Selection, separability: &Separability) -> (Vec
         set.push(best);
         let f = p.fit(&set, &p.epochs);
         if !stands_out(&f, &p.nominal_theta(&set), &set, best, sel.min_sigma) {
+            undetermined = Some(Undetermined {
+                candidate: best,
+                set,
+                fit: f,
+                mse_before: current,
+                mse_after: score,
+            });
             break;
         }
         let rivals = scores
@@ -858,7 +792,33 @@ pub fn select(p: &Problem, sel: &Selection, separability: &Separability) -> (Vec
     if !weak.is_empty() && chosen.len() > weak.len() {
         steps = without(p, steps, base, &weak);
     }
-    (steps, base)
+    Selected {
+        steps,
+        base,
+        undetermined,
+    }
+}
+
+/// What a selection chose.
+pub struct Selected {
+    pub steps: Vec<Step>,
+    /// The held-out score of the nominal model.
+    pub base: f64,
+    /// The candidate that lowered the held-out score enough but did not stand out from its
+    /// nominal value by the significance test, where the selection stopped.
+    pub undetermined: Option<Undetermined>,
+}
+
+/// A candidate the held-out score asks for and the significance test refuses: the data point at
+/// it without determining it (a slowly varying error the residual carries leaves its estimate
+/// a few deviations from nominal).
+pub struct Undetermined {
+    pub candidate: usize,
+    /// The set it was fitted in (the effects selected before it, then it).
+    pub set: Vec<usize>,
+    pub fit: Fit,
+    pub mse_before: f64,
+    pub mse_after: f64,
 }
 
 /// `steps` without the candidates `drop`, each remaining step's scores those of the set without
@@ -889,11 +849,7 @@ pub const MAX_SUBSET: usize = 3;
 /// a scale factor (two numbers) are not reported as four beam scales, while a single beam's
 /// error, which no installation effect reproduces, still is. Members whose estimate is not
 /// `min_sigma` from nominal are dropped. The kept set is reported in steps of decreasing gain.
-pub fn select_parsimonious(
-    p: &Problem,
-    sel: &Selection,
-    separability: &Separability,
-) -> (Vec<Step>, f64) {
+pub fn select_parsimonious(p: &Problem, sel: &Selection, separability: &Separability) -> Selected {
     let candidates = p.candidates();
     let base = p.held_out_mse(&[]);
     let mut sets: Vec<Vec<usize>> = vec![Vec::new()];
@@ -932,7 +888,11 @@ pub fn select_parsimonious(
         .min_by(|a, b| params(&a.0).cmp(&params(&b.0)).then(a.1.total_cmp(&b.1)))
         .cloned()
     else {
-        return (Vec::new(), base);
+        return Selected {
+            steps: Vec::new(),
+            base,
+            undetermined: None,
+        };
     };
     // Drop members the data do not put min_sigma from nominal.
     loop {
@@ -998,7 +958,11 @@ pub fn select_parsimonious(
         left.retain(|&x| x != c);
         current = score;
     }
-    (steps_out, base)
+    Selected {
+        steps: steps_out,
+        base,
+        undetermined: None,
+    }
 }
 
 /// Candidate `c` of the fitted `set` lies `min_sigma` of its deviations from its nominal value
@@ -1201,82 +1165,6 @@ pub fn candidate(c: usize) -> &'static Candidate {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use auvnav_sim::rng::Rng;
-
-    /// A first-order Gauss–Markov error (φ 0.98 per reading, σ 1) under white noise (σ 1)
-    /// comes back from its autocovariance with the long-run variance the covariance uses,
-    /// σ²(1+φ)/(1−φ) = 99, within 25 % (seed 7: 0.854 × 134 = 114, the log-linear fit reading
-    /// the correlation time long, 67 readings for 49.5, and the variance short, which is the
-    /// cautious side); white noise alone shows no correlated part.
-    #[test]
-    fn a_gauss_markov_error_under_white_noise_is_fitted_and_white_noise_is_not() {
-        let mut rng = Rng::new(7, "gauss-markov-fit");
-        let phi: f64 = 0.98;
-        let q = (1.0 - phi * phi).sqrt();
-        let mut e = rng.gauss(1.0);
-        let x: Vec<f64> = (0..20_000)
-            .map(|_| {
-                e = phi * e + rng.gauss(q);
-                e + rng.gauss(1.0)
-            })
-            .collect();
-        let (gm, white, fitted) = gauss_markov_fit(&x).expect("a correlated part");
-        let long_run = |v: f64, p: f64| v * (1.0 + p) / (1.0 - p);
-        let (got, want) = (long_run(gm, fitted), long_run(1.0, phi));
-        println!("φ {fitted:.4}, Gauss–Markov {gm:.3}, white {white:.3}, long-run {got:.1}");
-        assert!(
-            (got / want - 1.0).abs() < 0.25,
-            "long-run variance {got:.1} for {want:.1}"
-        );
-        assert!((-1.0 / fitted.ln() / 49.5 - 1.0).abs() < 0.5, "φ {fitted}");
-        let noise: Vec<f64> = (0..20_000).map(|_| rng.gauss(1.0)).collect();
-        assert!(gauss_markov_fit(&noise).is_none());
-    }
-
-    /// A Gauss–Markov error only a few correlation times long (400 readings, τ 80, σ 1, under
-    /// white noise σ 0.3), its mean taken out as a fitted bias would: the autocovariance alone
-    /// reads its long-run variance (2σ²τ ≈ 160) short, the fit with the variogram within a factor
-    /// of two (medians over 40 seeds).
-    #[test]
-    fn a_short_series_of_a_slow_error_is_not_read_as_a_quick_one() {
-        let (mut fitted, mut autocovariance) = (Vec::new(), Vec::new());
-        let phi: f64 = (-1.0f64 / 80.0).exp();
-        let long_run = |(g, _, p): (f64, f64, f64)| g * (1.0 + p) / (1.0 - p);
-        for seed in 0..40 {
-            let mut rng = Rng::new(seed, "gauss-markov-short");
-            let q = (1.0 - phi * phi).sqrt();
-            let mut e = rng.gauss(1.0);
-            let mut x: Vec<f64> = (0..400)
-                .map(|_| {
-                    e = phi * e + rng.gauss(q);
-                    e + rng.gauss(0.3)
-                })
-                .collect();
-            let mean = x.iter().sum::<f64>() / x.len() as f64;
-            x.iter_mut().for_each(|v| *v -= mean);
-            if let Some(f) = gauss_markov_fit(&x) {
-                fitted.push(long_run(f));
-            }
-            if let Some(f) = autocovariance_fit(&x) {
-                autocovariance.push(long_run(f));
-            }
-        }
-        let median = |v: &mut Vec<f64>| {
-            v.sort_by(f64::total_cmp);
-            v[v.len() / 2]
-        };
-        let truth = (1.0 + phi) / (1.0 - phi);
-        let (got, short) = (median(&mut fitted), median(&mut autocovariance));
-        println!(
-            "median long-run variance {got:.1} (autocovariance alone {short:.1}) for {truth:.1}"
-        );
-        assert!(fitted.len() >= 35, "a correlated part in most series");
-        assert!(got > 0.5 * truth && got < 2.0 * truth, "{got} for {truth}");
-        assert!(
-            short < 0.5 * truth,
-            "the autocovariance alone: {short} for {truth}"
-        );
-    }
 
     /// The drift taken out of an IMU residual: a slow wander (a ramp and a 400 s sine) goes, the
     /// constant stays for the bias, and a quick signal (a 20 s sine) is left nearly whole.

@@ -225,6 +225,18 @@ fn markdown(r: &DiscoverReport, figures: &[(ChannelKind, Vec<String>)]) -> Strin
         }
         let _ = writeln!(m);
     }
+    if !r.undetermined.is_empty() {
+        let _ = writeln!(
+            m,
+            "## Pointed at, not determined\n\nCandidates that lower the held-out score but do not \
+             stand out from nominal once the residual's correlation in time is allowed for: not \
+             named, not written into the model.\n"
+        );
+        for u in &r.undetermined {
+            let _ = writeln!(m, "- {}", u.note);
+        }
+        let _ = writeln!(m);
+    }
     if !r.floors.is_empty() {
         let _ = writeln!(
             m,

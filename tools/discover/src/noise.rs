@@ -1,0 +1,268 @@
+//! The residual noise model by restricted maximum likelihood: a first-order Gauss–Markov error
+//! plus white noise, fitted to a residual together with the design of the effects fitted to it.
+//!
+//! A residual left by fitted effects has lost to them whatever of the noise lies in their span.
+//! A slowly varying error (a DVL velocity error correlated over minutes, on a voyage a few of
+//! those minutes long) is mostly such a part: a scale factor or a mounting angle is, on a
+//! straight leg, nearly a constant, and absorbs the error's slow part. The residual's
+//! autocovariance or variogram then reads the error short, the effects' deviations come out
+//! too small, and the error's realisation is named as an installation effect.
+//! The restricted likelihood (Patterson & Thompson 1971) is the likelihood of the residual's
+//! part orthogonal to the design, whatever the effects' values: it counts what the effects
+//! could have taken, and its estimate of the noise does not shrink with the number of effects.
+
+use nalgebra::{DMatrix, DVector};
+
+/// The Gauss–Markov error plus white noise of one residual component (readings in time order),
+/// `x`, by restricted maximum likelihood with the effects' design `design` (one row per reading,
+/// one column per effect parameter, in the same units as `x` per unit parameter): (Gauss–Markov
+/// variance, white variance, φ per reading). The correlation time is searched from one reading to
+/// a quarter of the series: searched up to the whole series, a residual's slow structure (the
+/// moving bed of a river crossing) is read as one error over the whole record, against which
+/// nothing can be named. None when the likelihood
+/// ratio against white noise alone is under 6 (two parameters, about the 5 % point), or the series
+/// is too short.
+pub fn restricted_gauss_markov(x: &[f64], design: &DMatrix<f64>) -> Option<(f64, f64, f64)> {
+    let m = x.len();
+    if m < 16 || design.nrows() != m {
+        return None;
+    }
+    let basis = orthonormal_basis(design);
+    let r = basis.ncols();
+    if m <= r + 4 {
+        return None;
+    }
+    let white = objective(x, &basis, 0.0, 0.0)?;
+    let tau_max = (m as f64 / 4.0).max(2.0);
+    // A coarse grid over log τ and log λ (λ = σ²_gm / σ²_w), then four refinements about the
+    // best, each at half the previous spacing.
+    let mut best: Option<(f64, f64, f64)> = None;
+    let consider = |log_tau: f64, log_lambda: f64, best: &mut Option<(f64, f64, f64)>| {
+        let phi = (-(-log_tau).exp()).exp();
+        if let Some(v) = objective(x, &basis, log_lambda.exp(), phi)
+            && best.is_none_or(|b| v.0 < b.0)
+        {
+            *best = Some((v.0, log_tau, log_lambda));
+        }
+    };
+    let (tau_lo, tau_hi) = (0.0, tau_max.ln());
+    let (lam_lo, lam_hi) = ((1e-3f64).ln(), (1e4f64).ln());
+    const COARSE: usize = 8;
+    for i in 0..COARSE {
+        for j in 0..COARSE {
+            let (u, v) = (
+                i as f64 / (COARSE - 1) as f64,
+                j as f64 / (COARSE - 1) as f64,
+            );
+            consider(
+                tau_lo + (tau_hi - tau_lo) * u,
+                lam_lo + (lam_hi - lam_lo) * v,
+                &mut best,
+            );
+        }
+    }
+    let step = |lo: f64, hi: f64| (hi - lo) / (COARSE - 1) as f64 / 2.0;
+    let (mut dt, mut dl) = (step(tau_lo, tau_hi), step(lam_lo, lam_hi));
+    for _ in 0..4 {
+        let (_, t0, l0) = best?;
+        for i in -1..=1 {
+            for j in -1..=1 {
+                if i != 0 || j != 0 {
+                    let t = (t0 + dt * i as f64).clamp(tau_lo, tau_hi);
+                    let l = (l0 + dl * j as f64).clamp(lam_lo, lam_hi);
+                    consider(t, l, &mut best);
+                }
+            }
+        }
+        dt /= 2.0;
+        dl /= 2.0;
+    }
+    let (value, log_tau, log_lambda) = best?;
+    if white.0 - value < 6.0 {
+        return None;
+    }
+    let phi = (-(-log_tau).exp()).exp();
+    let lambda = log_lambda.exp();
+    let (_, s2) = objective(x, &basis, lambda, phi)?;
+    Some((lambda * s2, s2, phi.min(0.9999)))
+}
+
+/// An orthonormal basis of the design's columns (directions with a singular value under 1e-9 of
+/// the largest left out: an effect the readings do not excite takes nothing).
+fn orthonormal_basis(design: &DMatrix<f64>) -> DMatrix<f64> {
+    if design.ncols() == 0 {
+        return DMatrix::zeros(design.nrows(), 0);
+    }
+    let svd = design.clone().svd(true, false);
+    let Some(u) = svd.u else {
+        return DMatrix::zeros(design.nrows(), 0);
+    };
+    let top = svd.singular_values.iter().copied().fold(0.0, f64::max);
+    let keep: Vec<usize> = (0..svd.singular_values.len())
+        .filter(|&i| top > 0.0 && svd.singular_values[i] > 1e-9 * top)
+        .collect();
+    DMatrix::from_fn(design.nrows(), keep.len(), |t, c| u[(t, keep[c])])
+}
+
+/// −2 × the restricted log-likelihood (constants dropped) of `x` with noise covariance
+/// σ²_w (I + λ Φ), Φ_ts = φ^|t−s|, σ²_w profiled out, and that σ²_w. The covariance is applied by
+/// the Kalman filter of a Gauss–Markov state seen under white noise: its innovations whiten any
+/// series, and their variances give the determinant.
+fn objective(x: &[f64], basis: &DMatrix<f64>, lambda: f64, phi: f64) -> Option<(f64, f64)> {
+    let m = x.len();
+    let r = basis.ncols();
+    // The filter's gains do not depend on the data: one pass for gains and innovation variances.
+    let (mut gain, mut scale, mut log_det) = (vec![0.0; m], vec![0.0; m], 0.0);
+    let q = lambda * (1.0 - phi * phi);
+    let mut p = lambda;
+    for t in 0..m {
+        if t > 0 {
+            p = phi * phi * p + q;
+        }
+        let f = p + 1.0;
+        gain[t] = p / f;
+        scale[t] = 1.0 / f.sqrt();
+        log_det += f.ln();
+        p *= 1.0 - gain[t];
+    }
+    let whiten = |v: &mut dyn Iterator<Item = f64>| -> Vec<f64> {
+        let mut out = Vec::with_capacity(m);
+        let mut a = 0.0;
+        for (t, y) in v.enumerate() {
+            if t > 0 {
+                a *= phi;
+            }
+            let nu = y - a;
+            out.push(nu * scale[t]);
+            a += gain[t] * nu;
+        }
+        out
+    };
+    let y = DVector::from_vec(whiten(&mut x.iter().copied()));
+    let mut yy = y.dot(&y);
+    let mut log_det_x = 0.0;
+    if r > 0 {
+        let mut w = DMatrix::zeros(m, r);
+        for c in 0..r {
+            let col = whiten(&mut basis.column(c).iter().copied());
+            w.set_column(c, &DVector::from_vec(col));
+        }
+        let wtw = w.transpose() * &w;
+        let chol = wtw.cholesky()?;
+        log_det_x = 2.0 * chol.l().diagonal().iter().map(|v| v.ln()).sum::<f64>();
+        let wty = w.transpose() * &y;
+        yy -= wty.dot(&chol.solve(&wty));
+    }
+    let dof = (m - r) as f64;
+    let s2 = yy.max(1e-300) / dof;
+    Some((dof * s2.ln() + log_det + log_det_x, s2))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use auvnav_sim::rng::Rng;
+
+    /// A Gauss–Markov error a few correlation times long (400 readings, τ 80, σ 1, under white
+    /// noise σ 0.3) from which a fit has taken a constant, a ramp and a slow sine (effects
+    /// that, on a straight leg, look like a slow error): read as it stands (no design) the
+    /// residual gives its long-run variance (2σ²τ ≈ 160) far short; the restricted likelihood,
+    /// which counts what the fitted effects took, within a factor of 1.5 (medians over 40 seeds).
+    /// White noise is taken for a correlated error in few of them.
+    #[test]
+    fn what_the_fitted_effects_absorbed_is_counted_in_the_noise() {
+        let phi: f64 = (-1.0f64 / 80.0).exp();
+        let long_run = |(g, _, p): (f64, f64, f64)| g * (1.0 + p) / (1.0 - p);
+        let m = 400;
+        let design = DMatrix::from_fn(m, 3, |t, c| {
+            let t = t as f64;
+            match c {
+                0 => 1.0,
+                1 => t / m as f64,
+                _ => (2.0 * std::f64::consts::PI * t / 300.0).sin(),
+            }
+        });
+        let (mut restricted, mut residual_only, mut white_found) = (Vec::new(), Vec::new(), 0);
+        for seed in 0..40 {
+            let mut rng = Rng::new(seed, "restricted-gauss-markov");
+            let q = (1.0 - phi * phi).sqrt();
+            let mut e = rng.gauss(1.0);
+            let y: Vec<f64> = (0..m)
+                .map(|_| {
+                    e = phi * e + rng.gauss(q);
+                    e + rng.gauss(0.3)
+                })
+                .collect();
+            // The least-squares residual of the three effects.
+            let yv = DVector::from_vec(y);
+            let beta = (design.transpose() * &design)
+                .cholesky()
+                .expect("full rank")
+                .solve(&(design.transpose() * &yv));
+            let x: Vec<f64> = (&yv - &design * beta).iter().copied().collect();
+            restricted.push(restricted_gauss_markov(&x, &design).map_or(0.0, long_run));
+            let alone = DMatrix::zeros(m, 0);
+            residual_only.push(restricted_gauss_markov(&x, &alone).map_or(0.0, long_run));
+            let noise: Vec<f64> = (0..m).map(|_| rng.gauss(1.0)).collect();
+            white_found += usize::from(restricted_gauss_markov(&noise, &design).is_some());
+        }
+        let median = |v: &mut Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        let truth = (1.0 + phi) / (1.0 - phi);
+        let (got, short) = (median(&mut restricted), median(&mut residual_only));
+        println!(
+            "median long-run variance {got:.1} (the residual read alone {short:.1}) for \
+             {truth:.1}; \
+             white noise read as correlated in {white_found} of 40"
+        );
+        assert!(got > truth / 1.5 && got < 1.5 * truth, "{got} for {truth}");
+        assert!(
+            short < 0.67 * truth,
+            "the residual alone: {short} for {truth}"
+        );
+        assert!(white_found <= 6, "white noise: {white_found} of 40");
+    }
+
+    /// Long records (10 000 readings, φ 0.98, σ 1 under white noise σ 1, ten seeds): the
+    /// long-run variance σ²(1+φ)/(1−φ) = 99 and the correlation time (49.5 readings) within
+    /// 15 % in the median, every record within 50 %.
+    #[test]
+    fn long_gauss_markov_records_are_read_right() {
+        let phi: f64 = 0.98;
+        let q = (1.0 - phi * phi).sqrt();
+        let long_run = |v: f64, p: f64| v * (1.0 + p) / (1.0 - p);
+        let want = long_run(1.0, phi);
+        let (mut runs, mut taus) = (Vec::new(), Vec::new());
+        for seed in 0..10 {
+            let mut rng = Rng::new(seed, "gauss-markov-long");
+            let mut e = rng.gauss(1.0);
+            let x: Vec<f64> = (0..10_000)
+                .map(|_| {
+                    e = phi * e + rng.gauss(q);
+                    e + rng.gauss(1.0)
+                })
+                .collect();
+            let design = DMatrix::from_element(x.len(), 1, 1.0);
+            let (gm, _, fitted) = restricted_gauss_markov(&x, &design).expect("a correlated part");
+            runs.push(long_run(gm, fitted) / want);
+            taus.push(-1.0 / fitted.ln() / 49.5);
+        }
+        println!("long-run variance / truth {runs:.2?}; correlation time / truth {taus:.2?}");
+        assert!(runs.iter().chain(&taus).all(|r| (r - 1.0).abs() < 0.5));
+        let median = |v: &mut Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            0.5 * (v[4] + v[5])
+        };
+        let (run, tau) = (median(&mut runs), median(&mut taus));
+        assert!(
+            (run - 1.0).abs() < 0.15,
+            "long-run variance {run:.2} of the truth"
+        );
+        assert!(
+            (tau - 1.0).abs() < 0.15,
+            "correlation time {tau:.2} of the truth"
+        );
+    }
+}
