@@ -382,7 +382,14 @@ pub fn discover_voyages(
                     .iter()
                     .copied()
                     .filter(|&c| {
-                        per_voyage(CANDIDATES[c].name) && named(*i, CANDIDATES[c].name).is_some()
+                        let name = CANDIDATES[c].name;
+                        // An IMU has a bias in every run (its turn-on bias, and a drifting
+                        // bias's mean over the voyage): fitted in every voyage, named alone
+                        // or not, so that a shared scale factor or misalignment does not take
+                        // up the bias of a voyage whose own discovery left it below the test.
+                        per_voyage(name)
+                            && (named(*i, name).is_some()
+                                || matches!(name, "imu.gyro_bias" | "imu.accel_bias"))
                     })
                     .collect();
                 ChannelVoyage { voyage: *i, p, own }
