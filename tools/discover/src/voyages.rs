@@ -41,6 +41,15 @@ pub fn per_voyage(name: &str) -> bool {
     )
 }
 
+/// Per-voyage effects fitted in every voyage of the shared selection, named alone or not: an
+/// IMU has a bias in every run (its turn-on bias, and a drifting bias's mean over the voyage),
+/// so that a shared scale factor or misalignment does not take up the bias of a voyage whose
+/// own discovery left it below the test. The other per-voyage effects are fitted in the voyages
+/// that named them.
+pub fn in_every_voyage(name: &str) -> bool {
+    matches!(name, "imu.gyro_bias" | "imu.accel_bias")
+}
+
 /// One log: its channels and its reference motion.
 pub struct VoyageData {
     pub log: String,
@@ -383,13 +392,7 @@ pub fn discover_voyages(
                     .copied()
                     .filter(|&c| {
                         let name = CANDIDATES[c].name;
-                        // An IMU has a bias in every run (its turn-on bias, and a drifting
-                        // bias's mean over the voyage): fitted in every voyage, named alone
-                        // or not, so that a shared scale factor or misalignment does not take
-                        // up the bias of a voyage whose own discovery left it below the test.
-                        per_voyage(name)
-                            && (named(*i, name).is_some()
-                                || matches!(name, "imu.gyro_bias" | "imu.accel_bias"))
+                        per_voyage(name) && (named(*i, name).is_some() || in_every_voyage(name))
                     })
                     .collect();
                 ChannelVoyage { voyage: *i, p, own }
