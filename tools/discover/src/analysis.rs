@@ -833,10 +833,7 @@ fn record_undetermined(
         return;
     }
     let nominal = p.nominal_theta(&u.set);
-    let sigmas = (off..off + len)
-        .filter(|&k| u.fit.std[k].is_finite() && u.fit.std[k] > 0.0)
-        .map(|k| (u.fit.theta[k] - nominal[k]).abs() / u.fit.std[k])
-        .fold(0.0, f64::max);
+    let sigmas = fit::departure_sigmas(&u.fit, &nominal, &u.set, u.candidate);
     let widening = (off..off + len)
         .filter(|&k| u.fit.std_white[k] > 0.0 && u.fit.std_white[k].is_finite())
         .map(|k| u.fit.std[k] / u.fit.std_white[k])

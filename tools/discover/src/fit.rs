@@ -968,11 +968,17 @@ pub fn select_parsimonious(p: &Problem, sel: &Selection, separability: &Separabi
 /// Candidate `c` of the fitted `set` lies `min_sigma` of its deviations from its nominal value
 /// (`nominal`: the set's) on some component: the significance test of the selection.
 fn stands_out(f: &Fit, nominal: &[f64], set: &[usize], c: usize, min_sigma: f64) -> bool {
+    departure_sigmas(f, nominal, set, c) >= min_sigma
+}
+
+/// How far candidate `c`'s estimate in a fitted set lies from its nominal value, in its own
+/// standard deviations (the largest over its components with a finite deviation; 0 without).
+pub fn departure_sigmas(f: &Fit, nominal: &[f64], set: &[usize], c: usize) -> f64 {
     let (off, len) = offset_of(set, c);
-    (off..off + len).any(|k| {
-        let s = f.std[k];
-        s.is_finite() && s > 0.0 && (f.theta[k] - nominal[k]).abs() >= min_sigma * s
-    })
+    (off..off + len)
+        .filter(|&k| f.std[k].is_finite() && f.std[k] > 0.0)
+        .map(|k| (f.theta[k] - nominal[k]).abs() / f.std[k])
+        .fold(0.0, f64::max)
 }
 
 /// Where a candidate's parameters sit in a set's vector: (offset, length).
