@@ -516,7 +516,7 @@ fn drift_hats(times: &[f64], knot: f64) -> Option<(Vec<(usize, f64)>, usize)> {
 
 /// The drift [`remove_drift`] can take out, as a design: one column per knot's hat function,
 /// one row per reading (none when it takes nothing out).
-pub fn drift_basis(times: &[f64], knot: f64) -> DMatrix<f64> {
+fn drift_basis(times: &[f64], knot: f64) -> DMatrix<f64> {
     let Some((hats, q)) = drift_hats(times, knot) else {
         return DMatrix::zeros(times.len(), 0);
     };

@@ -35,14 +35,14 @@ pub fn restricted_gauss_markov(x: &[f64], design: &DMatrix<f64>) -> Option<(f64,
     let white = objective(x, &basis, 0.0, 0.0)?;
     let tau_max = (m as f64 / 4.0).max(2.0);
     // A coarse grid over log τ and log λ (λ = σ²_gm / σ²_w), then four refinements about the
-    // best, each at half the previous spacing.
-    let mut best: Option<(f64, f64, f64)> = None;
-    let consider = |log_tau: f64, log_lambda: f64, best: &mut Option<(f64, f64, f64)>| {
-        let phi = (-(-log_tau).exp()).exp();
-        if let Some(v) = objective(x, &basis, log_lambda.exp(), phi)
-            && best.is_none_or(|b| v.0 < b.0)
+    // best, each at half the previous spacing. Best: (−2 log L, log τ, log λ, σ²_w).
+    let phi_of = |log_tau: f64| (-(-log_tau).exp()).exp();
+    let mut best: Option<(f64, f64, f64, f64)> = None;
+    let consider = |log_tau: f64, log_lambda: f64, best: &mut Option<(f64, f64, f64, f64)>| {
+        if let Some((v, s2)) = objective(x, &basis, log_lambda.exp(), phi_of(log_tau))
+            && best.is_none_or(|b| v < b.0)
         {
-            *best = Some((v.0, log_tau, log_lambda));
+            *best = Some((v, log_tau, log_lambda, s2));
         }
     };
     let (tau_lo, tau_hi) = (0.0, tau_max.ln());
@@ -64,7 +64,7 @@ pub fn restricted_gauss_markov(x: &[f64], design: &DMatrix<f64>) -> Option<(f64,
     let step = |lo: f64, hi: f64| (hi - lo) / (COARSE - 1) as f64 / 2.0;
     let (mut dt, mut dl) = (step(tau_lo, tau_hi), step(lam_lo, lam_hi));
     for _ in 0..4 {
-        let (_, t0, l0) = best?;
+        let (_, t0, l0, _) = best?;
         for i in -1..=1 {
             for j in -1..=1 {
                 if i != 0 || j != 0 {
@@ -77,14 +77,11 @@ pub fn restricted_gauss_markov(x: &[f64], design: &DMatrix<f64>) -> Option<(f64,
         dt /= 2.0;
         dl /= 2.0;
     }
-    let (value, log_tau, log_lambda) = best?;
+    let (value, log_tau, log_lambda, s2) = best?;
     if white.0 - value < 6.0 {
         return None;
     }
-    let phi = (-(-log_tau).exp()).exp();
-    let lambda = log_lambda.exp();
-    let (_, s2) = objective(x, &basis, lambda, phi)?;
-    Some((lambda * s2, s2, phi.min(0.9999)))
+    Some((log_lambda.exp() * s2, s2, phi_of(log_tau).min(0.9999)))
 }
 
 /// An orthonormal basis of the design's columns (directions with a singular value under 1e-9 of
@@ -125,10 +122,10 @@ fn objective(x: &[f64], basis: &DMatrix<f64>, lambda: f64, phi: f64) -> Option<(
         log_det += f.ln();
         p *= 1.0 - gain[t];
     }
-    let whiten = |v: &mut dyn Iterator<Item = f64>| -> Vec<f64> {
+    let whiten = |v: &[f64]| -> Vec<f64> {
         let mut out = Vec::with_capacity(m);
         let mut a = 0.0;
-        for (t, y) in v.enumerate() {
+        for (t, &y) in v.iter().enumerate() {
             if t > 0 {
                 a *= phi;
             }
@@ -138,13 +135,13 @@ fn objective(x: &[f64], basis: &DMatrix<f64>, lambda: f64, phi: f64) -> Option<(
         }
         out
     };
-    let y = DVector::from_vec(whiten(&mut x.iter().copied()));
+    let y = DVector::from_vec(whiten(x));
     let mut yy = y.dot(&y);
     let mut log_det_x = 0.0;
     if r > 0 {
         let mut w = DMatrix::zeros(m, r);
         for c in 0..r {
-            let col = whiten(&mut basis.column(c).iter().copied());
+            let col = whiten(basis.column(c).as_slice());
             w.set_column(c, &DVector::from_vec(col));
         }
         let wtw = w.transpose() * &w;
