@@ -3,7 +3,8 @@
 //! Simulated voyages of different seeds given together must give the answer one long voyage
 //! gives; two logs whose time stamps overlap must not be mixed (read as one series they compare
 //! one voyage's DVL with the other's motion); voyages that disagree on an installation effect
-//! must report it as inconsistent, not as a finding. Seeds and magnitudes are the tests' own.
+//! must report it as inconsistent, not as a finding, unless a few depart from what the rest agree
+//! on (the rest share it, the few are named). Seeds and magnitudes are the tests' own.
 
 use auvnav_log::LogMessage;
 use auvnav_sim::{SimConfig, scenario::Scenario};
@@ -218,4 +219,44 @@ fn voyages_that_disagree_are_reported_inconsistent() {
         let (y, _) = named(x, "dvl.mount_yaw").expect("named alone");
         assert!((y - hidden).abs() < 0.1, "{y} for {hidden}");
     }
+}
+
+#[test]
+fn a_voyage_that_departs_does_not_stop_the_others_sharing_the_installation() {
+    // Three voyages with one installation, one with another (a remounted DVL, a reference of
+    // its own): the three share the yaw, the fourth is named as departing and fits its own.
+    let mut voyages: Vec<VoyageData> = [7311u64, 7312, 7313]
+        .iter()
+        .map(|&seed| {
+            voyage(
+                &format!("seed {seed}"),
+                &simulate(seed, "lawnmower", 400.0, &[("dvl.mount_yaw", &[YAW])]),
+            )
+        })
+        .collect();
+    voyages.push(voyage(
+        "remounted",
+        &simulate(7314, "lawnmower", 400.0, &[("dvl.mount_yaw", &[-1.0])]),
+    ));
+    let r = together(&voyages);
+    let v = r.voyages.as_ref().expect("voyages");
+    for s in v.shared.iter().chain(&v.inconsistent) {
+        println!("{} {} ± {}: {}", s.name, s.value, s.std, s.verdict);
+    }
+    let (yaw, std) = named(&r, "dvl.mount_yaw").expect("the yaw shared by the three");
+    assert!((yaw - YAW).abs() <= 0.05 * YAW, "{yaw} ± {std}");
+    let shared = v
+        .shared
+        .iter()
+        .find(|s| s.name == "dvl.mount_yaw")
+        .expect("shared");
+    assert_eq!(shared.departing, ["remounted"]);
+    assert!(
+        !v.inconsistent.iter().any(|s| s.name == "dvl.mount_yaw"),
+        "{:#?}",
+        v.inconsistent
+    );
+    // The departing voyage's own estimate is its own yaw, not the others'.
+    let own = values_of(&shared.voyages[3].value).expect("value")[0];
+    assert!((own + 1.0).abs() < 0.1, "{own}");
 }

@@ -383,6 +383,12 @@ pub struct SharedEffect {
     /// voyages left out, never a finding by itself.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub agreeing: Option<Agreeing>,
+    /// The voyages set aside because they depart from what the others agree on (at most a
+    /// quarter of them): each fits its own value, the others' agreement is without them, and
+    /// the engineer should look at them. An effect can still end inconsistent after some were
+    /// set aside.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub departing: Vec<String>,
 }
 
 /// Voyages that agree once the most departing ones are set aside.

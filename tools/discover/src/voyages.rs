@@ -5,7 +5,10 @@
 //! predict the one left out), and combined as the information-weighted mean of each voyage's
 //! estimate. A cross-voyage χ² tests whether the voyages agree within their own uncertainties
 //! (Newey–West, so correlated residuals widen them): an effect on which they disagree is reported
-//! as inconsistent, never as a finding. The effects of one voyage — an IMU bias realisation, the
+//! as inconsistent, never as a finding — unless a few voyages (at most a quarter, with at least
+//! three left) depart from what the rest agree on: the rest share it, and the few are named and
+//! fit their own value, so that one odd voyage neither stops the vehicle's installation from
+//! being shared nor pulls its value. The effects of one voyage — an IMU bias realisation, the
 //! water's density, the sound speed of the acoustic link, the local field — stay each voyage's
 //! own, fitted in every voyage where its own discovery named them.
 //!
@@ -116,23 +119,27 @@ impl Estimate {
     }
 
     fn block(&self, off: usize, len: usize) -> Estimate {
-        // The marginal of a block: invert the information back to a covariance first.
+        self.pick(&(off..off + len).map(Some).collect::<Vec<_>>())
+    }
+
+    /// The marginal of the components `rows` names, in that order; `None` is a component this
+    /// estimate does not determine (infinite variance, no information).
+    fn pick(&self, rows: &[Option<usize>]) -> Estimate {
+        // Invert the information back to a covariance first.
         let (cov, _) = pseudo_inverse(&self.info);
-        let sub = cov.view((off, off), (len, len)).into_owned();
-        let det: Vec<bool> = (0..len)
-            .map(|k| self.info[(off + k, off + k)] > 0.0)
-            .collect();
-        let sub = DMatrix::from_fn(len, len, |i, j| {
-            if det[i] && det[j] {
-                sub[(i, j)]
-            } else if i == j {
-                f64::INFINITY
-            } else {
-                0.0
+        let det = |r: Option<usize>| r.filter(|&i| self.info[(i, i)] > 0.0);
+        let sub = DMatrix::from_fn(rows.len(), rows.len(), |a, b| {
+            match (det(rows[a]), det(rows[b])) {
+                (Some(i), Some(j)) => cov[(i, j)],
+                _ if a == b => f64::INFINITY,
+                _ => 0.0,
             }
         });
-        let zero = vec![0.0; len];
-        let theta: Vec<f64> = self.delta.rows(off, len).iter().copied().collect();
+        let zero = vec![0.0; rows.len()];
+        let theta: Vec<f64> = rows
+            .iter()
+            .map(|r| r.map_or(0.0, |i| self.delta[i]))
+            .collect();
         Estimate::new(&theta, &zero, &sub)
     }
 }
@@ -222,11 +229,16 @@ fn components(set: &[usize]) -> usize {
 /// A voyage's set (the shared effects first, then its own) and its fit.
 type VoyageFit = (Vec<usize>, Fit);
 
-/// Each voyage's fit of the shared set with its own effects (the shared set first).
+/// Each voyage's fit of the shared set with its own effects (the shared effects it shares first;
+/// a voyage set aside as departing from a shared effect fits that effect as its own).
 fn fit_voyages(cv: &[ChannelVoyage], shared: &[usize]) -> Vec<VoyageFit> {
     cv.iter()
         .map(|v| {
-            let mut set = shared.to_vec();
+            let mut set: Vec<usize> = shared
+                .iter()
+                .copied()
+                .filter(|c| !v.own.contains(c))
+                .collect();
             set.extend(v.own.iter().copied());
             let f = v.p.fit(&set, &v.p.epochs);
             (set, f)
@@ -234,20 +246,28 @@ fn fit_voyages(cv: &[ChannelVoyage], shared: &[usize]) -> Vec<VoyageFit> {
         .collect()
 }
 
-/// Each voyage's estimate of the shared set (its first components).
+/// Each voyage's estimate of the shared set; a shared effect the voyage fits as its own (it
+/// departs from it) carries no information there.
 fn shared_estimates(cv: &[ChannelVoyage], shared: &[usize], fits: &[VoyageFit]) -> Vec<Estimate> {
-    let n = components(shared);
     fits.iter()
         .zip(cv)
-        .map(|((_, f), v)| {
-            let nominal = v.p.nominal_theta(shared);
-            let all_nominal = {
-                let mut x = nominal.clone();
-                x.extend(std::iter::repeat_n(0.0, f.theta.len() - n));
-                x
-            };
-            let full = Estimate::new(&f.theta, &all_nominal, &f.cov);
-            full.block(0, n)
+        .map(|((set, f), v)| {
+            let n = components(shared);
+            let shares: Vec<usize> = shared
+                .iter()
+                .copied()
+                .filter(|c| !v.own.contains(c))
+                .collect();
+            let mut nominal = v.p.nominal_theta(&shares);
+            nominal.resize(f.theta.len(), 0.0);
+            let full = Estimate::new(&f.theta, &nominal, &f.cov);
+            let mut rows = Vec::with_capacity(n);
+            for &c in shared {
+                let (off, len) = offset_in(set, c);
+                let mine = !v.own.contains(&c);
+                rows.extend((0..len).map(|k| mine.then_some(off + k)));
+            }
+            full.pick(&rows)
         })
         .collect()
 }
@@ -453,9 +473,10 @@ pub fn discover_voyages(
 }
 
 /// Forward selection of the installation effects with the voyages as the held-out folds: the
-/// shared set and each one's held-out gain. An effect the voyages disagree on goes to
-/// `inconsistent` and stays in the data as each voyage's own, so that it does not bias the
-/// effects the voyages do share.
+/// shared set and each one's held-out gain. An effect on which a few voyages depart from what
+/// the others agree is tried with those voyages set aside ([`departing_from`]); an effect the
+/// voyages disagree on otherwise goes to `inconsistent` and stays in the data as each voyage's
+/// own, so that it does not bias the effects the voyages do share.
 fn select_shared(
     cv: &mut [ChannelVoyage],
     data: &[VoyageData],
@@ -465,77 +486,54 @@ fn select_shared(
 ) -> (Vec<usize>, Vec<f64>) {
     let mut shared: Vec<usize> = Vec::new();
     let mut gains: Vec<f64> = Vec::new();
-    let base = {
-        let fits = fit_voyages(cv, &shared);
-        held_out(cv, &shared, &shared_estimates(cv, &shared, &fits)).0
-    };
-    let mut current = base;
+    let mut current = held_out_score(cv, &shared);
     let mut rejected: Vec<usize> = Vec::new();
     loop {
-        let mut trials: Vec<(usize, f64, Vec<VoyageFit>)> = installation
+        let mut trials: Vec<Trial> = installation
             .iter()
             .copied()
             .filter(|c| !shared.contains(c) && !rejected.contains(c))
-            .map(|c| {
-                let mut set = shared.clone();
-                set.push(c);
-                let fits = fit_voyages(cv, &set);
-                let (score, _) = held_out(cv, &set, &shared_estimates(cv, &set, &fits));
-                (c, score, fits)
-            })
+            .map(|c| trial(cv, &shared, c, current))
             .collect();
-        trials.sort_by(|a, b| a.1.total_cmp(&b.1));
+        trials.sort_by(|a, b| b.gain.total_cmp(&a.gain));
         let mut added = false;
-        for (c, score, fits) in trials {
-            if !(score.is_finite() && 1.0 - score / current >= sel.min_gain) {
+        for t in trials {
+            if !(t.gain.is_finite() && t.gain >= sel.min_gain) {
                 break;
             }
+            let c = t.candidate;
             let mut set = shared.clone();
             set.push(c);
             let (off, len) = offset_in(&set, c);
-            let ests = shared_estimates(cv, &set, &fits);
+            set_aside(cv, c, &t.departing);
+            let ests = shared_estimates(cv, &set, &t.fits);
             let joint = combine(&ests.iter().collect::<Vec<_>>(), components(&set));
-            let (alone, agreement) = agreement_of(&ests, off, len);
-            // The voyages' own scatter, when larger than their deviations say (the Birge
-            // ratio), widens the combined deviation: a slowly varying error gives each voyage
-            // an estimate of its own sign that its deviation does not cover.
-            let birge = birge_ratio(&agreement);
-            let significant = (0..len).any(|k| {
-                let s = joint.std[off + k] * birge;
-                s.is_finite() && joint.delta[off + k].abs() >= sel.min_sigma * s
-            });
-            if !significant {
+            let (_, agreement) = agreement_of(&ests, off, len);
+            if !significant(&joint, &agreement, off, len, sel) {
+                restore(cv, c, &t.departing);
                 continue;
             }
             if agreement.disagrees() {
+                restore(cv, c, &t.departing);
+                let fits = fit_voyages(cv, &set);
+                let ests = shared_estimates(cv, &set, &fits);
+                let (alone, agreement) = agreement_of(&ests, off, len);
                 let (verdict, agreeing) = disagreement(cv, data, c, &alone, &agreement);
                 inconsistent.push(SharedEffect {
                     agreeing,
-                    ..shared_effect(
-                        cv,
-                        data,
-                        &set,
-                        c,
-                        &fits,
-                        &agreement,
-                        1.0 - score / current,
-                        verdict,
-                    )
+                    ..shared_effect(cv, data, c, &fits, &agreement, t.gain, verdict)
                 });
                 // Still in the data: each voyage fits its own value, so that it does not
                 // bias the effects the voyages do share.
                 rejected.push(c);
-                for x in cv.iter_mut() {
-                    x.own.push(c);
-                }
-                let fits = fit_voyages(cv, &shared);
-                current = held_out(cv, &shared, &shared_estimates(cv, &shared, &fits)).0;
+                own_in_every_voyage(cv, c);
+                current = held_out_score(cv, &shared);
                 added = true;
                 break;
             }
             shared.push(c);
-            gains.push(1.0 - score / current);
-            current = score;
+            gains.push(t.gain);
+            current = t.score;
             added = true;
             break;
         }
@@ -546,8 +544,107 @@ fn select_shared(
     (shared, gains)
 }
 
+/// One candidate tried as a shared effect.
+struct Trial {
+    candidate: usize,
+    /// The leave-one-voyage-out mean squared residual with it shared.
+    score: f64,
+    /// Its relative drop against the shared set without it (with the same voyages set aside).
+    gain: f64,
+    fits: Vec<VoyageFit>,
+    /// The voyages (indices into the channel's voyages) set aside as departing from it.
+    departing: Vec<usize>,
+}
+
+/// Candidate `c` added to the shared set: shared by every voyage, or, when a few voyages depart
+/// from what the others agree on, by the others with those few fitting their own value.
+fn trial(cv: &mut [ChannelVoyage], shared: &[usize], c: usize, current: f64) -> Trial {
+    let mut set = shared.to_vec();
+    set.push(c);
+    let (off, len) = offset_in(&set, c);
+    let fits = fit_voyages(cv, &set);
+    let ests = shared_estimates(cv, &set, &fits);
+    let score = held_out(cv, &set, &ests).0;
+    let (alone, agreement) = agreement_of(&ests, off, len);
+    let all = Trial {
+        candidate: c,
+        score,
+        gain: 1.0 - score / current,
+        fits,
+        departing: Vec::new(),
+    };
+    let Some(departing) = agreement
+        .disagrees()
+        .then(|| departing_from(cv, c, &alone, len))
+        .flatten()
+    else {
+        return all;
+    };
+    set_aside(cv, c, &departing);
+    let before = held_out_score(cv, shared);
+    let fits = fit_voyages(cv, &set);
+    let score = held_out(cv, &set, &shared_estimates(cv, &set, &fits)).0;
+    restore(cv, c, &departing);
+    let aside = Trial {
+        candidate: c,
+        score,
+        gain: 1.0 - score / before,
+        fits,
+        departing,
+    };
+    if aside.gain > all.gain { aside } else { all }
+}
+
+/// Voyages `which` fit effect `c` as their own.
+fn set_aside(cv: &mut [ChannelVoyage], c: usize, which: &[usize]) {
+    for &k in which {
+        if !cv[k].own.contains(&c) {
+            cv[k].own.push(c);
+        }
+    }
+}
+
+/// Voyages `which` share effect `c` again.
+fn restore(cv: &mut [ChannelVoyage], c: usize, which: &[usize]) {
+    for &k in which {
+        cv[k].own.retain(|&x| x != c);
+    }
+}
+
+/// The leave-one-voyage-out mean squared residual of a shared set.
+fn held_out_score(cv: &[ChannelVoyage], shared: &[usize]) -> f64 {
+    let fits = fit_voyages(cv, shared);
+    held_out(cv, shared, &shared_estimates(cv, shared, &fits)).0
+}
+
+/// Whether a shared effect (components `off..off + len` of the joint estimate) departs from
+/// nominal by the selection's σ. The voyages' own scatter, when larger than their deviations
+/// say (the Birge ratio), widens the combined deviation: a slowly varying error gives each
+/// voyage an estimate of its own sign that its deviation does not cover.
+fn significant(
+    joint: &Combined,
+    agreement: &Combined,
+    off: usize,
+    len: usize,
+    sel: &Selection,
+) -> bool {
+    let birge = birge_ratio(agreement);
+    (0..len).any(|k| {
+        let s = joint.std[off + k] * birge;
+        s.is_finite() && joint.delta[off + k].abs() >= sel.min_sigma * s
+    })
+}
+
+/// An effect the voyages disagree on becomes every voyage's own.
+fn own_in_every_voyage(cv: &mut [ChannelVoyage], c: usize) {
+    let all: Vec<usize> = (0..cv.len()).collect();
+    set_aside(cv, c, &all);
+}
+
 /// Effects set aside as each voyage's own change the others' estimates: the shared set must
-/// still agree at the end; the one that departs most goes to `inconsistent` until the rest agree.
+/// still agree at the end. The effect that departs most has its departing voyages set aside when
+/// the rest still share it ([`departing_from`]), or else goes to `inconsistent`, until the rest
+/// agree.
 fn settle_agreement(
     cv: &mut [ChannelVoyage],
     data: &[VoyageData],
@@ -555,9 +652,6 @@ fn settle_agreement(
     gains: &mut Vec<f64>,
     inconsistent: &mut Vec<SharedEffect>,
 ) {
-    // Effects set aside as each voyage's own change the others' estimates: the shared set
-    // must still agree at the end; the one that departs most goes to the inconsistent ones
-    // until the rest agree.
     loop {
         let fits = fit_voyages(cv, shared);
         let ests = shared_estimates(cv, shared, &fits);
@@ -568,20 +662,23 @@ fn settle_agreement(
                 let (off, len) = offset_in(shared, c);
                 let (alone, a) = agreement_of(&ests, off, len);
                 let ratio = if a.dof > 0 { a.chi2 / a.limit() } else { 0.0 };
-                (n, c, ratio, a, alone)
+                (n, c, ratio, a, alone, len)
             })
             .filter(|x| x.2 > 1.0)
             .max_by(|a, b| a.2.total_cmp(&b.2));
-        let Some((n, c, _, agreement, alone)) = worst else {
+        let Some((n, c, _, agreement, alone, len)) = worst else {
             break;
         };
+        if let Some(left) = departing_from(cv, c, &alone, len) {
+            set_aside(cv, c, &left);
+            continue;
+        }
         let (verdict, agreeing) = disagreement(cv, data, c, &alone, &agreement);
         inconsistent.push(SharedEffect {
             agreeing,
             ..shared_effect(
                 cv,
                 data,
-                shared,
                 c,
                 &fits,
                 &agreement,
@@ -593,9 +690,7 @@ fn settle_agreement(
         });
         shared.remove(n);
         gains.remove(n);
-        for x in cv.iter_mut() {
-            x.own.push(c);
-        }
+        own_in_every_voyage(cv, c);
     }
 }
 
@@ -713,18 +808,35 @@ fn record_shared(
         let mut s = shared_effect(
             cv,
             data,
-            shared,
             c,
             &fits,
             &agreement,
             gains[n],
             format!(
                 "shared by {} voyages; they agree (χ² {:.1} ≤ {limit:.1}, {} dof)",
-                cv.len(),
+                cv.len() - departing(cv, data, c).len(),
                 agreement.chi2,
                 agreement.dof
             ),
         );
+        if !s.departing.is_empty() {
+            s.verdict.push_str(&format!(
+                "; {} {} from it and {} its own value (look at {}: the voyages of one vehicle \
+                 share its installation)",
+                s.departing.join(", "),
+                if s.departing.len() == 1 {
+                    "departs"
+                } else {
+                    "depart"
+                },
+                if s.departing.len() == 1 {
+                    "fits"
+                } else {
+                    "each fit"
+                },
+                if s.departing.len() == 1 { "it" } else { "them" },
+            ));
+        }
         let birge = birge_ratio(&agreement);
         let std: Vec<f64> = std.iter().map(|x| x * birge).collect();
         s.value = json_of(&value);
@@ -799,7 +911,7 @@ fn not_confirmed(
                 let (verdict, agreeing) = disagreement(cv, data, c, &alone, &agreement);
                 v.inconsistent.push(SharedEffect {
                     agreeing,
-                    ..shared_effect(cv, data, &set, c, &fits, &agreement, 0.0, verdict)
+                    ..shared_effect(cv, data, c, &fits, &agreement, 0.0, verdict)
                 });
             }
         }
@@ -861,59 +973,84 @@ fn disagreement(
              sound speed does (dvl.sound_speed is each voyage's own): measure it on each voyage",
         );
     }
-    let mut kept: Vec<usize> = (0..alone.len()).collect();
-    let mut left: Vec<usize> = Vec::new();
-    while kept.len() > alone.len().div_ceil(2).max(2) {
-        let es: Vec<&Estimate> = kept.iter().map(|&k| &alone[k]).collect();
-        let c = combine(&es, len);
+    let informative = alone.iter().filter(|e| e.rank > 0).count();
+    let most = informative.saturating_sub(informative.div_ceil(2).max(2));
+    if let Some((left, c)) = agreeing_without(alone, len, most).filter(|(l, _)| !l.is_empty()) {
+        let value: Vec<String> = c
+            .delta
+            .iter()
+            .zip(&c.std)
+            .map(|(d, s)| format!("{d:+.4} ± {s:.4}"))
+            .collect();
+        let left_out: Vec<String> = left
+            .iter()
+            .map(|&k| data[cv[k].voyage].log.clone())
+            .collect();
+        text.push_str(&format!(
+            "; without {} the other {} voyages agree on a change of [{}] from nominal",
+            left_out.join(", "),
+            informative - left.len(),
+            value.join(", ")
+        ));
+        let v: Vec<f64> = nominal
+            .iter()
+            .zip(c.delta.iter())
+            .map(|(a, b)| a + b)
+            .collect();
+        let agreeing = Agreeing {
+            left_out,
+            voyages: informative - left.len(),
+            value: json_of(&v),
+            std: json_of(&c.std),
+        };
+        return (text, Some(agreeing));
+    }
+    (text, None)
+}
+
+/// The voyages to set aside, at most `most` of them, for the rest to agree: the one that departs
+/// most from the others' mean in turn. The set aside (indices into `alone`; the voyages without
+/// information on the effect are neither counted nor set aside) and what the rest agree on.
+fn agreeing_without(alone: &[Estimate], len: usize, most: usize) -> Option<(Vec<usize>, Combined)> {
+    let mut kept: Vec<usize> = (0..alone.len()).filter(|&k| alone[k].rank > 0).collect();
+    let mut left = Vec::new();
+    loop {
+        let c = combine(&kept.iter().map(|&k| &alone[k]).collect::<Vec<_>>(), len);
         if !c.disagrees() {
-            let value: Vec<String> = c
-                .delta
-                .iter()
-                .zip(&c.std)
-                .map(|(d, s)| format!("{d:+.4} ± {s:.4}"))
-                .collect();
-            let left_out: Vec<String> = left
-                .iter()
-                .map(|&k| data[cv[k].voyage].log.clone())
-                .collect();
-            text.push_str(&format!(
-                "; without {} the other {} voyages agree on a change of [{}] from nominal",
-                left_out.join(", "),
-                kept.len(),
-                value.join(", ")
-            ));
-            let v: Vec<f64> = nominal
-                .iter()
-                .zip(c.delta.iter())
-                .map(|(a, b)| a + b)
-                .collect();
-            return (
-                text,
-                Some(Agreeing {
-                    left_out,
-                    voyages: kept.len(),
-                    value: json_of(&v),
-                    std: json_of(&c.std),
-                }),
-            );
+            return Some((left, c));
         }
-        // Set aside the voyage that departs most from the others' mean.
+        if left.len() >= most {
+            return None;
+        }
+        let part = |k: usize| {
+            let d = &alone[k].delta - &c.delta;
+            (d.transpose() * &alone[k].info * &d)[(0, 0)]
+        };
         let worst = kept
             .iter()
             .copied()
-            .max_by(|&a, &b| {
-                let part = |k: usize| {
-                    let d = &alone[k].delta - &c.delta;
-                    (d.transpose() * &alone[k].info * &d)[(0, 0)]
-                };
-                part(a).total_cmp(&part(b))
-            })
-            .expect("voyages left");
+            .max_by(|&a, &b| part(a).total_cmp(&part(b)))?;
         kept.retain(|&k| k != worst);
         left.push(worst);
     }
-    (text, None)
+}
+
+/// The voyages of `cv` to set aside as departing from effect `c` so that the others share it:
+/// at most a quarter of the voyages in all (counting those already set aside), with at least
+/// three left that agree. A vehicle's installation is one; a voyage that departs from what the
+/// others agree on (a reference of its own, a bad stretch) is for the engineer to look at, and
+/// should neither stop the others from sharing the effect nor pull their value.
+fn departing_from(
+    cv: &[ChannelVoyage],
+    c: usize,
+    alone: &[Estimate],
+    len: usize,
+) -> Option<Vec<usize>> {
+    let already = cv.iter().filter(|x| x.own.contains(&c)).count();
+    let most = (cv.len() / 4).saturating_sub(already);
+    let informative = alone.iter().filter(|e| e.rank > 0).count();
+    let (left, _) = agreeing_without(alone, len, most)?;
+    (!left.is_empty() && informative - left.len() >= 3).then_some(left)
 }
 
 /// sqrt(χ² / dof) of the voyages' agreement, at least 1.
@@ -949,11 +1086,9 @@ fn set_all(to: &mut Effects, from: &Effects, set: &[usize]) {
     }
 }
 
-#[allow(clippy::too_many_arguments)]
 fn shared_effect(
     cv: &[ChannelVoyage],
     data: &[VoyageData],
-    set: &[usize],
     c: usize,
     fits: &[VoyageFit],
     agreement: &Combined,
@@ -961,7 +1096,6 @@ fn shared_effect(
     verdict: String,
 ) -> SharedEffect {
     let name = CANDIDATES[c].name;
-    let (off, len) = offset_in(set, c);
     let nominal = cv[0].p.nominal.get(name).unwrap_or_default();
     let value: Vec<f64> = nominal
         .iter()
@@ -978,10 +1112,13 @@ fn shared_effect(
         voyages: cv
             .iter()
             .zip(fits)
-            .map(|(x, (_, f))| VoyageEstimate {
-                log: data[x.voyage].log.clone(),
-                value: json_of(&f.theta[off..off + len]),
-                std: json_of(&f.std[off..off + len]),
+            .map(|(x, (set, f))| {
+                let (off, len) = offset_in(set, c);
+                VoyageEstimate {
+                    log: data[x.voyage].log.clone(),
+                    value: json_of(&f.theta[off..off + len]),
+                    std: json_of(&f.std[off..off + len]),
+                }
             })
             .collect(),
         chi2: agreement.chi2,
@@ -990,5 +1127,14 @@ fn shared_effect(
         held_out_gain: gain,
         verdict,
         agreeing: None,
+        departing: departing(cv, data, c),
     }
+}
+
+/// The voyages set aside as departing from shared effect `c` (each fits its own value).
+fn departing(cv: &[ChannelVoyage], data: &[VoyageData], c: usize) -> Vec<String> {
+    cv.iter()
+        .filter(|x| x.own.contains(&c))
+        .map(|x| data[x.voyage].log.clone())
+        .collect()
 }
