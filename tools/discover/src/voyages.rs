@@ -973,13 +973,17 @@ fn disagreement(
              sound speed does (dvl.sound_speed is each voyage's own): measure it on each voyage",
         );
     }
+    // At least half of all the voyages must agree; those already set aside as departing
+    // (their estimates carry no information here) count as left out.
     let informative = alone.iter().filter(|e| e.rank > 0).count();
-    let most = informative.saturating_sub(informative.div_ceil(2).max(2));
-    if let Some((left, c)) = agreeing_without(alone, len, most).filter(|(l, _)| !l.is_empty()) {
-        let value: Vec<String> = c
+    let most = informative.saturating_sub(cv.len().div_ceil(2).max(2));
+    if let Some((new, agree)) = agreeing_without(alone, len, most).filter(|(l, _)| !l.is_empty()) {
+        let mut left: Vec<usize> = (0..cv.len()).filter(|&k| cv[k].own.contains(&c)).collect();
+        left.extend(new);
+        let value: Vec<String> = agree
             .delta
             .iter()
-            .zip(&c.std)
+            .zip(&agree.std)
             .map(|(d, s)| format!("{d:+.4} ± {s:.4}"))
             .collect();
         let left_out: Vec<String> = left
@@ -989,19 +993,19 @@ fn disagreement(
         text.push_str(&format!(
             "; without {} the other {} voyages agree on a change of [{}] from nominal",
             left_out.join(", "),
-            informative - left.len(),
+            cv.len() - left.len(),
             value.join(", ")
         ));
         let v: Vec<f64> = nominal
             .iter()
-            .zip(c.delta.iter())
+            .zip(agree.delta.iter())
             .map(|(a, b)| a + b)
             .collect();
         let agreeing = Agreeing {
             left_out,
-            voyages: informative - left.len(),
+            voyages: cv.len() - left.len(),
             value: json_of(&v),
-            std: json_of(&c.std),
+            std: json_of(&agree.std),
         };
         return (text, Some(agreeing));
     }
