@@ -800,7 +800,7 @@ pub fn discover(
 
 /// A value and its deviation to the deviation's second significant digit, per component
 /// (`[a, b, c] ± [d, e, f]` for a vector).
-fn with_deviation(value: &[f64], std: &[f64]) -> String {
+pub(crate) fn with_deviation(value: &[f64], std: &[f64]) -> String {
     let (mut vs, mut ss) = (Vec::new(), Vec::new());
     for (v, s) in value.iter().zip(std) {
         let decimals = if s.is_finite() && *s > 0.0 {

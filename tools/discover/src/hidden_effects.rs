@@ -201,6 +201,9 @@ pub enum Miss {
     BelowTheFloor,
     /// Several voyages disagree on it beyond their uncertainties (reported as inconsistent).
     Inconsistent,
+    /// Above the floor, not named, but listed as pointed at without being determined (the
+    /// residual's correlation, or the voyages' scatter, widened its deviation below the test).
+    Undetermined,
     /// The report's floor says an effect of the hidden size would have been named, yet it was
     /// not: a miss the report does not account for.
     Silent,
@@ -236,6 +239,9 @@ fn miss_of(h: &Hidden, report: &DiscoverReport) -> (Miss, Option<f64>) {
     let ratio = size_over_floor(h, &nominal, &floors);
     let miss = match ratio {
         None => Miss::NotExcited,
+        Some(x) if x >= 1.0 && report.undetermined.iter().any(|u| u.name == h.name) => {
+            Miss::Undetermined
+        }
         Some(x) if x >= 1.0 => Miss::Silent,
         Some(_) => Miss::BelowTheFloor,
     };

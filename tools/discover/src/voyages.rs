@@ -60,6 +60,7 @@ pub struct VoyageData {
     pub reference: Reference,
 }
 
+use super::findings::Undetermined;
 pub use super::findings::{
     Agreeing, NamedAlone, SharedEffect, VoyageEstimate, VoyageScore, Voyages,
 };
@@ -428,8 +429,14 @@ pub fn discover_voyages(
             .filter(|&c| !per_voyage(CANDIDATES[c].name))
             .collect();
         // Forward selection with the voyages as the held-out folds.
-        let (mut shared, mut gains) =
-            select_shared(&mut cv, data, &installation, sel, &mut v.inconsistent);
+        let (mut shared, mut gains) = select_shared(
+            &mut cv,
+            data,
+            &installation,
+            sel,
+            &mut v.inconsistent,
+            &mut out.undetermined,
+        );
         settle_agreement(&mut cv, data, &mut shared, &mut gains, &mut v.inconsistent);
         record_shared(
             &cv,
@@ -483,6 +490,7 @@ fn select_shared(
     installation: &[usize],
     sel: &Selection,
     inconsistent: &mut Vec<SharedEffect>,
+    undetermined: &mut Vec<Undetermined>,
 ) -> (Vec<usize>, Vec<f64>) {
     let mut shared: Vec<usize> = Vec::new();
     let mut gains: Vec<f64> = Vec::new();
@@ -497,6 +505,8 @@ fn select_shared(
             .collect();
         trials.sort_by(|a, b| b.gain.total_cmp(&a.gain));
         let mut added = false;
+        // The candidate of this round with the most held-out gain that the test does not name.
+        let mut pointed: Option<Undetermined> = None;
         for t in trials {
             if !(t.gain.is_finite() && t.gain >= sel.min_gain) {
                 break;
@@ -510,6 +520,9 @@ fn select_shared(
             let joint = combine(&ests.iter().collect::<Vec<_>>(), components(&set));
             let (_, agreement) = agreement_of(&ests, off, len);
             if !significant(&joint, &agreement, off, len, sel) {
+                if pointed.is_none() && !agreement.disagrees() {
+                    pointed = pointed_at(cv, c, &joint, &agreement, (off, len), &t, sel);
+                }
                 restore(cv, c, &t.departing);
                 continue;
             }
@@ -538,10 +551,73 @@ fn select_shared(
             break;
         }
         if !added {
+            undetermined.extend(pointed);
             break;
         }
     }
     (shared, gains)
+}
+
+/// A shared candidate the voyages agree on and that lowers the leave-one-voyage-out score, but
+/// whose combined estimate (widened by the voyages' scatter) the test does not name.
+#[allow(clippy::too_many_arguments)]
+fn pointed_at(
+    cv: &[ChannelVoyage],
+    c: usize,
+    joint: &Combined,
+    agreement: &Combined,
+    (off, len): (usize, usize),
+    t: &Trial,
+    sel: &Selection,
+) -> Option<Undetermined> {
+    // The score without it, with the same voyages set aside.
+    let before = t.score / (1.0 - t.gain);
+    let name = CANDIDATES[c].name;
+    let birge = birge_ratio(agreement);
+    let std: Vec<f64> = (0..len).map(|k| joint.std[off + k] * birge).collect();
+    if std.iter().all(|s| !s.is_finite()) {
+        return None;
+    }
+    let nominal = cv[0].p.nominal.get(name).unwrap_or_default();
+    let value: Vec<f64> = (0..len)
+        .map(|k| nominal[k] + joint.delta[off + k])
+        .collect();
+    let sigmas = (0..len)
+        .filter(|&k| std[k].is_finite() && std[k] > 0.0)
+        .map(|k| joint.delta[off + k].abs() / std[k])
+        .fold(0.0, f64::max);
+    let unit = spec(name).map_or("", |s| s.unit);
+    let sharing = cv.len() - t.departing.len();
+    let scatter = if birge > 1.0 {
+        format!(
+            "; the voyages' estimates scatter {birge:.2}× more than their deviations say, which \
+             widens it"
+        )
+    } else {
+        String::new()
+    };
+    let note = format!(
+        "{name} ({}): {} {unit} over {sharing} voyages, {sigmas:.1}σ from nominal where the test \
+         asks {}σ; it lowers the leave-one-voyage-out score {before:.3e} → {:.3e}{scatter}: \
+         these voyages point at it without determining it (not named)",
+        CANDIDATES[c].channel.name(),
+        super::analysis::with_deviation(&value, &std),
+        sel.min_sigma,
+        t.score,
+    );
+    Some(Undetermined {
+        name: name.into(),
+        channel: CANDIDATES[c].channel,
+        value: json_of(&value),
+        std: json_of(&std),
+        nominal: json_of(&nominal),
+        unit: unit.into(),
+        sigmas,
+        widening: birge,
+        held_out_before: before,
+        held_out_after: t.score,
+        note,
+    })
 }
 
 /// One candidate tried as a shared effect.

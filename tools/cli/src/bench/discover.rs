@@ -91,6 +91,8 @@ struct Misses {
     below_the_floor: usize,
     /// Several voyages disagree on it (reported as inconsistent).
     inconsistent: usize,
+    /// Above the floor, listed as pointed at but not determined.
+    undetermined: usize,
     /// The report's floor says the hidden size would have been named: unaccounted for.
     silent: usize,
 }
@@ -103,6 +105,7 @@ impl Misses {
                 Miss::NotExcited => m.not_excited += 1,
                 Miss::BelowTheFloor => m.below_the_floor += 1,
                 Miss::Inconsistent => m.inconsistent += 1,
+                Miss::Undetermined => m.undetermined += 1,
                 Miss::Silent => m.silent += 1,
             }
         }
@@ -112,8 +115,12 @@ impl Misses {
     fn describe(&self) -> String {
         format!(
             "not named: {} reported not excited, {} below the floor, {} inconsistent across \
-             voyages, {} silent",
-            self.not_excited, self.below_the_floor, self.inconsistent, self.silent
+             voyages, {} pointed at but not determined, {} silent",
+            self.not_excited,
+            self.below_the_floor,
+            self.inconsistent,
+            self.undetermined,
+            self.silent
         )
     }
 }
