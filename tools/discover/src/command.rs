@@ -61,7 +61,8 @@ pub struct DiscoverOptions {
     /// The logs are pieces of one voyage (one recording split into files): read them as one
     /// series against one reference. By default each log is a voyage of its own: its own
     /// reference, time base and held-out blocks, with the installation effects shared by the
-    /// voyages and tested for agreement.
+    /// voyages and tested for agreement (a few voyages that depart from what the rest agree on
+    /// are named and fit their own value).
     #[cfg_attr(feature = "clap", arg(long))]
     pub one_voyage: bool,
     /// The DVL's bottom track may see a moving bed (a river, soft sediment that the current
