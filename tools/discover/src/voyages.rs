@@ -429,15 +429,8 @@ pub fn discover_voyages(
             .filter(|&c| !per_voyage(CANDIDATES[c].name))
             .collect();
         // Forward selection with the voyages as the held-out folds.
-        let (mut shared, mut gains) = select_shared(
-            &mut cv,
-            data,
-            &installation,
-            sel,
-            &mut v.inconsistent,
-            &mut out.undetermined,
-        );
-        settle_agreement(&mut cv, data, &mut shared, &mut gains, &mut v.inconsistent);
+        let out_of = (&mut v.inconsistent, &mut out.undetermined);
+        let (shared, gains) = select_shared(&mut cv, data, &installation, sel, out_of);
         record_shared(
             &cv,
             data,
@@ -483,14 +476,14 @@ pub fn discover_voyages(
 /// shared set and each one's held-out gain. An effect on which a few voyages depart from what
 /// the others agree is tried with those voyages set aside ([`departing_from`]); an effect the
 /// voyages disagree on otherwise goes to `inconsistent` and stays in the data as each voyage's
-/// own, so that it does not bias the effects the voyages do share.
+/// own, so that it does not bias the effects the voyages do share. The shared set is then
+/// settled so that it still agrees at the end ([`settle_agreement`]).
 fn select_shared(
     cv: &mut [ChannelVoyage],
     data: &[VoyageData],
     installation: &[usize],
     sel: &Selection,
-    inconsistent: &mut Vec<SharedEffect>,
-    undetermined: &mut Vec<Undetermined>,
+    (inconsistent, undetermined): (&mut Vec<SharedEffect>, &mut Vec<Undetermined>),
 ) -> (Vec<usize>, Vec<f64>) {
     let mut shared: Vec<usize> = Vec::new();
     let mut gains: Vec<f64> = Vec::new();
@@ -555,6 +548,7 @@ fn select_shared(
             break;
         }
     }
+    settle_agreement(cv, data, &mut shared, &mut gains, inconsistent);
     (shared, gains)
 }
 
