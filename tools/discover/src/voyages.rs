@@ -890,21 +890,14 @@ fn record_shared(
             ),
         );
         if !s.departing.is_empty() {
+            let (verb, fits, them) = match s.departing.len() {
+                1 => ("departs", "fits", "it"),
+                _ => ("depart", "each fit", "them"),
+            };
             s.verdict.push_str(&format!(
-                "; {} {} from it and {} its own value (look at {}: the voyages of one vehicle \
-                 share its installation)",
+                "; {} {verb} from it and {fits} its own value (look at {them}: the voyages of one \
+                 vehicle share its installation)",
                 s.departing.join(", "),
-                if s.departing.len() == 1 {
-                    "departs"
-                } else {
-                    "depart"
-                },
-                if s.departing.len() == 1 {
-                    "fits"
-                } else {
-                    "each fit"
-                },
-                if s.departing.len() == 1 { "it" } else { "them" },
             ));
         }
         let birge = birge_ratio(&agreement);
