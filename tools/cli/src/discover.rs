@@ -178,6 +178,9 @@ pub mod command {
                 n.dvl_rejected_after
             );
         }
+        for n in &r.navigation {
+            println!("  navigation {}: {}", n.log, n.verdict);
+        }
         for n in &r.notes {
             println!("  note: {n}");
         }

@@ -113,6 +113,12 @@ pub fn print_report(r: &ReplayReport) {
             "  error/distance CEP50 {:.3} %, heading error RMS {:.4} deg",
             acc.error_per_distance_cep50_percent, acc.heading_error_rms_deg
         );
+        if acc.horizontal_velocity_error_rms_m_s > 0.0 {
+            println!(
+                "  horizontal velocity error RMS {:.4} m/s; the reference's own position departs from the integral of its velocity by {:.2} m RMS",
+                acc.horizontal_velocity_error_rms_m_s, acc.truth_position_against_velocity_rms_m
+            );
+        }
     }
     let n = &r.navigator;
     println!(

@@ -347,6 +347,53 @@ pub struct NavigationGain {
     /// either run: where `--reference smoothed` found the log's reference to sit on the vehicle.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reference_lever_arm_m: Option<[f64; 3]>,
+    /// The effects make the navigation of this log worse ([`NavigationGain::judge`]).
+    pub worse: bool,
+    /// What the comparison shows, in words.
+    pub verdict: String,
+}
+
+impl NavigationGain {
+    /// Whether the run `after` navigates worse than `before`, and the sentence that says so.
+    /// Worse: its position error (RMS) against the reference grows, or its horizontal
+    /// velocity error does (where the reference has velocities). The sentence also gives the
+    /// RMS by which the reference's own position departs from the integral of its velocity
+    /// ([`Accuracy::truth_position_against_velocity_rms_m`]) when a position error grows by less
+    /// than that: such a reference does not say whether its position or its velocity is the
+    /// one in error, so the growth still counts, but the engineer should know that the
+    /// reference cannot tell that difference apart.
+    pub fn judge(before: &Accuracy, after: &Accuracy) -> (bool, String) {
+        let (pb, pa) = (before.horizontal_error_rms_m, after.horizontal_error_rms_m);
+        let own = before.truth_position_against_velocity_rms_m;
+        let (vb, va) = (
+            before.horizontal_velocity_error_rms_m_s,
+            after.horizontal_velocity_error_rms_m_s,
+        );
+        let with_velocity = vb > 0.0 && va > 0.0;
+        let velocity_worse = with_velocity && va > vb;
+        let position_worse = pa > pb;
+        let mut text = format!("position RMS {pb:.2} -> {pa:.2} m");
+        if position_worse && pa - pb <= own {
+            text.push_str(&format!(
+                " (less than the {own:.2} m RMS by which the reference's position departs from \
+                 the integral of its own velocity)"
+            ));
+        }
+        if with_velocity {
+            text.push_str(&format!(
+                ", velocity RMS {:.1} -> {:.1} mm/s",
+                1e3 * vb,
+                1e3 * va
+            ));
+        }
+        let head = match (velocity_worse, position_worse) {
+            (false, false) => "not worse",
+            (true, true) => "worse in velocity and position",
+            (true, false) => "worse in velocity",
+            (false, true) => "worse in position",
+        };
+        (velocity_worse || position_worse, format!("{head}: {text}"))
+    }
 }
 
 /// One voyage's estimate of an effect.
@@ -466,5 +513,42 @@ pub fn components_of(v: &serde_json::Value) -> Vec<Option<f64>> {
     match v {
         serde_json::Value::Array(a) => a.iter().map(|x| x.as_f64()).collect(),
         x => vec![x.as_f64()],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn accuracy(rms_m: f64, velocity_m_s: f64, own_m: f64) -> Accuracy {
+        Accuracy {
+            horizontal_error_rms_m: rms_m,
+            horizontal_velocity_error_rms_m_s: velocity_m_s,
+            truth_position_against_velocity_rms_m: own_m,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn a_growth_in_position_or_in_velocity_is_worse() {
+        let (worse, text) =
+            NavigationGain::judge(&accuracy(1.93, 0.0666, 1.10), &accuracy(1.45, 0.0183, 1.10));
+        assert!(!worse && text.starts_with("not worse"), "{text}");
+        // A growth within the reference's own departure counts, and is said to be within it.
+        let (worse, text) =
+            NavigationGain::judge(&accuracy(0.98, 0.0167, 0.75), &accuracy(1.25, 0.0125, 0.75));
+        assert!(worse && text.starts_with("worse in position"), "{text}");
+        assert!(text.contains("less than the 0.75 m"), "{text}");
+        let (worse, text) =
+            NavigationGain::judge(&accuracy(1.67, 0.091, 0.76), &accuracy(2.89, 0.025, 0.76));
+        assert!(worse && !text.contains("less than"), "{text}");
+        // The velocity error grows, the position falls.
+        let (worse, text) =
+            NavigationGain::judge(&accuracy(1.42, 0.0128, 1.41), &accuracy(0.95, 0.0134, 1.41));
+        assert!(worse && text.starts_with("worse in velocity:"), "{text}");
+        // No velocity compared (a reference without one): the position alone.
+        let (worse, text) =
+            NavigationGain::judge(&accuracy(0.12, 0.0, 0.001), &accuracy(0.10, 0.0, 0.001));
+        assert!(!worse && !text.contains("velocity"), "{text}");
     }
 }

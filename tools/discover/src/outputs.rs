@@ -167,15 +167,7 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
     // The installation found is written only where it does not make the navigation worse: a
     // log whose replay with the effects ends further off and with a larger error per distance
     // keeps the nominal tables.
-    let worse: Vec<&NavigationGain> = r
-        .navigation
-        .iter()
-        .filter(|g| {
-            g.after.horizontal_error_final_m > g.before.horizontal_error_final_m
-                && g.after.error_per_distance_cep50_percent
-                    > g.before.error_per_distance_cep50_percent
-        })
-        .collect();
+    let worse: Vec<&NavigationGain> = r.navigation.iter().filter(|g| g.worse).collect();
     let model = if worse.is_empty() {
         &r.model
     } else {
@@ -198,14 +190,9 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
     }
     for g in &worse {
         head.push_str(&format!(
-            "# NOT APPLIED: with the effects found the navigation of {} got worse (end {:.2} -> \
-             {:.2} m, CEP50 {:.3} -> {:.3} %): the tables below are the nominal installation; the \
-             effects found are in the report.\n",
-            g.log,
-            g.before.horizontal_error_final_m,
-            g.after.horizontal_error_final_m,
-            g.before.error_per_distance_cep50_percent,
-            g.after.error_per_distance_cep50_percent
+            "# NOT APPLIED: with the effects found the navigation of {} got {}: the tables \
+             below are the nominal installation; the effects found are in the report.\n",
+            g.log, g.verdict
         ));
     }
     for u in &r.unseparable {
@@ -280,10 +267,7 @@ pub fn navigation_gain(logs: &[PathBuf], r: &mut DiscoverReport) {
         let lever_arm = shared_lever_arm.or_else(|| own_reference_lever_arm(r, log));
         match navigation_of(log, &r.nominal_model, after, &kinds, lever_arm) {
             Ok(Some(g)) => {
-                let (b, a) = (&g.before, &g.after);
-                if a.horizontal_error_final_m > b.horizontal_error_final_m
-                    && a.error_per_distance_cep50_percent > b.error_per_distance_cep50_percent
-                {
+                if g.worse {
                     let why = if r.reference == "smoothed" {
                         "they describe the sensors against the IMU's own (smoothed) motion, yet \
                          the navigation does not gain from them on this log (its error is taken \
@@ -295,14 +279,10 @@ pub fn navigation_gain(logs: &[PathBuf], r: &mut DiscoverReport) {
                          with --reference smoothed)"
                     };
                     r.notes.push(format!(
-                        "{}: the navigation error grows with the effects found (end {:.2} -> {:.2} m, \
-                         CEP50 {:.3} -> {:.3} %): {why}. Check against the navigator's own \
-                         estimates (estimate_dvl_* in [navigation]) before using navigation.toml",
-                        g.log,
-                        b.horizontal_error_final_m,
-                        a.horizontal_error_final_m,
-                        b.error_per_distance_cep50_percent,
-                        a.error_per_distance_cep50_percent
+                        "{}: the navigation gets {} with the effects found: {why}. Check against \
+                         the navigator's own estimates (estimate_dvl_* in [navigation]) before \
+                         using navigation.toml",
+                        g.log, g.verdict
                     ));
                 }
                 r.navigation.push(g)
@@ -406,7 +386,10 @@ fn navigation_of(
     let Some((after, fa, ra)) = run(&with(after))? else {
         return Ok(None);
     };
+    let (worse, verdict) = NavigationGain::judge(&before, &after);
     Ok(Some(NavigationGain {
+        worse,
+        verdict,
         log: log.display().to_string(),
         configuration: source,
         before,

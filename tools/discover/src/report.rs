@@ -273,22 +273,28 @@ fn markdown(r: &DiscoverReport, figures: &[(ChannelKind, Vec<String>)]) -> Strin
         let _ = writeln!(
             m,
             "## Navigation error\n\nEach log replayed with the nominal installation and with the \
-             effects fitted on the first part of the readings (the rest of the configuration: \
-             the log's own or the defaults).\n\n| log | end error before | after | CEP50 before | after | heading RMS before | after | DVL rejected before | after |\n|---|---|---|---|---|---|---|---|---|"
+             effects found (held out: fitted on the other voyages, or on the first part of the \
+             readings; the rest of the configuration: the log's own or the defaults). Errors \
+             against the log's reference; *reference's own* is the RMS by which the reference's \
+             position departs from the integral of its own velocity (a reference that merges \
+             position fixes: metres), the scale of what it can tell apart in position.\n\n| log | RMS before | after | end before | after | velocity RMS before | after | reference's own | DVL rejected before | after | verdict |\n|---|---|---|---|---|---|---|---|---|---|---|"
         );
         for n in &r.navigation {
+            let (b, a) = (&n.before, &n.after);
             let _ = writeln!(
                 m,
-                "| {} | {:.2} m | {:.2} m | {:.3} % | {:.3} % | {:.3}° | {:.3}° | {} | {} |",
+                "| {} | {:.2} m | {:.2} m | {:.2} m | {:.2} m | {:.1} mm/s | {:.1} mm/s | {:.2} m | {} | {} | {} |",
                 n.log,
-                n.before.horizontal_error_final_m,
-                n.after.horizontal_error_final_m,
-                n.before.error_per_distance_cep50_percent,
-                n.after.error_per_distance_cep50_percent,
-                n.before.heading_error_rms_deg,
-                n.after.heading_error_rms_deg,
+                b.horizontal_error_rms_m,
+                a.horizontal_error_rms_m,
+                b.horizontal_error_final_m,
+                a.horizontal_error_final_m,
+                1e3 * b.horizontal_velocity_error_rms_m_s,
+                1e3 * a.horizontal_velocity_error_rms_m_s,
+                b.truth_position_against_velocity_rms_m,
                 n.dvl_rejected_before,
-                n.dvl_rejected_after
+                n.dvl_rejected_after,
+                n.verdict.split(':').next().unwrap_or_default()
             );
         }
         let _ = writeln!(m);

@@ -149,6 +149,31 @@ pub fn estimate_reference_offset(imu: &[[f64; 7]], reference: &[[f64; 10]]) -> C
     }
 }
 
+/// The reference's angular rate w.r.t. inertial space in body axes (rad/s) at each of its rows:
+/// the rotation between the neighbouring rows' attitudes (central differences, one-sided at the
+/// ends) plus the Earth rate. The data set gives the attitude only; a truth record carries the
+/// rate so that a reference at another point of the vehicle can be moved to the IMU in velocity
+/// as well as in position (`auvnav replay --reference-lever-arm`). NaN where the neighbours are
+/// more than 2 s apart.
+fn reference_rates(rows: &[[f64; 10]]) -> Vec<[f64; 3]> {
+    let attitude = |r: &[f64; 10]| UnitQuaternion::from_euler_angles(r[7], r[8], r[9]);
+    let n = rows.len();
+    (0..n)
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(1), (i + 1).min(n.saturating_sub(1)));
+            let dt = rows[b][0] - rows[a][0];
+            if a == b || !(dt > 0.0 && dt <= 2.0) {
+                return [f64::NAN; 3];
+            }
+            let (qa, qb) = (attitude(&rows[a]), attitude(&rows[b]));
+            let w_eb = (qa.inverse() * qb).scaled_axis() / dt;
+            let q = attitude(&rows[i]);
+            let w_ie = q.inverse() * auvnav_core::earth::earth_rate_ned(rows[i][2]);
+            (w_eb + w_ie).into()
+        })
+        .collect()
+}
+
 /// The messages of one segment in time order, and the summary.
 pub fn snapir_messages(
     dir: &Path,
@@ -232,6 +257,7 @@ pub fn snapir_messages(
         };
         out.push((m.host_time_ns, 2, topic::DVL, LogMessage::Dvl(m)));
     }
+    let rates = reference_rates(&reference.rows);
     for (i, r) in reference.rows.iter().enumerate() {
         let (lon, lat, alt) = (r[1], r[2], r[3]);
         let euler = [r[7], r[8], r[9]];
@@ -245,7 +271,7 @@ pub fn snapir_messages(
             velocity_ned_m_s: [r[4], r[5], r[6]],
             quaternion_body_to_ned: [q.w, q.i, q.j, q.k],
             euler_rad: euler,
-            angular_rate_rad_s: [f64::NAN; 3],
+            angular_rate_rad_s: rates[i],
             specific_force_m_s2: [f64::NAN; 3],
         };
         out.push((
@@ -330,7 +356,7 @@ pub fn snapir(a: &SnapirOptions) -> Result<SnapirSummary> {
             topic::TRUTH,
             &note(&[(
                 "source",
-                "ref_NN.csv: post-processed INS/DVL reference solution (not independent of the DVL); rates and specific force unknown (NaN)",
+                "ref_NN.csv: post-processed INS/DVL reference solution (not independent of the DVL); angular rate from its attitude (central differences) plus the Earth rate; specific force unknown (NaN)",
             )]),
         )?;
         w.declare::<DepthV1>(
@@ -353,4 +379,38 @@ pub fn snapir(a: &SnapirOptions) -> Result<SnapirSummary> {
     })
     .map_err(crate::error::output(&a.out))?;
     Ok(summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_reference_rate_is_its_attitude_turning_plus_the_earth_rate() {
+        // A reference turning at 0.1 rad/s in yaw, rolled 10°, at 0.5 rad latitude, 1 Hz.
+        let (roll, lat) = (10f64.to_radians(), 0.5);
+        let rows: Vec<[f64; 10]> = (0..5)
+            .map(|k| {
+                let t = k as f64;
+                [t, 0.6, lat, -10.0, 1.0, 0.0, 0.0, roll, 0.0, 0.1 * t]
+            })
+            .collect();
+        let rates = reference_rates(&rows);
+        for (r, w) in rows.iter().zip(&rates) {
+            let q = UnitQuaternion::from_euler_angles(r[7], r[8], r[9]);
+            // A yaw rate about the vertical, seen in the rolled body axes.
+            let w_eb = q.inverse() * nalgebra::Vector3::new(0.0, 0.0, 0.1);
+            let w_ie = q.inverse() * auvnav_core::earth::earth_rate_ned(lat);
+            let want = w_eb + w_ie;
+            for k in 0..3 {
+                assert!((w[k] - want[k]).abs() < 1e-9, "{w:?} against {want:?}");
+            }
+        }
+        // Rows more than 2 s apart give no rate.
+        let gap = [
+            rows[0],
+            [10.0, 0.6, lat, -10.0, 1.0, 0.0, 0.0, roll, 0.0, 1.0],
+        ];
+        assert!(reference_rates(&gap).iter().all(|w| w[0].is_nan()));
+    }
 }
