@@ -455,6 +455,12 @@ pub struct NamedAlone {
     pub channel: ChannelKind,
     pub unit: String,
     pub voyages: Vec<VoyageEstimate>,
+    /// An installation effect not confirmed although a few voyages depart from what the
+    /// others agree on (at most a quarter): what the others agree on, shared by them. It was
+    /// not named because, shared by them, it did not pass the test or lower the held-out
+    /// residual enough; the voyages are not reported as disagreeing.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub agreeing: Option<Agreeing>,
 }
 
 /// One channel's leave-one-voyage-out score.

@@ -60,10 +60,10 @@ pub struct VoyageData {
     pub reference: Reference,
 }
 
-use super::findings::Undetermined;
 pub use super::findings::{
     Agreeing, NamedAlone, SharedEffect, VoyageEstimate, VoyageScore, Voyages,
 };
+use super::findings::{Undetermined, values_of};
 
 /// An estimate in deviations from nominal with its information (pseudo-inverse of the
 /// covariance; a component without a finite variance carries none).
@@ -375,6 +375,7 @@ pub fn discover_voyages(
                 .collect();
             if per_voyage(name) && !by.is_empty() {
                 v.per_voyage.push(NamedAlone {
+                    agreeing: None,
                     name: name.into(),
                     channel: kind,
                     unit: spec(name).map_or("", |s| s.unit).into(),
@@ -964,6 +965,7 @@ fn not_confirmed(
             .iter()
             .filter(|x| named_alone(reports, x.voyage, kind, name).is_some())
             .count();
+        let mut agreeing = None;
         if alone_count > 0 && !v.inconsistent.iter().any(|s| s.name == name) {
             let mut set = shared.to_vec();
             set.push(c);
@@ -971,11 +973,17 @@ fn not_confirmed(
             let (off, len) = offset_in(&set, c);
             let (alone, agreement) = agreement_of(&shared_estimates(cv, &set, &fits), off, len);
             if agreement.disagrees() {
-                let (verdict, agreeing) = disagreement(cv, data, c, &alone, &agreement);
-                v.inconsistent.push(SharedEffect {
-                    agreeing,
-                    ..shared_effect(cv, data, c, &fits, &agreement, 0.0, verdict)
-                });
+                // A few voyages that depart do not make the rest disagree (as in the
+                // selection): what the rest agree on is reported, the effect not confirmed.
+                agreeing = departing_from(cv, c, &alone, len)
+                    .and_then(|left| agreed_without(cv, data, c, &alone, &left));
+                if agreeing.is_none() {
+                    let (verdict, agreeing) = disagreement(cv, data, c, &alone, &agreement);
+                    v.inconsistent.push(SharedEffect {
+                        agreeing,
+                        ..shared_effect(cv, data, c, &fits, &agreement, 0.0, verdict)
+                    });
+                }
             }
         }
         let by: Vec<VoyageEstimate> = cv
@@ -990,19 +998,39 @@ fn not_confirmed(
             .collect();
         if !by.is_empty() {
             let inconsistent = v.inconsistent.iter().any(|s| s.name == name);
+            let why = match &agreeing {
+                _ if inconsistent => "they disagree".to_string(),
+                Some(a) => {
+                    let (v, e) = (values_of(&a.value), values_of(&a.std));
+                    let pm: Vec<String> = v
+                        .unwrap_or_default()
+                        .iter()
+                        .zip(e.unwrap_or_default())
+                        .map(|(v, e)| {
+                            // Two significant digits of the deviation.
+                            let d = (1.0 - e.log10().floor()).clamp(0.0, 12.0) as usize;
+                            format!("{v:.d$} ± {e:.d$}")
+                        })
+                        .collect();
+                    format!(
+                        "without {} the other {} agree on [{}], but shared by them it is not \
+                         significant or has too little held-out gain",
+                        a.left_out.join(", "),
+                        a.voyages,
+                        pm.join(", ")
+                    )
+                }
+                None => "not significant or no held-out gain across voyages".to_string(),
+            };
             notes.push(format!(
                 "{name} ({}): named by {} of {} voyages alone, not by the voyages together \
-                 ({})",
+                 ({why})",
                 kind.name(),
                 by.len(),
                 cv.len(),
-                if inconsistent {
-                    "they disagree"
-                } else {
-                    "not significant or no held-out gain across voyages"
-                }
             ));
             v.not_confirmed.push(NamedAlone {
+                agreeing,
                 name: name.into(),
                 channel: kind,
                 unit: spec(name).map_or("", |s| s.unit).into(),
@@ -1118,6 +1146,36 @@ fn departing_from(
     let informative = alone.iter().filter(|e| e.rank > 0).count();
     let (left, _) = agreeing_without(alone, len, most)?;
     (!left.is_empty() && informative - left.len() >= 3).then_some(left)
+}
+
+/// What the voyages of `cv` other than `left` (those departing from effect `c`) agree on.
+fn agreed_without(
+    cv: &[ChannelVoyage],
+    data: &[VoyageData],
+    c: usize,
+    alone: &[Estimate],
+    left: &[usize],
+) -> Option<Agreeing> {
+    let len = alone.first()?.delta.len();
+    let kept: Vec<&Estimate> = (0..alone.len())
+        .filter(|k| alone[*k].rank > 0 && !left.contains(k))
+        .map(|k| &alone[k])
+        .collect();
+    let agree = combine(&kept, len);
+    let nominal = cv[0].p.nominal.get(CANDIDATES[c].name).unwrap_or_default();
+    let value: Vec<f64> = nominal
+        .iter()
+        .zip(agree.delta.iter())
+        .map(|(a, b)| a + b)
+        .collect();
+    // Voyages already fitting their own value of it count as left out too.
+    let out = (0..cv.len()).filter(|k| left.contains(k) || cv[*k].own.contains(&c));
+    Some(Agreeing {
+        left_out: out.map(|k| data[cv[k].voyage].log.clone()).collect(),
+        voyages: kept.len(),
+        value: json_of(&value),
+        std: json_of(&agree.std),
+    })
 }
 
 /// sqrt(χ² / dof) of the voyages' agreement, at least 1.
