@@ -22,16 +22,10 @@ use std::path::PathBuf;
 pub struct Collector {
     truth: Vec<auvnav_shm_schema::TruthStateV1>,
     channels: Vec<Channel>,
-    /// Specific force summed since the last magnetometer reading, and the mean at that reading.
-    force_sum: [f64; 3],
-    force_n: usize,
+    /// The vertical at each magnetometer reading: the specific force since the previous one,
+    /// the centripetal acceleration of a turn taken off (as `auvnav calibrate mag` reads it).
+    vertical: auvnav_import::mag::VerticalBetweenReadings,
     last_force: Option<[f64; 3]>,
-    /// Angular rate summed since the last magnetometer reading (rad/s), and the last bottom-track
-    /// velocity (time s, m/s in the DVL's frame): the centripetal acceleration ω × v, taken out
-    /// of the specific force so that its direction is the vertical in a turn too.
-    rate_sum: [f64; 3],
-    rate_n: usize,
-    last_dvl: Option<(f64, [f64; 3])>,
     /// The IMU samples, compared with the reference over intervals once it is complete.
     imu: Vec<super::imu::ImuSample>,
     last_imu_time: Option<f64>,
@@ -61,12 +55,8 @@ impl Collector {
         Collector {
             truth: Vec::new(),
             channels: ChannelKind::ALL.iter().map(|&k| Channel::new(k)).collect(),
-            force_sum: [0.0; 3],
-            force_n: 0,
+            vertical: Default::default(),
             last_force: None,
-            rate_sum: [0.0; 3],
-            rate_n: 0,
-            last_dvl: None,
             imu: Vec::new(),
             last_imu_time: None,
             dvl_beams: false,
@@ -74,12 +64,10 @@ impl Collector {
     }
 
     pub fn add(&mut self, m: &LogMessage) {
-        if let LogMessage::Dvl(d) = m
-            && d.validity & DvlVelocityV1::VALID_VELOCITY != 0
-            && !d.is_water_track()
-            && d.velocity_dvl_m_s.iter().all(|x| x.is_finite())
-        {
-            self.last_dvl = Some((d.host_time_ns as f64 * 1e-9, d.velocity_dvl_m_s));
+        match m {
+            LogMessage::Dvl(d) => self.vertical.add_dvl(d),
+            LogMessage::Imu(x) => self.vertical.add_imu(x),
+            _ => {}
         }
         match m {
             LogMessage::Truth(t) => self.truth.push(*t),
@@ -133,12 +121,6 @@ impl Collector {
             }
             LogMessage::Imu(x) => {
                 let force = auvnav_calibrate::mag::input::specific_force(x);
-                if let Some(f) = force {
-                    for k in 0..3 {
-                        self.force_sum[k] += f[k];
-                    }
-                    self.force_n += 1;
-                }
                 let t = x.host_time_ns as f64 * 1e-9;
                 let dt = if x.interval_s.is_finite() && x.interval_s > 0.0 {
                     Some(x.interval_s)
@@ -150,12 +132,6 @@ impl Collector {
                     .then(|| auvnav_sim::perturb::imu_rate(x))
                     .filter(|w| w.iter().all(|v| v.is_finite()));
                 let force = force.filter(|f| f.iter().all(|v| v.is_finite()));
-                if let Some(w) = rate {
-                    for k in 0..3 {
-                        self.rate_sum[k] += w[k];
-                    }
-                    self.rate_n += 1;
-                }
                 match dt {
                     Some(dt_s) if dt_s <= 1.0 && (rate.is_some() || force.is_some()) => {
                         self.imu.push(super::imu::ImuSample {
@@ -173,24 +149,9 @@ impl Collector {
             }
             LogMessage::Magnetometer(m) => {
                 let t = m.host_time_ns as f64 * 1e-9;
-                if self.force_n > 0 {
-                    let f = Vector3::from(self.force_sum.map(|x| x / self.force_n as f64));
-                    // In a turn the specific force leans by the centripetal acceleration
-                    // (4°/s at 2 m/s: 0.8°, a dip error of 0.7 µT): with the gyro's mean rate
-                    // and a bottom-track velocity of the last two seconds, ω × v comes off.
-                    let centripetal = match self.last_dvl {
-                        Some((tv, v)) if self.rate_n > 0 && (t - tv).abs() <= 2.0 => {
-                            let w = Vector3::from(self.rate_sum.map(|x| x / self.rate_n as f64));
-                            w.cross(&Vector3::from(v))
-                        }
-                        _ => Vector3::zeros(),
-                    };
-                    self.last_force = Some((f - centripetal).into());
+                if let Some(f) = self.vertical.take(t) {
+                    self.last_force = Some(f.into());
                 }
-                self.force_sum = [0.0; 3];
-                self.force_n = 0;
-                self.rate_sum = [0.0; 3];
-                self.rate_n = 0;
                 let field = m.field_t.map(|b| b * 1e6);
                 if m.validity & MagnetometerV1::VALID_FIELD != 0 {
                     self.channels[2].push(t, field);
