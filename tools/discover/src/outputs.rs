@@ -164,9 +164,9 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
         navigation: Navigation,
     }
     let source = format!("auvnav discover on {}", r.inputs.join(", "));
-    // The installation found is written only where it does not make the navigation worse: a
-    // log whose replay with the effects ends further off and with a larger error per distance
-    // keeps the nominal tables.
+    // The installation found is written only where it does not make the navigation worse
+    // (`NavigationGain::judge`: a larger position or velocity error against the reference on
+    // any log keeps the nominal tables).
     let worse: Vec<&NavigationGain> = r.navigation.iter().filter(|g| g.worse).collect();
     let model = if worse.is_empty() {
         &r.model
