@@ -770,8 +770,9 @@ pub fn discover(
         } else {
             Vec::new()
         };
-        r.noise
-            .push(super::outputs::noise_estimate(kind, &rms_all, spacing_s));
+        r.noise.extend(super::outputs::noise_estimates(
+            &p, &set, &rms_all, spacing_s,
+        ));
         r.residuals.push(ResidualSeries {
             channel: kind,
             times: times.clone(),

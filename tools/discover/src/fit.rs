@@ -12,7 +12,7 @@
 //! Long on purpose: the fit, the held-out selection and the separability check share the channel's
 //! epochs, design and prior: three steps of one estimator.
 
-use super::noise::restricted_gauss_markov;
+use super::noise::{GaussMarkov, restricted_gauss_markov_from};
 use super::{CANDIDATES, Candidate, Channel, ChannelKind, Reference, spec};
 use auvnav_sim::effects::Effects;
 use nalgebra::{DMatrix, DVector};
@@ -87,10 +87,20 @@ impl<'a> Problem<'a> {
     /// The noise model ([`Problem::noise_lags`], [`Problem::noise_model`]) of the residual with
     /// the candidates `all` fitted.
     fn fit_noise(&mut self, all: &[usize]) {
+        let (lags, model) = self.noise_of(all, 1);
+        (self.noise_lags, self.noise_model) = (lags, model);
+    }
+
+    /// The correlation lags and, per component, the Gauss–Markov error and white noise of the
+    /// residual with the set `set` fitted (as [`Problem::noise_model`]), the likelihood searched
+    /// from `starts` points ([`super::noise::restricted_gauss_markov_from`]). With every
+    /// candidate the noise is what no effect can take; with the effects found, it is the noise
+    /// of the extended model, read with fewer directions absorbed.
+    pub fn noise_of(&self, set: &[usize], starts: usize) -> (usize, Vec<Option<GaussMarkov>>) {
         let d = self.channel.kind.dims();
-        let f = self.fit(all, &self.epochs);
-        let r = self.residuals(&self.effects(all, &f.theta), &self.epochs);
-        self.noise_lags = correlation_lags(&r, d);
+        let f = self.fit(set, &self.epochs);
+        let r = self.residuals(&self.effects(set, &f.theta), &self.epochs);
+        let lags = correlation_lags(&r, d);
         let m = r.len() / d.max(1);
         // The noise is read with what the candidates (and an IMU's drift nuisance) took from it
         // counted (the restricted likelihood with their design): a slow sensor error on a
@@ -99,7 +109,7 @@ impl<'a> Problem<'a> {
         let jac = if f.theta.is_empty() {
             DMatrix::zeros(r.len(), 0)
         } else {
-            self.jacobian(all, &f.theta, &self.epochs, &r)
+            self.jacobian(set, &f.theta, &self.epochs, &r)
         };
         let drift = match self.drift_knot_s {
             Some(knot) => {
@@ -109,7 +119,7 @@ impl<'a> Problem<'a> {
             None => DMatrix::zeros(m, 0),
         };
         let (p, q) = (jac.ncols(), drift.ncols());
-        self.noise_model = (0..d)
+        let model = (0..d)
             .map(|k| {
                 let x: Vec<f64> = (0..m).map(|t| r[t * d + k]).collect();
                 let design = DMatrix::from_fn(m, p + q, |t, c| {
@@ -119,9 +129,10 @@ impl<'a> Problem<'a> {
                         drift[(t, c - p)]
                     }
                 });
-                restricted_gauss_markov(&x, &design)
+                restricted_gauss_markov_from(&x, &design, starts)
             })
             .collect();
+        (lags, model)
     }
 
     /// This channel's candidates (indices into [`CANDIDATES`]).

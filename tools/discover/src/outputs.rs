@@ -65,6 +65,70 @@ pub fn noise_estimate(
     }
 }
 
+/// A channel's noise effects: [`noise_estimate`] from the RMS of its residual with the effects
+/// found (`set` on the problem `p`), and for the DVL, where that residual shows a
+/// time-correlated part (per DVL-frame component the Gauss–Markov variance, the white variance
+/// and φ per reading of spacing `spacing_s`, by restricted likelihood searched from three
+/// starts: this is the sensor's noise a report gives), that part as the simulator's
+/// `dvl.velocity_error_instability` (the RMS over the three axes of the Gauss–Markov deviation)
+/// and `dvl.velocity_error_correlation_time` (−spacing / ln φ, the geometric mean over the axes
+/// that show one), and `dvl.noise` from the white part alone.
+pub fn noise_estimates(
+    p: &super::fit::Problem,
+    set: &[usize],
+    rms: &[f64],
+    spacing_s: f64,
+) -> Vec<super::findings::NoiseEstimate> {
+    let kind = p.channel.kind;
+    if kind != ChannelKind::Dvl {
+        return vec![noise_estimate(kind, rms, spacing_s)];
+    }
+    let noise_model = p.noise_of(set, 3).1;
+    let correlated: Vec<(f64, f64, f64)> = noise_model.iter().flatten().copied().collect();
+    if correlated.is_empty() || noise_model.len() != rms.len() {
+        return vec![noise_estimate(kind, rms, spacing_s)];
+    }
+    // The white part per component (the RMS where a component shows no correlated part).
+    let white: Vec<f64> = noise_model
+        .iter()
+        .zip(rms)
+        .map(|(m, r)| m.map_or(*r, |(_, w, _)| w.sqrt()))
+        .collect();
+    let mut white_noise = noise_estimate(kind, &white, spacing_s);
+    white_noise.note = "the white part of the residual with the effects found, beside its \
+                        Gauss–Markov part (restricted likelihood)"
+        .into();
+    let sigma = (correlated.iter().map(|(g, _, _)| g).sum::<f64>() / rms.len() as f64).sqrt();
+    let taus: Vec<f64> = correlated
+        .iter()
+        .filter(|(_, _, phi)| *phi > 0.0 && *phi < 1.0)
+        .map(|(_, _, phi)| -spacing_s / phi.ln())
+        .collect();
+    let mut out = vec![white_noise];
+    let note = format!(
+        "the time-correlated part of the residual with the effects found (a first-order \
+         Gauss–Markov error by restricted likelihood, on {} of {} DVL-frame axes)",
+        correlated.len(),
+        rms.len()
+    );
+    let mut push = |name: &str, value: f64| {
+        let spec = super::spec(name);
+        out.push(super::findings::NoiseEstimate {
+            name: name.into(),
+            value: spec.map_or(value, |s| value.clamp(s.min, s.max)),
+            unit: spec.map_or("", |s| s.unit).into(),
+            channel: kind,
+            note: note.clone(),
+        });
+    };
+    push("dvl.velocity_error_instability", sigma);
+    if !taus.is_empty() {
+        let tau = (taus.iter().map(|t| t.ln()).sum::<f64>() / taus.len() as f64).exp();
+        push("dvl.velocity_error_correlation_time", tau);
+    }
+    out
+}
+
 /// The effect set of the extended model: every effect that differs from the simulator's
 /// defaults (the nominal settings and the effects found), and each analysed channel's noise.
 pub fn effect_set(r: &DiscoverReport) -> Vec<(String, Vec<f64>)> {
