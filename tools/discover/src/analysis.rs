@@ -64,10 +64,8 @@ impl Collector {
     }
 
     pub fn add(&mut self, m: &LogMessage) {
-        match m {
-            LogMessage::Dvl(d) => self.vertical.add_dvl(d),
-            LogMessage::Imu(x) => self.vertical.add_imu(x),
-            _ => {}
+        if let LogMessage::Dvl(d) = m {
+            self.vertical.add_dvl(d);
         }
         match m {
             LogMessage::Truth(t) => self.truth.push(*t),
@@ -132,6 +130,7 @@ impl Collector {
                     .then(|| auvnav_sim::perturb::imu_rate(x))
                     .filter(|w| w.iter().all(|v| v.is_finite()));
                 let force = force.filter(|f| f.iter().all(|v| v.is_finite()));
+                self.vertical.add(force, rate);
                 match dt {
                     Some(dt_s) if dt_s <= 1.0 && (rate.is_some() || force.is_some()) => {
                         self.imu.push(super::imu::ImuSample {

@@ -13,6 +13,10 @@
 
 use nalgebra::{DMatrix, DVector};
 
+/// A residual component's Gauss–Markov error and white noise: (Gauss–Markov variance, white
+/// variance, φ per reading).
+pub type GaussMarkov = (f64, f64, f64);
+
 /// The Gauss–Markov error plus white noise of one residual component (readings in time order),
 /// `x`, by restricted maximum likelihood with the effects' design `design` (one row per reading,
 /// one column per effect parameter, in the same units as `x` per unit parameter): (Gauss–Markov
@@ -22,10 +26,6 @@ use nalgebra::{DMatrix, DVector};
 /// nothing can be named. None when the likelihood
 /// ratio against white noise alone is under 6 (two parameters, about the 5 % point), or the series
 /// is too short.
-/// A residual component's Gauss–Markov error and white noise: (Gauss–Markov variance, white
-/// variance, φ per reading).
-pub type GaussMarkov = (f64, f64, f64);
-
 pub fn restricted_gauss_markov(x: &[f64], design: &DMatrix<f64>) -> Option<GaussMarkov> {
     gauss_markov_search(x, design, 1)
 }
@@ -46,7 +46,7 @@ pub fn restricted_gauss_markov_from(
     gauss_markov_search(x, design, starts.max(1))
 }
 
-fn gauss_markov_search(x: &[f64], design: &DMatrix<f64>, starts: usize) -> Option<(f64, f64, f64)> {
+fn gauss_markov_search(x: &[f64], design: &DMatrix<f64>, starts: usize) -> Option<GaussMarkov> {
     let m = x.len();
     if m < 16 || design.nrows() != m {
         return None;

@@ -62,11 +62,17 @@ pub struct VerticalBetweenReadings {
 
 impl VerticalBetweenReadings {
     pub fn add_imu(&mut self, x: &ImuSampleV1) {
-        if let Some(f) = specific_force(x).filter(|f| f.iter().all(|v| v.is_finite())) {
+        self.add(specific_force(x), angular_rate(x));
+    }
+
+    /// An IMU sample's specific force and angular rate, as read by the caller (non-finite
+    /// values are left out).
+    pub fn add(&mut self, force: Option<Vector3<f64>>, rate: Option<Vector3<f64>>) {
+        if let Some(f) = force.filter(|f| f.iter().all(|v| v.is_finite())) {
             self.force_sum += f;
             self.force_n += 1;
         }
-        if let Some(w) = angular_rate(x).filter(|w| w.iter().all(|v| v.is_finite())) {
+        if let Some(w) = rate.filter(|w| w.iter().all(|v| v.is_finite())) {
             self.rate_sum += w;
             self.rate_n += 1;
         }
