@@ -52,16 +52,29 @@ pub fn noise_estimate(
         ChannelKind::AcousticRanges => ("usbl.range_noise", rms_all),
         ChannelKind::Magnetometer | ChannelKind::MagneticField => ("mag.noise", rms_all),
     };
+    noise_named(
+        name,
+        value,
+        kind,
+        "RMS of the residual with the effects found: an upper bound on the white noise when \
+         structure is left unexplained",
+    )
+}
+
+/// A noise effect in the simulator's name and unit, its value clamped to the effect's range.
+fn noise_named(
+    name: &str,
+    value: f64,
+    kind: ChannelKind,
+    note: &str,
+) -> super::findings::NoiseEstimate {
     let spec = super::spec(name);
-    let value = spec.map_or(value, |s| value.clamp(s.min, s.max));
     super::findings::NoiseEstimate {
         name: name.into(),
-        value,
+        value: spec.map_or(value, |s| value.clamp(s.min, s.max)),
         unit: spec.map_or("", |s| s.unit).into(),
         channel: kind,
-        note: "RMS of the residual with the effects found: an upper bound on the white noise \
-               when structure is left unexplained"
-            .into(),
+        note: note.into(),
     }
 }
 
@@ -84,7 +97,8 @@ pub fn noise_estimates(
         return vec![noise_estimate(kind, rms, spacing_s)];
     }
     let noise_model = p.noise_of(set, 3).1;
-    let correlated: Vec<(f64, f64, f64)> = noise_model.iter().flatten().copied().collect();
+    let correlated: Vec<super::noise::GaussMarkov> =
+        noise_model.iter().flatten().copied().collect();
     if correlated.is_empty() || noise_model.len() != rms.len() {
         return vec![noise_estimate(kind, rms, spacing_s)];
     }
@@ -111,20 +125,20 @@ pub fn noise_estimates(
         correlated.len(),
         rms.len()
     );
-    let mut push = |name: &str, value: f64| {
-        let spec = super::spec(name);
-        out.push(super::findings::NoiseEstimate {
-            name: name.into(),
-            value: spec.map_or(value, |s| value.clamp(s.min, s.max)),
-            unit: spec.map_or("", |s| s.unit).into(),
-            channel: kind,
-            note: note.clone(),
-        });
-    };
-    push("dvl.velocity_error_instability", sigma);
+    out.push(noise_named(
+        "dvl.velocity_error_instability",
+        sigma,
+        kind,
+        &note,
+    ));
     if !taus.is_empty() {
         let tau = (taus.iter().map(|t| t.ln()).sum::<f64>() / taus.len() as f64).exp();
-        push("dvl.velocity_error_correlation_time", tau);
+        out.push(noise_named(
+            "dvl.velocity_error_correlation_time",
+            tau,
+            kind,
+            &note,
+        ));
     }
     out
 }
