@@ -105,7 +105,10 @@ pub struct NavConfig {
     pub estimate_dvl_lever_arm: bool,
     /// Initial one-sigma of the DVL lever arm when estimated (m). Default 0.5.
     pub initial_dvl_lever_arm_std_m: f64,
-    /// Estimate the DVL time offset (parameter state). Default false.
+    /// Estimate the DVL time offset (parameter state). Default false. The state models what the
+    /// retiming of `dvl_time_offset_s` leaves to first order, which comes out short for an offset
+    /// of a second (from 0, −0.26 to −0.56 s on the Snapir AUV's −1.0 s): configure the offset
+    /// `auvnav smooth` or `auvnav discover` finds, and estimate the rest.
     pub estimate_dvl_time_offset: bool,
     /// Initial one-sigma of the DVL time offset when estimated (s). Default 0.2.
     pub initial_dvl_time_offset_std_s: f64,

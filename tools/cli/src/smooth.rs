@@ -96,6 +96,13 @@ pub fn print_report(r: &SmoothReport) {
             l.second_pass_wall_s,
             l.real_time_factor
         );
+        if !l.dvl_retimed_s.is_empty() {
+            let offsets: Vec<String> = l.dvl_retimed_s.iter().map(|t| format!("{t:.3}")).collect();
+            println!(
+                "  DVL time offset estimated to first order, then smoothed again with the readings retimed at it: {} s",
+                offsets.join(" -> ")
+            );
+        }
         let f = &l.fixes;
         println!(
             "  fixes: {} from the file ({} outside the log, not used); GNSS {} fused / {} rejected; USBL {} fused / {} rejected",

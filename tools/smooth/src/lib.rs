@@ -21,6 +21,7 @@ pub mod export;
 pub use auvnav_import::fixes;
 pub mod montecarlo;
 pub mod report;
+pub mod retime;
 
 use auvnav_core::ekf;
 use auvnav_core::smoother::{SmoothedParameters, SmoothedTrack, SmoothedValue, SmootherLog};
@@ -215,6 +216,9 @@ pub struct LogSmoothReport {
     pub fixes: FixUse,
     pub against_reference: Option<AgainstReference>,
     pub parameters: Option<ParameterReport>,
+    /// With the DVL time offset estimated: the offsets (s) the readings were retimed at, one per
+    /// run after the first, the last being the run reported (`retime`); empty for one run.
+    pub dvl_retimed_s: Vec<f64>,
     /// UTC of the log's time 0 used for the exports, and where it came from.
     pub unix_time_of_log_zero: Option<f64>,
     pub utc_source: String,
@@ -428,55 +432,41 @@ pub fn smooth_log_with(
     let (span, gnss_time) = (scan.span_ns, scan.unix_time_of_log_zero);
     let (fix_msgs, from_file, from_file_outside_log) = fix_messages(span);
 
-    // First pass: the forward filter, recording its epochs.
-    let t_start = std::time::Instant::now();
-    let mut first = Replay::new(&cfg, 100.0);
-    first.inject(fix_msgs.clone());
-    first.record_for_smoothing(SmootherLog::spilling(
-        &spill_dir,
-        a.memory_budget_mib.saturating_mul(1 << 20),
-    ));
-    let mut truths = Vec::new();
-    let mut forward_solutions = 0u64;
-    let (_, log_error) = run_log(log, &mut first, &mut |o| {
-        match o {
-            Output::Truth(t) => truths.push(*t),
-            Output::Solution(_) => forward_solutions += 1,
-            _ => {}
-        }
-        Ok(())
-    })
-    .map_err(|e| SmoothError::Log {
-        path: log.to_path_buf(),
-        source: e.into(),
-    })?;
-    if first.counts.imu == 0 {
-        return Err(SmoothError::Input(format!(
-            "{}: the log has no IMU samples: nothing to smooth",
-            log.display()
-        )));
-    }
-    if first.initial().is_none() && !first.has_alignment() {
-        return Err(SmoothError::Input(format!(
-            "{}: no initial state: the log has no truth channel and the configuration no [initial] table",
-            log.display()
-        )));
-    }
-    let Some(run) = first.finish_recording() else {
-        return Err(SmoothError::Input(format!(
-            "{}: the navigation filter never started",
-            log.display()
-        )));
+    // First pass: the forward filter, recording its epochs, and the backward pass over them;
+    // again with the DVL readings retimed while an estimated DVL time offset moves (`retime`).
+    let budget = a.memory_budget_mib.saturating_mul(1 << 20);
+    let pass = |cfg: &auvnav_replay::ReplayConfig| {
+        forward_and_back(cfg, log, fix_msgs.clone(), &spill_dir, budget)
     };
-    let chains = run.log.chains;
-    let spilled_bytes = run.log.spilled_bytes();
-    let forward_wall_s = t_start.elapsed().as_secs_f64();
-    let t_back = std::time::Instant::now();
-    let mut track = run.smooth().map_err(|e| SmoothError::Backward {
-        log: log.to_path_buf(),
-        source: e.into(),
-    })?;
-    let backward_wall_s = t_back.elapsed().as_secs_f64();
+    let mut passes = pass(&cfg)?;
+    let mut dvl_retimed_s = Vec::new();
+    let mut earlier_walls_s = (0.0, 0.0);
+    while dvl_retimed_s.len() < retime::MAX_RETIMINGS {
+        let estimate = passes.track.last_chain_parameters();
+        let Some(offset) = retime::next_offset(&cfg.navigation, estimate.as_ref()) else {
+            break;
+        };
+        retime::set_dvl_time_offset(&mut cfg.navigation, offset);
+        dvl_retimed_s.push(offset);
+        earlier_walls_s.0 += passes.forward_wall_s;
+        earlier_walls_s.1 += passes.backward_wall_s;
+        passes = pass(&cfg)?;
+    }
+    let ForwardAndBack {
+        mut track,
+        truths,
+        forward_solutions,
+        chains,
+        spilled_bytes,
+        log_error,
+        forward_wall_s,
+        backward_wall_s,
+    } = passes;
+    // The walls count every run's passes.
+    let (forward_wall_s, backward_wall_s) = (
+        forward_wall_s + earlier_walls_s.0,
+        backward_wall_s + earlier_walls_s.1,
+    );
 
     // Second pass: the same forward run, each solution written as it was and smoothed.
     let t_second = std::time::Instant::now();
@@ -636,6 +626,7 @@ pub fn smooth_log_with(
         },
         against_reference: cmp.result(),
         parameters: params,
+        dvl_retimed_s,
         unix_time_of_log_zero: unix_offset,
         utc_source,
         forward_wall_s,
@@ -645,6 +636,81 @@ pub fn smooth_log_with(
         spilled_bytes,
         log_error,
         figures,
+    })
+}
+
+/// The first pass over one log (the forward filter, recording its epochs) and the backward pass.
+struct ForwardAndBack {
+    track: SmoothedTrack,
+    truths: Vec<TruthStateV1>,
+    forward_solutions: u64,
+    chains: u64,
+    spilled_bytes: u64,
+    log_error: Option<String>,
+    forward_wall_s: f64,
+    backward_wall_s: f64,
+}
+
+fn forward_and_back(
+    cfg: &auvnav_replay::ReplayConfig,
+    log: &Path,
+    fix_msgs: Vec<LogMessage>,
+    spill_dir: &Path,
+    memory_budget_bytes: usize,
+) -> Result<ForwardAndBack, SmoothError> {
+    let t_start = std::time::Instant::now();
+    let mut first = Replay::new(cfg, 100.0);
+    first.inject(fix_msgs);
+    first.record_for_smoothing(SmootherLog::spilling(spill_dir, memory_budget_bytes));
+    let mut truths = Vec::new();
+    let mut forward_solutions = 0u64;
+    let (_, log_error) = run_log(log, &mut first, &mut |o| {
+        match o {
+            Output::Truth(t) => truths.push(*t),
+            Output::Solution(_) => forward_solutions += 1,
+            _ => {}
+        }
+        Ok(())
+    })
+    .map_err(|e| SmoothError::Log {
+        path: log.to_path_buf(),
+        source: e.into(),
+    })?;
+    if first.counts.imu == 0 {
+        return Err(SmoothError::Input(format!(
+            "{}: the log has no IMU samples: nothing to smooth",
+            log.display()
+        )));
+    }
+    if first.initial().is_none() && !first.has_alignment() {
+        return Err(SmoothError::Input(format!(
+            "{}: no initial state: the log has no truth channel and the configuration no [initial] table",
+            log.display()
+        )));
+    }
+    let Some(run) = first.finish_recording() else {
+        return Err(SmoothError::Input(format!(
+            "{}: the navigation filter never started",
+            log.display()
+        )));
+    };
+    let chains = run.log.chains;
+    let spilled_bytes = run.log.spilled_bytes();
+    let forward_wall_s = t_start.elapsed().as_secs_f64();
+    let t_back = std::time::Instant::now();
+    let track = run.smooth().map_err(|e| SmoothError::Backward {
+        log: log.to_path_buf(),
+        source: e.into(),
+    })?;
+    Ok(ForwardAndBack {
+        track,
+        truths,
+        forward_solutions,
+        chains,
+        spilled_bytes,
+        log_error,
+        forward_wall_s,
+        backward_wall_s: t_back.elapsed().as_secs_f64(),
     })
 }
 
