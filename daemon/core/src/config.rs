@@ -107,7 +107,7 @@ pub struct NavConfig {
     pub initial_dvl_lever_arm_std_m: f64,
     /// Estimate the DVL time offset (parameter state). Default false. The state models what the
     /// retiming of `dvl_time_offset_s` leaves to first order, which comes out short for an offset
-    /// of a second (from 0, −0.26 to −0.56 s on the Snapir AUV's −1.0 s): configure the offset
+    /// of a second (from 0, −0.39 to −0.55 s on the Snapir AUV's −1.0 s): configure the offset
     /// `auvnav smooth` or `auvnav discover` finds, and estimate the rest.
     pub estimate_dvl_time_offset: bool,
     /// Initial one-sigma of the DVL time offset when estimated (s). Default 0.2.
