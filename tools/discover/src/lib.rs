@@ -307,7 +307,11 @@ impl ChannelKind {
             }
             ChannelKind::Depth => {
                 let r = reference.at(t_s)?;
-                Some([DepthModel::reading(e, -r.height_m), 0.0, 0.0])
+                Some([
+                    DepthModel::reading(e, -r.height_m, &r.c_body_to_ned),
+                    0.0,
+                    0.0,
+                ])
             }
             ChannelKind::Magnetometer => {
                 let r = reference.at(t_s)?;
@@ -613,6 +617,11 @@ pub const CANDIDATES: &[Candidate] = &[
         name: "depth.density",
         channel: ChannelKind::Depth,
         step: 0.1,
+    },
+    Candidate {
+        name: "depth.lever_arm",
+        channel: ChannelKind::Depth,
+        step: 0.01,
     },
     Candidate {
         name: "mag.hard_iron",

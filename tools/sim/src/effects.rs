@@ -264,6 +264,8 @@ effects! {
     depth_bias: f64 = "depth.bias", unit "m", range -10.0..=10.0, default [0.0];
     /// True water density; the sensor converts pressure with 1025 kg/m^3, so depth scales by value/1025.
     depth_density: f64 = "depth.density", unit "kg/m^3", range 990.0..=1050.0, default [1025.0];
+    /// Position of the depth (pressure) sensor from the IMU, body axes (forward, starboard, down): it reads the depth of that point, depth + (C_b^n l)_down, so pitch and roll move the reading.
+    depth_lever_arm: [f64; 3] = "depth.lever_arm", unit "m", range -10.0..=10.0, default [0.0, 0.0, 0.0];
 
     /// Hard-iron offset added to the magnetometer reading (body axes).
     mag_hard_iron: [f64; 3] = "mag.hard_iron", unit "uT", range -1000.0..=1000.0, default [0.0, 0.0, 0.0];

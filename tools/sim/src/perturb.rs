@@ -15,7 +15,8 @@
 //! - Depth (`depth.bias`, `depth.noise`).
 //!
 //! Other effects (the trajectory-level ones: USBL geometry, magnetometer, GNSS, bias
-//! instabilities) are rejected with the list of the ones that can be applied. The output log
+//! instabilities, and `depth.lever_arm`, which needs the attitude a recorded log does not carry
+//! beside its sensors) are rejected with the list of the ones that can be applied. The output log
 //! carries the input's header plus notes saying what was applied (`perturb.effects`,
 //! `perturb.seed`, `perturb.source`, `perturb.counts`).
 

@@ -658,15 +658,18 @@ impl DepthModel {
         }
     }
 
-    /// What a noise-free depth sensor reads at a true depth (m): the pressure converted with the
-    /// assumed density (`depth.density`), plus `depth.bias`. Model discovery uses the same code.
-    pub fn reading(e: &Effects, depth_m: f64) -> f64 {
-        let pressure = e.depth_density * STANDARD_GRAVITY * depth_m;
+    /// What a noise-free depth sensor reads when the IMU is at a true depth (m) with attitude
+    /// `c_body_to_ned`: the depth of the sensor's point (`depth.lever_arm` from the IMU), its
+    /// pressure converted with the assumed density (`depth.density`), plus `depth.bias`. Model
+    /// discovery uses the same code.
+    pub fn reading(e: &Effects, depth_m: f64, c_body_to_ned: &Matrix3<f64>) -> f64 {
+        let sensor_depth_m = depth_m + (c_body_to_ned * Vector3::from(e.depth_lever_arm)).z;
+        let pressure = e.depth_density * STANDARD_GRAVITY * sensor_depth_m;
         pressure / (ASSUMED_DENSITY * STANDARD_GRAVITY) + e.depth_bias
     }
 
     pub fn sample(&mut self, t: f64, truth: &TruthSample) -> DepthV1 {
-        let measured = DepthModel::reading(&self.e, -truth.position.height_m)
+        let measured = DepthModel::reading(&self.e, -truth.position.height_m, &truth.c_body_to_ned)
             + self.rng.gauss(self.e.depth_noise);
         self.sequence += 1;
         DepthV1 {
