@@ -49,6 +49,10 @@ pub struct NavConfig {
     pub dvl_lever_arm_m: [f64; 3],
     /// Depth noise (m). Default 0.1.
     pub depth_std_m: f64,
+    /// Depth (pressure) sensor position in the body frame (m, |·| ≤ 50): it reads the depth of
+    /// that point, so pitch and roll move its reading (the simulator's `depth.lever_arm`).
+    /// Default 0.
+    pub depth_lever_arm_m: [f64; 3],
     /// Gate for DVL velocity (chi-square, 3 dof). Default 16.27 (99.9 %).
     pub dvl_gate_chi2: f64,
     /// Gate for depth (chi-square, 1 dof). Default 10.83 (99.9 %).
@@ -193,6 +197,7 @@ impl Default for NavConfig {
             dvl_scale_factor: 1.0,
             dvl_lever_arm_m: [0.0; 3],
             depth_std_m: 0.1,
+            depth_lever_arm_m: [0.0; 3],
             dvl_gate_chi2: gate::CHI2_3DOF_999,
             depth_gate_chi2: gate::CHI2_1DOF_999,
             covariance_interval_s: 0.05,
@@ -843,6 +848,12 @@ impl NavConfig {
         p.array(
             "navigation.dvl_lever_arm_m",
             &self.dvl_lever_arm_m,
+            -50.0,
+            50.0,
+        );
+        p.array(
+            "navigation.depth_lever_arm_m",
+            &self.depth_lever_arm_m,
             -50.0,
             50.0,
         );

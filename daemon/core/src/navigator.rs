@@ -243,7 +243,11 @@ impl Navigator {
         }
         Navigator {
             dvl,
-            depth: DepthAid::new(cfg.depth_std_m, cfg.depth_gate_chi2),
+            depth: DepthAid::new(
+                cfg.depth_std_m,
+                cfg.depth_gate_chi2,
+                Vector3::from(cfg.depth_lever_arm_m),
+            ),
             gnss: GnssAid::new(cfg.gnss_lever_arm_m, cfg.gnss_min_std_m, cfg.gnss_gate_chi2),
             zero_velocity: ZeroVelocityAid::new(
                 cfg.zero_velocity_std_m_s,

@@ -1,6 +1,7 @@
 //! The navigation core against physics: Jacobians against finite differences, the Schuler period
 //! of a pure-inertial run with an initial tilt error.
 
+use auvnav_core::aid::depth::depth_model;
 use auvnav_core::aid::dvl::{DvlParameters, dvl_model};
 use auvnav_core::aid::gnss::gnss_model;
 use auvnav_core::earth::{self, Geodetic};
@@ -145,6 +146,38 @@ fn gnss_jacobian_matches_finite_differences() {
             (col - analytic).norm() < 1e-5,
             "phi{k}: {col} vs {analytic}"
         );
+    }
+}
+
+#[test]
+fn depth_jacobian_matches_finite_differences() {
+    let s = state();
+    let arm = Vector3::new(1.7, -0.3, 0.4);
+    let (z0, h) = depth_model(&s, &arm);
+    // The sensor's point below the IMU: −x sin θ + y sin φ cos θ + z cos φ cos θ (a nose-down
+    // pitch of 0.08 rad puts the forward arm 0.14 m deeper).
+    let (roll, pitch) = (0.05f64, -0.08f64);
+    let down = -1.7 * pitch.sin() - 0.3 * roll.sin() * pitch.cos() + 0.4 * roll.cos() * pitch.cos();
+    assert!(
+        (z0 - (25.0 + down)).abs() < 1e-12,
+        "{z0} against {}",
+        25.0 + down
+    );
+    let eps = 1e-3;
+    for k in 0..3 {
+        let mut unit = Vector3::zeros();
+        unit[k] = eps;
+        let mut sp = s;
+        sp.position = earth::offset_position(&s.position, &unit);
+        let col = (depth_model(&sp, &arm).0 - z0) / eps;
+        // The state's position error is NED; depth is down.
+        let analytic = h[(0, filter::POS + k)];
+        assert!((col - analytic).abs() < 1e-5, "dp{k}: {col} vs {analytic}");
+        let mut sa = s;
+        sa.q_body_to_ned = UnitQuaternion::from_scaled_axis(-unit * 1e-3) * s.q_body_to_ned;
+        let col = (depth_model(&sa, &arm).0 - z0) / (eps * 1e-3);
+        let analytic = h[(0, filter::ATT + k)];
+        assert!((col - analytic).abs() < 1e-5, "phi{k}: {col} vs {analytic}");
     }
 }
 

@@ -342,7 +342,8 @@ fn record_effects(
                 effects: vec![name.into(), fit::name(*rival).into()],
                 correlation: *corr,
                 note: format!(
-                    "the motion cannot separate them; reported as {name}, which scored best"
+                    "the motion cannot separate them; reported as {name}, which scored best or, \
+                     within the held-out score's noise, has fewer parameters"
                 ),
             });
         }
@@ -718,7 +719,7 @@ pub fn discover(
                 components: comps.clone(),
             });
         }
-        let selected = if kind == ChannelKind::DvlBeams {
+        let selected = if fit::parsimonious(kind) {
             fit::select_parsimonious(&p, sel, &sep)
         } else {
             fit::select(&p, sel, &sep)

@@ -852,6 +852,19 @@ pub fn without(p: &Problem, steps: Vec<Step>, base: f64, drop: &[usize]) -> Vec<
 /// Most candidates [`select_parsimonious`] combines.
 pub const MAX_SUBSET: usize = 3;
 
+/// Channels whose candidates alias each other on common motion, selected by best subset with
+/// the fewest parameters ([`select_parsimonious`]): the DVL's beams, and the depth, where a
+/// bias, a density error at a steady depth and the down component of the sensor's lever arm
+/// move the reading alike (a hidden depth bias came out as a lever arm with its three numbers).
+pub fn parsimonious(kind: ChannelKind) -> bool {
+    matches!(kind, ChannelKind::DvlBeams | ChannelKind::Depth)
+}
+
+/// The number of parameters of candidate `c` (its components).
+pub fn parameters(c: usize) -> usize {
+    spec(CANDIDATES[c].name).map_or(1, |s| s.components)
+}
+
 /// Best-subset selection on one channel, for candidates that alias each other on common motion
 /// (the DVL's beams: on a vehicle moving straight ahead, four per-beam scales reproduce any
 /// change of the four beam readings, a mounting error too). Every set of up to [`MAX_SUBSET`]
@@ -916,6 +929,32 @@ pub fn select_parsimonious(p: &Problem, sel: &Selection, separability: &Separabi
         match weak {
             Some(c) => chosen.retain(|&x| x != c),
             None => break,
+        }
+    }
+    // On the depth, a member the motion cannot separate from a simpler candidate gives way to it
+    // when, fitted together, it does not stand out beyond it: what it explains is the simpler
+    // one's (a depth bias read as the down component of a lever arm, whose forward and
+    // starboard components sit within their deviations). The held-out score alone is too noisy
+    // to decide between near-aliases by a percent. Not on the beams: fitted beside the DVL's
+    // scale, four beam scales lose their sum, and a single beam's real error would not stand
+    // out there either.
+    let depth = p.channel.kind == ChannelKind::Depth;
+    for k in 0..chosen.len() {
+        if !depth {
+            break;
+        }
+        let c = chosen[k];
+        let simpler = candidates.iter().copied().find(|&r| {
+            !chosen.contains(&r)
+                && parameters(r) < parameters(c)
+                && separability.correlation(c, r) > sel.max_correlation
+        });
+        let Some(r) = simpler else { continue };
+        let mut both = chosen.clone();
+        both.push(r);
+        let f = p.fit(&both, &p.epochs);
+        if !stands_out(&f, &p.nominal_theta(&both), &both, c, sel.min_sigma) {
+            chosen[k] = r;
         }
     }
     // Report in steps: each time the member whose addition lowers the score most.

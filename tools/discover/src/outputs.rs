@@ -226,12 +226,22 @@ fn analysed(r: &DiscoverReport) -> Vec<ChannelKind> {
     kinds
 }
 
-/// The navigator configuration file's text (`[navigation.dvl]`, `[navigation.magnetometer]`),
-/// from the effects found on all readings; the depth effects, which the navigator does not model,
-/// are listed as comments.
+/// The depth sensor's lever arm for the navigator (`depth_lever_arm_m`) when the depth channel
+/// was analysed.
+pub fn navigator_depth_lever_arm(e: &Effects, analysed: &[ChannelKind]) -> Option<[f64; 3]> {
+    analysed
+        .contains(&ChannelKind::Depth)
+        .then_some(e.depth_lever_arm)
+}
+
+/// The navigator configuration file's text (`[navigation.dvl]`, `[navigation.magnetometer]`,
+/// the depth sensor's `depth_lever_arm_m`), from the effects found on all readings; the depth
+/// bias and density, which the navigator does not model, are listed as comments.
 pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
     #[derive(Serialize)]
     struct Navigation {
+        #[serde(skip_serializing_if = "Option::is_none")]
+        depth_lever_arm_m: Option<[f64; 3]>,
         #[serde(skip_serializing_if = "Option::is_none")]
         dvl: Option<DvlInstallation>,
         #[serde(skip_serializing_if = "Option::is_none")]
@@ -252,8 +262,13 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
         &r.nominal_model
     };
     let (dvl, magnetometer) = navigator_tables(model, &analysed(r), &source);
+    let depth_lever_arm_m = navigator_depth_lever_arm(model, &analysed(r));
     let body = toml::to_string(&File {
-        navigation: Navigation { dvl, magnetometer },
+        navigation: Navigation {
+            depth_lever_arm_m,
+            dvl,
+            magnetometer,
+        },
     })?;
     let mut head = String::from(
         "# Navigator configuration from `auvnav discover`: the installation the data show.\n\
@@ -429,6 +444,9 @@ fn navigation_of(
         let (dvl, mag) = navigator_tables(e, kinds, "auvnav discover");
         if let Some(d) = dvl {
             cfg.navigation.set_dvl_installation(d);
+        }
+        if let Some(l) = navigator_depth_lever_arm(e, kinds) {
+            cfg.navigation.depth_lever_arm_m = l;
         }
         // The magnetometer aid is only recalibrated where the configuration uses it.
         if let (Some(m), Some(old)) = (mag, cfg.navigation.magnetometer.as_ref()) {

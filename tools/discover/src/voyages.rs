@@ -498,6 +498,7 @@ fn select_shared(
             .map(|c| trial(cv, &shared, c, current))
             .collect();
         trials.sort_by(|a, b| b.gain.total_cmp(&a.gain));
+        prefer_fewer_parameters(&mut trials, sel.min_gain);
         let mut added = false;
         // The candidate of this round with the most held-out gain that the test does not name.
         let mut pointed: Option<Undetermined> = None;
@@ -551,6 +552,26 @@ fn select_shared(
     }
     settle_agreement(cv, data, &mut shared, &mut gains, inconsistent);
     (shared, gains)
+}
+
+/// On a channel whose candidates alias each other ([`fit::parsimonious`]), the best trial gives
+/// way to one of the same channel with fewer parameters whose gain is within `min_gain` of it,
+/// as the one-voyage selection keeps the smallest subset within `min_gain` of the best.
+fn prefer_fewer_parameters(trials: &mut [Trial], min_gain: f64) {
+    let Some(best) = trials.first() else { return };
+    let kind = CANDIDATES[best.candidate].channel;
+    if !fit::parsimonious(kind) {
+        return;
+    }
+    let top = best.gain;
+    let simplest = (0..trials.len())
+        .filter(|&i| {
+            CANDIDATES[trials[i].candidate].channel == kind && trials[i].gain >= top - min_gain
+        })
+        .min_by_key(|&i| (fit::parameters(trials[i].candidate), i));
+    if let Some(i) = simplest {
+        trials[..=i].rotate_right(1);
+    }
 }
 
 /// A shared candidate the voyages agree on and that lowers the leave-one-voyage-out score, but
