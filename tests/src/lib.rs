@@ -98,6 +98,19 @@ pub mod processes {
         serde_json::from_slice(&o.stdout).unwrap_or(serde_json::Value::Null)
     }
 
+    /// `auvnav import snapir DATA --segment N --out OUT`: one Snapir segment as a log.
+    pub fn import_snapir(data: &Path, segment: u32, out: &Path) {
+        auvnav_json(&[
+            "import",
+            "snapir",
+            &data.display().to_string(),
+            "--segment",
+            &segment.to_string(),
+            "--out",
+            &out.display().to_string(),
+        ]);
+    }
+
     /// A name unique to this test process and call, for service prefixes and directories.
     pub fn unique(tag: &str) -> String {
         static N: AtomicU32 = AtomicU32::new(0);

@@ -70,23 +70,15 @@ fn a_hidden_depth_sensor_lever_arm_is_named() {
 
 #[test]
 fn snapir_depth_is_read_at_the_references_point() {
-    use auvnav_tests::processes::{TempDir, auvnav_json as auvnav};
+    use auvnav_tests::processes::{TempDir, auvnav_json as auvnav, import_snapir};
     let Some(data) = auvnav_tests::measured_data("snapir-auv", "imu_01.csv") else {
         return;
     };
     let tmp = TempDir::new("depth-lever-snapir");
     for segment in [1, 11] {
         let log = tmp.path().join(format!("s{segment}.mcap"));
+        import_snapir(&data, segment, &log);
         let log = log.display().to_string();
-        auvnav(&[
-            "import",
-            "snapir",
-            &data.display().to_string(),
-            "--segment",
-            &segment.to_string(),
-            "--out",
-            &log,
-        ]);
         let r = auvnav(&[
             "discover",
             &log,

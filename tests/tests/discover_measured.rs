@@ -10,20 +10,7 @@ use auvnav_tools::discover::command::{discover, discover_messages, values_of};
 use auvnav_tools::discover::fit::Selection;
 use auvnav_tools::import::{GpsVelocity, TimeBase, pd0_messages, snapir_messages};
 
-/// `auvnav import snapir DIR --segment N --out OUT`.
-fn import_snapir(dir: &std::path::Path, segment: u32, out: &std::path::Path) {
-    let dir = dir.display().to_string();
-    let out = out.display().to_string();
-    auvnav_tests::processes::auvnav_json(&[
-        "import",
-        "snapir",
-        &dir,
-        "--segment",
-        &segment.to_string(),
-        "--out",
-        &out,
-    ]);
-}
+use auvnav_tests::processes::import_snapir;
 
 #[test]
 fn snapir_dvl_lever_arm_and_lag_are_found_without_being_asked() {

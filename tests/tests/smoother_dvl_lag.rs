@@ -11,7 +11,7 @@
 //!   and the same lever arm within 0.05 m (before the retiming: −0.46 and −0.55 s, lever arms
 //!   0.4–0.5 m apart in x and z).
 
-use auvnav_tests::processes::{TempDir, auvnav_json as auvnav};
+use auvnav_tests::processes::{TempDir, auvnav_json as auvnav, import_snapir};
 use std::path::Path;
 
 /// The configuration discovery smooths with: every DVL installation state, wide priors.
@@ -113,15 +113,7 @@ fn snapir_segments_smoothed_alone_agree_on_the_dvl_lag_and_lever_arm() {
     let mut found = Vec::new();
     for segment in [4, 11] {
         let log = tmp.path().join(format!("s{segment}.mcap"));
-        auvnav(&[
-            "import",
-            "snapir",
-            &data.display().to_string(),
-            "--segment",
-            &segment.to_string(),
-            "--out",
-            &log.display().to_string(),
-        ]);
+        import_snapir(&data, segment, &log);
         let s = smooth(tmp.path(), &log);
         println!(
             "segment {segment}: {:.3} ± {:.3} s, lever arm {:?} m, retimed at {:?}",
