@@ -918,6 +918,30 @@ pub fn select_parsimonious(p: &Problem, sel: &Selection, separability: &Separabi
             undetermined: None,
         };
     };
+    // On the depth, a member the motion cannot separate from a simpler candidate gives way to it
+    // when, fitted together, it does not stand out beyond it: what it explains is the simpler
+    // one's (a depth bias read as the down component of a lever arm, whose forward and
+    // starboard components sit within their deviations). The held-out score alone is too noisy
+    // to decide between near-aliases by a percent. Not on the beams: fitted beside the DVL's
+    // scale, four beam scales lose their sum, and a single beam's real error would not stand
+    // out there either. The significance test below then applies to what stays.
+    if p.channel.kind == ChannelKind::Depth {
+        for k in 0..chosen.len() {
+            let c = chosen[k];
+            let simpler = candidates.iter().copied().find(|&r| {
+                !chosen.contains(&r)
+                    && parameters(r) < parameters(c)
+                    && separability.correlation(c, r) > sel.max_correlation
+            });
+            let Some(r) = simpler else { continue };
+            let mut both = chosen.clone();
+            both.push(r);
+            let f = p.fit(&both, &p.epochs);
+            if !stands_out(&f, &p.nominal_theta(&both), &both, c, sel.min_sigma) {
+                chosen[k] = r;
+            }
+        }
+    }
     // Drop members the data do not put min_sigma from nominal.
     loop {
         let f = p.fit(&chosen, &p.epochs);
@@ -929,32 +953,6 @@ pub fn select_parsimonious(p: &Problem, sel: &Selection, separability: &Separabi
         match weak {
             Some(c) => chosen.retain(|&x| x != c),
             None => break,
-        }
-    }
-    // On the depth, a member the motion cannot separate from a simpler candidate gives way to it
-    // when, fitted together, it does not stand out beyond it: what it explains is the simpler
-    // one's (a depth bias read as the down component of a lever arm, whose forward and
-    // starboard components sit within their deviations). The held-out score alone is too noisy
-    // to decide between near-aliases by a percent. Not on the beams: fitted beside the DVL's
-    // scale, four beam scales lose their sum, and a single beam's real error would not stand
-    // out there either.
-    let depth = p.channel.kind == ChannelKind::Depth;
-    for k in 0..chosen.len() {
-        if !depth {
-            break;
-        }
-        let c = chosen[k];
-        let simpler = candidates.iter().copied().find(|&r| {
-            !chosen.contains(&r)
-                && parameters(r) < parameters(c)
-                && separability.correlation(c, r) > sel.max_correlation
-        });
-        let Some(r) = simpler else { continue };
-        let mut both = chosen.clone();
-        both.push(r);
-        let f = p.fit(&both, &p.epochs);
-        if !stands_out(&f, &p.nominal_theta(&both), &both, c, sel.min_sigma) {
-            chosen[k] = r;
         }
     }
     // Report in steps: each time the member whose addition lowers the score most.

@@ -3,16 +3,16 @@
 //! The filter's DVL model takes a time offset τ to first order: the reading stamped t is
 //! `v_b(t) − τ a_b(t)`, with `a_b` from the IMU sample at t. Over a second that is a poor
 //! description of an AUV's velocity change: the acceleration of one instant is not the mean
-//! over the second that follows, so an offset estimated from zero comes out short. On the Snapir
-//! AUV's segments the smoother gave −0.39 to −0.55 s while the readings' residuals against the
-//! smoothed motion, and against the imported reference, both say −1.0 s; on simulated docking
-//! voyages with a −1.0 s offset it gave −0.90 to −0.96 s (± 0.035). A configured negative offset is applied
-//! exactly instead, by holding each reading until the filter reaches the moment it describes
-//! (`auvnav_core::navigator::dvl_retime_s`), and the first-order term is left with the rest.
-//! So the smoother runs again with the readings retimed at its estimate until the estimate
-//! and the retiming agree: on Snapir segment 4 it retimes at −0.46, −0.83, −1.00 and −1.03 s and
-//! ends at −1.034 ± 0.007 s, and the lever arm it estimates beside it then agrees with
-//! discovery's (docs/postprocessing.md).
+//! over the second that follows, so an offset estimated from zero comes out short. On the
+//! Snapir AUV's segments the smoother gave −0.39 to −0.55 s while the readings' residuals
+//! against the smoothed motion, and against the imported reference, both say −1.0 s; on
+//! simulated docking voyages with a −1.0 s offset it gave −0.90 to −0.96 s (± 0.035). A
+//! configured negative offset is applied exactly instead, by holding each reading until the
+//! filter reaches the moment it describes (`auvnav_core::navigator::dvl_retime_s`), and the
+//! first-order term is left with the rest. So the smoother runs again with the readings
+//! retimed at its estimate until the estimate and the retiming agree: on Snapir segment 4 it
+//! retimes at −0.46, −0.83, −1.00 and −1.03 s and ends at −1.034 ± 0.007 s, and the lever arm
+//! it estimates beside it then agrees with discovery's (docs/postprocessing.md).
 
 use auvnav_core::config::NavConfig;
 use auvnav_core::smoother::SmoothedParameters;
