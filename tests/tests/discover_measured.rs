@@ -398,15 +398,7 @@ fn write_config_keeps_the_nominal_installation_when_the_navigation_gets_worse() 
             .try_into()
             .expect("dvl table")
     };
-    auvnav(&[
-        "import",
-        "snapir",
-        &dir.display().to_string(),
-        "--segment",
-        "12",
-        "--out",
-        &path("s12.mcap"),
-    ]);
+    import_snapir(&dir, 12, &tmp.path().join("s12.mcap"));
     auvnav(&[
         "discover",
         &path("s12.mcap"),

@@ -251,15 +251,7 @@ fn replay_output_is_unchanged_on_measured_data() {
     let dir = TempDir::new("golden-measured");
     let d = dir.path();
     let log = d.join("seg3.mcap");
-    auvnav(&[
-        "import",
-        "snapir",
-        s(&data),
-        "--segment",
-        "3",
-        "--out",
-        s(&log),
-    ]);
+    auvnav_tests::processes::import_snapir(&data, 3, &log);
     let got = replay(d, "snapir.segment3", &log, &[]).to_vec();
     check(got);
 }
