@@ -12,7 +12,7 @@
 //! Long on purpose: the fit, the held-out selection and the separability check share the channel's
 //! epochs, design and prior: three steps of one estimator.
 
-use super::noise::{GaussMarkov, restricted_gauss_markov_from};
+use super::noise::{GaussMarkov, restricted_gauss_markov_from, restricted_gauss_markov_shared};
 use super::{CANDIDATES, Candidate, Channel, ChannelKind, Reference, spec};
 use auvnav_sim::effects::Effects;
 use nalgebra::{DMatrix, DVector};
@@ -119,7 +119,7 @@ impl<'a> Problem<'a> {
             None => DMatrix::zeros(m, 0),
         };
         let (p, q) = (jac.ncols(), drift.ncols());
-        let model = (0..d)
+        let series: Vec<(Vec<f64>, DMatrix<f64>)> = (0..d)
             .map(|k| {
                 let x: Vec<f64> = (0..m).map(|t| r[t * d + k]).collect();
                 let design = DMatrix::from_fn(m, p + q, |t, c| {
@@ -129,10 +129,45 @@ impl<'a> Problem<'a> {
                         drift[(t, c - p)]
                     }
                 });
-                restricted_gauss_markov_from(&x, &design, starts)
+                (x, design)
             })
             .collect();
+        // Components alike in their noise are read together ([`Problem::alike_components`]):
+        // read alone, a DVL's horizontal axis's long-run variance varies from voyage to voyage
+        // by a factor of several, and an axis read low makes the deviations of the effects it
+        // carries too small (a hidden mounting yaw named 4–6σ from its value on one voyage in
+        // ten).
+        let mut model: Vec<Option<GaussMarkov>> = vec![None; d];
+        for group in self.alike_components() {
+            if let [k] = group[..] {
+                model[k] = restricted_gauss_markov_from(&series[k].0, &series[k].1, starts);
+                continue;
+            }
+            let parts: Vec<(&[f64], &DMatrix<f64>)> = group
+                .iter()
+                .map(|&k| (series[k].0.as_slice(), &series[k].1))
+                .collect();
+            if let Some(v) = restricted_gauss_markov_shared(&parts, starts) {
+                for (&k, g) in group.iter().zip(v) {
+                    model[k] = Some(g);
+                }
+            }
+        }
         (lags, model)
+    }
+
+    /// The channel's components grouped by the noise they share in shape (one correlation time,
+    /// one ratio of correlated to white noise, each its own level), read together by
+    /// [`super::noise::restricted_gauss_markov_shared`]. A Janus DVL's two horizontal axes see
+    /// its beams alike, its vertical axis its own; every other channel's components alone (read
+    /// together, a gyro triad's three axes gave a misalignment's deviations no closer to their
+    /// scatter over noise realisations).
+    fn alike_components(&self) -> Vec<Vec<usize>> {
+        let d = self.channel.kind.dims();
+        match self.channel.kind {
+            ChannelKind::Dvl if d == 3 => vec![vec![0, 1], vec![2]],
+            _ => (0..d).map(|k| vec![k]).collect(),
+        }
     }
 
     /// This channel's candidates (indices into [`CANDIDATES`]).
@@ -302,17 +337,33 @@ impl<'a> Problem<'a> {
                     // A slowly varying error correlated beyond the Newey–West window (a
                     // Gauss–Markov error of a minute on a few minutes of data) is what that
                     // window underestimates: its parametric long-run covariance, where the
-                    // residual shows one, is taken where it is the larger.
-                    let cov = match parametric_scores(&jac, &r, d, &self.noise_model) {
-                        Some(sp) => {
-                            let cp = &inv * sp * &inv;
-                            if cp.trace() > cov.trace() { cp } else { cov }
-                        }
-                        None => cov,
-                    };
+                    // residual shows one, is taken where it is the larger. On an IMU channel,
+                    // whose drifting bias is taken out as a nuisance, each deviation is the
+                    // larger of the two: on a simulated voyage with a drifting gyro bias the
+                    // window gave a gyro misalignment's x and y deviations half their scatter
+                    // over noise realisations and the parametric covariance nearly all of it,
+                    // but the window's z deviation, larger than either, made its matrix the one
+                    // taken whole. On the DVL the whole matrix is kept: parameter by parameter,
+                    // the six perturbed Snapir segments no longer pointed at their hidden scale.
+                    let parametric = parametric_scores(&jac, &r, d, &self.noise_model)
+                        .map(|sp| &inv * sp * &inv);
+                    let per_parameter = self.drift_knot_s.is_some();
                     let std: Vec<f64> = (0..theta.len())
-                        .map(|i| cov[(i, i)].max(0.0).sqrt().max(white[i]))
+                        .map(|i| {
+                            let p = parametric.as_ref().map_or(0.0, |c| c[(i, i)].max(0.0));
+                            let w = cov[(i, i)].max(0.0);
+                            let v = match &parametric {
+                                Some(cp) if !per_parameter && cp.trace() > cov.trace() => p,
+                                Some(_) if !per_parameter => w,
+                                _ => w.max(p),
+                            };
+                            v.sqrt().max(white[i])
+                        })
                         .collect();
+                    let cov = match parametric {
+                        Some(cp) if cp.trace() > cov.trace() => cp,
+                        _ => cov,
+                    };
                     let widening = std
                         .iter()
                         .zip(&white)

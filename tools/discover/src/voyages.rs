@@ -514,7 +514,7 @@ fn select_shared(
             let ests = shared_estimates(cv, &set, &t.fits);
             let joint = combine(&ests.iter().collect::<Vec<_>>(), components(&set));
             let (_, agreement) = agreement_of(&ests, off, len);
-            if !significant(&joint, &agreement, off, len, sel) {
+            if !significant(&joint, &agreement, &ests, (off, len), sel) {
                 if pointed.is_none() && !agreement.disagrees() {
                     pointed = pointed_at(cv, c, &joint, &agreement, (off, len), &t, sel);
                 }
@@ -713,16 +713,25 @@ fn held_out_score(cv: &[ChannelVoyage], shared: &[usize]) -> f64 {
 /// nominal by the selection's σ. The voyages' own scatter, when larger than their deviations
 /// say (the Birge ratio), widens the combined deviation: a slowly varying error gives each
 /// voyage an estimate of its own sign that its deviation does not cover.
+///
+/// Each component's deviation is also taken no smaller than that of the voyages' own deviations
+/// of it combined alone. The joint combination adds each voyage's information over all the
+/// components, and where a voyage's components are strongly correlated the sum is narrow along
+/// directions no voyage determines by itself: it leans on the correlations of the deviations,
+/// which a slowly varying error read from a few of its correlation times makes uncertain. On
+/// three simulated voyages with a coloured DVL error and nothing hidden in the DVL, a lever arm
+/// came out 5.4σ in y jointly while each voyage's own y lay within 1σ of zero (1.6σ combined).
 fn significant(
     joint: &Combined,
     agreement: &Combined,
-    off: usize,
-    len: usize,
+    ests: &[Estimate],
+    (off, len): (usize, usize),
     sel: &Selection,
 ) -> bool {
     let birge = birge_ratio(agreement);
     (0..len).any(|k| {
-        let s = joint.std[off + k] * birge;
+        let (_, alone) = agreement_of(ests, off + k, 1);
+        let s = joint.std[off + k].max(alone.std[0]) * birge;
         s.is_finite() && joint.delta[off + k].abs() >= sel.min_sigma * s
     })
 }
