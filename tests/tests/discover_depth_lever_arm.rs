@@ -4,7 +4,8 @@
 //! component within 10 % and every component within three of its reported deviations. Measured: the Snapir import's depth is its reference's, taken at the point
 //! whose velocity `--reference smoothed` places about 1.76 m ahead of the IMU; against the
 //! smoothed motion the depth channel must name a lever arm at that point (the line at 86 s in
-//! that residual is the vehicle's pitch oscillation seen through it).
+//! that residual is the vehicle's pitch oscillation seen through it), found on the motion
+//! smoothed again with the depth fused at the lever arm the first pass names.
 
 use auvnav_tools::discover::hidden_effects::{Hidden, trial};
 
@@ -120,5 +121,16 @@ fn snapir_depth_is_read_at_the_references_point() {
             "segment {segment}: {x} against {velocity_arm}"
         );
         assert!(rms("selected") < 0.5 * rms("nominal"), "segment {segment}");
+        let again = r["notes"]
+            .as_array()
+            .expect("notes")
+            .iter()
+            .filter_map(|n| n.as_str())
+            .find(|n| n.contains("smoothed again with the depth sensor's lever arm"));
+        assert!(
+            again.is_some(),
+            "segment {segment}: not smoothed again: {}",
+            r["notes"]
+        );
     }
 }

@@ -47,7 +47,13 @@ impl Smoothed {
 }
 
 /// Smooths `log` (outputs into `work`, a scratch folder) and returns its smoothed motion.
-pub fn smooth(log: &Path, work: &Path) -> Result<Smoothed, DiscoverError> {
+/// `depth_lever_arm_m` is the depth sensor's lever arm the smoother fuses its readings at (body
+/// axes, m; zero: at the IMU).
+pub fn smooth(
+    log: &Path,
+    work: &Path,
+    depth_lever_arm_m: [f64; 3],
+) -> Result<Smoothed, DiscoverError> {
     std::fs::create_dir_all(work).map_err(|e| auvnav_smooth::SmoothError::Output {
         path: work.to_path_buf(),
         source: e.into(),
@@ -58,6 +64,7 @@ pub fn smooth(log: &Path, work: &Path) -> Result<Smoothed, DiscoverError> {
     };
     let r = smooth_log_with(&args, log, None, &|cfg| {
         let n = &mut cfg.navigation;
+        n.depth_lever_arm_m = depth_lever_arm_m;
         n.estimate_dvl_lever_arm = true;
         n.initial_dvl_lever_arm_std_m = LEVER_ARM_STD_M;
         n.estimate_dvl_time_offset = true;

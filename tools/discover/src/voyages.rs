@@ -684,7 +684,11 @@ fn trial(cv: &mut [ChannelVoyage], shared: &[usize], c: usize, current: f64) -> 
         fits,
         departing,
     };
-    if aside.gain > all.gain { aside } else { all }
+    // With every voyage sharing it the voyages disagree, so that trial could only end as
+    // inconsistent; the departing voyages set aside, the rest agree. The two gains are not
+    // comparable: a departing voyage's own value is fitted in the baseline of the second, so a
+    // voyage the effect helps most (the one that departs) counts in the first only.
+    if aside.gain.is_finite() { aside } else { all }
 }
 
 /// Voyages `which` fit effect `c` as their own.
