@@ -236,6 +236,19 @@ mod tests {
     use super::*;
     use auvnav_sim::rng::Rng;
 
+    /// The design of three effects that, on a straight leg, look like a slow error: a constant,
+    /// a ramp and a slow sine (period 300 readings), over `m` readings.
+    fn slow_effects(m: usize) -> DMatrix<f64> {
+        DMatrix::from_fn(m, 3, |t, c| {
+            let t = t as f64;
+            match c {
+                0 => 1.0,
+                1 => t / m as f64,
+                _ => (2.0 * std::f64::consts::PI * t / 300.0).sin(),
+            }
+        })
+    }
+
     /// A Gauss–Markov error a few correlation times long (400 readings, τ 80, σ 1, under white
     /// noise σ 0.3) from which a fit has taken a constant, a ramp and a slow sine (effects
     /// that, on a straight leg, look like a slow error): read as it stands (no design) the
@@ -247,14 +260,7 @@ mod tests {
         let phi: f64 = (-1.0f64 / 80.0).exp();
         let long_run = |(g, _, p): (f64, f64, f64)| g * (1.0 + p) / (1.0 - p);
         let m = 400;
-        let design = DMatrix::from_fn(m, 3, |t, c| {
-            let t = t as f64;
-            match c {
-                0 => 1.0,
-                1 => t / m as f64,
-                _ => (2.0 * std::f64::consts::PI * t / 300.0).sin(),
-            }
-        });
+        let design = slow_effects(m);
         let (mut restricted, mut residual_only, mut white_found) = (Vec::new(), Vec::new(), 0);
         for seed in 0..40 {
             let mut rng = Rng::new(seed, "restricted-gauss-markov");
@@ -309,14 +315,7 @@ mod tests {
         let long_run = |(g, _, p): (f64, f64, f64)| g * (1.0 + p) / (1.0 - p);
         let truth = (1.0 + phi) / (1.0 - phi);
         let m = 400;
-        let design = DMatrix::from_fn(m, 3, |t, c| {
-            let t = t as f64;
-            match c {
-                0 => 1.0,
-                1 => t / m as f64,
-                _ => (2.0 * std::f64::consts::PI * t / 300.0).sin(),
-            }
-        });
+        let design = slow_effects(m);
         let residual = |rng: &mut Rng, white: f64| -> Vec<f64> {
             let q = (1.0 - phi * phi).sqrt();
             let mut e = rng.gauss(1.0);
