@@ -348,20 +348,25 @@ impl<'a> Problem<'a> {
                     let parametric = parametric_scores(&jac, &r, d, &self.noise_model)
                         .map(|sp| &inv * sp * &inv);
                     let per_parameter = self.drift_knot_s.is_some();
+                    let parametric_whole = parametric
+                        .as_ref()
+                        .is_some_and(|cp| cp.trace() > cov.trace());
                     let std: Vec<f64> = (0..theta.len())
                         .map(|i| {
-                            let p = parametric.as_ref().map_or(0.0, |c| c[(i, i)].max(0.0));
-                            let w = cov[(i, i)].max(0.0);
-                            let v = match &parametric {
-                                Some(cp) if !per_parameter && cp.trace() > cov.trace() => p,
-                                Some(_) if !per_parameter => w,
-                                _ => w.max(p),
+                            let p = parametric.as_ref().map_or(0.0, |c| c[(i, i)]);
+                            let w = cov[(i, i)];
+                            let v = if per_parameter {
+                                w.max(p)
+                            } else if parametric_whole {
+                                p
+                            } else {
+                                w
                             };
-                            v.sqrt().max(white[i])
+                            v.max(0.0).sqrt().max(white[i])
                         })
                         .collect();
                     let cov = match parametric {
-                        Some(cp) if cp.trace() > cov.trace() => cp,
+                        Some(cp) if parametric_whole => cp,
                         _ => cov,
                     };
                     let widening = std
