@@ -35,6 +35,19 @@ fn column(h: &SMatrix<f64, 3, { filter::N }>, j: usize) -> Vector3<f64> {
     h.fixed_view::<3, 1>(0, j).into()
 }
 
+/// `s` with its position moved by `eps` metres along NED axis `k`, and with its attitude turned
+/// by `eps` milliradians about that axis (the filter's attitude error convention): the two
+/// states a measurement model's position and attitude Jacobian columns are differenced against.
+fn perturbed(s: &NavState, k: usize, eps: f64) -> (NavState, NavState) {
+    let mut unit = Vector3::zeros();
+    unit[k] = eps;
+    let mut sp = *s;
+    sp.position = earth::offset_position(&s.position, &unit);
+    let mut sa = *s;
+    sa.q_body_to_ned = UnitQuaternion::from_scaled_axis(-unit * 1e-3) * s.q_body_to_ned;
+    (sp, sa)
+}
+
 #[test]
 fn dvl_jacobian_matches_finite_differences() {
     let s = state();
@@ -131,15 +144,10 @@ fn gnss_jacobian_matches_finite_differences() {
     // Millimetres: smaller steps drown in the rounding of the latitude in radians.
     let eps = 1e-3;
     for k in 0..3 {
-        let mut unit = Vector3::zeros();
-        unit[k] = eps;
-        let mut sp = s;
-        sp.position = earth::offset_position(&s.position, &unit);
+        let (sp, sa) = perturbed(&s, k, eps);
         let col = (gnss_model(&sp, &arm, &fix).0 - y0) / eps;
         let analytic = column(&h, filter::POS + k);
         assert!((col - analytic).norm() < 1e-5, "dp{k}: {col} vs {analytic}");
-        let mut sa = s;
-        sa.q_body_to_ned = UnitQuaternion::from_scaled_axis(-unit * 1e-3) * s.q_body_to_ned;
         let col = (gnss_model(&sa, &arm, &fix).0 - y0) / (eps * 1e-3);
         let analytic = column(&h, filter::ATT + k);
         assert!(
@@ -165,16 +173,11 @@ fn depth_jacobian_matches_finite_differences() {
     );
     let eps = 1e-3;
     for k in 0..3 {
-        let mut unit = Vector3::zeros();
-        unit[k] = eps;
-        let mut sp = s;
-        sp.position = earth::offset_position(&s.position, &unit);
+        let (sp, sa) = perturbed(&s, k, eps);
         let col = (depth_model(&sp, &arm).0 - z0) / eps;
         // The state's position error is NED; depth is down.
         let analytic = h[(0, filter::POS + k)];
         assert!((col - analytic).abs() < 1e-5, "dp{k}: {col} vs {analytic}");
-        let mut sa = s;
-        sa.q_body_to_ned = UnitQuaternion::from_scaled_axis(-unit * 1e-3) * s.q_body_to_ned;
         let col = (depth_model(&sa, &arm).0 - z0) / (eps * 1e-3);
         let analytic = h[(0, filter::ATT + k)];
         assert!((col - analytic).abs() < 1e-5, "phi{k}: {col} vs {analytic}");
