@@ -72,6 +72,8 @@ struct Estimate {
     delta: DVector<f64>,
     info: DMatrix<f64>,
     rank: usize,
+    /// The degrees of freedom of its deviations ([`Fit::deviation_dof`]; infinite when known).
+    dof: f64,
 }
 
 fn pseudo_inverse(m: &DMatrix<f64>) -> (DMatrix<f64>, usize) {
@@ -96,7 +98,7 @@ fn pseudo_inverse(m: &DMatrix<f64>) -> (DMatrix<f64>, usize) {
 }
 
 impl Estimate {
-    fn new(theta: &[f64], nominal: &[f64], cov: &DMatrix<f64>) -> Estimate {
+    fn new(theta: &[f64], nominal: &[f64], cov: &DMatrix<f64>, dof: f64) -> Estimate {
         let n = theta.len();
         let finite: Vec<usize> = (0..n)
             .filter(|&i| {
@@ -116,7 +118,12 @@ impl Estimate {
             }
         }
         let delta = DVector::from_iterator(n, theta.iter().zip(nominal).map(|(t, n)| t - n));
-        Estimate { delta, info, rank }
+        Estimate {
+            delta,
+            info,
+            rank,
+            dof,
+        }
     }
 
     fn block(&self, off: usize, len: usize) -> Estimate {
@@ -141,7 +148,7 @@ impl Estimate {
             .iter()
             .map(|r| r.map_or(0.0, |i| self.delta[i]))
             .collect();
-        Estimate::new(&theta, &zero, &sub)
+        Estimate::new(&theta, &zero, &sub, self.dof)
     }
 }
 
@@ -152,6 +159,11 @@ struct Combined {
     std: Vec<f64>,
     chi2: f64,
     dof: usize,
+    /// The voyages that determine some component.
+    voyages: usize,
+    /// Welch's Σ (1 − hᵢ)² / νᵢ over those voyages, hᵢ a voyage's share of the combined
+    /// information and νᵢ its deviations' degrees of freedom (0 when every deviation is known).
+    welch: f64,
 }
 
 fn combine(es: &[&Estimate], n: usize) -> Combined {
@@ -181,18 +193,43 @@ fn combine(es: &[&Estimate], n: usize) -> Combined {
             (d.transpose() * &e.info * &d)[(0, 0)]
         })
         .sum();
+    // Each voyage's share of the combined information, tr(Iᵢ I⁺) / rank (wᵢ / W for one
+    // component).
+    let determining: Vec<&&Estimate> = es.iter().filter(|e| e.rank > 0).collect();
+    let welch = determining
+        .iter()
+        .map(|e| {
+            let share = (&e.info * &cov).trace() / rank.max(1) as f64;
+            (1.0 - share).powi(2) / e.dof
+        })
+        .sum();
     Combined {
         delta,
         std,
         chi2,
         dof: ranks.saturating_sub(rank),
+        voyages: determining.len(),
+        welch,
     }
 }
 
 impl Combined {
-    /// The χ² above which the estimates disagree (1 %, [`AGREEMENT_Z`]).
+    /// The χ² above which the estimates disagree (1 %, [`AGREEMENT_Z`]). Each voyage's deviation
+    /// is itself estimated, from a few correlation times of a slowly varying error, so the spread
+    /// of estimates that agree is wider than their deviations say: Welch's (1951) test of means
+    /// with estimated variances takes χ² / dof, divided by 1 + 2(k − 2) A / (k² − 1), as an F
+    /// with dof and (k² − 1) / 3A degrees of freedom, for k voyages and A = [`Combined::welch`].
+    /// With known deviations (white residuals, A = 0) it is the χ² quantile.
     fn limit(&self) -> f64 {
-        auvnav_studies::nees::chi2_quantile(self.dof.max(1) as f64, AGREEMENT_Z)
+        let dof = self.dof.max(1) as f64;
+        let k = self.voyages.max(2) as f64;
+        let a = self.welch;
+        if !(a.is_finite() && a > 0.0) {
+            return auvnav_studies::nees::chi2_quantile(dof, AGREEMENT_Z);
+        }
+        let denominator_dof = (k * k - 1.0) / (3.0 * a);
+        let correction = 1.0 + 2.0 * (k - 2.0) * a / (k * k - 1.0);
+        dof * correction * auvnav_studies::nees::f_quantile(dof, denominator_dof, AGREEMENT_Z)
     }
 
     /// The estimates disagree beyond their uncertainties.
@@ -261,7 +298,7 @@ fn shared_estimates(cv: &[ChannelVoyage], shared: &[usize], fits: &[VoyageFit]) 
                 .collect();
             let mut nominal = v.p.nominal_theta(&shares);
             nominal.resize(f.theta.len(), 0.0);
-            let full = Estimate::new(&f.theta, &nominal, &f.cov);
+            let full = Estimate::new(&f.theta, &nominal, &f.cov, f.deviation_dof());
             let mut rows = Vec::with_capacity(n);
             for &c in shared {
                 let (off, len) = offset_in(set, c);
@@ -1296,4 +1333,39 @@ fn departing(cv: &[ChannelVoyage], data: &[VoyageData], c: usize) -> Vec<String>
         .filter(|x| x.own.contains(&c))
         .map(|x| data[x.voyage].log.clone())
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use auvnav_sim::rng::Rng;
+
+    /// Three voyages whose estimates agree (drawn around one value with unit deviations) and
+    /// whose deviations are themselves estimated with 5 degrees of freedom (a χ²₅ / 5 draw of
+    /// each variance, as a slowly varying error read over a few correlation times gives): the χ²
+    /// limit for known deviations calls them disagreeing several times more often than its 1 %;
+    /// Welch's limit near its 1 %. Four thousand draws.
+    #[test]
+    fn estimated_deviations_disagree_at_the_tests_rate() {
+        let nu = 5usize;
+        let mut rng = Rng::new(1, "welch-agreement");
+        let (mut welch, mut known, draws) = (0usize, 0usize, 4000usize);
+        for _ in 0..draws {
+            let ests: Vec<Estimate> = (0..3)
+                .map(|_| {
+                    let x = rng.gauss(1.0);
+                    let var = (0..nu).map(|_| rng.gauss(1.0).powi(2)).sum::<f64>() / nu as f64;
+                    let cov = DMatrix::from_element(1, 1, var);
+                    Estimate::new(&[x], &[0.0], &cov, nu as f64)
+                })
+                .collect();
+            let c = combine(&ests.iter().collect::<Vec<_>>(), 1);
+            welch += usize::from(c.disagrees());
+            let chi2_limit = auvnav_studies::nees::chi2_quantile(c.dof as f64, AGREEMENT_Z);
+            known += usize::from(c.chi2 > chi2_limit);
+        }
+        let (welch, known) = (welch as f64 / draws as f64, known as f64 / draws as f64);
+        assert!(known > 0.03, "χ² limit with estimated deviations: {known}");
+        assert!((0.003..0.02).contains(&welch), "Welch's limit: {welch}");
+    }
 }

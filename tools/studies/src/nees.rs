@@ -92,6 +92,20 @@ pub fn chi2_quantile(k: f64, z: f64) -> f64 {
     }
 }
 
+/// The F quantile with `d1` and `d2` degrees of freedom at the probability of the standard
+/// normal's `z`, from `statrs`; an infinite `d2` gives the χ² quantile over `d1`.
+pub fn f_quantile(d1: f64, d2: f64, z: f64) -> f64 {
+    use statrs::distribution::{ContinuousCDF, FisherSnedecor, Normal};
+    if !d2.is_finite() {
+        return chi2_quantile(d1, z) / d1;
+    }
+    let p = Normal::standard().cdf(z);
+    match FisherSnedecor::new(d1, d2) {
+        Ok(f) => f.inverse_cdf(p),
+        Err(_) => f64::NAN,
+    }
+}
+
 /// The attitude error `phi` with `C_est = (I - [phi x]) C_true`.
 fn attitude_error(est: &UnitQuaternion<f64>, truth: &UnitQuaternion<f64>) -> Vector3<f64> {
     -(est * truth.inverse()).scaled_axis()
