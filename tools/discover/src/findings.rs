@@ -420,7 +420,8 @@ pub struct SharedEffect {
     /// Σ over voyages of (estimate − mean)ᵀ C⁻¹ (estimate − mean).
     pub chi2: f64,
     pub dof: usize,
-    /// The χ² at which the voyages are taken to disagree (1 %).
+    /// The χ² at which the voyages are taken to disagree (1 %; Welch's limit where the voyages'
+    /// deviations are estimated from correlated residuals, the χ² quantile where they are white).
     pub chi2_limit: f64,
     /// Relative drop of the leave-one-voyage-out mean squared residual when the effect was added.
     pub held_out_gain: f64,
