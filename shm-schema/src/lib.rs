@@ -253,6 +253,32 @@ impl ImuSampleV1 {
     pub const STATUS_ACCEL_SATURATED: u32 = 1 << 6;
     /// The device's built-in test reports a failure.
     pub const STATUS_BUILT_IN_TEST_FAIL: u32 = 1 << 7;
+
+    /// The angular rate (rad/s): the rate as given, or the increment over `interval_s`. None when
+    /// the gyro is not valid, an increment has no positive interval, or a value is not finite.
+    pub fn angular_rate(&self) -> Option<[f64; 3]> {
+        self.per_second(self.angular, Self::STATUS_GYRO_VALID)
+    }
+
+    /// The specific force (m/s²), as [`ImuSampleV1::angular_rate`] for the accelerometer.
+    pub fn specific_force(&self) -> Option<[f64; 3]> {
+        self.per_second(self.specific, Self::STATUS_ACCEL_VALID)
+    }
+
+    fn per_second(&self, v: [f64; 3], valid: u32) -> Option<[f64; 3]> {
+        if self.status & valid == 0 {
+            return None;
+        }
+        let v = if self.status & Self::STATUS_INCREMENTS != 0 {
+            if self.interval_s.is_nan() || self.interval_s <= 0.0 {
+                return None;
+            }
+            v.map(|x| x / self.interval_s)
+        } else {
+            v
+        };
+        v.iter().all(|x| x.is_finite()).then_some(v)
+    }
 }
 
 message! {
@@ -893,4 +919,50 @@ pub fn all_schemas() -> Vec<(&'static str, &'static str, String)> {
         entry::<TruthStateV1>(),
         entry::<RawBytesV1>(),
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ImuSampleV1;
+
+    /// Increments are divided by their interval, rates taken as they are; an invalid triad, an
+    /// increment over no interval and a value that is not finite give nothing.
+    #[test]
+    fn imu_rates_from_rates_or_increments() {
+        let valid = ImuSampleV1::STATUS_GYRO_VALID | ImuSampleV1::STATUS_ACCEL_VALID;
+        let rates = ImuSampleV1 {
+            angular: [0.1, -0.2, 0.3],
+            specific: [0.0, 0.0, -9.8],
+            interval_s: 0.01,
+            status: valid,
+            ..Default::default()
+        };
+        assert_eq!(rates.angular_rate(), Some([0.1, -0.2, 0.3]));
+        assert_eq!(rates.specific_force(), Some([0.0, 0.0, -9.8]));
+        let increments = ImuSampleV1 {
+            angular: [0.001, -0.002, 0.003],
+            specific: [0.0, 0.0, -0.098],
+            status: valid | ImuSampleV1::STATUS_INCREMENTS,
+            ..rates
+        };
+        let w = increments.angular_rate().expect("rate");
+        let f = increments.specific_force().expect("force");
+        assert!((w[1] + 0.2).abs() < 1e-12 && (f[2] + 9.8).abs() < 1e-12);
+        let no_interval = ImuSampleV1 {
+            interval_s: 0.0,
+            ..increments
+        };
+        assert_eq!(no_interval.angular_rate(), None);
+        let gyro_invalid = ImuSampleV1 {
+            status: ImuSampleV1::STATUS_ACCEL_VALID,
+            ..rates
+        };
+        assert_eq!(gyro_invalid.angular_rate(), None);
+        assert!(gyro_invalid.specific_force().is_some());
+        let not_finite = ImuSampleV1 {
+            specific: [f64::NAN, 0.0, -9.8],
+            ..rates
+        };
+        assert_eq!(not_finite.specific_force(), None);
+    }
 }

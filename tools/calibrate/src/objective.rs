@@ -10,7 +10,6 @@ use auvnav_core::earth::{self, Geodetic};
 use auvnav_core::feed::SensorMessage;
 use auvnav_core::session::{Session, SessionConfig, SessionOutput};
 use auvnav_shm_schema::{DvlVelocityV1, NavSolutionV1};
-use auvnav_sim::perturb::imu_rate;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 /// The S-CAL CEP50 factor.
@@ -155,8 +154,10 @@ pub fn run_voyage(
     }
     let mut last_rate = Vector3::zeros();
     for m in &voyage.inputs {
-        if let SensorMessage::Imu(x) = m {
-            last_rate = imu_rate(x);
+        if let SensorMessage::Imu(x) = m
+            && let Some(w) = x.angular_rate()
+        {
+            last_rate = Vector3::from(w);
         }
         if record.epochs
             && let SensorMessage::Dvl(d) = m

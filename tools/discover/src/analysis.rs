@@ -12,7 +12,7 @@ use super::residuals::{Description, describe};
 use super::{Channel, ChannelKind, Reference, spec};
 use crate::DiscoverError;
 use auvnav_log::{LogMessage, LogReader};
-use auvnav_shm_schema::{AcousticRangesV1, DepthV1, DvlVelocityV1, ImuSampleV1, MagnetometerV1};
+use auvnav_shm_schema::{AcousticRangesV1, DepthV1, DvlVelocityV1, MagnetometerV1};
 use auvnav_sim::effects::Effects;
 use nalgebra::Vector3;
 use std::path::PathBuf;
@@ -118,7 +118,7 @@ impl Collector {
                 c.push_ranges(a.host_time_ns as f64 * 1e-9, ranges, a.position_array_m);
             }
             LogMessage::Imu(x) => {
-                let force = auvnav_calibrate::mag::input::specific_force(x);
+                let force = x.specific_force().map(Vector3::from);
                 let t = x.host_time_ns as f64 * 1e-9;
                 let dt = if x.interval_s.is_finite() && x.interval_s > 0.0 {
                     Some(x.interval_s)
@@ -126,10 +126,7 @@ impl Collector {
                     self.last_imu_time.map(|p| t - p).filter(|d| *d > 0.0)
                 };
                 self.last_imu_time = Some(t);
-                let rate = (x.status & ImuSampleV1::STATUS_GYRO_VALID != 0)
-                    .then(|| auvnav_sim::perturb::imu_rate(x))
-                    .filter(|w| w.iter().all(|v| v.is_finite()));
-                let force = force.filter(|f| f.iter().all(|v| v.is_finite()));
+                let rate = x.angular_rate().map(Vector3::from);
                 self.vertical.add(force, rate);
                 match dt {
                     Some(dt_s) if dt_s <= 1.0 && (rate.is_some() || force.is_some()) => {

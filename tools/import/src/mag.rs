@@ -62,7 +62,10 @@ pub struct VerticalBetweenReadings {
 
 impl VerticalBetweenReadings {
     pub fn add_imu(&mut self, x: &ImuSampleV1) {
-        self.add(specific_force(x), angular_rate(x));
+        self.add(
+            x.specific_force().map(Vector3::from),
+            x.angular_rate().map(Vector3::from),
+        );
     }
 
     /// An IMU sample's specific force and angular rate, as read by the caller (non-finite
@@ -181,36 +184,6 @@ pub fn read_log(path: &Path) -> Result<Recording> {
         }
     }
     Ok(out)
-}
-
-/// The angular rate of an IMU sample (rad/s; rates or increments), None when not valid.
-pub fn angular_rate(x: &ImuSampleV1) -> Option<Vector3<f64>> {
-    if x.status & ImuSampleV1::STATUS_GYRO_VALID == 0 {
-        return None;
-    }
-    let w = Vector3::from(x.angular);
-    if x.status & ImuSampleV1::STATUS_INCREMENTS != 0 {
-        (x.interval_s > 0.0).then(|| w / x.interval_s)
-    } else {
-        Some(w)
-    }
-}
-
-/// The specific force of an IMU sample (rates or increments), None when not valid.
-pub fn specific_force(x: &ImuSampleV1) -> Option<Vector3<f64>> {
-    if x.status & ImuSampleV1::STATUS_ACCEL_VALID == 0
-        || x.interval_s.is_nan()
-        || x.interval_s <= 0.0
-    {
-        return None;
-    }
-    let f = Vector3::from(x.specific);
-    let f = if x.status & ImuSampleV1::STATUS_INCREMENTS != 0 {
-        f / x.interval_s
-    } else {
-        f
-    };
-    f.iter().all(|v| v.is_finite()).then_some(f)
 }
 
 fn field_ut(x: &MagnetometerV1) -> Option<Vector3<f64>> {

@@ -115,16 +115,6 @@ struct DvlEpoch {
     omega: Vector3<f64>,
 }
 
-/// The IMU angular rate of a sample (rad/s), whichever mode it is in.
-pub fn imu_rate(m: &ImuSampleV1) -> Vector3<f64> {
-    let a = Vector3::from(m.angular);
-    if m.status & ImuSampleV1::STATUS_INCREMENTS != 0 && m.interval_s > 0.0 {
-        a / m.interval_s
-    } else {
-        a
-    }
-}
-
 /// The recorded velocity and IMU rate at `t` (linear between the two valid epochs around it,
 /// at most `max_gap` apart), or `None`.
 fn at_time(epochs: &[DvlEpoch], t: f64, max_gap: f64) -> Option<(Vector3<f64>, Vector3<f64>)> {
@@ -179,7 +169,11 @@ pub fn perturb_log(
     let mut epochs = Vec::new();
     for m in &raw {
         match m.decode_any() {
-            Ok(LogMessage::Imu(x)) => last_rate = imu_rate(&x),
+            Ok(LogMessage::Imu(x)) => {
+                if let Some(w) = x.angular_rate() {
+                    last_rate = Vector3::from(w);
+                }
+            }
             Ok(LogMessage::Dvl(x)) => epochs.push(DvlEpoch {
                 t: x.validity_time_ns as f64 * 1e-9,
                 valid: x.validity & DvlVelocityV1::VALID_VELOCITY != 0
