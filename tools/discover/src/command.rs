@@ -20,7 +20,8 @@ pub struct DiscoverOptions {
     /// installation as filter states: the vehicle's own motion, so that an effect describes the
     /// sensor against the IMU; the IMU channels are then not compared, and a log's own reference
     /// is compared with the smoothed motion to say what separates them; where a depth sensor's
-    /// lever arm is found, the logs are smoothed again with the depth fused there).
+    /// lever arm is found, the logs are smoothed again with the depth fused there, until the
+    /// lever arm found is the one smoothed at).
     #[cfg_attr(feature = "clap", arg(long, default_value = "truth", value_parser = ["truth", "smoothed"]))]
     pub reference: String,
     /// The nominal model's effects, NAME=VALUE (repeatable; default: every effect off, the
@@ -133,14 +134,23 @@ pub fn run(a: &DiscoverOptions) -> Result<DiscoverReport, DiscoverError> {
     // discovered again: a depth sensor far from the IMU on a pitching vehicle otherwise has its
     // readings refused by the smoother's gate, and the smoothed depth drifts (Snapir segment 9,
     // pitching up to 20° with the depth taken 1.7 m ahead: up to 5.9 m).
+    // The smoothing moves with the lever arm it is given, so the passes go on until the lever
+    // arm found is the one smoothed at (within SETTLED_M) or MAX_PASSES have run.
     let (mut r, undecodable, mut against) = analyse(a, &nominal, nominal.depth_lever_arm)?;
-    let mut smoothed_again = None;
-    if smoothed && r.model.depth_lever_arm != nominal.depth_lever_arm {
-        let (lever, first_wall) = (r.model.depth_lever_arm, r.wall_s);
+    let mut smoothed_at = nominal.depth_lever_arm;
+    let mut passes = 1;
+    while smoothed
+        && passes < MAX_PASSES
+        && r.model.depth_lever_arm != nominal.depth_lever_arm
+        && !settled(r.model.depth_lever_arm, smoothed_at)
+    {
+        let (lever, earlier_wall) = (r.model.depth_lever_arm, r.wall_s);
         (r, _, against) = analyse(a, &nominal, lever)?;
-        r.wall_s += first_wall;
-        smoothed_again = Some(lever);
+        r.wall_s += earlier_wall;
+        smoothed_at = lever;
+        passes += 1;
     }
+    let smoothed_again = (passes > 1).then_some(smoothed_at);
     if undecodable > 0 {
         r.notes.push(format!(
             "{undecodable} messages in the logs did not decode and were left out"
@@ -156,10 +166,22 @@ pub fn run(a: &DiscoverOptions) -> Result<DiscoverReport, DiscoverError> {
                 .into(),
         );
         if let Some(l) = smoothed_again {
+            let found = r.model.depth_lever_arm;
+            let settled_note = if found == nominal.depth_lever_arm {
+                "the last pass names no depth lever arm".to_string()
+            } else if settled(found, l) {
+                format!("the lever arm found is the one smoothed at (within {SETTLED_M} m)")
+            } else {
+                format!(
+                    "the lever arm found, ({:.3}, {:.3}, {:.3}) m, still differs from it by more \
+                     than {SETTLED_M} m after {passes} passes",
+                    found[0], found[1], found[2]
+                )
+            };
             r.notes.push(format!(
-                "each log smoothed again with the depth sensor's lever arm the first pass found, \
-                 ({:.3}, {:.3}, {:.3}) m, and discovered again: these are the second pass's \
-                 findings",
+                "each log smoothed again with the depth sensor's lever arm the previous pass \
+                 found, {passes} passes in all, the last at ({:.3}, {:.3}, {:.3}) m: these are \
+                 the last pass's findings; {settled_note}",
                 l[0], l[1], l[2]
             ));
         }
@@ -193,6 +215,21 @@ pub fn run(a: &DiscoverOptions) -> Result<DiscoverReport, DiscoverError> {
         })?;
     }
     Ok(r)
+}
+
+/// Smoothing passes at most, the first at the nominal depth lever arm.
+const MAX_PASSES: usize = 4;
+
+/// A depth lever arm that moves less than this (m, per component) from the one smoothed at is
+/// settled: at the 20° a pitching vehicle reaches it moves the depth by under 7 mm, below the
+/// depth residual against a smoothed motion (12–27 mm on Snapir).
+const SETTLED_M: f64 = 0.02;
+
+fn settled(found: [f64; 3], smoothed_at: [f64; 3]) -> bool {
+    found
+        .iter()
+        .zip(&smoothed_at)
+        .all(|(f, s)| (f - s).abs() <= SETTLED_M)
 }
 
 /// Reads the logs and discovers: the logs as voyages, or as one; with `--reference smoothed`,
