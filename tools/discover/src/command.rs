@@ -133,9 +133,9 @@ pub fn run(a: &DiscoverOptions) -> Result<DiscoverReport, DiscoverError> {
     // nominal lever arm; where discovery finds another, the logs are smoothed again with it and
     // discovered again: a depth sensor far from the IMU on a pitching vehicle otherwise has its
     // readings refused by the smoother's gate, and the smoothed depth drifts (Snapir segment 9,
-    // pitching up to 20° with the depth taken 1.7 m ahead: up to 5.9 m).
-    // The smoothing moves with the lever arm it is given, so the passes go on until the lever
-    // arm found is the one smoothed at (within SETTLED_M) or MAX_PASSES have run.
+    // pitching up to 20° with the depth taken 1.7 m ahead: up to 5.9 m). The smoothed motion
+    // moves with the lever arm it is given, so the passes go on until the lever arm found is the
+    // one smoothed at (within SETTLED_M) or MAX_PASSES have run.
     let (mut r, undecodable, mut against) = analyse(a, &nominal, nominal.depth_lever_arm)?;
     let mut smoothed_at = nominal.depth_lever_arm;
     let mut passes = 1;

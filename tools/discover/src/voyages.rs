@@ -219,7 +219,9 @@ impl Combined {
     /// of estimates that agree is wider than their deviations say: Welch's (1951) test of means
     /// with estimated variances takes χ² / dof, divided by 1 + 2(k − 2) A / (k² − 1), as an F
     /// with dof and (k² − 1) / 3A degrees of freedom, for k voyages and A = [`Combined::welch`].
-    /// With known deviations (white residuals, A = 0) it is the χ² quantile.
+    /// With known deviations (white residuals, A = 0) it is the χ² quantile. An effect of several
+    /// components takes each voyage's share over them together (an approximation: Welch's test
+    /// is for one).
     fn limit(&self) -> f64 {
         let dof = self.dof.max(1) as f64;
         let k = self.voyages.max(2) as f64;
