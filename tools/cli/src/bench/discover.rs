@@ -65,6 +65,9 @@ struct Summary {
     coloured_hidden_within_3_sigma: usize,
     /// How the coloured hidden trials that did not name the hidden effect accounted for it.
     coloured_hidden_misses: Misses,
+    /// `coloured_hidden_named_right` over the hidden trials the report neither puts below its
+    /// floor nor calls not excited (the rate the target is set on).
+    coloured_hidden_named_right_where_detectable_rate: f64,
     coloured: Vec<SetTrial>,
     /// The same noise over three voyages of one vehicle discovered together (each voyage its
     /// own noise realisation; an installation effect hidden in all three, or nothing).
@@ -75,6 +78,8 @@ struct Summary {
     voyages_hidden_false_discoveries: usize,
     voyages_hidden_named_right: usize,
     voyages_hidden_misses: Misses,
+    /// As `coloured_hidden_named_right_where_detectable_rate`, for the three voyages.
+    voyages_hidden_named_right_where_detectable_rate: f64,
     voyages: Vec<SetTrial>,
     /// Discovery on the measured data sets (import in memory and discovery, per item).
     measured: Vec<MeasuredTiming>,
@@ -110,6 +115,12 @@ impl Misses {
             }
         }
         m
+    }
+
+    /// Of `trials` hidden trials, those the report neither puts below its floor nor calls not
+    /// excited.
+    fn detectable(&self, trials: usize) -> usize {
+        trials.saturating_sub(self.below_the_floor + self.not_excited)
     }
 
     fn describe(&self) -> String {
@@ -317,6 +328,7 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
     let c_hidden_correct = c_hidden.iter().filter(|t| t.correct).count();
     let misses_of =
         |trials: &[SetTrial]| Misses::of(trials.iter().flat_map(|t| t.misses.iter().flatten()));
+    let rate = |n: usize, of: usize| n as f64 / of.max(1) as f64;
     let mut floor = Vec::new();
     for (e, (name, lo, hi)) in HIDDEN.iter().enumerate() {
         for &f in &FLOOR_FRACTIONS {
@@ -412,6 +424,10 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
             .filter(|t| t.within_3_sigma.iter().all(|w| w.unwrap_or(false)))
             .count(),
         coloured_hidden_misses: misses_of(c_hidden),
+        coloured_hidden_named_right_where_detectable_rate: rate(
+            c_hidden.iter().filter(|t| t.named_right).count(),
+            misses_of(c_hidden).detectable(coloured_hidden),
+        ),
         coloured: coloured_trials.to_vec(),
         voyages_null_trials: v_null.len(),
         voyages_null_false_discoveries: v_null.iter().filter(|t| t.false_discovery).count(),
@@ -420,6 +436,10 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
         voyages_hidden_false_discoveries: v_hidden.iter().filter(|t| t.false_discovery).count(),
         voyages_hidden_named_right: v_hidden.iter().filter(|t| t.named_right).count(),
         voyages_hidden_misses: misses_of(v_hidden),
+        voyages_hidden_named_right_where_detectable_rate: rate(
+            v_hidden.iter().filter(|t| t.named_right).count(),
+            misses_of(v_hidden).detectable(voyages_hidden),
+        ),
         voyages: voyage_trials.to_vec(),
         measured,
         wall_s: start.elapsed().as_secs_f64(),
@@ -496,10 +516,14 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
             s.coloured_hidden_false_discoveries
         );
         println!(
-            "  hidden: {}/{} the right name and nothing else (any value); {} within 3 reported \
-             standard deviations; {}",
+            "  hidden: {}/{} the right name and nothing else (any value), {}/{} ({:.1} %) of those \
+             not below the floor or not excited; {} within 3 reported standard deviations; {}",
             s.coloured_hidden_named_right,
             s.coloured_hidden_trials,
+            s.coloured_hidden_named_right,
+            s.coloured_hidden_misses
+                .detectable(s.coloured_hidden_trials),
+            100.0 * s.coloured_hidden_named_right_where_detectable_rate,
             s.coloured_hidden_within_3_sigma,
             s.coloured_hidden_misses.describe()
         );
@@ -528,9 +552,13 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
             s.voyages_hidden_false_discoveries
         );
         println!(
-            "  hidden: {}/{} the right name and nothing else (any value); {}",
+            "  hidden: {}/{} the right name and nothing else (any value), {}/{} ({:.1} %) of those \
+             not below the floor or not excited; {}",
             s.voyages_hidden_named_right,
             s.voyages_hidden_trials,
+            s.voyages_hidden_named_right,
+            s.voyages_hidden_misses.detectable(s.voyages_hidden_trials),
+            100.0 * s.voyages_hidden_named_right_where_detectable_rate,
             s.voyages_hidden_misses.describe()
         );
         for t in s.voyages.iter().filter(|t| !t.correct) {
