@@ -166,6 +166,11 @@ proptest! {
             }
             bytes.extend(f);
         }
+        // The stream goes on after the frames (zeros: no preamble). A valid frame's data can
+        // hold a preamble and bus id (a sample time of 0xFAFF74A0): once the corrupted frame
+        // before it is refused, the decoder resynchronises there and waits for the length that
+        // false start declares, which only the bytes that follow can refuse.
+        bytes.extend(std::iter::repeat_n(0u8, xsens::MAX_PAYLOAD + 7));
         let mut d = XbusDecoder::new();
         let out = feed(&bytes, &chunks, &mut d, |d, b| d.push(b), |d| d.next_message());
         let expected: Vec<XbusMessage> = msgs
@@ -381,4 +386,39 @@ proptest! {
             prop_assert!(d.stats().bytes_skipped <= d.stats().bytes);
         }
     }
+}
+
+/// The case the property above found: the corrupted first frame's sample time, 0xFAFF74A0, holds
+/// a preamble and bus id declaring a 160-byte payload; the frame after it still comes out once
+/// the stream goes on.
+#[test]
+fn a_false_frame_start_inside_a_corrupted_frame_does_not_swallow_the_next() {
+    let first = MtData2 {
+        packet_counter: Some(0),
+        sample_time_fine: Some(0xFAFF_74A0),
+        status_word: Some(0),
+        acceleration: Some([0.0; 3]),
+        delta_v: Some([0.0; 3]),
+        rate_of_turn: Some([0.0; 3]),
+        delta_q: Some([0.0; 4]),
+        ..Default::default()
+    };
+    let second = MtData2 {
+        sample_time_fine: Some(0),
+        ..first.clone()
+    };
+    let mut bytes = xsens::encode_mtdata2(&first);
+    let k = bytes.len() - 2;
+    bytes[k] ^= 0x10;
+    bytes.extend(xsens::encode_mtdata2(&second));
+    let mut d = XbusDecoder::new();
+    d.push(&bytes);
+    assert_eq!(
+        d.next_message(),
+        None,
+        "the false start waits for its length"
+    );
+    d.push(&vec![0u8; xsens::MAX_PAYLOAD + 7]);
+    assert_eq!(d.next_message(), Some(XbusMessage::MtData2(second)));
+    assert!(d.stats().checksum_errors >= 1);
 }
