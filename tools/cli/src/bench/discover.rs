@@ -329,6 +329,9 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
     let misses_of =
         |trials: &[SetTrial]| Misses::of(trials.iter().flat_map(|t| t.misses.iter().flatten()));
     let rate = |n: usize, of: usize| n as f64 / of.max(1) as f64;
+    let (c_misses, v_misses) = (misses_of(c_hidden), misses_of(v_hidden));
+    let named_right = |trials: &[SetTrial]| trials.iter().filter(|t| t.named_right).count();
+    let (c_named_right, v_named_right) = (named_right(c_hidden), named_right(v_hidden));
     let mut floor = Vec::new();
     for (e, (name, lo, hi)) in HIDDEN.iter().enumerate() {
         for &f in &FLOOR_FRACTIONS {
@@ -418,28 +421,28 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
         coloured_hidden_correct: c_hidden_correct,
         coloured_hidden_correct_rate: c_hidden_correct as f64 / coloured_hidden.max(1) as f64,
         coloured_hidden_false_discoveries: c_hidden.iter().filter(|t| t.false_discovery).count(),
-        coloured_hidden_named_right: c_hidden.iter().filter(|t| t.named_right).count(),
+        coloured_hidden_named_right: c_named_right,
         coloured_hidden_within_3_sigma: c_hidden
             .iter()
             .filter(|t| t.within_3_sigma.iter().all(|w| w.unwrap_or(false)))
             .count(),
-        coloured_hidden_misses: misses_of(c_hidden),
         coloured_hidden_named_right_where_detectable_rate: rate(
-            c_hidden.iter().filter(|t| t.named_right).count(),
-            misses_of(c_hidden).detectable(coloured_hidden),
+            c_named_right,
+            c_misses.detectable(coloured_hidden),
         ),
+        coloured_hidden_misses: c_misses,
         coloured: coloured_trials.to_vec(),
         voyages_null_trials: v_null.len(),
         voyages_null_false_discoveries: v_null.iter().filter(|t| t.false_discovery).count(),
         voyages_hidden_trials: voyages_hidden,
         voyages_hidden_correct: v_hidden.iter().filter(|t| t.correct).count(),
         voyages_hidden_false_discoveries: v_hidden.iter().filter(|t| t.false_discovery).count(),
-        voyages_hidden_named_right: v_hidden.iter().filter(|t| t.named_right).count(),
-        voyages_hidden_misses: misses_of(v_hidden),
+        voyages_hidden_named_right: v_named_right,
         voyages_hidden_named_right_where_detectable_rate: rate(
-            v_hidden.iter().filter(|t| t.named_right).count(),
-            misses_of(v_hidden).detectable(voyages_hidden),
+            v_named_right,
+            v_misses.detectable(voyages_hidden),
         ),
+        voyages_hidden_misses: v_misses,
         voyages: voyage_trials.to_vec(),
         measured,
         wall_s: start.elapsed().as_secs_f64(),
