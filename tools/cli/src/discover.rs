@@ -181,6 +181,18 @@ pub mod command {
         for n in &r.navigation {
             println!("  navigation {}: {}", n.log, n.verdict);
         }
+        for w in &r.withheld {
+            println!(
+                "  not in the navigator configuration: {}: {}",
+                w.name, w.note
+            );
+        }
+        for n in &r.navigation_written {
+            println!(
+                "  navigation {} with the effects kept: {}",
+                n.log, n.verdict
+            );
+        }
         for n in &r.notes {
             println!("  note: {n}");
         }

@@ -192,7 +192,7 @@ pub fn run(a: &DiscoverOptions) -> Result<DiscoverReport, DiscoverError> {
     }
     if !a.no_navigation {
         let start = std::time::Instant::now();
-        super::outputs::navigation_gain(&a.logs, &mut r);
+        super::navigation::navigation_gain(&a.logs, &mut r);
         r.wall_s += start.elapsed().as_secs_f64();
     }
     if let Some(p) = &a.write_effects {

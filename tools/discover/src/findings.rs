@@ -228,6 +228,14 @@ pub struct DiscoverReport {
     /// reference from the smoothed (IMU) motion.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub reference_against_imu: Vec<ReferenceAgainstImu>,
+    /// The effects found that the navigator configuration (`--write-config`) leaves at their
+    /// nominal values: with them the held-out navigation of some log got worse.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub withheld: Vec<Withheld>,
+    /// Each log's navigation with what the navigator configuration carries (the effects found
+    /// less those withheld), when effects were withheld and some are left.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub navigation_written: Vec<NavigationGain>,
     pub wall_s: f64,
     /// The nominal effects.
     #[serde(skip)]
@@ -262,6 +270,8 @@ impl DiscoverReport {
             floors: Vec::new(),
             voyages: None,
             reference_against_imu: Vec::new(),
+            withheld: Vec::new(),
+            navigation_written: Vec::new(),
             wall_s: 0.0,
             nominal_model: nominal.clone(),
             model: nominal.clone(),
@@ -351,6 +361,13 @@ pub struct NavigationGain {
     pub worse: bool,
     /// What the comparison shows, in words.
     pub verdict: String,
+}
+
+/// An effect found that the navigator configuration leaves out, and why.
+#[derive(Debug, Clone, Serialize)]
+pub struct Withheld {
+    pub name: String,
+    pub note: String,
 }
 
 impl NavigationGain {

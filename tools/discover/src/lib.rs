@@ -22,6 +22,7 @@ pub mod findings;
 pub mod fit;
 pub mod hidden_effects;
 pub mod imu;
+pub mod navigation;
 pub mod noise;
 pub mod outputs;
 pub mod report;

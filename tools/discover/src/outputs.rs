@@ -1,18 +1,14 @@
 //! What discovery found, in the forms other tools take: an effect set for the simulator
 //! (`auvnav sim --effects-from`), a navigator configuration (the calibration the daemon and
-//! `auvnav replay` take), and the navigation error before/after on the logs.
+//! `auvnav replay` take); the navigation error before/after is in `navigation`.
 
 use super::ChannelKind;
 use super::findings::{DiscoverReport, NavigationGain};
-use anyhow::Context;
 use auvnav_core::aid::magnetometer::MagnetometerConfig;
 use auvnav_core::config::DvlInstallation;
-use auvnav_replay::accuracy::Accuracy;
-use auvnav_replay::{Replay, ReplayConfig, ReplayOptions};
 use auvnav_sim::effects::{self, Effects};
 use auvnav_sim::sensors::{MagnetometerModel, dvl_velocity_std_per_beam_noise};
 use serde::Serialize;
-use std::path::{Path, PathBuf};
 
 /// The simulator's noise effect of a channel from the RMS per component of its residual with the
 /// effects found. `dvl.noise` is per beam: each DVL-frame component's RMS is divided by what one
@@ -211,8 +207,15 @@ pub fn navigator_tables(
     (dvl, mag)
 }
 
+/// The model the navigator configuration is written from: the effects found (on all readings)
+/// less those withheld because the held-out navigation got worse with them.
+pub fn written_model(r: &DiscoverReport) -> Effects {
+    let names: Vec<&str> = r.withheld.iter().map(|w| w.name.as_str()).collect();
+    super::navigation::with_only(&r.model, &r.nominal_model, &names, &[])
+}
+
 /// The channels analysed (in any voyage).
-fn analysed(r: &DiscoverReport) -> Vec<ChannelKind> {
+pub(crate) fn analysed(r: &DiscoverReport) -> Vec<ChannelKind> {
     let mut kinds: Vec<ChannelKind> = r.channels.iter().map(|c| c.channel).collect();
     if let Some(v) = &r.voyages {
         kinds.extend(
@@ -254,13 +257,10 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
     let source = format!("auvnav discover on {}", r.inputs.join(", "));
     // The installation found is written only where it does not make the navigation worse
     // (`NavigationGain::judge`: a larger position or velocity error against the reference on
-    // any log keeps the nominal tables).
-    let worse: Vec<&NavigationGain> = r.navigation.iter().filter(|g| g.worse).collect();
-    let model = if worse.is_empty() {
-        &r.model
-    } else {
-        &r.nominal_model
-    };
+    // any log): the effects with which some log got worse are withheld, one at a time
+    // (`navigation::withhold`), and the rest written.
+    let written = written_model(r);
+    let model = &written;
     let (dvl, magnetometer) = navigator_tables(model, &analysed(r), &source);
     let depth_lever_arm_m = navigator_depth_lever_arm(model, &analysed(r));
     let body = toml::to_string(&File {
@@ -281,11 +281,17 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
              # determined; add `model_date` (or `declination_deg`) to [navigation.magnetometer].\n",
         );
     }
+    let worse: Vec<&NavigationGain> = r.navigation.iter().filter(|g| g.worse).collect();
     for g in &worse {
         head.push_str(&format!(
-            "# NOT APPLIED: with the effects found the navigation of {} got {}: the tables \
-             below are the nominal installation; the effects found are in the report.\n",
+            "# With every effect found the navigation of {} got {}.\n",
             g.log, g.verdict
+        ));
+    }
+    for w in &r.withheld {
+        head.push_str(&format!(
+            "# NOT APPLIED: {} ({}); the tables below keep its nominal value.\n",
+            w.name, w.note
         ));
     }
     for u in &r.unseparable {
@@ -330,172 +336,6 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
         }
     }
     Ok(head + &body)
-}
-
-/// Replays each log with an IMU and a reference twice: with the navigator tables of the nominal
-/// effects and with those of the effects fitted on the first part of each channel; the rest of
-/// the configuration is what `auvnav replay LOG` would use. Logs without an IMU or a reference
-/// are skipped with a note.
-pub fn navigation_gain(logs: &[PathBuf], r: &mut DiscoverReport) {
-    let kinds = analysed(r);
-    if !kinds.contains(&ChannelKind::Dvl) && !kinds.contains(&ChannelKind::Magnetometer) {
-        return;
-    }
-    let shared_lever_arm = reference_lever_arm(r);
-    if let Some(l) = shared_lever_arm {
-        r.notes.push(format!(
-            "navigation scored at the IMU: the logs' reference moved by ({:.2}, {:.2}, {:.2}) m \
-             (body axes), where the logs found it against their smoothed motion (combined over \
-             the logs)",
-            l[0], l[1], l[2]
-        ));
-    }
-    for (i, log) in logs.iter().enumerate() {
-        // Several voyages: each is replayed with the installation fitted on the others (held
-        // out); one voyage: with the effects fitted on the first part of each channel.
-        let after = match &r.voyages {
-            Some(v) => v.held_out_models.get(i).unwrap_or(&r.model),
-            None => &r.held_out_model,
-        };
-        let lever_arm = shared_lever_arm.or_else(|| own_reference_lever_arm(r, log));
-        match navigation_of(log, &r.nominal_model, after, &kinds, lever_arm) {
-            Ok(Some(g)) => {
-                if g.worse {
-                    let why = if r.reference == "smoothed" {
-                        "they describe the sensors against the IMU's own (smoothed) motion, yet \
-                         the navigation does not gain from them on this log (its error is taken \
-                         against the log's reference, moved to the IMU where its lever arm was \
-                         found)"
-                    } else {
-                        "they describe the sensors against the reference, and the reference is \
-                         not the IMU's motion (its velocity at another point or time; compare \
-                         with --reference smoothed)"
-                    };
-                    r.notes.push(format!(
-                        "{}: the navigation gets {} with the effects found: {why}. Check against \
-                         the navigator's own estimates (estimate_dvl_* in [navigation]) before \
-                         using navigation.toml",
-                        g.log, g.verdict
-                    ));
-                }
-                r.navigation.push(g)
-            }
-            Ok(None) => r.notes.push(format!(
-                "{}: no IMU or no reference: navigation error not compared",
-                log.display()
-            )),
-            Err(e) => r.notes.push(format!(
-                "{}: navigation replay failed: {e:#}",
-                log.display()
-            )),
-        }
-    }
-}
-
-/// A log's reference lever arm (value, one sigma) as `--reference smoothed` found it: its
-/// velocity read as a DVL on the vehicle against the smoothed motion.
-fn lever_arm_of(found: &super::findings::ReferenceAgainstImu) -> Option<([f64; 3], [f64; 3])> {
-    let (_, value, std) = found
-        .effects
-        .iter()
-        .find(|(n, _, _)| n == "dvl.lever_arm")?;
-    let v = <[f64; 3]>::try_from(super::findings::values_of(value)?).ok()?;
-    let s = <[f64; 3]>::try_from(super::findings::values_of(std)?).ok()?;
-    Some((v, s))
-}
-
-/// Where the log's own reference sits from the IMU, when `--reference smoothed` found it.
-fn own_reference_lever_arm(r: &DiscoverReport, log: &Path) -> Option<[f64; 3]> {
-    let name = log.display().to_string();
-    let found = r.reference_against_imu.iter().find(|x| x.log == name)?;
-    lever_arm_of(found).map(|(v, _)| v)
-}
-
-/// Where the reference sits from the IMU, combined over the logs that found it (the reference
-/// is the vehicle's: one point for every voyage): each component the information-weighted mean
-/// of the logs' estimates. None with fewer than two logs' estimates.
-fn reference_lever_arm(r: &DiscoverReport) -> Option<[f64; 3]> {
-    let found: Vec<([f64; 3], [f64; 3])> = r
-        .reference_against_imu
-        .iter()
-        .filter_map(lever_arm_of)
-        .filter(|(v, s)| v.iter().chain(s).all(|x| x.is_finite()) && s.iter().all(|x| *x > 0.0))
-        .collect();
-    if found.len() < 2 {
-        return None;
-    }
-    Some(std::array::from_fn(|i| {
-        let w: f64 = found.iter().map(|(_, s)| s[i].powi(-2)).sum();
-        found.iter().map(|(v, s)| v[i] * s[i].powi(-2)).sum::<f64>() / w
-    }))
-}
-
-fn navigation_of(
-    log: &Path,
-    nominal: &Effects,
-    after: &Effects,
-    kinds: &[ChannelKind],
-    reference_lever_arm: Option<[f64; 3]>,
-) -> anyhow::Result<Option<NavigationGain>> {
-    let options = ReplayOptions::new(log);
-    let (base, source) = auvnav_replay::replay_config(&options)?;
-    let with = |e: &Effects| -> ReplayConfig {
-        let mut cfg = base.clone();
-        let (dvl, mag) = navigator_tables(e, kinds, "auvnav discover");
-        if let Some(d) = dvl {
-            cfg.navigation.set_dvl_installation(d);
-        }
-        if let Some(l) = navigator_depth_lever_arm(e, kinds) {
-            cfg.navigation.depth_lever_arm_m = l;
-        }
-        // The magnetometer aid is only recalibrated where the configuration uses it.
-        if let (Some(m), Some(old)) = (mag, cfg.navigation.magnetometer.as_ref()) {
-            cfg.navigation.magnetometer = Some(MagnetometerConfig {
-                heading_std_deg: old.heading_std_deg,
-                gate_chi2: old.gate_chi2,
-                field_tolerance: old.field_tolerance,
-                min_interval_s: old.min_interval_s,
-                ..m
-            });
-        }
-        cfg
-    };
-    let run = |cfg: &ReplayConfig| -> anyhow::Result<Option<(Accuracy, u64, u64)>> {
-        let mut replay = Replay::new(cfg, options.min_distance);
-        if let Some(l) = reference_lever_arm {
-            replay.set_reference_lever_arm(l);
-        }
-        auvnav_replay::run_log(log, &mut replay, &mut |_| Ok(()))
-            .with_context(|| format!("replaying {}", log.display()))?;
-        if replay.counts.imu == 0 {
-            return Ok(None);
-        }
-        let c = replay.nav_counters();
-        Ok(replay
-            .accuracy()
-            .filter(|a| a.epochs > 0)
-            .map(|a| (a, c.dvl_fused, c.dvl_rejected)))
-    };
-    let Some((before, fb, rb)) = run(&with(nominal))? else {
-        return Ok(None);
-    };
-    let Some((after, fa, ra)) = run(&with(after))? else {
-        return Ok(None);
-    };
-    let (worse, verdict) = NavigationGain::judge(&before, &after);
-    Ok(Some(NavigationGain {
-        worse,
-        verdict,
-        log: log.display().to_string(),
-        configuration: source,
-        before,
-        after,
-        dvl_fused_before: fb,
-        dvl_rejected_before: rb,
-        dvl_fused_after: fa,
-        dvl_rejected_after: ra,
-        reference_lever_arm_m: reference_lever_arm,
-    }))
 }
 
 #[cfg(test)]

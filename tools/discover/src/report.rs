@@ -3,7 +3,7 @@
 //! `navigation.toml`.
 
 use super::ChannelKind;
-use super::findings::{DiscoverReport, ResidualSeries};
+use super::findings::{DiscoverReport, NavigationGain, ResidualSeries};
 use super::outputs;
 use super::residuals::{periodogram_nyquist, periodogram_up_to};
 use anyhow::Context;
@@ -277,25 +277,31 @@ fn markdown(r: &DiscoverReport, figures: &[(ChannelKind, Vec<String>)]) -> Strin
              readings; the rest of the configuration: the log's own or the defaults). Errors \
              against the log's reference; *reference's own* is the RMS by which the reference's \
              position departs from the integral of its own velocity (a reference that merges \
-             position fixes: metres), the scale of what it can tell apart in position.\n\n| log | RMS before | after | end before | after | velocity RMS before | after | reference's own | DVL rejected before | after | verdict |\n|---|---|---|---|---|---|---|---|---|---|---|"
+             position fixes: metres), the scale of what it can tell apart in position.\n\n\
+             {NAVIGATION_HEAD}"
         );
-        for n in &r.navigation {
-            let (b, a) = (&n.before, &n.after);
+        navigation_rows(&mut m, &r.navigation);
+        let _ = writeln!(m);
+        if !r.withheld.is_empty() {
             let _ = writeln!(
                 m,
-                "| {} | {:.2} m | {:.2} m | {:.2} m | {:.2} m | {:.1} mm/s | {:.1} mm/s | {:.2} m | {} | {} | {} |",
-                n.log,
-                b.horizontal_error_rms_m,
-                a.horizontal_error_rms_m,
-                b.horizontal_error_final_m,
-                a.horizontal_error_final_m,
-                1e3 * b.horizontal_velocity_error_rms_m_s,
-                1e3 * a.horizontal_velocity_error_rms_m_s,
-                b.truth_position_against_velocity_rms_m,
-                n.dvl_rejected_before,
-                n.dvl_rejected_after,
-                n.verdict.split(':').next().unwrap_or_default()
+                "### What the navigator configuration carries\n\nWith every effect found some \
+                 log navigated worse, so effects were withheld one at a time until none did \
+                 (the rest are in `navigation.toml`):\n"
             );
+            for w in &r.withheld {
+                let _ = writeln!(m, "- `{}`: {}", w.name, w.note);
+            }
+            let _ = writeln!(m);
+            if r.navigation_written.is_empty() {
+                let _ = writeln!(
+                    m,
+                    "Every effect was withheld: `navigation.toml` keeps the nominal installation."
+                );
+            } else {
+                let _ = writeln!(m, "Each log with the effects kept:\n\n{NAVIGATION_HEAD}");
+                navigation_rows(&mut m, &r.navigation_written);
+            }
         }
         let _ = writeln!(m);
     }
@@ -535,4 +541,31 @@ Each log is a voyage of its own, analysed against its own reference \
         );
     }
     Ok(m)
+}
+
+/// The header of a navigation table ([`navigation_rows`]).
+const NAVIGATION_HEAD: &str = "| log | RMS before | after | end before | after | velocity RMS \
+     before | after | reference's own | DVL rejected before | after | verdict |\n\
+     |---|---|---|---|---|---|---|---|---|---|---|";
+
+/// One row per log: its navigation error before and after.
+fn navigation_rows(m: &mut String, gains: &[NavigationGain]) {
+    for n in gains {
+        let (b, a) = (&n.before, &n.after);
+        let _ = writeln!(
+            m,
+            "| {} | {:.2} m | {:.2} m | {:.2} m | {:.2} m | {:.1} mm/s | {:.1} mm/s | {:.2} m | {} | {} | {} |",
+            n.log,
+            b.horizontal_error_rms_m,
+            a.horizontal_error_rms_m,
+            b.horizontal_error_final_m,
+            a.horizontal_error_final_m,
+            1e3 * b.horizontal_velocity_error_rms_m_s,
+            1e3 * a.horizontal_velocity_error_rms_m_s,
+            b.truth_position_against_velocity_rms_m,
+            n.dvl_rejected_before,
+            n.dvl_rejected_after,
+            n.verdict.split(':').next().unwrap_or_default()
+        );
+    }
 }
