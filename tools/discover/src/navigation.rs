@@ -404,8 +404,8 @@ fn withhold_worsening(
                     .into()
             } else {
                 format!(
-                    "added to the effects kept, the held-out navigation of {} is worse than with \
-                     the nominal installation",
+                    "added to the effects kept, the held-out navigation is worse than with the \
+                     nominal installation on {}",
                     logs.join(", ")
                 )
             },

@@ -286,8 +286,9 @@ fn markdown(r: &DiscoverReport, figures: &[(ChannelKind, Vec<String>)]) -> Strin
             let _ = writeln!(
                 m,
                 "### What the navigator configuration carries\n\nWith every effect found some \
-                 log navigated worse, so effects were withheld one at a time until none did \
-                 (the rest are in `navigation.toml`):\n"
+                 log navigated worse; `navigation.toml` carries the largest set of them with \
+                 which none does. Left out, with the logs that navigate worse when each is \
+                 added to that set:\n"
             );
             for w in &r.withheld {
                 let _ = writeln!(m, "- `{}`: {}", w.name, w.note);
