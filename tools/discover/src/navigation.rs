@@ -6,7 +6,7 @@
 
 use super::ChannelKind;
 use super::findings::{DiscoverReport, NavigationGain, Withheld};
-use super::outputs::{analysed, navigator_depth_lever_arm, navigator_tables};
+use super::outputs::{analysed, navigator_depth_lever_arm, navigator_tables, with_only};
 use anyhow::Context;
 use auvnav_core::aid::magnetometer::MagnetometerConfig;
 use auvnav_replay::accuracy::Accuracy;
@@ -206,18 +206,6 @@ fn navigator_effects(
             })
         })
         .collect()
-}
-
-/// `model` with only the effects `kept` of `names` left as found (the others at their nominal
-/// values).
-pub fn with_only(model: &Effects, nominal: &Effects, names: &[&str], kept: &[&str]) -> Effects {
-    let mut m = model.clone();
-    for name in names.iter().filter(|n| !kept.contains(n)) {
-        if let Some(v) = nominal.get(name) {
-            let _ = m.set(name, &v);
-        }
-    }
-    m
 }
 
 /// How one log's navigation with a set of effects compares with the nominal one.

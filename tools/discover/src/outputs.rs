@@ -211,7 +211,19 @@ pub fn navigator_tables(
 /// less those withheld because the held-out navigation got worse with them.
 pub fn written_model(r: &DiscoverReport) -> Effects {
     let names: Vec<&str> = r.withheld.iter().map(|w| w.name.as_str()).collect();
-    super::navigation::with_only(&r.model, &r.nominal_model, &names, &[])
+    with_only(&r.model, &r.nominal_model, &names, &[])
+}
+
+/// `model` with only the effects `kept` of `names` left as found (the others at their nominal
+/// values).
+pub fn with_only(model: &Effects, nominal: &Effects, names: &[&str], kept: &[&str]) -> Effects {
+    let mut m = model.clone();
+    for name in names.iter().filter(|n| !kept.contains(n)) {
+        if let Some(v) = nominal.get(name) {
+            let _ = m.set(name, &v);
+        }
+    }
+    m
 }
 
 /// The channels analysed (in any voyage).
