@@ -48,7 +48,9 @@ pub struct DiscoverOptions {
     #[cfg_attr(feature = "clap", arg(long, value_name = "FILE"))]
     pub write_effects: Option<PathBuf>,
     /// Write the navigator configuration of the effects found (`[navigation.dvl]`,
-    /// `[navigation.magnetometer]`).
+    /// `[navigation.magnetometer]`, the depth sensor's lever arm), less those with which the
+    /// replayed navigation of some log gets worse, each named in a comment (with
+    /// `--no-navigation` nothing is replayed and every effect found is written).
     #[cfg_attr(feature = "clap", arg(long, value_name = "FILE"))]
     pub write_config: Option<PathBuf>,
     /// Do not replay the logs through the navigator to compare the navigation error before and
