@@ -211,14 +211,13 @@ pub fn navigator_tables(
 /// less those withheld because the held-out navigation got worse with them.
 pub fn written_model(r: &DiscoverReport) -> Effects {
     let names: Vec<&str> = r.withheld.iter().map(|w| w.name.as_str()).collect();
-    with_only(&r.model, &r.nominal_model, &names, &[])
+    at_nominal(&r.model, &r.nominal_model, &names)
 }
 
-/// `model` with only the effects `kept` of `names` left as found (the others at their nominal
-/// values).
-pub fn with_only(model: &Effects, nominal: &Effects, names: &[&str], kept: &[&str]) -> Effects {
+/// `model` with the effects `names` set back to their nominal values.
+pub fn at_nominal(model: &Effects, nominal: &Effects, names: &[&str]) -> Effects {
     let mut m = model.clone();
-    for name in names.iter().filter(|n| !kept.contains(n)) {
+    for name in names {
         if let Some(v) = nominal.get(name) {
             let _ = m.set(name, &v);
         }
@@ -269,10 +268,9 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
     let source = format!("auvnav discover on {}", r.inputs.join(", "));
     // The installation found is written only where it does not make the navigation worse
     // (`NavigationGain::judge`: a larger position or velocity error against the reference on
-    // any log): the effects with which some log got worse are withheld, one at a time
-    // (`navigation::withhold`), and the rest written.
-    let written = written_model(r);
-    let model = &written;
+    // any log): where every effect found does, the largest set with which no log does
+    // (`navigation::withhold`).
+    let model = &written_model(r);
     let (dvl, magnetometer) = navigator_tables(model, &analysed(r), &source);
     let depth_lever_arm_m = navigator_depth_lever_arm(model, &analysed(r));
     let body = toml::to_string(&File {
