@@ -344,20 +344,20 @@ fn withhold_worsening(
     let replay_all = |kept: &[&str]| -> Vec<Option<Run>> {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
         let chunk = compared.len().div_ceil(threads).max(1);
+        let left: Vec<&str> = names
+            .iter()
+            .copied()
+            .filter(|n| !kept.contains(n))
+            .collect();
         std::thread::scope(|s| {
             let handles: Vec<_> = compared
                 .chunks(chunk)
                 .map(|part| {
-                    let (names, nominal) = (&names, &nominal);
+                    let (left, nominal) = (&left, &nominal);
                     s.spawn(move || {
                         part.iter()
                             .map(|(l, m, _)| {
-                                let left: Vec<&str> = names
-                                    .iter()
-                                    .copied()
-                                    .filter(|n| !kept.contains(n))
-                                    .collect();
-                                l.run(&at_nominal(m, nominal, &left), kinds).ok().flatten()
+                                l.run(&at_nominal(m, nominal, left), kinds).ok().flatten()
                             })
                             .collect::<Vec<_>>()
                     })
@@ -389,7 +389,14 @@ fn withhold_worsening(
         .iter()
         .map(|g| Judged::of(&g.before, &g.after))
         .collect();
-    let (kept, left) = withhold(&names, full, |kept| judged(&replay_all(kept)));
+    // The runs of every set replayed, so that the set kept is not replayed again.
+    let mut runs_of: std::collections::HashMap<Vec<&str>, Vec<Option<Run>>> = Default::default();
+    let (kept, left) = withhold(&names, full, |kept| {
+        let runs = replay_all(kept);
+        let j = judged(&runs);
+        runs_of.insert(kept.to_vec(), runs);
+        j
+    });
     for s in &left {
         let logs: Vec<&str> = s
             .worse_with
@@ -414,7 +421,7 @@ fn withhold_worsening(
     if kept.is_empty() {
         return;
     }
-    let runs = replay_all(&kept);
+    let runs = runs_of.remove(&kept).unwrap_or_else(|| replay_all(&kept));
     for ((l, _, before), run) in compared.iter().zip(&runs) {
         if let Some(after) = run {
             r.navigation_written.push(l.gain(before, after));
