@@ -201,6 +201,10 @@ enum ImportWhat {
     /// A Teledyne RDI PD0 file with GPS (WinRiver NMEA blocks): the bottom track as the DVL
     /// channel, the GPS velocity over ground with the DVL's own attitude as the reference
     Pd0(auvnav_tools::import::Pd0Options),
+    /// A SonTek RiverSurveyor (M9, S5) MATLAB export from RiverSurveyor Live: the bottom track
+    /// as the DVL channel (rotated back into the instrument frame), every GGA fix as a GNSS fix,
+    /// and the GPS velocity over ground with the ADCP's own compass attitude as the reference.
+    Riversurveyor(auvnav_tools::import::RiverSurveyorOptions),
     /// A magnetometer recording in CSV (magnetometer and accelerometer columns, as
     /// `auvnav calibrate mag` reads them): the magnetometer channel and the specific force, for
     /// `auvnav discover` without a reference attitude.
@@ -573,6 +577,40 @@ fn run_import_pd0(a: &auvnav_tools::import::Pd0Options) -> anyhow::Result<()> {
     Ok(())
 }
 
+fn run_import_riversurveyor(a: &auvnav_tools::import::RiverSurveyorOptions) -> anyhow::Result<()> {
+    let s = auvnav_tools::import::riversurveyor(a)?;
+    if a.json {
+        auvnav_tools::json::print(&s)?;
+    } else {
+        eprintln!(
+            "{}: RiverSurveyor {}, {} samples of {:.1} s ({:.0} s): {} with a bottom-track velocity ({} invalid, {} with a bad time), {} reference records ({:?} velocity), {} without GPS around them",
+            a.out.display(),
+            s.serial_number,
+            s.samples,
+            s.interval_s,
+            s.duration_s,
+            s.bottom_track_velocity,
+            s.bottom_track_invalid,
+            s.bad_time,
+            s.reference,
+            s.velocity,
+            s.no_reference,
+        );
+        eprintln!(
+            "  GPS: {} GGA fixes ({} without a fix, {} with a bad time, {} repeated), {} VTG; ADCP clock = UTC {:+.3} s (GGA delay spread {:.3} s); declination applied by the export {:.2} deg",
+            s.gga,
+            s.gga_no_fix,
+            s.gga_bad_time,
+            s.gga_repeated,
+            s.vtg,
+            s.adcp_clock_minus_utc_s,
+            s.gga_delay_spread_s,
+            s.magnetic_declination_deg,
+        );
+    }
+    Ok(())
+}
+
 fn run_import_mag_csv(a: &auvnav_tools::import::MagCsvOptions) -> anyhow::Result<()> {
     let s = auvnav_tools::import::mag_csv(a)?;
     if a.json {
@@ -705,6 +743,7 @@ fn main() -> std::process::ExitCode {
         Command::Import { what } => match what {
             ImportWhat::Snapir(a) => run_import_snapir(&a),
             ImportWhat::Pd0(a) => run_import_pd0(&a),
+            ImportWhat::Riversurveyor(a) => run_import_riversurveyor(&a),
             ImportWhat::MagCsv(a) => run_import_mag_csv(&a),
             ImportWhat::UgpsG2(a) => run_import_ugps(&a),
         },

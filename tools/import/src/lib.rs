@@ -8,7 +8,8 @@
 //!   the reference becomes the truth channel, and the reference depth (`-alt_m`) becomes a depth
 //!   channel whose metadata says it is derived from the reference, not an independent sensor.
 //!   Times are the files' own (0 at the segment start) in nanoseconds.
-//! - [`pd0`]: a PD0 file with GPS, [`mag_csv`]: a magnetometer CSV recording, [`ugps`]: a UGPS
+//! - [`pd0`]: a PD0 file with GPS, [`riversurveyor`]: a SonTek RiverSurveyor MATLAB export
+//!   (bottom track, compass and GPS; read by [`mat5`]), [`mag_csv`]: a magnetometer CSV recording, [`ugps`]: a UGPS
 //!   G2 acoustic log.
 //! - [`fixes`]: position fixes from a CSV file; [`mag`]: magnetometer recordings (a log or a CSV
 //!   file) as samples for calibration.
@@ -42,13 +43,16 @@ mod error;
 pub mod fixes;
 pub mod mag;
 mod mag_csv;
+pub mod mat5;
 mod pd0;
+mod riversurveyor;
 mod snapir;
 mod ugps;
 use error::ReadContext;
 pub use error::{ImportError, Source};
 pub use mag_csv::*;
 pub use pd0::*;
+pub use riversurveyor::*;
 pub use snapir::*;
 pub use ugps::*;
 

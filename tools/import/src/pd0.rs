@@ -4,11 +4,12 @@
 use super::*;
 
 /// How the GPS velocity of `auvnav import pd0` is formed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "snake_case")]
 pub enum GpsVelocity {
     /// VTG course and speed over ground when the file has them, otherwise GGA positions.
+    #[default]
     Auto,
     /// VTG course and speed over ground (interpolated to the ensemble).
     Vtg,
@@ -68,10 +69,10 @@ pub struct Pd0Summary {
 
 /// A GPS sample on the ensemble clock: time (s), north and east (m from the first fix), or
 /// north and east velocity (m/s).
-type GpsSample = (f64, f64, f64);
+pub(crate) type GpsSample = (f64, f64, f64);
 
 /// Linear interpolation of `s` at `t` between samples at most `max_gap` s apart.
-fn interpolate_gps(s: &[GpsSample], t: f64, max_gap: f64) -> Option<(f64, f64)> {
+pub(crate) fn interpolate_gps(s: &[GpsSample], t: f64, max_gap: f64) -> Option<(f64, f64)> {
     let i = s.partition_point(|x| x.0 <= t);
     let (a, b) = (s.get(i.checked_sub(1)?)?, s.get(i)?);
     if b.0 - a.0 > max_gap || b.0 <= a.0 {
@@ -83,7 +84,7 @@ fn interpolate_gps(s: &[GpsSample], t: f64, max_gap: f64) -> Option<(f64, f64)> 
 
 /// Velocity from positions: least-squares line through the samples within ±`half` s of `t`
 /// (at least three, spanning at least `half`).
-fn velocity_from_positions(s: &[GpsSample], t: f64, half: f64) -> Option<(f64, f64)> {
+pub(crate) fn velocity_from_positions(s: &[GpsSample], t: f64, half: f64) -> Option<(f64, f64)> {
     let lo = s.partition_point(|x| x.0 < t - half);
     let hi = s.partition_point(|x| x.0 <= t + half);
     let w = &s[lo..hi];
