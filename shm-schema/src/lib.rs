@@ -493,6 +493,40 @@ impl MagnetometerV1 {
 }
 
 message! {
+    /// Heading, pitch and roll from a compass or an AHRS (no IMU samples): what a boat's ADCP, a
+    /// small vehicle without an inertial unit, or an autopilot reports as its attitude.
+    #[type_name("auvnav/Attitude/v1")]
+    #[schema_name("auvnav_msgs/msg/AttitudeV1")]
+    pub struct AttitudeV1 {
+        /// Host time at read return (ns, CLOCK_MONOTONIC; simulated time in simulated logs).
+        pub host_time_ns: u64,
+        /// Device clock (ns); valid with VALID_DEVICE_TIME.
+        pub device_time_ns: u64,
+        /// Sequence number assigned by the publisher.
+        pub sequence: u64,
+        /// Roll, pitch, heading of the body w.r.t. north-east-down (rad, ZYX Euler angles; heading -pi..2pi); valid with VALID_ATTITUDE.
+        pub euler_rad: [f64; 3],
+        /// Declination the device added to its magnetic heading (rad, east positive, -pi..pi); valid with HEADING_TRUE.
+        pub declination_rad: f64,
+        /// One-sigma heading uncertainty (rad, 0..pi); valid with VALID_STD.
+        pub heading_std_rad: f64,
+        /// Validity bit flags (AttitudeV1::VALID_*, HEADING_*).
+        pub validity: u32,
+        /// Padding (0).
+        pub reserved: u32,
+    }
+}
+
+impl AttitudeV1 {
+    pub const VALID_ATTITUDE: u32 = 1 << 0;
+    pub const VALID_STD: u32 = 1 << 1;
+    pub const VALID_DEVICE_TIME: u32 = 1 << 2;
+    /// The heading is referred to true north (the device added `declination_rad` to a magnetic
+    /// heading, or measured true heading); clear: magnetic.
+    pub const HEADING_TRUE: u32 = 1 << 3;
+}
+
+message! {
     /// The speed of sound in the water from a CTD or sound-velocity probe.
     #[type_name("auvnav/SoundVelocity/v1")]
     #[schema_name("auvnav_msgs/msg/SoundVelocityV1")]
@@ -913,6 +947,7 @@ pub fn all_schemas() -> Vec<(&'static str, &'static str, String)> {
         entry::<GnssFixV1>(),
         entry::<NavSolutionV1>(),
         entry::<SoundVelocityV1>(),
+        entry::<AttitudeV1>(),
         entry::<AidDiagnosticsV1>(),
         entry::<ProcessHealthV1>(),
         entry::<LateAidV1>(),

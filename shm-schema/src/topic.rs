@@ -19,6 +19,9 @@ pub const ACOUSTIC_RANGES: &str = "acoustic_ranges";
 pub const GNSS: &str = "gnss";
 /// The speed of sound from a CTD or sound-velocity probe ([`crate::SoundVelocityV1`]).
 pub const SOUND_VELOCITY: &str = "sound_velocity";
+/// Heading, pitch and roll from a compass or an AHRS ([`crate::AttitudeV1`]; written by the
+/// importers of surface runs and read by dead reckoning, not yet fused by the daemon).
+pub const ATTITUDE: &str = "attitude";
 /// Navigation solution ([`crate::NavSolutionV1`]).
 pub const NAV_SOLUTION: &str = "nav/solution";
 /// Per-aid-source diagnostics ([`crate::AidDiagnosticsV1`]).

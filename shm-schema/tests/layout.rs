@@ -36,6 +36,11 @@ fn layouts_are_pinned() {
             align_of::<SoundVelocityV1>(),
         ),
         (
+            "AttitudeV1",
+            size_of::<AttitudeV1>(),
+            align_of::<AttitudeV1>(),
+        ),
+        (
             "NavSolutionV1",
             size_of::<NavSolutionV1>(),
             align_of::<NavSolutionV1>(),
@@ -67,6 +72,7 @@ fn layouts_are_pinned() {
         ("AcousticRangesV1", 224, 8),
         ("GnssFixV1", 96, 8),
         ("SoundVelocityV1", 56, 8),
+        ("AttitudeV1", 72, 8),
         ("NavSolutionV1", 248, 8),
         ("AidDiagnosticsV1", 136, 8),
         ("ProcessHealthV1", 120, 8),
@@ -113,6 +119,7 @@ fn schemas_describe_the_whole_struct() {
         size_of::<GnssFixV1>(),
         size_of::<NavSolutionV1>(),
         size_of::<SoundVelocityV1>(),
+        size_of::<AttitudeV1>(),
         size_of::<AidDiagnosticsV1>(),
         size_of::<ProcessHealthV1>(),
         size_of::<LateAidV1>(),
@@ -152,6 +159,7 @@ fn every_type_roundtrips_through_bytes() {
     roundtrip_bytes::<DepthV1>();
     roundtrip_bytes::<MagnetometerV1>();
     roundtrip_bytes::<SoundVelocityV1>();
+    roundtrip_bytes::<AttitudeV1>();
     roundtrip_bytes::<AcousticRangesV1>();
     roundtrip_bytes::<GnssFixV1>();
     roundtrip_bytes::<NavSolutionV1>();

@@ -13,6 +13,7 @@ pub mod aid;
 pub mod align;
 pub mod config;
 pub mod csv;
+pub mod dead_reckoning;
 pub mod earth;
 pub mod ekf;
 pub mod feed;

@@ -107,6 +107,43 @@ pub fn load_voyages(
     specs.iter().map(|s| Voyage::load(s, fixes, cfg)).collect()
 }
 
+/// The calibration of surface runs ([`crate::surface`]) when every voyage is one (a compass and
+/// GNSS, no IMU); `None` when none is (the replay-based calibration applies); an error when the
+/// voyages are of both kinds. Writes `--write-config` itself.
+pub fn calibrate_dvl_surface(
+    args: &CalibrateDvlOptions,
+) -> Result<Option<crate::surface::SurfaceReport>, CalibrationError> {
+    let kinds = args
+        .voyages
+        .iter()
+        .map(|v| crate::surface::is_surface_run(&v.path))
+        .collect::<Result<Vec<bool>, _>>()?;
+    if !kinds.iter().any(|k| *k) {
+        return Ok(None);
+    }
+    if !kinds.iter().all(|k| *k) {
+        usage!(
+            "the voyages mix surface runs (compass and GNSS, no IMU) with runs that have an IMU: calibrate them separately"
+        );
+    }
+    if !(args.threshold.is_finite() && args.threshold > 0.0) {
+        usage!(
+            "--threshold {}: expected a distance in metres > 0",
+            args.threshold
+        );
+    }
+    let first_voyage = args.voyages.first().map(|v| v.path.as_path());
+    let cfg = load_session_config(args.config.as_ref(), first_voyage)?;
+    let start = cfg.navigation.dvl_installation();
+    let report =
+        crate::surface::calibrate_surface(&args.voyages, &start, &args.params, args.threshold)?;
+    if let Some(path) = &args.write_config {
+        crate::surface::write_config(path, &report)
+            .map_err(|e| CalibrationError::output(path, e))?;
+    }
+    Ok(Some(report))
+}
+
 /// The whole calibration: returns the report (also what `--json` prints).
 // Long on purpose: the calibration as the recipe the report documents (options checked, voyages
 // read, method, held-out evaluation, report); each step is a function.

@@ -23,6 +23,7 @@ pub mod params;
 pub mod report;
 pub mod scal;
 pub mod smoother;
+pub mod surface;
 pub mod svg;
 pub mod two_point;
 pub mod voyage;

@@ -184,6 +184,14 @@ fn run_calibrate_mag(a: &auvnav_tools::calibrate::mag::CalibrateMagOptions) -> a
 }
 
 fn run_calibrate_dvl(a: &auvnav_tools::calibrate::CalibrateDvlOptions) -> anyhow::Result<()> {
+    if let Some(r) = auvnav_tools::calibrate::calibrate_dvl_surface(a)? {
+        if a.json {
+            auvnav_tools::json::print(&r)?;
+        } else {
+            print!("{}", auvnav_tools::calibrate::surface::text(&r));
+        }
+        return Ok(());
+    }
     let r = auvnav_tools::calibrate::calibrate_dvl(a)?;
     if a.json {
         auvnav_tools::json::print(&r)?;

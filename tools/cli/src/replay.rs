@@ -120,6 +120,31 @@ pub fn print_report(r: &ReplayReport) {
             );
         }
     }
+    if let Some(d) = &r.dead_reckoning {
+        println!(
+            "  surface run without an IMU: dead reckoning from the compass and the DVL against {} GNSS fixes over {:.0} s and {:.0} m: horizontal error final {:.2} m ({:.3} % of the distance), max {:.2} m, RMS {:.2} m, CEP50 {:.2} m",
+            d.fixes_compared,
+            d.duration_s,
+            d.distance_travelled_m,
+            d.horizontal_error_final_m,
+            d.final_error_per_distance_percent,
+            d.horizontal_error_max_m,
+            d.horizontal_error_rms_m,
+            d.horizontal_error_cep50_m
+        );
+        if d.readings_without_attitude > 0 || d.long_dvl_gaps > 0 {
+            println!(
+                "  {} DVL readings without an attitude around them, {} gaps between readings longer than {} s",
+                d.readings_without_attitude,
+                d.long_dvl_gaps,
+                auvnav_replay::surface::DVL_GAP_S
+            );
+        }
+    } else if r.samples_processed == 0 {
+        println!(
+            "  no IMU sample and no compass (attitude channel): nothing navigated, no accuracy reported"
+        );
+    }
     let n = &r.navigator;
     println!(
         "  {} IMU samples, {:.0} s of log in {:.3} s (real-time factor {:.0}); fused {} DVL ({} rejected, {} invalid), {} depth ({} rejected), {} GNSS ({} rejected)",

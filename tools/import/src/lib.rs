@@ -30,7 +30,9 @@ macro_rules! bad_option {
 }
 
 use auvnav_log::{LogHeader, LogMessage, LogWriter, write_log_atomically};
-use auvnav_shm_schema::{DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, TruthStateV1, topic};
+use auvnav_shm_schema::{
+    AttitudeV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, TruthStateV1, topic,
+};
 use nalgebra::UnitQuaternion;
 use serde::Serialize;
 use std::collections::BTreeMap;

@@ -53,6 +53,10 @@ pub struct Pd0Summary {
     pub vtg: u64,
     /// GGA sentences without a fix (left out).
     pub gga_no_fix: u64,
+    /// Ensembles whose heading, pitch and roll were written to the attitude channel.
+    pub attitude: u64,
+    /// GGA fixes written as GNSS fixes (none with `--fixes`, whose fixes take their place).
+    pub gnss_from_gga: u64,
     pub velocity: GpsVelocity,
     /// Reference records written (ensembles with GPS on both sides).
     pub reference: u64,
@@ -128,6 +132,8 @@ pub fn pd0_messages(
         gga: 0,
         vtg: 0,
         gga_no_fix: 0,
+        attitude: 0,
+        gnss_from_gga: 0,
         velocity,
         reference: 0,
         duration_s: 0.0,
@@ -159,6 +165,8 @@ pub fn pd0_messages(
     // GPS samples on the same clock: sentence time = ensemble time − WinRiver's delta.
     // GGA fixes: (time, latitude deg, longitude deg, altitude m).
     let mut fixes: Vec<(f64, f64, f64, f64)> = Vec::new();
+    // Per fix: quality, satellites, HDOP.
+    let mut gga_quality: Vec<(u8, u8, f64)> = Vec::new();
     let mut vtg: Vec<GpsSample> = Vec::new();
     let mut seen_utc = std::collections::HashSet::new();
     for (t, e) in &timed {
@@ -171,6 +179,8 @@ pub fn pd0_messages(
                     longitude_deg,
                     fix_quality,
                     altitude_m,
+                    satellites,
+                    hdop,
                     ..
                 } => {
                     if *fix_quality == 0 || !latitude_deg.is_finite() {
@@ -183,6 +193,7 @@ pub fn pd0_messages(
                             *longitude_deg,
                             f64::from(*altitude_m),
                         ));
+                        gga_quality.push((*fix_quality, *satellites, f64::from(*hdop)));
                     }
                 }
                 NmeaBlock::Vtg {
@@ -204,7 +215,10 @@ pub fn pd0_messages(
             }
         }
     }
-    fixes.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut order: Vec<usize> = (0..fixes.len()).collect();
+    order.sort_by(|&a, &b| fixes[a].0.total_cmp(&fixes[b].0));
+    let fixes: Vec<(f64, f64, f64, f64)> = order.iter().map(|&i| fixes[i]).collect();
+    let gga_quality: Vec<(u8, u8, f64)> = order.iter().map(|&i| gga_quality[i]).collect();
     vtg.sort_by(|a, b| a.0.total_cmp(&b.0));
     vtg.dedup_by(|a, b| a.0 == b.0);
     let use_vtg = match velocity {
@@ -238,6 +252,33 @@ pub fn pd0_messages(
     };
     let heights: Vec<GpsSample> = fixes.iter().map(|f| (f.0, f.3, 0.0)).collect();
     let mut out = Vec::new();
+    // Every GGA fix inside the file's time span as a GNSS fix (σ = 1 m × HDOP).
+    for (f, q) in fixes.iter().zip(&gga_quality) {
+        if f.0 < 0.0 {
+            continue;
+        }
+        let std = if q.2.is_finite() && q.2 > 0.0 {
+            q.2
+        } else {
+            1.0
+        };
+        let g = GnssFixV1 {
+            host_time_ns: ns(f.0),
+            sequence: s.gnss_from_gga,
+            latitude_rad: f.1.to_radians(),
+            longitude_rad: f.2.to_radians(),
+            height_m: f.3,
+            horizontal_std_m: std,
+            vertical_std_m: 2.0 * std,
+            satellites: u32::from(q.1),
+            validity: GnssFixV1::VALID_POSITION
+                | GnssFixV1::VALID_HEIGHT
+                | if q.0 >= 2 { GnssFixV1::DIFFERENTIAL } else { 0 },
+            ..Default::default()
+        };
+        s.gnss_from_gga += 1;
+        out.push((g.host_time_ns, 3u8, topic::GNSS, LogMessage::Gnss(g)));
+    }
     for (seq, (t, e)) in timed.iter().enumerate() {
         let host = ns(*t);
         if let Some(d) = pd0_velocity(e, host, 0.0, seq as u64) {
@@ -249,6 +290,22 @@ pub fn pd0_messages(
         let Some(v) = e.variable.as_ref() else {
             continue;
         };
+        let euler = [
+            v.roll_deg.to_radians(),
+            v.pitch_deg.to_radians(),
+            v.heading_deg.to_radians(),
+        ];
+        if euler.iter().all(|x| x.is_finite()) {
+            let a = AttitudeV1 {
+                host_time_ns: host,
+                sequence: s.attitude,
+                euler_rad: euler,
+                validity: AttitudeV1::VALID_ATTITUDE,
+                ..Default::default()
+            };
+            s.attitude += 1;
+            out.push((host, 2, topic::ATTITUDE, LogMessage::Attitude(a)));
+        }
         let vel = if use_vtg {
             interpolate_gps(&vtg, *t, 1.5)
         } else {
@@ -268,11 +325,6 @@ pub fn pd0_messages(
             let f = (t - a.0) / (b.0 - a.0);
             (a.1 + (b.1 - a.1) * f, a.2 + (b.2 - a.2) * f)
         };
-        let euler = [
-            v.roll_deg.to_radians(),
-            v.pitch_deg.to_radians(),
-            v.heading_deg.to_radians(),
-        ];
         let q = UnitQuaternion::from_euler_angles(euler[0], euler[1], euler[2]);
         let truth = TruthStateV1 {
             host_time_ns: host,
@@ -297,8 +349,14 @@ pub fn pd0_messages(
 /// Imports a PD0 file with GPS into a log at `out` (written atomically).
 pub fn pd0(a: &Pd0Options) -> Result<Pd0Summary> {
     let bytes = std::fs::read(&a.file).read_context(|| format!("reading {}", a.file.display()))?;
-    let (messages, mut summary) = pd0_messages(&bytes, a.velocity)?;
+    let (mut messages, mut summary) = pd0_messages(&bytes, a.velocity)?;
     let fix_file = a.fixes.as_deref().map(crate::fixes::read).transpose()?;
+    if fix_file.is_some() {
+        // The fixes logged elsewhere take the place of the file's own GGA.
+        messages.retain(|(_, m)| !matches!(m, LogMessage::Gnss(_)));
+        summary.gnss_from_gga = 0;
+    }
+    let gga_gnss = summary.gnss_from_gga > 0;
     let mut gnss = Vec::new();
     if let Some(f) = &fix_file {
         summary.fixes_unparsable_lines = f.unparsable_lines as u64;
@@ -342,6 +400,13 @@ pub fn pd0(a: &Pd0Options) -> Result<Pd0Summary> {
                 "PD0 bottom track converted as the DVL driver does (ship/instrument coordinates to x forward, y starboard, z down; the vehicle's velocity)",
             )]),
         )?;
+        w.declare::<AttitudeV1>(
+            topic::ATTITUDE,
+            &note(&[(
+                "source",
+                "the DVL's own heading, pitch and roll (each ensemble's variable leader: its compass, with whatever heading alignment and declination the instrument was set to)",
+            )]),
+        )?;
         w.declare::<TruthStateV1>(
             topic::TRUTH,
             &note(&[(
@@ -357,6 +422,14 @@ pub fn pd0(a: &Pd0Options) -> Result<Pd0Summary> {
                     "position fixes from --fixes (logged elsewhere), on the ensemble clock",
                 )]),
             )?;
+        } else if gga_gnss {
+            w.declare::<GnssFixV1>(
+                topic::GNSS,
+                &note(&[(
+                    "source",
+                    "the file's GGA fixes (WinRiver NMEA blocks) at their sentence times on the ensemble clock; horizontal σ = 1 m × HDOP",
+                )]),
+            )?;
         }
         // The fixes in time order among the ensemble's messages.
         let mut next_fix = gnss.iter().peekable();
@@ -364,6 +437,8 @@ pub fn pd0(a: &Pd0Options) -> Result<Pd0Summary> {
             let t_ns = match m {
                 LogMessage::Dvl(x) => x.host_time_ns,
                 LogMessage::Truth(x) => x.host_time_ns,
+                LogMessage::Attitude(x) => x.host_time_ns,
+                LogMessage::Gnss(x) => x.host_time_ns,
                 _ => 0,
             };
             while let Some(f) = next_fix.next_if(|f| f.host_time_ns <= t_ns) {
@@ -372,6 +447,8 @@ pub fn pd0(a: &Pd0Options) -> Result<Pd0Summary> {
             match m {
                 LogMessage::Dvl(x) => w.write(t, x)?,
                 LogMessage::Truth(x) => w.write(t, x)?,
+                LogMessage::Attitude(x) => w.write(t, x)?,
+                LogMessage::Gnss(x) => w.write(t, x)?,
                 _ => {}
             }
         }

@@ -23,7 +23,7 @@
 //! z down; the earth-frame velocity rotated back with the sample's own heading, pitch and roll,
 //! the inverse of what RiverSurveyor Live applied), a reference at each sample from the GPS
 //! (position interpolated, velocity over ground over the sample's interval, vertical 0) with the
-//! compass's attitude, and every GGA fix as a GNSS fix. Time 0 is the first sample's start.
+//! compass's attitude, the compass on the attitude channel, and every GGA fix as a GNSS fix. Time 0 is the first sample's start.
 
 #[allow(unused_imports)]
 use super::*;
@@ -67,6 +67,8 @@ pub struct RiverSurveyorSummary {
     pub bottom_track_velocity: u64,
     pub bottom_track_invalid: u64,
     pub bad_time: u64,
+    /// Compass samples written to the attitude channel.
+    pub attitude: u64,
     /// Declination the export applied to the compass heading (deg, east positive).
     pub magnetic_declination_deg: f64,
     /// GGA sentences used, and those left out: no fix (quality 0, position 0), a UTC time that
@@ -404,6 +406,21 @@ pub fn riversurveyor_messages(
         let v = [bt[row], bt[row + n], bt[row + 2 * n], bt[row + 3 * n]];
         let attitude_ok = psi.is_finite() && theta.abs() < 1.0 && phi.abs() < 1.0;
         let q = UnitQuaternion::from_euler_angles(phi, theta, psi);
+        if attitude_ok {
+            let a = AttitudeV1 {
+                host_time_ns: host,
+                device_time_ns: ns_of((time[row] + interval / 2.0).max(0.0)),
+                sequence: row as u64,
+                euler_rad: [phi, theta, psi],
+                declination_rad: s.magnetic_declination_deg.to_radians(),
+                validity: AttitudeV1::VALID_ATTITUDE
+                    | AttitudeV1::VALID_DEVICE_TIME
+                    | AttitudeV1::HEADING_TRUE,
+                ..Default::default()
+            };
+            s.attitude += 1;
+            out.push((host, 1, topic::ATTITUDE, LogMessage::Attitude(a)));
+        }
         let velocity_ok = v[..3].iter().all(|x| x.is_finite() && x.abs() < 20.0)
             && v[..3].iter().any(|x| *x != 0.0);
         if attitude_ok && velocity_ok {
@@ -434,7 +451,7 @@ pub fn riversurveyor_messages(
                 d.validity |= DvlVelocityV1::VALID_ALTITUDE;
             }
             s.bottom_track_velocity += 1;
-            out.push((host, 1, topic::DVL, LogMessage::Dvl(d)));
+            out.push((host, 2, topic::DVL, LogMessage::Dvl(d)));
         } else {
             s.bottom_track_invalid += 1;
         }
@@ -485,7 +502,7 @@ pub fn riversurveyor_messages(
             specific_force_m_s2: [f64::NAN; 3],
         };
         s.reference += 1;
-        out.push((host, 2, topic::TRUTH, LogMessage::Truth(truth)));
+        out.push((host, 3, topic::TRUTH, LogMessage::Truth(truth)));
     }
     out.sort_by_key(|&(t, order, _, _)| (t, order));
     s.duration_s = (time[n - 1] - t0 + interval).max(0.0);
@@ -536,6 +553,13 @@ pub fn riversurveyor(a: &RiverSurveyorOptions) -> Result<RiverSurveyorSummary> {
                 "every GGA fix with a position (RawGPSData), at its UTC placed on the ADCP clock; height = GGA altitude + geoid separation; horizontal σ = --gnss-std-m × HDOP",
             )]),
         )?;
+        w.declare::<AttitudeV1>(
+            topic::ATTITUDE,
+            &note(&[(
+                "source",
+                "the ADCP's internal compass: true heading (magnetic + the export's declination), pitch and roll, at the middle of the sample's interval",
+            )]),
+        )?;
         w.declare::<DvlVelocityV1>(
             topic::DVL,
             &note(&[(
@@ -555,6 +579,7 @@ pub fn riversurveyor(a: &RiverSurveyorOptions) -> Result<RiverSurveyorSummary> {
                 LogMessage::Dvl(x) => w.write(t, x)?,
                 LogMessage::Truth(x) => w.write(t, x)?,
                 LogMessage::Gnss(x) => w.write(t, x)?,
+                LogMessage::Attitude(x) => w.write(t, x)?,
                 _ => {}
             }
         }
@@ -565,34 +590,5 @@ pub fn riversurveyor(a: &RiverSurveyorOptions) -> Result<RiverSurveyorSummary> {
 }
 
 #[cfg(test)]
-mod riversurveyor_tests {
-    use super::*;
-
-    #[test]
-    fn utc_fields_and_wrapping() {
-        let t = utc_seconds(150339.9).expect("a time");
-        assert!(
-            (t - (15.0 * 3600.0 + 3.0 * 60.0 + 39.9)).abs() < 1e-9,
-            "{t}"
-        );
-        assert_eq!(utc_seconds(0.0), Some(0.0));
-        assert!(utc_seconds(f64::NAN).is_none());
-        assert!(utc_seconds(156_000.0).is_none(), "minute 60");
-        assert!(utc_seconds(-1.0).is_none());
-        assert!(utc_seconds(126_000.0).is_none());
-        assert!((wrap(86_399.0, DAY_S) + 1.0).abs() < 1e-9);
-        assert!((wrap(3607.9, DAY_S) - 3607.9).abs() < 1e-9);
-    }
-
-    #[test]
-    fn a_mat_file_without_the_structs_is_refused_with_the_reason() {
-        let f = MatFile {
-            header: "MATLAB 5.0 MAT-file".into(),
-            variables: Vec::new(),
-        };
-        let Err(e) = riversurveyor_messages(&f, GpsVelocity::Auto, 1.0) else {
-            panic!("accepted");
-        };
-        assert!(e.to_string().contains("coordinateSystem"), "{e}");
-    }
-}
+#[path = "riversurveyor_tests.rs"]
+mod riversurveyor_tests;

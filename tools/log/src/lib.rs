@@ -29,9 +29,9 @@
 #![forbid(unsafe_code)]
 
 use auvnav_shm_schema::{
-    AcousticRangesV1, AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1,
-    MagnetometerV1, Message, NavSolutionV1, ProcessHealthV1, SoundVelocityV1, TruthStateV1,
-    UsblFixV1,
+    AcousticRangesV1, AidDiagnosticsV1, AttitudeV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1,
+    LateAidV1, MagnetometerV1, Message, NavSolutionV1, ProcessHealthV1, SoundVelocityV1,
+    TruthStateV1, UsblFixV1,
 };
 use mcap::records::{MessageHeader, Metadata, Record, op};
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
@@ -374,6 +374,7 @@ enum MessageKind {
     Depth,
     Magnetometer,
     SoundVelocity,
+    Attitude,
     AcousticRanges,
     Gnss,
     NavSolution,
@@ -393,6 +394,7 @@ impl MessageKind {
             s if s == DepthV1::SCHEMA_NAME => MessageKind::Depth,
             s if s == MagnetometerV1::SCHEMA_NAME => MessageKind::Magnetometer,
             s if s == SoundVelocityV1::SCHEMA_NAME => MessageKind::SoundVelocity,
+            s if s == AttitudeV1::SCHEMA_NAME => MessageKind::Attitude,
             s if s == AcousticRangesV1::SCHEMA_NAME => MessageKind::AcousticRanges,
             s if s == GnssFixV1::SCHEMA_NAME => MessageKind::Gnss,
             s if s == NavSolutionV1::SCHEMA_NAME => MessageKind::NavSolution,
@@ -433,6 +435,7 @@ fn decode_bytes(kind: MessageKind, topic: &str, data: &[u8]) -> Result<LogMessag
         MessageKind::Depth => LogMessage::Depth(decode_pod(topic, data)?),
         MessageKind::Magnetometer => LogMessage::Magnetometer(decode_pod(topic, data)?),
         MessageKind::SoundVelocity => LogMessage::SoundVelocity(decode_pod(topic, data)?),
+        MessageKind::Attitude => LogMessage::Attitude(decode_pod(topic, data)?),
         MessageKind::AcousticRanges => LogMessage::AcousticRanges(decode_pod(topic, data)?),
         MessageKind::Gnss => LogMessage::Gnss(decode_pod(topic, data)?),
         MessageKind::NavSolution => LogMessage::NavSolution(decode_pod(topic, data)?),
@@ -454,6 +457,8 @@ pub enum LogMessage {
     Magnetometer(MagnetometerV1),
     /// The speed of sound from a CTD.
     SoundVelocity(SoundVelocityV1),
+    /// Heading, pitch and roll from a compass or an AHRS.
+    Attitude(AttitudeV1),
     AcousticRanges(AcousticRangesV1),
     Gnss(GnssFixV1),
     NavSolution(NavSolutionV1),

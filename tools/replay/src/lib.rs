@@ -22,6 +22,7 @@ mod error;
 pub mod json;
 pub mod order;
 mod run;
+pub mod surface;
 pub use error::{ReplayError, Source};
 pub use run::*;
 

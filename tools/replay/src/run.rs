@@ -67,6 +67,9 @@ pub struct ReplayReport {
     pub log_error: Option<String>,
     /// With `--compare-recorded`: the replay against the recorded solutions.
     pub recorded_comparison: Option<RecordedComparison>,
+    /// A surface run (a compass on the attitude channel, GNSS fixes, no IMU): its dead
+    /// reckoning through the configured DVL installation against the fixes.
+    pub dead_reckoning: Option<crate::surface::DeadReckoningAccuracy>,
 }
 
 /// Reads `log` and feeds every message to `replay`. A truncated or damaged tail ends the replay
@@ -343,11 +346,23 @@ pub fn replay(a: &ReplayOptions) -> Result<ReplayReport, ReplayError> {
         )));
     }
     let log_duration_s = replay.duration_s();
+    // Without an IMU sample the filter navigated on nothing: a surface run is dead-reckoned from
+    // its compass instead, and no filter accuracy is reported.
+    let dead_reckoning = if replay.counts.imu == 0 && crate::surface::is_surface_run(&a.log)? {
+        let run = crate::surface::read_surface_run(&a.log, &a.log.display().to_string(), None)?;
+        run.accuracy(&cfg.navigation.dvl_installation())
+    } else {
+        None
+    };
     Ok(ReplayReport {
         log: a.log.display().to_string(),
         configuration: config_source,
         initial_state: replay.initial().cloned(),
-        accuracy: replay.accuracy(),
+        accuracy: if replay.counts.imu == 0 {
+            None
+        } else {
+            replay.accuracy()
+        },
         samples_processed: replay.counts.imu,
         log_duration_s,
         wall_s: wall,
@@ -361,6 +376,7 @@ pub fn replay(a: &ReplayOptions) -> Result<ReplayReport, ReplayError> {
         final_parameters: replay.navigator().map(FinalParameters::of),
         log_error,
         recorded_comparison: replay.recorded_comparison().cloned(),
+        dead_reckoning,
     })
 }
 

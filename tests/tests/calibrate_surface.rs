@@ -1,0 +1,155 @@
+//! Surface runs (a compass, a DVL and GNSS throughout, no IMU) on measured data: `auvnav replay`
+//! dead-reckons them against the GNSS, `auvnav calibrate dvl` calibrates the installation on the
+//! GNSS, which is independent of the DVL — and recovers an installation hidden with `auvnav
+//! perturb` in the measured run, at magnitudes and signs chosen here, not tuned on.
+
+use auvnav_tests::processes::{TempDir, binary};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn auvnav(args: &[&str]) -> serde_json::Value {
+    let o = Command::new(binary("auvnav"))
+        .args(args)
+        .output()
+        .expect("running auvnav");
+    assert!(
+        o.status.success(),
+        "auvnav {args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    serde_json::from_slice(&o.stdout).unwrap_or(serde_json::Value::Null)
+}
+
+fn s(p: &Path) -> String {
+    p.display().to_string()
+}
+
+/// The estimate and whether it was written, of parameter `name` in a calibration report.
+fn param(report: &serde_json::Value, name: &str) -> (f64, bool) {
+    let p = report["params"]
+        .as_array()
+        .expect("params")
+        .iter()
+        .find(|p| p["name"] == name)
+        .unwrap_or_else(|| panic!("{name} in {report}"));
+    (
+        p["estimate"].as_f64().expect("estimate"),
+        p["written"].as_bool().expect("written"),
+    )
+}
+
+fn lake(tmp: &TempDir) -> Option<PathBuf> {
+    let dir = auvnav_tests::measured_data("riversurveyor-m9", "20250117160335.mat")?;
+    let out = tmp.path().join("lake.mcap");
+    auvnav(&[
+        "import",
+        "riversurveyor",
+        &s(&dir.join("20250117160335.mat")),
+        "--out",
+        &s(&out),
+        "--velocity",
+        "gga",
+        "--json",
+    ]);
+    Some(out)
+}
+
+#[test]
+fn replay_dead_reckons_a_surface_run_against_its_gnss() {
+    let tmp = TempDir::new("surface-replay");
+    let Some(log) = lake(&tmp) else {
+        return;
+    };
+    let r = auvnav(&["replay", &s(&log), "--json"]);
+    assert!(r["accuracy"].is_null(), "no IMU: no filter accuracy: {r}");
+    let d = &r["dead_reckoning"];
+    let fixes = d["fixes_compared"].as_u64().expect("fixes");
+    let distance = d["distance_travelled_m"].as_f64().expect("distance");
+    let per_distance = d["final_error_per_distance_percent"]
+        .as_f64()
+        .expect("error/distance");
+    // Measured: 3714 fixes, 314 m, 0.73 m at the end (0.23 %), 0.50 m RMS.
+    assert!(fixes > 3000 && distance > 250.0, "{d}");
+    assert!(per_distance < 0.5, "{d}");
+}
+
+#[test]
+fn an_installation_hidden_in_the_measured_run_is_recovered_from_the_gnss() {
+    let tmp = TempDir::new("surface-calibrate");
+    let Some(log) = lake(&tmp) else {
+        return;
+    };
+    let base = auvnav(&["calibrate", "dvl", &s(&log), "--threshold", "50", "--json"]);
+    // The run as recorded: nothing stands out from the nominal installation.
+    for name in ["dvl.mount_yaw", "dvl.scale_factor", "dvl.lever_arm.x"] {
+        assert!(
+            !param(&base, name).1,
+            "{name} written on the run as recorded: {base}"
+        );
+    }
+    let (yaw0, _) = param(&base, "dvl.mount_yaw");
+    for (yaw, scale, offset) in [(3.0, 1.01, 0.5), (-2.0, 0.99, -0.3)] {
+        let hidden = tmp.path().join(format!("lake-{yaw}.mcap"));
+        let o = Command::new(binary("auvnav"))
+            .args(["perturb", &s(&log), "--out", &s(&hidden)])
+            .args(["--effect", &format!("dvl.mount_yaw={yaw}")])
+            .args(["--effect", &format!("dvl.scale_factor={scale}")])
+            .args(["--effect", &format!("dvl.time_offset={offset}")])
+            .output()
+            .expect("perturb");
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let r = auvnav(&[
+            "calibrate",
+            "dvl",
+            &s(&hidden),
+            "--threshold",
+            "50",
+            "--json",
+        ]);
+        let (found, written) = param(&r, "dvl.mount_yaw");
+        assert!(written, "{r}");
+        // Within 10 % of the hidden yaw, on top of what the run itself carries.
+        assert!(
+            (found - yaw0 - yaw).abs() <= 0.1 * yaw.abs(),
+            "hidden {yaw} deg on a run at {yaw0}: found {found}"
+        );
+        let nominal = r["in_sample"]["nominal"]["rms_error_m"]
+            .as_f64()
+            .expect("rms");
+        let calibrated = r["in_sample"]["calibrated"]["rms_error_m"]
+            .as_f64()
+            .expect("rms");
+        assert!(calibrated < 0.5 * nominal, "{nominal} -> {calibrated}");
+    }
+}
+
+#[test]
+fn the_heading_offset_of_a_river_transect_is_found_against_its_gps() {
+    let Some(dir) = auvnav_tests::measured_data("rdi-pd0", "raw/winriver02_transect.PD0") else {
+        return;
+    };
+    let tmp = TempDir::new("surface-winriver");
+    let log = tmp.path().join("wr.mcap");
+    auvnav(&[
+        "import",
+        "pd0",
+        &s(&dir.join("raw/winriver02_transect.PD0")),
+        "--out",
+        &s(&log),
+        "--json",
+    ]);
+    let r = auvnav(&["calibrate", "dvl", &s(&log), "--threshold", "100", "--json"]);
+    let (yaw, written) = param(&r, "dvl.mount_yaw");
+    // The ADCP's magnetic heading against true north: about 20° of declination there (WMM), less
+    // some compass deviation. Measured: 15.6 ± 1.5°.
+    assert!(written && (12.0..=21.0).contains(&yaw), "{r}");
+    let score = |which: &str| {
+        r["in_sample"][which]["median_error_per_distance_percent"]
+            .as_f64()
+            .expect("score")
+    };
+    assert!(
+        score("calibrated") < score("two_point") && score("two_point") < score("nominal"),
+        "{r}"
+    );
+}
