@@ -8,16 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn auvnav(args: &[&str]) -> serde_json::Value {
-    let o = Command::new(binary("auvnav"))
-        .args(args)
-        .output()
-        .expect("running auvnav");
-    assert!(
-        o.status.success(),
-        "auvnav {args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    serde_json::from_slice(&o.stdout).unwrap_or(serde_json::Value::Null)
+    auvnav_tests::processes::auvnav_json(args)
 }
 
 fn s(p: &Path) -> String {
@@ -151,5 +142,83 @@ fn the_heading_offset_of_a_river_transect_is_found_against_its_gps() {
     assert!(
         score("calibrated") < score("two_point") && score("two_point") < score("nominal"),
         "{r}"
+    );
+}
+
+/// A boat swinging its compass through all headings at the surface (a scenario written here),
+/// simulated with a deviation card and DVL noise: the card is recovered from the GNSS; on the
+/// measured lake run, whose headings fill two of the eight sectors, the card is not excited.
+#[test]
+fn a_compass_deviation_card_is_found_on_a_swing_and_not_asked_of_a_run_that_does_not_swing() {
+    let tmp = TempDir::new("surface-swing");
+    let legs: String = (0..8)
+        .map(|_| {
+            "[[legs]]\nkind = \"straight\"\nduration_s = 40.0\n\n[[legs]]\nkind = \"turn\"\n\
+             angle_deg = 45.0\nrate_deg_s = 3.0\nbank_deg = 0.0\n\n"
+        })
+        .collect();
+    let scenario = tmp.path().join("swing.toml");
+    std::fs::write(
+        &scenario,
+        format!(
+            "name = \"surface_swing\"\ndescription = \"a compass swing at the surface\"\n\
+             seabed_depth_m = 30.0\n\n[start]\nlatitude_deg = 52.0\nlongitude_deg = 13.0\n\
+             depth_m = 0.0\nheading_deg = 10.0\nspeed_m_s = 1.5\n\n[rates]\nimu_hz = 100\n\
+             dvl_hz = 1\nusbl_hz = 0\ndepth_hz = 1\nmagnetometer_hz = 0\ngnss_hz = 1\n\
+             truth_hz = 1\ncompass_hz = 1\n\n{legs}"
+        ),
+    )
+    .expect("scenario");
+    let card = [0.0, 2.5, -1.5, 1.0, 0.0];
+    for seed in [5u64, 6] {
+        let log = tmp.path().join(format!("swing-{seed}.mcap"));
+        let o = Command::new(binary("auvnav"))
+            .args([
+                "sim",
+                "--scenario",
+                &s(&scenario),
+                "--seed",
+                &seed.to_string(),
+            ])
+            .args(["--effect", "heading.deviation=0,2.5,-1.5,1,0"])
+            .args(["--effect", "dvl.noise=0.01"])
+            .args(["--out", &s(&log)])
+            .output()
+            .expect("sim");
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let r = auvnav(&[
+            "calibrate",
+            "dvl",
+            &s(&log),
+            "--compass",
+            "--threshold",
+            "50",
+            "--json",
+        ]);
+        for (k, name) in ["b", "c", "d"].iter().enumerate() {
+            let (found, written) = param(&r, &format!("heading.deviation.{name}"));
+            let hidden = card[k + 1];
+            assert!(
+                written && (found - hidden).abs() <= 0.1 * f64::abs(hidden),
+                "seed {seed}: {name} hidden {hidden}, found {found}: {r}"
+            );
+        }
+        assert!(!param(&r, "heading.deviation.e").1, "{r}");
+    }
+    let Some(lake) = lake(&tmp) else {
+        return;
+    };
+    let r = auvnav(&["calibrate", "dvl", &s(&lake), "--threshold", "50", "--json"]);
+    let p = r["params"]
+        .as_array()
+        .expect("params")
+        .iter()
+        .find(|p| p["name"] == "heading.deviation.b")
+        .expect("b");
+    assert!(
+        p["verdict"]
+            .as_str()
+            .is_some_and(|v| v.starts_with("not excited")),
+        "{p}"
     );
 }

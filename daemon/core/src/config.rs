@@ -47,6 +47,10 @@ pub struct NavConfig {
     pub dvl_scale_factor: f64,
     /// DVL position in the body frame (m). Default 0.
     pub dvl_lever_arm_m: [f64; 3],
+    /// The compass's deviation card, `[A, B, C, D, E]` (deg, |·| ≤ 45; the simulator's
+    /// `heading.deviation`): taken out of an attitude channel's heading before it is used, which
+    /// dead reckoning of a surface run does (the filter does not read a compass). Default 0.
+    pub compass_deviation_deg: [f64; 5],
     /// Depth noise (m). Default 0.1.
     pub depth_std_m: f64,
     /// Depth (pressure) sensor position in the body frame (m, |·| ≤ 50): it reads the depth of
@@ -196,6 +200,7 @@ impl Default for NavConfig {
             dvl_mount_deg: [0.0; 3],
             dvl_scale_factor: 1.0,
             dvl_lever_arm_m: [0.0; 3],
+            compass_deviation_deg: [0.0; 5],
             depth_std_m: 0.1,
             depth_lever_arm_m: [0.0; 3],
             dvl_gate_chi2: gate::CHI2_3DOF_999,
@@ -850,6 +855,12 @@ impl NavConfig {
             &self.dvl_lever_arm_m,
             -50.0,
             50.0,
+        );
+        p.array(
+            "navigation.compass_deviation_deg",
+            &self.compass_deviation_deg,
+            -45.0,
+            45.0,
         );
         p.array(
             "navigation.depth_lever_arm_m",

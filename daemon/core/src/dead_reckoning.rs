@@ -14,6 +14,46 @@
 use crate::aid::dvl::DvlParameters;
 use nalgebra::{UnitQuaternion, Vector3};
 
+/// A compass's deviation (rad) at the heading it shows, `psi_c` (rad), from the classical
+/// coefficients `[A, B, C, D, E]` (deg): `A + B sin ψc + C cos ψc + D sin 2ψc + E cos 2ψc` (the
+/// simulator's `heading.deviation`; a deviation card is drawn up against the compass heading).
+/// The compass shows `ψc` with `ψc − δ(ψc) = ψ`, the heading it should show.
+pub fn compass_deviation_rad(psi_c: f64, coefficients_deg: &[f64; 5]) -> f64 {
+    let [a, b, c, d, e] = coefficients_deg.map(f64::to_radians);
+    a + b * psi_c.sin() + c * psi_c.cos() + d * (2.0 * psi_c).sin() + e * (2.0 * psi_c).cos()
+}
+
+/// The heading a compass with deviation `coefficients_deg` shows when the heading is `psi`
+/// (rad): the solution of `ψc − δ(ψc) = ψ`, by fixed-point iteration (a contraction for
+/// deviations below 57°/(|B|+|C|+2|D|+2|E|) rad⁻¹, far beyond any compass).
+pub fn compass_reading_rad(psi: f64, coefficients_deg: &[f64; 5]) -> f64 {
+    let mut psi_c = psi;
+    for _ in 0..20 {
+        psi_c = psi + compass_deviation_rad(psi_c, coefficients_deg);
+    }
+    psi_c
+}
+
+/// Attitude samples with a compass deviation taken out of their heading.
+pub fn without_deviation(
+    samples: &[AttitudeSample],
+    coefficients_deg: &[f64; 5],
+) -> Vec<AttitudeSample> {
+    if coefficients_deg.iter().all(|c| *c == 0.0) {
+        return samples.to_vec();
+    }
+    samples
+        .iter()
+        .map(|s| {
+            let (r, p, y) = s.attitude.euler_angles();
+            AttitudeSample::from_euler(
+                s.t_s,
+                [r, p, y - compass_deviation_rad(y, coefficients_deg)],
+            )
+        })
+        .collect()
+}
+
 /// One attitude sample: time (s) and body-to-NED attitude.
 #[derive(Debug, Clone, Copy)]
 pub struct AttitudeSample {
@@ -224,6 +264,25 @@ mod tests {
             })
             .fold(0.0, f64::max);
         assert!(worst > 1.0, "{worst}");
+    }
+
+    #[test]
+    fn a_compass_reading_gives_back_its_heading_once_the_deviation_is_taken_out() {
+        let c = [1.5, 3.0, -2.0, 0.8, -0.5];
+        for k in 0..72 {
+            let psi = (k as f64 * 5.0 - 180.0) * DEG;
+            let shown = compass_reading_rad(psi, &c);
+            let back = shown - compass_deviation_rad(shown, &c);
+            assert!((back - psi).abs() < 1e-10, "{psi}: {back}");
+            // Two-cycle and one-cycle parts as the card says, at the heading shown.
+            assert!((shown - psi).abs() <= (1.5 + 3.0 + 2.0 + 0.8 + 0.5) * DEG);
+        }
+        let samples = [AttitudeSample::from_euler(
+            0.0,
+            [0.01, -0.02, compass_reading_rad(1.0, &c)],
+        )];
+        let (r, p, y) = without_deviation(&samples, &c)[0].attitude.euler_angles();
+        assert!((r - 0.01).abs() < 1e-12 && (p + 0.02).abs() < 1e-12 && (y - 1.0).abs() < 1e-9);
     }
 
     #[test]

@@ -113,11 +113,23 @@ pub fn load_voyages(
 pub fn calibrate_dvl_surface(
     args: &CalibrateDvlOptions,
 ) -> Result<Option<crate::surface::SurfaceReport>, CalibrationError> {
-    let kinds = args
+    let channels = args
         .voyages
         .iter()
-        .map(|v| crate::surface::is_surface_run(&v.path))
-        .collect::<Result<Vec<bool>, _>>()?;
+        .map(|v| auvnav_replay::surface::channels(&v.path))
+        .collect::<Result<Vec<(bool, bool)>, _>>()?;
+    if args.compass
+        && let Some((v, _)) = args.voyages.iter().zip(&channels).find(|(_, c)| !c.1)
+    {
+        usage!(
+            "--compass: {} has no attitude channel (a compass or an AHRS) to dead-reckon with",
+            v.name()
+        );
+    }
+    let kinds: Vec<bool> = channels
+        .iter()
+        .map(|(imu, attitude)| *attitude && (!imu || args.compass))
+        .collect();
     if !kinds.iter().any(|k| *k) {
         return Ok(None);
     }
@@ -134,7 +146,10 @@ pub fn calibrate_dvl_surface(
     }
     let first_voyage = args.voyages.first().map(|v| v.path.as_path());
     let cfg = load_session_config(args.config.as_ref(), first_voyage)?;
-    let start = cfg.navigation.dvl_installation();
+    let start = crate::surface::Candidate {
+        dvl: cfg.navigation.dvl_installation(),
+        compass_deviation_deg: cfg.navigation.compass_deviation_deg,
+    };
     let report =
         crate::surface::calibrate_surface(&args.voyages, &start, &args.params, args.threshold)?;
     if let Some(path) = &args.write_config {

@@ -90,6 +90,12 @@ pub struct CalibrateDvlOptions {
     /// Write a report (Markdown, SVG plots, JSON) into this directory.
     #[cfg_attr(feature = "clap", arg(long))]
     pub report: Option<PathBuf>,
+    /// Dead-reckon from the attitude channel (a compass or an AHRS) against the GNSS, as for a
+    /// surface run, even when the logs carry an IMU (to calibrate the compass's deviation card
+    /// with the DVL installation). Logs without an IMU but with a compass are surface runs
+    /// without it.
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub compass: bool,
 }
 
 impl CalibrateDvlOptions {
@@ -114,6 +120,7 @@ impl CalibrateDvlOptions {
             json: true,
             write_config: None,
             report: None,
+            compass: false,
         }
     }
 }

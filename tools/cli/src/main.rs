@@ -159,13 +159,14 @@ fn run_perturb(a: &PerturbArgs) -> anyhow::Result<()> {
         }))?;
     } else {
         eprintln!(
-            "{}: {} applied to {} messages ({} IMU, {} DVL, {} depth changed; {} DVL without a neighbour at t - offset marked invalid)",
+            "{}: {} applied to {} messages ({} IMU, {} DVL, {} depth, {} attitude changed; {} DVL without a neighbour at t - offset marked invalid)",
             a.out.display(),
             p.describe(),
             counts.messages,
             counts.imu_changed,
             counts.dvl_changed,
             counts.depth_changed,
+            counts.attitude_changed,
             counts.dvl_invalidated
         );
     }

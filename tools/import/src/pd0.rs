@@ -75,6 +75,29 @@ pub struct Pd0Summary {
 /// north and east velocity (m/s).
 pub(crate) type GpsSample = (f64, f64, f64);
 
+/// `(time, latitude deg, longitude deg)` as `(time, north m, east m)` on the plane tangent at
+/// the first.
+pub(crate) fn north_east_of(fixes: impl Iterator<Item = (f64, f64, f64)>) -> Vec<GpsSample> {
+    let mut fixes = fixes.peekable();
+    let Some(&(_, lat0, lon0)) = fixes.peek() else {
+        return Vec::new();
+    };
+    let (lat0, lon0) = (lat0.to_radians(), lon0.to_radians());
+    let (rm, rn) = (
+        auvnav_core::earth::meridian_radius(lat0),
+        auvnav_core::earth::prime_vertical_radius(lat0),
+    );
+    fixes
+        .map(|(t, lat, lon)| {
+            (
+                t,
+                (lat.to_radians() - lat0) * rm,
+                (lon.to_radians() - lon0) * rn * lat0.cos(),
+            )
+        })
+        .collect()
+}
+
 /// Linear interpolation of `s` at `t` between samples at most `max_gap` s apart.
 pub(crate) fn interpolate_gps(s: &[GpsSample], t: f64, max_gap: f64) -> Option<(f64, f64)> {
     let i = s.partition_point(|x| x.0 <= t);
@@ -230,26 +253,7 @@ pub fn pd0_messages(
         bad_option!("--velocity vtg: the file has {} VTG sentences", vtg.len());
     }
     // Local north/east (m) of the fixes around the first one.
-    let origin = fixes.first().map(|f| (f.1.to_radians(), f.2.to_radians()));
-    let positions: Vec<GpsSample> = match origin {
-        Some((lat0, lon0)) => {
-            let (rm, rn) = (
-                auvnav_core::earth::meridian_radius(lat0),
-                auvnav_core::earth::A,
-            );
-            fixes
-                .iter()
-                .map(|f| {
-                    (
-                        f.0,
-                        (f.1.to_radians() - lat0) * rm,
-                        (f.2.to_radians() - lon0) * rn * lat0.cos(),
-                    )
-                })
-                .collect()
-        }
-        None => Vec::new(),
-    };
+    let positions = north_east_of(fixes.iter().map(|f| (f.0, f.1, f.2)));
     let heights: Vec<GpsSample> = fixes.iter().map(|f| (f.0, f.3, 0.0)).collect();
     let mut out = Vec::new();
     // Every GGA fix inside the file's time span as a GNSS fix (σ = 1 m × HDOP).

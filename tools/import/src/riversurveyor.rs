@@ -28,7 +28,7 @@
 #[allow(unused_imports)]
 use super::*;
 use crate::mat5::{MatFile, MatValue};
-use crate::pd0::{GpsSample, GpsVelocity, interpolate_gps, velocity_from_positions};
+use crate::pd0::{GpsSample, GpsVelocity, interpolate_gps, north_east_of, velocity_from_positions};
 
 /// Command-line arguments of `auvnav import riversurveyor`.
 #[derive(Debug, Clone)]
@@ -338,26 +338,7 @@ pub fn riversurveyor_messages(
         );
     }
     // Local north/east of the fixes around the first.
-    let positions: Vec<GpsSample> = match fixes.first() {
-        Some(f) => {
-            let (lat0, lon0) = (f.1.to_radians(), f.2.to_radians());
-            let (rm, rn) = (
-                auvnav_core::earth::meridian_radius(lat0),
-                auvnav_core::earth::prime_vertical_radius(lat0),
-            );
-            fixes
-                .iter()
-                .map(|f| {
-                    (
-                        f.0,
-                        (f.1.to_radians() - lat0) * rm,
-                        (f.2.to_radians() - lon0) * rn * lat0.cos(),
-                    )
-                })
-                .collect()
-        }
-        None => Vec::new(),
-    };
+    let positions = north_east_of(fixes.iter().map(|f| (f.0, f.1, f.2)));
     let mut out: Vec<(u64, u8, &'static str, LogMessage)> = Vec::new();
     for (seq, f) in fixes.iter().enumerate() {
         if f.0 < 0.0 {

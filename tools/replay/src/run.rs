@@ -346,14 +346,7 @@ pub fn replay(a: &ReplayOptions) -> Result<ReplayReport, ReplayError> {
         )));
     }
     let log_duration_s = replay.duration_s();
-    // Without an IMU sample the filter navigated on nothing: a surface run is dead-reckoned from
-    // its compass instead, and no filter accuracy is reported.
-    let dead_reckoning = if replay.counts.imu == 0 && crate::surface::is_surface_run(&a.log)? {
-        let run = crate::surface::read_surface_run(&a.log, &a.log.display().to_string(), None)?;
-        run.accuracy(&cfg.navigation.dvl_installation())
-    } else {
-        None
-    };
+    let dead_reckoning = dead_reckoning(&a.log, &cfg, replay.counts.imu)?;
     Ok(ReplayReport {
         log: a.log.display().to_string(),
         configuration: config_source,
@@ -378,6 +371,23 @@ pub fn replay(a: &ReplayOptions) -> Result<ReplayReport, ReplayError> {
         recorded_comparison: replay.recorded_comparison().cloned(),
         dead_reckoning,
     })
+}
+
+/// Without an IMU sample the filter navigated on nothing: a surface run (a compass, GNSS) is
+/// dead-reckoned from its compass instead.
+fn dead_reckoning(
+    log: &Path,
+    cfg: &auvnav_core::config::SessionConfig,
+    imu_samples: u64,
+) -> Result<Option<crate::surface::DeadReckoningAccuracy>, ReplayError> {
+    if imu_samples > 0 || !crate::surface::is_surface_run(log)? {
+        return Ok(None);
+    }
+    let run = crate::surface::read_surface_run(log, &log.display().to_string(), None)?;
+    Ok(run.accuracy(
+        &cfg.navigation.dvl_installation(),
+        &cfg.navigation.compass_deviation_deg,
+    ))
 }
 
 /// Marks an error of an output sink (a CSV row, an MCAP record) inside `run_log`'s error.

@@ -6,7 +6,9 @@
 
 use crate::ReplayError;
 use auvnav_core::config::DvlInstallation;
-use auvnav_core::dead_reckoning::{AttitudeSample, AttitudeSeries, DvlReading, Track, dead_reckon};
+use auvnav_core::dead_reckoning::{
+    AttitudeSample, AttitudeSeries, DvlReading, Track, dead_reckon, without_deviation,
+};
 use auvnav_core::earth::{self, Geodetic};
 use auvnav_log::{LogMessage, LogReader};
 use auvnav_shm_schema::{DvlVelocityV1, GnssFixV1};
@@ -34,6 +36,12 @@ pub struct SurfaceRun {
 
 /// Whether the log at `path` is a surface run: DVL and attitude, GNSS fixes, and no IMU sample.
 pub fn is_surface_run(path: &Path) -> Result<bool, ReplayError> {
+    let (imu, attitude) = channels(path)?;
+    Ok(attitude && !imu)
+}
+
+/// Whether the log at `path` has IMU samples, and whether it has attitude samples.
+pub fn channels(path: &Path) -> Result<(bool, bool), ReplayError> {
     let mut r = open(path)?;
     let (mut imu, mut attitude) = (false, false);
     while let Some(raw) = r.next_message().map_err(read_error(path))? {
@@ -42,11 +50,11 @@ pub fn is_surface_run(path: &Path) -> Result<bool, ReplayError> {
             Ok(LogMessage::Attitude(_)) => attitude = true,
             _ => {}
         }
-        if imu {
-            return Ok(false);
+        if imu && attitude {
+            break;
         }
     }
-    Ok(attitude)
+    Ok((imu, attitude))
 }
 
 fn open(path: &Path) -> Result<LogReader<std::io::BufReader<std::fs::File>>, ReplayError> {
@@ -153,23 +161,29 @@ pub fn read_surface_run(
 }
 
 impl SurfaceRun {
-    /// The dead reckoning of the run with `installation`, from the origin (its first fix) at
-    /// its first reading.
-    pub fn dead_reckon(&self, installation: &DvlInstallation) -> Track {
+    /// The dead reckoning of the run with `installation` and the compass's deviation card
+    /// (`deviation_deg`, [`auvnav_core::dead_reckoning::compass_deviation_rad`]), from the
+    /// origin (its first fix) at its first reading.
+    pub fn dead_reckon(&self, installation: &DvlInstallation, deviation_deg: &[f64; 5]) -> Track {
         let p = auvnav_core::aid::dvl::DvlParameters::new(
             installation.mount_deg,
             installation.scale_factor,
             installation.lever_arm_m,
             installation.time_offset_s,
         );
-        let series = AttitudeSeries::new(&self.attitude, ATTITUDE_GAP_S);
+        let attitude = without_deviation(&self.attitude, deviation_deg);
+        let series = AttitudeSeries::new(&attitude, ATTITUDE_GAP_S);
         dead_reckon(&self.dvl, &series, &p, [0.0, 0.0], DVL_GAP_S)
     }
 
-    /// The dead reckoning started at the first fix it covers (its position), scored at every
+    /// The dead reckoning (as [`SurfaceRun::dead_reckon`]) started at the first fix it covers (its position), scored at every
     /// later fix.
-    pub fn accuracy(&self, installation: &DvlInstallation) -> Option<DeadReckoningAccuracy> {
-        let track = self.dead_reckon(installation);
+    pub fn accuracy(
+        &self,
+        installation: &DvlInstallation,
+        deviation_deg: &[f64; 5],
+    ) -> Option<DeadReckoningAccuracy> {
+        let track = self.dead_reckon(installation, deviation_deg);
         let covered: Vec<(&Fix, [f64; 2])> = self
             .fixes
             .iter()

@@ -177,6 +177,7 @@ pub fn campaign(
                 gnss_hz: 1,
                 truth_hz: 1,
                 ctd_hz: 0,
+                compass_hz: 0,
             },
             legs: legs(kind, length_m, &mut rng),
             station: None,

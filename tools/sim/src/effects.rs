@@ -226,6 +226,9 @@ effects! {
     /// Velocity of the bed under bottom track, north and east: a moving bed (sediment the current carries) or a bottom track locked on something that moves. The DVL measures the vehicle's velocity relative to it, so the error is fixed on the Earth and turns with the heading in the DVL's frame; water track is not affected.
     dvl_bed_velocity: [f64; 2] = "dvl.bed_velocity", unit "m/s", range -3.0..=3.0, default [0.0, 0.0];
 
+    /// A compass's heading-dependent deviation, the classical card: the compass (the attitude channel, `rates.compass_hz`) shows ψc where ψc − δ(ψc) is the true heading, δ(ψc) = A + B sin ψc + C cos ψc + D sin 2ψc + E cos 2ψc with the coefficients A, B, C, D, E: A a constant offset (a misaligned lubber line, an uncorrected declination), B and C the one-cycle part (permanent magnetism of the vehicle), D and E the two-cycle part (induced magnetism of soft iron).
+    heading_deviation: [f64; 5] = "heading.deviation", unit "deg", range -45.0..=45.0, default [0.0, 0.0, 0.0, 0.0, 0.0];
+
     /// The water current at the surface, north and east (the vehicle's velocity relative to the water is its velocity over the ground minus the current).
     water_current: [f64; 2] = "water.current", unit "m/s", range -5.0..=5.0, default [0.0, 0.0];
     /// Stationary one-sigma of the current's slowly varying part (first-order Gauss-Markov, 600 s correlation), per axis.

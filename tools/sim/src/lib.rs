@@ -16,7 +16,7 @@ pub mod trajectory;
 
 use auvnav_core::earth::{self, Geodetic};
 use auvnav_log::{LogHeader, LogMessage, write_log_atomically};
-use auvnav_shm_schema::{SoundVelocityV1, TruthStateV1, topic};
+use auvnav_shm_schema::{AttitudeV1, SoundVelocityV1, TruthStateV1, topic};
 use effects::Effects;
 pub use error::SimError;
 use nalgebra::Vector3;
@@ -172,6 +172,8 @@ pub struct SimSummary {
     pub depth: u64,
     pub magnetometer: u64,
     pub gnss: u64,
+    /// Compass samples on the attitude channel (`rates.compass_hz`).
+    pub attitude: u64,
     /// CTD sound-velocity readings (`rates.ctd_hz`).
     pub sound_velocity: u64,
     pub truth: u64,
@@ -195,6 +197,19 @@ fn truth_message(seq: u64, s: &TruthSample) -> TruthStateV1 {
     }
 }
 
+/// The compass's attitude: the true roll and pitch, the heading shown with `heading.deviation`.
+fn compass_message(seq: u64, s: &TruthSample, e: &Effects) -> AttitudeV1 {
+    let [roll, pitch, heading] = s.kin.euler_rad;
+    let shown = auvnav_core::dead_reckoning::compass_reading_rad(heading, &e.heading_deviation);
+    AttitudeV1 {
+        host_time_ns: (s.time_s * 1e9).round() as u64,
+        sequence: seq,
+        euler_rad: [roll, pitch, shown],
+        validity: AttitudeV1::VALID_ATTITUDE | AttitudeV1::HEADING_TRUE,
+        ..Default::default()
+    }
+}
+
 fn divider(imu_hz: u32, hz: u32) -> u64 {
     imu_hz.checked_div(hz).map(u64::from).unwrap_or(0)
 }
@@ -212,6 +227,8 @@ pub fn simulate_to_vec(cfg: &SimConfig) -> Result<(Vec<LogMessage>, SimSummary),
 /// Runs the simulation, handing every message to `sink` in time order (truth on [`LogMessage::Truth`]).
 /// The first error of `sink` ends the run and is returned; a scenario the trajectory cannot fly
 /// is returned as `E` from [`SimError::Trajectory`].
+// Long on purpose: one loop over the IMU epochs in which every sensor is sampled at its own
+// divider from the same truth, in the order the log receives them.
 pub fn simulate<F, E>(cfg: &SimConfig, mut sink: F) -> Result<SimSummary, E>
 where
     F: FnMut(&LogMessage) -> Result<(), E>,
@@ -234,6 +251,7 @@ where
         divider(rates.imu_hz, rates.truth_hz),
     );
     let ctd_div = divider(rates.imu_hz, rates.ctd_hz);
+    let compass_div = divider(rates.imu_hz, rates.compass_hz);
 
     let mut imu = ImuModel::new(e, cfg.seed, imu_hz);
     let mut dvl = DvlModel::new(e, cfg.seed, s.seabed_depth_m);
@@ -348,6 +366,14 @@ where
             summary.gnss += 1;
             sink(&LogMessage::Gnss(fix))?;
         }
+        if compass_div > 0 && k % compass_div == 0 {
+            summary.attitude += 1;
+            sink(&LogMessage::Attitude(compass_message(
+                summary.attitude,
+                &now,
+                e,
+            )))?;
+        }
         if truth_div > 0 && k % truth_div == 0 {
             summary.truth += 1;
             sink(&LogMessage::Truth(truth_message(summary.truth, &now)))?;
@@ -407,6 +433,7 @@ pub fn simulate_to_log(cfg: &SimConfig, out: &Path) -> Result<SimSummary, SimErr
                 LogMessage::Magnetometer(x) => w.write(topic::MAGNETOMETER, x)?,
                 LogMessage::Gnss(x) => w.write(topic::GNSS, x)?,
                 LogMessage::SoundVelocity(x) => w.write(topic::SOUND_VELOCITY, x)?,
+                LogMessage::Attitude(x) => w.write(topic::ATTITUDE, x)?,
                 LogMessage::Truth(x) => w.write(topic::TRUTH, x)?,
                 _ => {}
             }

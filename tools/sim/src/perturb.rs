@@ -13,6 +13,8 @@
 //! - IMU (`imu.gyro_bias`, `imu.accel_bias`): constant biases added to every sample (to the
 //!   increments times the interval in increment mode).
 //! - Depth (`depth.bias`, `depth.noise`).
+//! - Compass (`heading.deviation`): the heading of every attitude message (a compass or AHRS)
+//!   becomes the one a compass with that deviation shows (the recorded heading taken as true).
 //!
 //! Other effects (the trajectory-level ones: USBL geometry, magnetometer, GNSS, bias
 //! instabilities, and `depth.lever_arm`, which needs the attitude a recorded log does not carry
@@ -42,6 +44,7 @@ pub const APPLICABLE: &[&str] = &[
     "imu.accel_bias",
     "depth.bias",
     "depth.noise",
+    "heading.deviation",
 ];
 
 /// What a perturbation did.
@@ -53,6 +56,8 @@ pub struct PerturbCounts {
     /// DVL messages marked invalid: no recorded neighbour at `t - dvl.time_offset`.
     pub dvl_invalidated: u64,
     pub depth_changed: u64,
+    /// Attitude messages whose heading was given the compass deviation.
+    pub attitude_changed: u64,
     /// Messages that could not be decoded (copied unchanged).
     pub undecodable: u64,
 }
@@ -198,6 +203,7 @@ pub fn perturb_log(
     let accel_bias = Vector3::from(e.imu_accel_bias) * 9.806_65e-6;
     let touches = |prefix: &str| p.settings.iter().any(|(n, _)| n.starts_with(prefix));
     let (dvl_on, imu_on, depth_on) = (touches("dvl."), touches("imu."), touches("depth."));
+    let compass_on = touches("heading.");
     let mut dvl_rng = Rng::new(p.seed, "perturb.dvl");
     let mut depth_rng = Rng::new(p.seed, "perturb.depth");
 
@@ -256,6 +262,14 @@ pub fn perturb_log(
                 LogMessage::Depth(mut x) if depth_on && x.validity & DepthV1::VALID_DEPTH != 0 => {
                     x.depth_m += e.depth_bias + depth_rng.gauss(e.depth_noise);
                     counts.depth_changed += 1;
+                    w.write(&m.topic, &x)?;
+                }
+                LogMessage::Attitude(mut x) if compass_on => {
+                    x.euler_rad[2] = auvnav_core::dead_reckoning::compass_reading_rad(
+                        x.euler_rad[2],
+                        &e.heading_deviation,
+                    );
+                    counts.attitude_changed += 1;
                     w.write(&m.topic, &x)?;
                 }
                 _ => w.write_raw(m)?,

@@ -81,6 +81,11 @@ pub struct Rates {
     /// true sound speed (`dvl.sound_speed`).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub ctd_hz: u32,
+    /// Rate of a compass's (or AHRS's) heading, pitch and roll on the attitude channel (Hz; 0,
+    /// the default: none). Roll and pitch are the true ones, the heading is shown with
+    /// `heading.deviation`.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub compass_hz: u32,
 }
 
 fn is_zero(v: &u32) -> bool {
@@ -98,6 +103,7 @@ impl Default for Rates {
             gnss_hz: 1,
             truth_hz: 20,
             ctd_hz: 0,
+            compass_hz: 0,
         }
     }
 }

@@ -9,8 +9,8 @@
 //! fixes' — its error in metres and as a fraction of the distance. The installation is fitted by
 //! Gauss–Newton (numerical derivatives) on the squared window errors; its standard deviations
 //! are widened by the windows' overlap (the windows of one stretch share their errors). A
-//! parameter is written when it stands three deviations from its starting value; the others are
-//! held at their starting values (the least significant first, the rest fitted again) and
+//! parameter is written when it stands five deviations from its starting value; the others are
+//! held at their starting values (the least determined first, the rest fitted again) and
 //! reported as consistent with it (deviation within the parameter's engineering tolerance) or as
 //! not determined. Beside it, the
 //! S-CAL two-point formulas (yaw and scale from the first and last fix of each run) are scored
@@ -18,15 +18,15 @@
 
 use crate::voyage::VoyageSpec;
 use crate::{CalibrationError, error::unusable};
-use auvnav_core::aid::dvl::DvlParameters;
-use auvnav_core::config::DvlInstallation;
-use auvnav_core::dead_reckoning::{AttitudeSeries, dead_reckon};
-use auvnav_replay::surface::{ATTITUDE_GAP_S, DVL_GAP_S, read_surface_run};
+use auvnav_replay::surface::read_surface_run;
 pub use auvnav_replay::surface::{SurfaceRun, is_surface_run};
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
+mod params;
 mod report;
+pub use params::Candidate;
+use params::{PARAMS, get, set};
 pub use report::*;
 
 /// One scoring window: the fixes A and B (indices) and the GNSS distance along the track.
@@ -85,9 +85,8 @@ fn windows(run: &SurfaceRun, threshold_m: f64) -> Vec<Window> {
 
 /// The dead-reckoned displacement error of each window (north, east, m), `None` for a window
 /// the track does not cover.
-fn window_errors(run: &SurfaceRun, p: &DvlParameters, windows: &[Window]) -> Vec<Option<[f64; 2]>> {
-    let series = AttitudeSeries::new(&run.attitude, ATTITUDE_GAP_S);
-    let track = dead_reckon(&run.dvl, &series, p, [0.0, 0.0], DVL_GAP_S);
+fn window_errors(run: &SurfaceRun, c: &Candidate, windows: &[Window]) -> Vec<Option<[f64; 2]>> {
+    let track = run.dead_reckon(&c.dvl, &c.compass_deviation_deg);
     windows
         .iter()
         .map(|w| {
@@ -101,74 +100,6 @@ fn window_errors(run: &SurfaceRun, p: &DvlParameters, windows: &[Window]) -> Vec
         .collect()
 }
 
-/// A parameter of the surface calibration: its vocabulary name, unit, engineering tolerance (the
-/// deviation below which it counts as determined) and derivative step.
-#[derive(Debug, Clone, Copy)]
-struct Param {
-    name: &'static str,
-    unit: &'static str,
-    tolerance: f64,
-    step: f64,
-}
-
-const PARAMS: [Param; 5] = [
-    Param {
-        name: "dvl.mount_yaw",
-        unit: "deg",
-        tolerance: 0.5,
-        step: 0.05,
-    },
-    Param {
-        name: "dvl.scale_factor",
-        unit: "1",
-        tolerance: 0.003,
-        step: 1e-4,
-    },
-    Param {
-        name: "dvl.time_offset",
-        unit: "s",
-        tolerance: 0.1,
-        step: 0.02,
-    },
-    Param {
-        name: "dvl.lever_arm.x",
-        unit: "m",
-        tolerance: 0.1,
-        step: 0.02,
-    },
-    Param {
-        name: "dvl.lever_arm.y",
-        unit: "m",
-        tolerance: 0.1,
-        step: 0.02,
-    },
-];
-
-/// The installation with parameter `k` set to `v`.
-fn set(i: &mut DvlInstallation, k: usize, v: f64) {
-    match k {
-        0 => i.mount_deg[2] = v,
-        1 => i.scale_factor = v,
-        2 => i.time_offset_s = v,
-        3 => i.lever_arm_m[0] = v,
-        _ => i.lever_arm_m[1] = v,
-    }
-}
-
-fn get(i: &DvlInstallation, k: usize) -> f64 {
-    match k {
-        0 => i.mount_deg[2],
-        1 => i.scale_factor,
-        2 => i.time_offset_s,
-        3 => i.lever_arm_m[0],
-        _ => i.lever_arm_m[1],
-    }
-}
-
-fn parameters(i: &DvlInstallation) -> DvlParameters {
-    DvlParameters::new(i.mount_deg, i.scale_factor, i.lever_arm_m, i.time_offset_s)
-}
-
 /// The score of an installation on runs: per run and over all.
 #[derive(Debug, Clone, Serialize)]
 pub struct SurfaceScore {
@@ -180,11 +111,10 @@ pub struct SurfaceScore {
     pub mean_error_per_distance_percent: f64,
 }
 
-fn score(runs: &[(&SurfaceRun, Vec<Window>)], inst: &DvlInstallation) -> SurfaceScore {
-    let p = parameters(inst);
+fn score(runs: &[(&SurfaceRun, Vec<Window>)], inst: &Candidate) -> SurfaceScore {
     let (mut sq, mut ratios) = (0.0, Vec::new());
     for (run, windows) in runs {
-        for (e, w) in window_errors(run, &p, windows).iter().zip(windows) {
+        for (e, w) in window_errors(run, inst, windows).iter().zip(windows) {
             if let Some(e) = e {
                 let m = e[0].hypot(e[1]);
                 sq += m * m;
@@ -220,14 +150,13 @@ pub struct FittedParam {
 /// A Gauss–Newton fit of `which` parameters on the runs' window errors, from `start`.
 fn fit(
     runs: &[(&SurfaceRun, Vec<Window>)],
-    start: &DvlInstallation,
+    start: &Candidate,
     which: &[usize],
-) -> (DvlInstallation, Vec<f64>) {
-    let residuals = |inst: &DvlInstallation| -> Vec<f64> {
-        let p = parameters(inst);
+) -> (Candidate, Vec<f64>) {
+    let residuals = |inst: &Candidate| -> Vec<f64> {
         let mut r = Vec::new();
         for (run, windows) in runs {
-            for e in window_errors(run, &p, windows) {
+            for e in window_errors(run, inst, windows) {
                 // A window the track stops covering counts as it did at the start: zero change.
                 let e = e.unwrap_or([0.0, 0.0]);
                 r.extend(e);
@@ -311,12 +240,10 @@ fn fit(
 /// The two-point installation (S-CAL's formulas (a)): yaw and scale from the displacement between
 /// the first and last fix of each run against the dead reckoning with `start`, averaged with the
 /// runs' distances as weights.
-fn two_point(runs: &[&SurfaceRun], start: &DvlInstallation) -> DvlInstallation {
-    let p = parameters(start);
+fn two_point(runs: &[&SurfaceRun], start: &Candidate) -> Candidate {
     let (mut yaw, mut scale, mut weight) = (0.0, 0.0, 0.0);
     for run in runs {
-        let series = AttitudeSeries::new(&run.attitude, ATTITUDE_GAP_S);
-        let track = dead_reckon(&run.dvl, &series, &p, [0.0, 0.0], DVL_GAP_S);
+        let track = run.dead_reckon(&start.dvl, &start.compass_deviation_deg);
         // The first and last fixes the track covers.
         let covered: Vec<&(f64, f64, f64)> = run
             .fixes
@@ -337,42 +264,46 @@ fn two_point(runs: &[&SurfaceRun], start: &DvlInstallation) -> DvlInstallation {
         }
         // χ_DVL − χ_GPS; the yaw that turns the dead reckoning onto the fixes' course.
         let eps = auvnav_replay::accuracy::wrap(de.atan2(dn) - ge.atan2(gn));
-        yaw += g_len * (start.mount_deg[2] - eps.to_degrees());
-        scale += g_len * (start.scale_factor * d_len / g_len);
+        yaw += g_len * (start.dvl.mount_deg[2] - eps.to_degrees());
+        scale += g_len * (start.dvl.scale_factor * d_len / g_len);
         weight += g_len;
     }
     let mut out = start.clone();
     if weight > 0.0 {
-        out.mount_deg[2] = yaw / weight;
-        out.scale_factor = scale / weight;
+        out.dvl.mount_deg[2] = yaw / weight;
+        out.dvl.scale_factor = scale / weight;
     }
     out
 }
 
-/// Whether an estimate is worth writing: at least three deviations from its starting value.
+/// The distance from its starting value, in deviations, at which an estimate is written: the
+/// significance discovery asks of an effect (the deviations are first-order and widened only by
+/// the windows' overlap, so they understate slowly varying errors).
+const MIN_SIGMA: f64 = 5.0;
+
+/// Whether an estimate is worth writing: at least [`MIN_SIGMA`] deviations from its start.
 fn kept(start: f64, estimate: f64, sd: f64) -> bool {
-    sd.is_finite() && (estimate - start).abs() >= 3.0 * sd
+    sd.is_finite() && (estimate - start).abs() >= MIN_SIGMA * sd
 }
 
 /// What a fit on `runs` writes: the installation, the parameters with their verdicts. By
-/// backward elimination: the free parameter that stands least far from its starting value (in
-/// its deviations) is held there and the others fitted again, until every free one is kept
-/// ([`kept`]).
+/// backward elimination: of the free parameters not [`kept`], the one the runs determine least
+/// (its deviation against its tolerance: a parameter the motion confounds with others first) is
+/// held at its starting value and the others fitted again, until every free one is kept.
 fn calibrate_on(
     runs: &[(&SurfaceRun, Vec<Window>)],
-    start: &DvlInstallation,
+    start: &Candidate,
     which: &[usize],
-) -> (DvlInstallation, Vec<FittedParam>) {
+) -> (Candidate, Vec<FittedParam>) {
     let mut free: Vec<usize> = which.to_vec();
     let mut held: Vec<(usize, f64, f64)> = Vec::new();
     let (mut fitted, mut std) = fit(runs, start, &free);
     while let Some(worst) = free
         .iter()
         .zip(&std)
-        .map(|(k, sd)| (*k, *sd, (get(&fitted, *k) - get(start, *k)).abs() / *sd))
-        .filter(|(k, sd, _)| !kept(get(start, *k), get(&fitted, *k), *sd))
-        .min_by(|a, b| a.2.total_cmp(&b.2))
-        .map(|(k, sd, _)| (k, sd))
+        .filter(|(k, sd)| !kept(get(start, **k), get(&fitted, **k), **sd))
+        .max_by(|a, b| (a.1 / PARAMS[*a.0].tolerance).total_cmp(&(b.1 / PARAMS[*b.0].tolerance)))
+        .map(|(k, sd)| (*k, *sd))
     {
         held.push((worst.0, get(&fitted, worst.0), worst.1));
         free.retain(|k| *k != worst.0);
@@ -436,11 +367,35 @@ fn calibrate_on(
     (written, params)
 }
 
+/// The share of the attitude samples a 45° heading sector needs for the deviation card to be
+/// fitted.
+const SECTOR_SHARE: f64 = 0.02;
+
+/// How many of the eight 45° heading sectors the runs' compass fills (each with at least
+/// [`SECTOR_SHARE`] of the samples), and whether that is all of them.
+fn heading_sectors(runs: &[SurfaceRun]) -> (usize, bool) {
+    let mut count = [0usize; 8];
+    let mut total = 0usize;
+    for r in runs {
+        for a in &r.attitude {
+            let (_, _, y) = a.attitude.euler_angles();
+            let sector = (y.to_degrees().rem_euclid(360.0) / 45.0) as usize;
+            count[sector.min(7)] += 1;
+            total += 1;
+        }
+    }
+    let filled = count
+        .iter()
+        .filter(|c| **c as f64 >= SECTOR_SHARE * total.max(1) as f64)
+        .count();
+    (filled, filled == 8)
+}
+
 /// Calibrates a DVL installation on surface runs (`auvnav calibrate dvl` when the voyages carry
 /// no IMU but a compass and GNSS).
 pub fn calibrate_surface(
     specs: &[VoyageSpec],
-    start: &DvlInstallation,
+    start: &Candidate,
     names: &[String],
     threshold_m: f64,
 ) -> Result<SurfaceReport, CalibrationError> {
@@ -451,10 +406,11 @@ pub fn calibrate_surface(
         for n in names {
             let ks: Vec<usize> = match n.as_str() {
                 "dvl.lever_arm" => vec![3, 4],
+                "heading.deviation" => vec![5, 6, 7, 8],
                 other => match PARAMS.iter().position(|p| p.name == other) {
                     Some(k) => vec![k],
                     None => crate::error::usage!(
-                        "--params {other}: surface runs calibrate {} (and dvl.lever_arm for both horizontal components)",
+                        "--params {other}: surface runs calibrate {} (dvl.lever_arm for both horizontal components, heading.deviation for B, C, D, E)",
                         PARAMS.iter().map(|p| p.name).collect::<Vec<_>>().join(", ")
                     ),
                 },
@@ -479,7 +435,33 @@ pub fn calibrate_surface(
             );
         }
     }
-    let (installation, params) = calibrate_on(&with_windows, start, &which);
+    // The deviation card needs the headings it describes: a swing through all of them.
+    let (sectors, excited) = heading_sectors(&runs);
+    let deviation = |k: &usize| PARAMS[*k].name.starts_with("heading.deviation");
+    let unexcited: Vec<usize> = if excited {
+        Vec::new()
+    } else {
+        which.iter().copied().filter(deviation).collect()
+    };
+    let which: Vec<usize> = which
+        .into_iter()
+        .filter(|k| !unexcited.contains(k))
+        .collect();
+    let (installation, mut params) = calibrate_on(&with_windows, start, &which);
+    for k in unexcited {
+        params.push(FittedParam {
+            name: PARAMS[k].name.into(),
+            unit: PARAMS[k].unit.into(),
+            start: get(start, k),
+            estimate: get(start, k),
+            std: f64::INFINITY,
+            verdict: format!(
+                "not excited: the runs' headings fill {sectors} of the 8 sectors of 45° (a swing through all headings, each sector at least {} % of the time, would determine the card): not written",
+                100.0 * SECTOR_SHARE
+            ),
+            written: false,
+        });
+    }
     let all: Vec<&SurfaceRun> = runs.iter().collect();
     let tp = two_point(&all, start);
     let in_sample = ScoreSet {

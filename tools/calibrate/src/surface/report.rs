@@ -1,7 +1,7 @@
 //! The surface calibration's report: its types, its text, its verdict and the
 //! `[navigation.dvl]` table it writes.
 
-use super::{FittedParam, SurfaceScore};
+use super::{Candidate, FittedParam, SurfaceScore};
 use auvnav_core::config::DvlInstallation;
 use serde::Serialize;
 
@@ -11,8 +11,9 @@ pub struct SurfaceReport {
     pub runs: Vec<String>,
     pub threshold_m: f64,
     pub params: Vec<FittedParam>,
-    /// The installation written (the starting one with the written parameters).
-    pub installation: DvlInstallation,
+    /// The installation and deviation card written (the starting ones with the written
+    /// parameters).
+    pub installation: Candidate,
     /// On all runs (in-sample): the starting installation, the two-point one and the fitted one.
     pub in_sample: ScoreSet,
     /// Leave-one-run-out, when there are at least two runs: each run scored with what the others
@@ -47,7 +48,7 @@ pub(super) fn verdict(
         .map(|p| p.name.as_str())
         .collect();
     let mut s = if written.is_empty() {
-        "These runs write nothing: no parameter stands three deviations from its starting value."
+        "These runs write nothing: no parameter stands five deviations from its starting value."
             .to_string()
     } else {
         format!(
@@ -116,20 +117,24 @@ pub fn text(r: &SurfaceReport) -> String {
     s
 }
 
-/// The `[navigation.dvl]` table of the written installation.
+/// The `[navigation]` `compass_deviation_deg` and `[navigation.dvl]` table of what is written.
 pub fn config_toml(r: &SurfaceReport) -> anyhow::Result<String> {
     #[derive(Serialize)]
     struct Navigation {
+        compass_deviation_deg: [f64; 5],
         dvl: DvlInstallation,
     }
     #[derive(Serialize)]
     struct File {
         navigation: Navigation,
     }
-    let mut dvl = r.installation.clone();
+    let mut dvl = r.installation.dvl.clone();
     dvl.source = format!("auvnav calibrate dvl, surface runs {}", r.runs.join(", "));
     let body = toml::to_string(&File {
-        navigation: Navigation { dvl },
+        navigation: Navigation {
+            compass_deviation_deg: r.installation.compass_deviation_deg,
+            dvl,
+        },
     })?;
     let written: Vec<&str> = r
         .params
