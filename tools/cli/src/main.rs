@@ -211,8 +211,9 @@ enum ImportWhat {
     /// channel, the GPS velocity over ground with the DVL's own attitude as the reference
     Pd0(auvnav_tools::import::Pd0Options),
     /// A SonTek RiverSurveyor (M9, S5) MATLAB export from RiverSurveyor Live: the bottom track
-    /// as the DVL channel (rotated back into the instrument frame), every GGA fix as a GNSS fix,
-    /// and the GPS velocity over ground with the ADCP's own compass attitude as the reference.
+    /// as the DVL channel (rotated back into the instrument frame), the compass on the attitude
+    /// channel, every GGA fix as a GNSS fix, and the GPS velocity over ground with the compass
+    /// attitude as the reference (a surface run: `auvnav replay` and `calibrate dvl` take it).
     Riversurveyor(auvnav_tools::import::RiverSurveyorOptions),
     /// A magnetometer recording in CSV (magnetometer and accelerometer columns, as
     /// `auvnav calibrate mag` reads them): the magnetometer channel and the specific force, for
