@@ -45,6 +45,7 @@ __all__ = [
     "effects",
     "import_mag_csv",
     "import_pd0",
+    "import_riversurveyor",
     "import_snapir",
     "import_ugps_g2",
     "nees",
@@ -199,6 +200,10 @@ def import_snapir(dir: PathLike, **options: Any) -> dict[str, Any]:
 
 def import_pd0(*positionals: PathLike, **options: Any) -> dict[str, Any]:
     return _run("import_pd0", positionals, options)
+
+
+def import_riversurveyor(*positionals: PathLike, **options: Any) -> dict[str, Any]:
+    return _run("import_riversurveyor", positionals, options)
 
 
 def import_mag_csv(*positionals: PathLike, **options: Any) -> dict[str, Any]:

@@ -73,7 +73,9 @@ fn specs() -> Vec<Spec> {
     use auvnav_calibrate::CalibrateDvlOptions;
     use auvnav_calibrate::mag::CalibrateMagOptions;
     use auvnav_discover::command::DiscoverOptions;
-    use auvnav_import::{MagCsvOptions, Pd0Options, SnapirOptions, UgpsOptions};
+    use auvnav_import::{
+        MagCsvOptions, Pd0Options, RiverSurveyorOptions, SnapirOptions, UgpsOptions,
+    };
     use auvnav_smooth::SmoothOptions;
     use auvnav_studies::align::{AlignMeasuredOptions, AlignOptions};
     use auvnav_studies::nees::NeesOptions;
@@ -163,6 +165,12 @@ fn specs() -> Vec<Spec> {
             "auvnav import pd0: a PD0 file with GPS into a log",
             Pd0Options,
             |a| document(&auvnav_import::pd0(&a)?)
+        ),
+        spec!(
+            "import_riversurveyor",
+            "auvnav import riversurveyor: a SonTek RiverSurveyor MATLAB export into a log",
+            RiverSurveyorOptions,
+            |a| document(&auvnav_import::riversurveyor(&a)?)
         ),
         spec!(
             "import_mag_csv",
