@@ -116,7 +116,7 @@ pub fn calibrate_dvl_surface(
     let channels = args
         .voyages
         .iter()
-        .map(|v| auvnav_replay::surface::channels(&v.path))
+        .map(|v| auvnav_replay::surface::channels(&v.path, args.compass))
         .collect::<Result<Vec<(bool, bool)>, _>>()?;
     if args.compass
         && let Some((v, _)) = args.voyages.iter().zip(&channels).find(|(_, c)| !c.1)

@@ -36,12 +36,14 @@ pub struct SurfaceRun {
 
 /// Whether the log at `path` is a surface run: DVL and attitude, GNSS fixes, and no IMU sample.
 pub fn is_surface_run(path: &Path) -> Result<bool, ReplayError> {
-    let (imu, attitude) = channels(path)?;
+    let (imu, attitude) = channels(path, false)?;
     Ok(attitude && !imu)
 }
 
-/// Whether the log at `path` has IMU samples, and whether it has attitude samples.
-pub fn channels(path: &Path) -> Result<(bool, bool), ReplayError> {
+/// Whether the log at `path` has IMU samples, and whether it has attitude samples. The read
+/// stops at the first IMU sample unless `attitude_beside_imu` asks whether an attitude channel
+/// is there too (a whole recording is not read for an answer already known).
+pub fn channels(path: &Path, attitude_beside_imu: bool) -> Result<(bool, bool), ReplayError> {
     let mut r = open(path)?;
     let (mut imu, mut attitude) = (false, false);
     while let Some(raw) = r.next_message().map_err(read_error(path))? {
@@ -50,7 +52,7 @@ pub fn channels(path: &Path) -> Result<(bool, bool), ReplayError> {
             Ok(LogMessage::Attitude(_)) => attitude = true,
             _ => {}
         }
-        if imu && attitude {
+        if imu && (attitude || !attitude_beside_imu) {
             break;
         }
     }
