@@ -169,6 +169,26 @@ fn ns(t: f64) -> u64 {
     (t * 1e9).round() as u64
 }
 
+/// The header of an imported log: its producer, the source it was read from, what that source
+/// is (`description`, with its time origin) and the import's counts as JSON.
+fn import_header(
+    producer: &str,
+    source: String,
+    description: impl Into<String>,
+    counts: &impl Serialize,
+) -> LogHeader {
+    let mut header = LogHeader::new(producer, "");
+    header.notes.insert("source".into(), source);
+    header
+        .notes
+        .insert("source.description".into(), description.into());
+    header.notes.insert(
+        "import.counts".into(),
+        serde_json::to_string(counts).unwrap_or_default(),
+    );
+    header
+}
+
 fn note(pairs: &[(&str, &str)]) -> BTreeMap<String, String> {
     pairs
         .iter()

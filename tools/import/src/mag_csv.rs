@@ -129,12 +129,9 @@ pub fn mag_csv_messages(
 pub fn mag_csv(a: &MagCsvOptions) -> Result<MagCsvSummary> {
     use auvnav_shm_schema::MagnetometerV1;
     let (messages, summary) = mag_csv_messages(a)?;
-    let mut header = LogHeader::new("auvnav import mag-csv", "");
-    header
-        .notes
-        .insert("source".into(), a.file.display().to_string());
-    header.notes.insert(
-        "source.description".into(),
+    let header = import_header(
+        "auvnav import mag-csv",
+        a.file.display().to_string(),
         format!(
             "magnetometer CSV: field {}, accelerometer {}; time 0 = first row{}",
             summary.field_unit,
@@ -143,10 +140,7 @@ pub fn mag_csv(a: &MagCsvOptions) -> Result<MagCsvSummary> {
                 .date
                 .map_or(String::new(), |d| format!(" (decimal year {d:.4})"))
         ),
-    );
-    header.notes.insert(
-        "import.counts".into(),
-        serde_json::to_string(&summary).unwrap_or_default(),
+        &summary,
     );
     write_log_atomically(&a.out, &header, |w: &mut LogWriter<_>| {
         w.declare::<ImuSampleV1>(

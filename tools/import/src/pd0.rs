@@ -382,19 +382,12 @@ pub fn pd0(a: &Pd0Options) -> Result<Pd0Summary> {
             summary.vtg
         );
     }
-    let mut header = LogHeader::new("auvnav import pd0", "");
-    header
-        .notes
-        .insert("source".into(), a.file.display().to_string());
-    header.notes.insert(
-        "source.description".into(),
+    let header = import_header(
+        "auvnav import pd0",
+        a.file.display().to_string(),
         "Teledyne RDI PD0 bottom track with GPS (WinRiver NMEA blocks); time 0 = first ensemble \
-         on the DVL's clock"
-            .into(),
-    );
-    header.notes.insert(
-        "import.counts".into(),
-        serde_json::to_string(&summary).unwrap_or_default(),
+         on the DVL's clock",
+        &summary,
     );
     write_log_atomically(&a.out, &header, |w: &mut LogWriter<_>| {
         w.declare::<DvlVelocityV1>(

@@ -510,22 +510,16 @@ pub fn riversurveyor(a: &RiverSurveyorOptions) -> Result<RiverSurveyorSummary> {
             summary.gga_bad_time
         );
     }
-    let mut header = LogHeader::new("auvnav import riversurveyor", "");
-    header
-        .notes
-        .insert("source".into(), a.file.display().to_string());
-    header.notes.insert(
-        "source.description".into(),
+    let header = import_header(
+        "auvnav import riversurveyor",
+        a.file.display().to_string(),
         format!(
             "SonTek RiverSurveyor (serial {}) bottom track, compass and GPS from a RiverSurveyor \
              Live MATLAB export; time 0 = the first sample's start on the ADCP clock; the ADCP \
              clock is UTC + {:.3} s",
             summary.serial_number, summary.adcp_clock_minus_utc_s
         ),
-    );
-    header.notes.insert(
-        "import.counts".into(),
-        serde_json::to_string(&summary).unwrap_or_default(),
+        &summary,
     );
     write_log_atomically(&a.out, &header, |w: &mut LogWriter<_>| {
         w.declare::<GnssFixV1>(

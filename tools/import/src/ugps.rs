@@ -214,20 +214,16 @@ pub fn ugps_messages(input: &Path) -> Result<(Vec<(&'static str, LogMessage)>, U
 pub fn ugps(a: &UgpsOptions) -> Result<UgpsSummary> {
     use auvnav_shm_schema::AcousticRangesV1;
     let (messages, summary) = ugps_messages(&a.input)?;
-    let mut header = LogHeader::new("auvnav import ugps-g2", "");
-    header.notes.insert("source".into(), summary.file.clone());
-    header.notes.insert(
-        "source.description".into(),
+    let header = import_header(
+        "auvnav import ugps-g2",
+        summary.file.clone(),
         format!(
             "Water Linked Underwater GPS G2 acoustic log: per-receiver distances and the system's \
              locator position (x, y, z down relative to the topside); rows repeating the previous \
              update left out; time 0 = Unix time {:.3}",
             summary.start_unix_s
         ),
-    );
-    header.notes.insert(
-        "import.counts".into(),
-        serde_json::to_string(&summary).unwrap_or_default(),
+        &summary,
     );
     write_log_atomically(&a.out, &header, |w: &mut LogWriter<_>| {
         w.declare::<AcousticRangesV1>(
