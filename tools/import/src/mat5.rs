@@ -449,21 +449,10 @@ fn struct_array(
     }
     let mut elements = Vec::with_capacity(count.min(r.remaining() / 8 + 1));
     for _ in 0..count {
-        let mut values = Vec::with_capacity(fields.len());
-        for f in &fields {
-            let (ty, b) = r
-                .element()
-                .map_err(|e| within(&format!("field {f}: "), e))?;
-            if ty != mi::MATRIX {
-                return Err(within(
-                    "",
-                    format!("field {f} is an element of type {ty}, not an array"),
-                ));
-            }
-            let (_, v) =
-                matrix(b, big_endian, depth + 1).map_err(|e| within(&format!("field {f}: "), e))?;
-            values.push(v);
-        }
+        let values = fields
+            .iter()
+            .map(|f| nested(r, big_endian, depth, &format!("field {f}"), within))
+            .collect::<Result<Vec<_>, _>>()?;
         elements.push(values);
     }
     Ok(MatValue::Struct {
@@ -484,13 +473,30 @@ fn cell_array(
 ) -> Result<MatValue, String> {
     let mut items = Vec::with_capacity(count.min(r.remaining() / 8 + 1));
     for i in 0..count {
-        let (ty, b) = r.element().map_err(|e| within(&format!("cell {i}: "), e))?;
-        if ty != mi::MATRIX {
-            return Err(within("", format!("cell {i} is an element of type {ty}")));
-        }
-        items.push(matrix(b, big_endian, depth + 1)?.1);
+        items.push(nested(r, big_endian, depth, &format!("cell {i}"), within)?);
     }
     Ok(MatValue::Cell { dims, items })
+}
+
+/// The next element of `r` as an array nested in a struct or a cell (`what` names it in errors:
+/// `field x`, `cell 3`).
+fn nested(
+    r: &mut Reader,
+    big_endian: bool,
+    depth: usize,
+    what: &str,
+    within: &dyn Fn(&str, String) -> String,
+) -> Result<MatValue, String> {
+    let (ty, b) = r.element().map_err(|e| within(&format!("{what}: "), e))?;
+    if ty != mi::MATRIX {
+        return Err(within(
+            "",
+            format!("{what} is an element of type {ty}, not an array"),
+        ));
+    }
+    matrix(b, big_endian, depth + 1)
+        .map(|(_, v)| v)
+        .map_err(|e| within(&format!("{what}: "), e))
 }
 
 #[cfg(test)]
