@@ -98,6 +98,32 @@ pub(crate) fn north_east_of(fixes: impl Iterator<Item = (f64, f64, f64)>) -> Vec
         .collect()
 }
 
+/// A surface vessel's GPS reference record: position (latitude, longitude deg) and height
+/// interpolated between fixes, velocity over ground (north, east; vertical 0), the attitude
+/// its own sensor gives (roll, pitch, heading rad), rates unknown (NaN).
+pub(crate) fn surface_reference(
+    host_time_ns: u64,
+    sequence: u64,
+    (latitude_deg, longitude_deg): (f64, f64),
+    height_m: f64,
+    (vn, ve): (f64, f64),
+    euler_rad: [f64; 3],
+) -> TruthStateV1 {
+    let q = UnitQuaternion::from_euler_angles(euler_rad[0], euler_rad[1], euler_rad[2]);
+    TruthStateV1 {
+        host_time_ns,
+        sequence,
+        latitude_rad: latitude_deg.to_radians(),
+        longitude_rad: longitude_deg.to_radians(),
+        height_m,
+        velocity_ned_m_s: [vn, ve, 0.0],
+        quaternion_body_to_ned: [q.w, q.i, q.j, q.k],
+        euler_rad,
+        angular_rate_rad_s: [f64::NAN; 3],
+        specific_force_m_s2: [f64::NAN; 3],
+    }
+}
+
 /// Linear interpolation of `s` at `t` between samples at most `max_gap` s apart.
 pub(crate) fn interpolate_gps(s: &[GpsSample], t: f64, max_gap: f64) -> Option<(f64, f64)> {
     let i = s.partition_point(|x| x.0 <= t);
@@ -255,6 +281,7 @@ pub fn pd0_messages(
     // Local north/east (m) of the fixes around the first one.
     let positions = north_east_of(fixes.iter().map(|f| (f.0, f.1, f.2)));
     let heights: Vec<GpsSample> = fixes.iter().map(|f| (f.0, f.3, 0.0)).collect();
+    let lat_lon_deg: Vec<GpsSample> = fixes.iter().map(|f| (f.0, f.1, f.2)).collect();
     let mut out = Vec::new();
     // Every GGA fix inside the file's time span as a GNSS fix (σ = 1 m × HDOP).
     for (f, q) in fixes.iter().zip(&gga_quality) {
@@ -315,33 +342,14 @@ pub fn pd0_messages(
         } else {
             velocity_from_positions(&positions, *t, 1.0)
         };
-        let (Some((vn, ve)), Some(_), Some((h, _))) = (
+        let (Some(v_ne), Some(lat_lon), Some((h, _))) = (
             vel,
-            interpolate_gps(&positions, *t, 1.5),
+            interpolate_gps(&lat_lon_deg, *t, 1.5),
             interpolate_gps(&heights, *t, 1.5),
         ) else {
             continue;
         };
-        let (lat, lon) = {
-            // Interpolated in degrees between the bracketing fixes.
-            let i = fixes.partition_point(|f| f.0 <= *t);
-            let (a, b) = (&fixes[i - 1], &fixes[i]);
-            let f = (t - a.0) / (b.0 - a.0);
-            (a.1 + (b.1 - a.1) * f, a.2 + (b.2 - a.2) * f)
-        };
-        let q = UnitQuaternion::from_euler_angles(euler[0], euler[1], euler[2]);
-        let truth = TruthStateV1 {
-            host_time_ns: host,
-            sequence: s.reference,
-            latitude_rad: lat.to_radians(),
-            longitude_rad: lon.to_radians(),
-            height_m: h,
-            velocity_ned_m_s: [vn, ve, 0.0],
-            quaternion_body_to_ned: [q.w, q.i, q.j, q.k],
-            euler_rad: euler,
-            angular_rate_rad_s: [f64::NAN; 3],
-            specific_force_m_s2: [f64::NAN; 3],
-        };
+        let truth = surface_reference(host, s.reference, lat_lon, h, v_ne, euler);
         s.reference += 1;
         out.push((host, 0, topic::TRUTH, LogMessage::Truth(truth)));
     }

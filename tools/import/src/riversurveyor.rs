@@ -28,7 +28,10 @@
 #[allow(unused_imports)]
 use super::*;
 use crate::mat5::{MatFile, MatValue};
-use crate::pd0::{GpsSample, GpsVelocity, interpolate_gps, north_east_of, velocity_from_positions};
+use crate::pd0::{
+    GpsSample, GpsVelocity, interpolate_gps, north_east_of, surface_reference,
+    velocity_from_positions,
+};
 
 /// Command-line arguments of `auvnav import riversurveyor`.
 #[derive(Debug, Clone)]
@@ -370,6 +373,7 @@ pub fn riversurveyor_messages(
         out.push((fix.host_time_ns, 0, topic::GNSS, LogMessage::Gnss(fix)));
     }
     let heights: Vec<GpsSample> = fixes.iter().map(|f| (f.0, f.3, 0.0)).collect();
+    let lat_lon_deg: Vec<GpsSample> = fixes.iter().map(|f| (f.0, f.1, f.2)).collect();
     let mut last = f64::NEG_INFINITY;
     for row in 0..n {
         let start = time[row] - t0;
@@ -457,32 +461,15 @@ pub fn riversurveyor_messages(
             velocity_from_positions(&positions, t, interval / 2.0)
         };
         let max_gap = 1.5 * interval.max(0.2);
-        let (Some((vn, ve)), Some(_), Some((h, _))) = (
+        let (Some(v_ne), Some(lat_lon), Some((h, _))) = (
             vel,
-            interpolate_gps(&positions, t, max_gap),
+            interpolate_gps(&lat_lon_deg, t, max_gap),
             interpolate_gps(&heights, t, max_gap),
         ) else {
             s.no_reference += 1;
             continue;
         };
-        let (lat, lon) = {
-            let i = fixes.partition_point(|f| f.0 <= t);
-            let (a, b) = (&fixes[i - 1], &fixes[i]);
-            let f = (t - a.0) / (b.0 - a.0);
-            (a.1 + (b.1 - a.1) * f, a.2 + (b.2 - a.2) * f)
-        };
-        let truth = TruthStateV1 {
-            host_time_ns: host,
-            sequence: s.reference,
-            latitude_rad: lat.to_radians(),
-            longitude_rad: lon.to_radians(),
-            height_m: h,
-            velocity_ned_m_s: [vn, ve, 0.0],
-            quaternion_body_to_ned: [q.w, q.i, q.j, q.k],
-            euler_rad: [phi, theta, psi],
-            angular_rate_rad_s: [f64::NAN; 3],
-            specific_force_m_s2: [f64::NAN; 3],
-        };
+        let truth = surface_reference(host, s.reference, lat_lon, h, v_ne, [phi, theta, psi]);
         s.reference += 1;
         out.push((host, 3, topic::TRUTH, LogMessage::Truth(truth)));
     }
