@@ -201,3 +201,75 @@ fn bad_input_gives_named_errors_or_constrained_fits() {
     assert!(h.after_rms_deg < 1.0, "{h:?}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The default (`auto`, chosen on held-out blocks) on the S-MAG setting: hard and soft iron hidden
+/// in AUV-like attitudes (roll and pitch within ±20°), other seeds and magnitudes than the tests
+/// above. It must choose a model with soft iron, and recover both within their stated
+/// uncertainties (3σ of the block-to-block spread, floored at the simulated noise's reach).
+#[test]
+fn the_default_recovers_hidden_hard_and_soft_iron_with_limited_attitude() {
+    let cases: [([f64; 3], [f64; 9], f64, f64); 2] = [
+        (
+            [14.0, 5.5, -9.0],
+            [1.05, -0.03, 0.02, -0.03, 0.97, 0.04, 0.02, 0.04, 1.06],
+            50.0,
+            62.0,
+        ),
+        (
+            [-6.0, -13.0, 4.0],
+            [0.93, 0.05, -0.01, 0.05, 1.04, 0.02, -0.01, 0.02, 0.99],
+            45.0,
+            -48.0,
+        ),
+    ];
+    for (k, (hard, soft, f, dip)) in cases.iter().enumerate() {
+        let e = effects(*hard, *soft, *f, *dip);
+        let d = samples(
+            &e,
+            Attitudes::Limited { tilt_deg: 20.0 },
+            3000,
+            0.02,
+            80 + k as u64,
+        );
+        let o = run_method(
+            MagMethod::Auto,
+            &d,
+            &reference(*f, *dip),
+            &Thresholds::default(),
+            SwarmSettings::default(),
+            None,
+        )
+        .expect("fit");
+        let sel = o.selection.as_ref().expect("selection");
+        let spread = sel.parameter_spread.as_ref().expect("parameter spread");
+        eprintln!(
+            "case {k}: chosen {:?} ({}), hard iron {:?} ± {:?}",
+            sel.chosen, sel.reason, o.calibration.hard_iron_ut, spread.hard_iron_ut
+        );
+        assert!(
+            matches!(o.model, auvnav_tools::calibrate::mag::fit::Model::Full),
+            "case {k}: soft iron is hidden, the chosen model must hold it: {:?}",
+            o.model
+        );
+        for (i, truth) in hard.iter().enumerate() {
+            let err = o.calibration.hard_iron_ut[i] - truth;
+            let sigma = spread.hard_iron_ut[i].max(0.01);
+            assert!(
+                err.abs() <= 3.0 * sigma,
+                "case {k} axis {i}: {err} uT vs σ {sigma}"
+            );
+        }
+        let s = o.calibration.soft_iron().expect("invertible");
+        let scale = s.determinant().cbrt();
+        let truth = nalgebra::Matrix3::from_row_slice(soft);
+        let truth_scale = truth.determinant().cbrt();
+        for i in 0..9 {
+            let err = s[(i / 3, i % 3)] / scale - truth[(i / 3, i % 3)] / truth_scale;
+            let sigma = spread.soft_iron[i].max(1e-4);
+            assert!(
+                err.abs() <= 3.0 * sigma,
+                "case {k} S[{i}]: {err} vs σ {sigma}"
+            );
+        }
+    }
+}

@@ -360,14 +360,21 @@ enum BenchWhat {
         #[arg(long)]
         json: bool,
     },
-    /// Wall time of the magnetometer calibration methods (ellipsoid, seed, lm) on 10 000
-    /// simulated samples, full and AUV-like attitude coverage, with their errors.
+    /// Wall time of the magnetometer calibration methods (auto, lm, sphere, ellipsoid, seed) on
+    /// 10 000 simulated samples, full and AUV-like attitude coverage, with their errors; with
+    /// --recording, every method on measured recordings, scored on the held-out rest.
     Mag {
         #[arg(long, default_value_t = 10_000)]
         samples: usize,
         /// Repetitions (the median is reported).
         #[arg(long, default_value_t = 3)]
         repeat: usize,
+        /// Measured recordings (CSV or .mcap, as `calibrate mag` reads them); repeatable.
+        #[arg(long)]
+        recording: Vec<std::path::PathBuf>,
+        /// Fit fractions of each recording (the rest is held out).
+        #[arg(long, value_delimiter = ',', default_values_t = [0.3, 0.5, 0.7])]
+        fit_fraction: Vec<f64>,
         #[arg(long)]
         json: bool,
     },
@@ -803,8 +810,10 @@ fn main() -> std::process::ExitCode {
             BenchWhat::Mag {
                 samples,
                 repeat,
+                recording,
+                fit_fraction,
                 json,
-            } => auvnav_tools::bench::mag(samples, repeat, json),
+            } => auvnav_tools::bench::mag(samples, repeat, &recording, &fit_fraction, json),
             BenchWhat::Align { runs, json } => auvnav_tools::bench::align(runs, json),
             BenchWhat::Usbl { seconds, json } => auvnav_tools::bench::usbl(seconds, json),
             BenchWhat::E2e {

@@ -27,9 +27,9 @@ pub struct CalibrateMagOptions {
     /// Recordings: auvnav logs (.mcap; the magnetometer topic, the IMU for gravity) or CSV files.
     #[cfg_attr(feature = "clap", arg(required = true))]
     pub inputs: Vec<PathBuf>,
-    #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = MagMethod::Lm))]
+    #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = MagMethod::Auto))]
     pub method: MagMethod,
-    /// Model of the lm method.
+    /// Model of the lm method (with the auto method, a model other than auto means lm in it).
     #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = ModelChoice::Auto))]
     pub model: ModelChoice,
     /// Fraction of each recording (from its start) used for the fit; the rest evaluates it.
@@ -73,7 +73,7 @@ impl CalibrateMagOptions {
     pub fn new(inputs: Vec<PathBuf>) -> Self {
         CalibrateMagOptions {
             inputs,
-            method: MagMethod::Lm,
+            method: MagMethod::Auto,
             model: ModelChoice::Auto,
             fit_fraction: 0.5,
             field_ut: None,
@@ -137,6 +137,10 @@ pub struct MagReport {
     pub condition_number: Option<f64>,
     pub residual_rms: Option<f64>,
     pub swarm_evaluations: Option<usize>,
+    /// The constraint weights' estimated noise model (weighted fits).
+    pub noise_model: Option<super::weights::NoiseModel>,
+    /// Every candidate scored on held-out blocks of the fit part (auto method).
+    pub selection: Option<super::select::Selection>,
     pub coverage_raw: Coverage,
     pub coverage_calibrated: Coverage,
     pub spreads: SpreadTable,
@@ -230,8 +234,39 @@ pub fn heading_check(samples: &[MagSample], c: &Calibration) -> Option<HeadingCh
     })
 }
 
-/// The effects of a calibration: `mag.hard_iron` (µT) and `mag.soft_iron` (S = K⁻¹).
-fn effects(c: &Calibration, lm: Option<&fit::LmFit>, model: Model) -> Vec<EffectValue> {
+/// The effects of a calibration: `mag.hard_iron` (µT) and `mag.soft_iron` (S = K⁻¹), with the
+/// block-to-block spread as the standard deviation when the selection measured one (it holds
+/// what coloured residuals do to the estimate), else the fit's own.
+fn effects(
+    c: &Calibration,
+    lm: Option<&fit::LmFit>,
+    model: Model,
+    spread: Option<&super::select::ParameterSpread>,
+) -> Vec<EffectValue> {
+    if let Some(p) = spread {
+        let s = c.soft_iron().unwrap_or_else(nalgebra::Matrix3::identity);
+        let fixed = |i: usize| match model {
+            Model::Full => false,
+            Model::Diagonal => !i.is_multiple_of(4),
+            _ => true,
+        };
+        return vec![
+            EffectValue {
+                name: "mag.hard_iron",
+                value: c.hard_iron_ut.iter().copied().collect(),
+                std: p.hard_iron_ut.iter().map(|v| Some(*v)).collect(),
+                unit: "uT",
+            },
+            EffectValue {
+                name: "mag.soft_iron",
+                value: s.transpose().iter().copied().collect(),
+                std: (0..9)
+                    .map(|i| (!fixed(i)).then_some(p.soft_iron[i]))
+                    .collect(),
+                unit: "1",
+            },
+        ];
+    }
     let s = c.soft_iron().unwrap_or_else(nalgebra::Matrix3::identity);
     let names = lm.map(|f| fit::parameter_names(f.model));
     let std_of = |name: &str| -> Option<f64> {
@@ -358,11 +393,32 @@ pub fn calibrate_mag(a: &CalibrateMagOptions) -> Result<MagReport, CalibrationEr
     let lm = outcome.lm.as_ref();
     let fitted_dip = c.lambda.map(|l| (-l).clamp(-1.0, 1.0).asin().to_degrees());
     let mut verdict = Vec::new();
-    let mut status = if outcome.model == Model::Full {
-        "calibrated"
-    } else {
-        "constrained"
+    let mut status = match outcome.model {
+        Model::Full => "calibrated",
+        Model::None => "undetermined",
+        _ => "constrained",
     };
+    if outcome.model == Model::None {
+        verdict.push(
+            "no calibration: no fit scored better on held-out blocks of the recording than the \
+             readings as they are (see the selection table); nothing is written"
+                .into(),
+        );
+    }
+    let spread = outcome
+        .selection
+        .as_ref()
+        .and_then(|s| s.parameter_spread.as_ref());
+    let undetermined = spread
+        .map(|p| {
+            super::select::undetermined_parameters(
+                p,
+                outcome.model,
+                limits.hard_iron_std_fraction * reference.intensity_ut,
+                limits.soft_iron_std,
+            )
+        })
+        .unwrap_or_default();
     if outcome
         .reasons
         .iter()
@@ -440,7 +496,8 @@ pub fn calibrate_mag(a: &CalibrateMagOptions) -> Result<MagReport, CalibrationEr
             limits.coverage * 100.0
         ));
     }
-    if verdict.is_empty() || status == "calibrated" || status == "constrained" {
+    verdict.extend(undetermined);
+    if status == "calibrated" || status == "constrained" {
         verdict.insert(
             0,
             format!(
@@ -472,11 +529,13 @@ pub fn calibrate_mag(a: &CalibrateMagOptions) -> Result<MagReport, CalibrationEr
         method: a.method,
         model: outcome.model,
         reasons: outcome.reasons.clone(),
-        effects: effects(&c, lm, outcome.model),
+        effects: effects(&c, lm, outcome.model, spread),
         fitted_dip_deg: fitted_dip,
         condition_number: lm.map(|f| f.condition),
         residual_rms: lm.map(|f| f.residual_rms),
         swarm_evaluations: outcome.evaluations,
+        noise_model: outcome.noise,
+        selection: outcome.selection.clone(),
         coverage_raw: cov_raw,
         coverage_calibrated: cov_cal,
         spreads,

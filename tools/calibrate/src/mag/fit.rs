@@ -23,6 +23,8 @@
 use auvnav_sim::rng::Rng;
 use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, SVector, Vector3};
 
+pub use super::weights::Weights;
+
 pub use auvnav_import::mag::MagSample;
 
 /// A calibration `B = K (h − b)`.
@@ -65,6 +67,9 @@ pub enum Model {
     /// The heading plane: symmetric 2×2 K and the x, y hard iron from the horizontal components
     /// (nearly level data); the z axis is left as read.
     Plane,
+    /// No calibration: the readings as they are (chosen when no fit does better on held-out
+    /// readings; never fitted by Levenberg–Marquardt).
+    None,
 }
 
 impl Model {
@@ -74,6 +79,7 @@ impl Model {
             Model::Diagonal => "hard iron + diagonal scale",
             Model::HardIron => "hard iron only",
             Model::Plane => "heading-plane 2-D (x, y)",
+            Model::None => "no calibration",
         }
     }
 }
@@ -377,6 +383,7 @@ pub fn parameter_names(model: Model) -> &'static [&'static str] {
         Model::Diagonal => &["k11", "k22", "k33", "bx", "by", "bz", "lambda"],
         Model::HardIron => &["scale", "bx", "by", "bz", "lambda"],
         Model::Plane => &["k11", "k22", "k12", "bx", "by"],
+        Model::None => &[],
     }
 }
 
@@ -411,6 +418,7 @@ fn expand(model: Model, p: &[f64]) -> (SVector<f64, 10>, DMatrix<f64>) {
             }
         }
         Model::Plane => unreachable!("the plane model has its own residuals"),
+        Model::None => unreachable!("no calibration has no parameters"),
     }
     (full, t)
 }
@@ -447,16 +455,17 @@ impl Normal {
         }
     }
 
-    fn add(&mut self, row: &[f64; 10], r: f64) {
+    /// Adds one residual `r` with its derivative row and weight `w2` (1/σ²).
+    fn add(&mut self, row: &[f64; 10], r: f64, w2: f64) {
         let n = self.n;
         for a in 0..n {
-            self.jtr[a] += row[a] * r;
-            let ra = row[a];
+            let ra = row[a] * w2;
+            self.jtr[a] += ra * r;
             for (acc, rb) in self.jtj[a][a..n].iter_mut().zip(&row[a..n]) {
                 *acc += ra * rb;
             }
         }
-        self.ssr += r * r;
+        self.ssr += w2 * r * r;
         self.count += 1;
     }
 
@@ -499,12 +508,13 @@ fn symmetric_row(
     ]
 }
 
-/// Normal equations of the model at `p`: (JᵀJ, Jᵀr, Σr², residual count). `units` holds each
-/// sample's unit specific force ([`unit_forces`]).
+/// Normal equations of the model at `p`: (JᵀJ, Jᵀr, Σr², residual count), each residual
+/// weighted by `w`. `units` holds each sample's unit specific force ([`unit_forces`]).
 fn normal_equations(
     model: Model,
     samples: &[MagSample],
     units: &[Option<Vector3<f64>>],
+    w: &Weights,
     field_ut: f64,
     horizontal_ut: f64,
     p: &[f64],
@@ -530,7 +540,7 @@ fn normal_equations(
                 -kb.x * g,
                 -kb.y * g,
             ]);
-            ne.add(&row, r);
+            ne.add(&row, r, w.norm);
         }
         return ne.finish();
     }
@@ -556,7 +566,7 @@ fn normal_equations(
     let k = k_of(&full);
     let b = Vector3::new(full[6], full[7], full[8]);
     let lambda = full[9];
-    for (s, f) in samples.iter().zip(units) {
+    for (i, (s, f)) in samples.iter().zip(units).enumerate() {
         let d = s.field_ut - b;
         let bb = k * d;
         let nb = bb.norm().max(1e-12);
@@ -565,18 +575,23 @@ fn normal_equations(
         ne.add(
             &map(&symmetric_row(&bb, &d, &kb, 1.0 / (nb * field_ut), 0.0)),
             r1,
+            w.norm,
         );
         if let Some(f) = f {
             let r2 = f.dot(&bb) / field_ut - lambda;
             let kf = k.transpose() * f;
-            ne.add(&map(&symmetric_row(f, &d, &kf, 1.0 / field_ut, -1.0)), r2);
+            ne.add(
+                &map(&symmetric_row(f, &d, &kf, 1.0 / field_ut, -1.0)),
+                r2,
+                w.dip_of(i),
+            );
         }
     }
     ne.finish()
 }
 
 /// The calibration of a model's parameter vector.
-fn calibration_of(model: Model, p: &[f64]) -> Calibration {
+pub fn calibration_of(model: Model, p: &[f64]) -> Calibration {
     if model == Model::Plane {
         return Calibration {
             k: Matrix3::new(p[0], p[2], 0.0, p[2], p[1], 0.0, 0.0, 0.0, 1.0),
@@ -612,6 +627,7 @@ fn start_of(model: Model, c: &Calibration, lambda: f64) -> Vec<f64> {
         Model::Diagonal => vec![k[(0, 0)], k[(1, 1)], k[(2, 2)], b.x, b.y, b.z, lambda],
         Model::HardIron => vec![k.diagonal().mean(), b.x, b.y, b.z, lambda],
         Model::Plane => vec![k[(0, 0)], k[(1, 1)], 0.0, b.x, b.y],
+        Model::None => Vec::new(),
     }
 }
 
@@ -627,9 +643,9 @@ pub fn mean_lambda(samples: &[MagSample], field_ut: f64, c: &Calibration) -> f64
     if n > 0 { sum / n as f64 } else { 0.0 }
 }
 
-/// Levenberg–Marquardt on the model's residuals from `start` (R = `field_ut`; the plane model
-/// compares the horizontal components with `horizontal_ut`). With no specific force in any
-/// sample, λ is not estimated (its row is absent and its start value kept).
+/// Levenberg–Marquardt on the model's residuals from `start` with equal weights (R =
+/// `field_ut`; the plane model compares the horizontal components with `horizontal_ut`). With no
+/// specific force in any sample, λ is not estimated (its row is absent and its start value kept).
 pub fn levenberg_marquardt(
     samples: &[MagSample],
     field_ut: f64,
@@ -637,8 +653,30 @@ pub fn levenberg_marquardt(
     model: Model,
     start: &Calibration,
 ) -> Result<LmFit, FitError> {
+    let w = Weights::equal();
+    levenberg_marquardt_weighted(samples, field_ut, horizontal_ut, model, start, &w)
+}
+
+/// [`levenberg_marquardt`] with each residual weighted by `weights` (1/σ², see
+/// [`super::weights`]); the parameters' standard deviations follow from the weights and the
+/// weighted residuals.
+// Long on purpose: the damped Gauss–Newton loop and the covariance of its result share the
+// normal matrix; split, the covariance would have to recompute it.
+pub fn levenberg_marquardt_weighted(
+    samples: &[MagSample],
+    field_ut: f64,
+    horizontal_ut: f64,
+    model: Model,
+    start: &Calibration,
+    weights: &Weights,
+) -> Result<LmFit, FitError> {
     if samples.is_empty() {
         return Err(FitError::Degenerate("no samples".into()));
+    }
+    if model == Model::None {
+        return Err(FitError::Degenerate(
+            "no calibration has no parameters to fit".into(),
+        ));
     }
     let lambda0 = mean_lambda(samples, field_ut, start);
     let mut p = start_of(model, start, lambda0);
@@ -646,7 +684,7 @@ pub fn levenberg_marquardt(
     let has_force = units.iter().any(Option::is_some);
     let np = p.len();
     let (mut jtj, mut jtr, mut ssr, mut m) =
-        normal_equations(model, samples, &units, field_ut, horizontal_ut, &p);
+        normal_equations(model, samples, &units, weights, field_ut, horizontal_ut, &p);
     let mut mu = 1e-3;
     let mut iterations = 0;
     for _ in 0..100 {
@@ -674,8 +712,15 @@ pub fn levenberg_marquardt(
             continue;
         };
         let trial: Vec<f64> = p.iter().zip(step.iter()).map(|(x, d)| x + d).collect();
-        let (j2, r2, s2, m2) =
-            normal_equations(model, samples, &units, field_ut, horizontal_ut, &trial);
+        let (j2, r2, s2, m2) = normal_equations(
+            model,
+            samples,
+            &units,
+            weights,
+            field_ut,
+            horizontal_ut,
+            &trial,
+        );
         if s2.is_finite() && s2 < ssr {
             let gain = (ssr - s2) / ssr.max(1e-300);
             p = trial;

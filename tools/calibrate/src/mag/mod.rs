@@ -10,13 +10,16 @@ pub mod command;
 pub mod fit;
 pub use auvnav_import::mag as input;
 pub mod report;
+pub mod select;
 pub mod simulated;
+pub mod weights;
 
 use fit::{Calibration, FitError, LmFit, MagSample, Model, SwarmSettings};
 use nalgebra::Vector3;
 use serde::Serialize;
 
 pub use command::{CalibrateMagOptions, calibrate_mag};
+pub use weights::weighted_lm;
 
 /// `auvnav calibrate mag` as a function: the calibration, then the files it asks for (the
 /// `[navigation.magnetometer]` table, the report directory).
@@ -37,6 +40,11 @@ pub fn run(a: &CalibrateMagOptions) -> Result<command::MagReport, crate::Calibra
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum MagMethod {
+    /// Every candidate (sphere, ellipsoid, weighted norm + dip in each model, none) scored on
+    /// held-out blocks of the fit part; the best that is not worse than the sphere fit.
+    Auto,
+    /// Hard iron and one scale by the linear sphere fit (the simplest baseline).
+    Sphere,
     /// The 10-coefficient ellipsoid fit, K by Cholesky (the seed's baseline).
     Ellipsoid,
     /// The seed's 13-unknown multi-constraint cost by particle swarm.
@@ -220,6 +228,48 @@ pub struct MethodOutcome {
     pub reasons: Vec<String>,
     /// Swarm evaluations (seed only).
     pub evaluations: Option<usize>,
+    /// The estimated weights' noise model (weighted Levenberg–Marquardt fits).
+    pub noise: Option<weights::NoiseModel>,
+    /// The held-out comparison of every candidate (auto only).
+    pub selection: Option<select::Selection>,
+}
+
+/// The auto method: the held-out selection, then the chosen candidate fitted on every sample.
+fn run_auto(samples: &[MagSample], reference: &ReferenceField) -> Result<MethodOutcome, FitError> {
+    let selection = select::select(samples, reference);
+    let (chosen, mut reasons) = match &selection {
+        Some(s) => (
+            s.chosen,
+            vec![format!("chosen on held-out blocks: {}", s.reason)],
+        ),
+        None => (
+            select::Candidate::Lm(Model::HardIron),
+            vec![format!(
+                "too few readings for {} held-out blocks of {}: the weighted hard-iron fit",
+                select::BLOCKS,
+                select::MIN_BLOCK
+            )],
+        ),
+    };
+    let f = select::fit_candidate(chosen, samples, reference)?;
+    if let Some(l) = &f.lm {
+        reasons.push(format!(
+            "{}: condition {:.2e}, {} iterations",
+            l.model.name(),
+            l.condition,
+            l.iterations
+        ));
+    }
+    Ok(MethodOutcome {
+        method: MagMethod::Auto,
+        calibration: f.calibration,
+        model: chosen.model(),
+        lm: f.lm,
+        reasons,
+        evaluations: None,
+        noise: f.noise,
+        selection,
+    })
 }
 
 /// The largest standard deviation among a fit's soft-iron parameters and among its hard-iron
@@ -253,6 +303,18 @@ pub fn run_method(
 ) -> Result<MethodOutcome, FitError> {
     let r = reference.intensity_ut;
     match method {
+        MagMethod::Auto if forced_model.is_none() => run_auto(samples, reference),
+        MagMethod::Sphere => Ok(MethodOutcome {
+            method,
+            calibration: select::fit_candidate(select::Candidate::Sphere, samples, reference)?
+                .calibration,
+            model: Model::HardIron,
+            lm: None,
+            reasons: vec!["sphere fit: hard iron and one scale, linear least squares".into()],
+            evaluations: None,
+            noise: None,
+            selection: None,
+        }),
         MagMethod::Ellipsoid => Ok(MethodOutcome {
             method,
             calibration: fit::ellipsoid(samples, r)?,
@@ -260,6 +322,8 @@ pub fn run_method(
             lm: None,
             reasons: vec!["ellipsoid fit: all ten quadric coefficients".into()],
             evaluations: None,
+            noise: None,
+            selection: None,
         }),
         MagMethod::Seed => {
             let (c, evaluations) = fit::swarm(samples, r, swarm)?;
@@ -273,9 +337,12 @@ pub fn run_method(
                     swarm.particles, evaluations, swarm.seed
                 )],
                 evaluations: Some(evaluations),
+                noise: None,
+                selection: None,
             })
         }
-        MagMethod::Lm => {
+        // A model given with auto is the lm method in that model.
+        MagMethod::Lm | MagMethod::Auto => {
             let horizontal = reference
                 .inclination_deg
                 .map_or(r, |i| r * i.to_radians().cos());
@@ -298,7 +365,7 @@ pub fn run_method(
                         hard_iron_ut: Vector3::new(mean.x, mean.y, 0.0),
                         lambda: None,
                     };
-                    let f = fit::levenberg_marquardt(samples, r, horizontal, Model::Plane, &start)?;
+                    let (f, noise) = weighted_lm(samples, r, horizontal, Model::Plane, &start)?;
                     return Ok(MethodOutcome {
                         method,
                         calibration: f.calibration,
@@ -309,6 +376,8 @@ pub fn run_method(
                             Model::Plane.name()
                         )],
                         evaluations: None,
+                        noise,
+                        selection: None,
                     });
                 }
                 Err(e) => return Err(e),
@@ -331,13 +400,15 @@ pub fn run_method(
                 None => vec![Model::Full, Model::Diagonal, Model::HardIron, Model::Plane],
             };
             let mut last: Option<LmFit> = None;
+            let mut last_noise = None;
             for (i, model) in order.iter().enumerate() {
                 let from = if *model == Model::Full {
                     &start
                 } else {
                     &sphere_start
                 };
-                let f = fit::levenberg_marquardt(samples, r, horizontal, *model, from)?;
+                let (f, noise) = weighted_lm(samples, r, horizontal, *model, from)?;
+                last_noise = noise;
                 let (k_std, b_std) = std_by_kind(&f);
                 let mut why = Vec::new();
                 if !f.condition.is_finite() || f.condition > limits.condition {
@@ -395,6 +466,8 @@ pub fn run_method(
                 lm: Some(f),
                 reasons,
                 evaluations: None,
+                noise: last_noise,
+                selection: None,
             })
         }
     }

@@ -50,6 +50,43 @@ pub fn text(r: &MagReport) -> String {
     for reason in &r.reasons {
         let _ = writeln!(s, "model: {reason}");
     }
+    if let Some(sel) = &r.selection {
+        let _ = writeln!(
+            s,
+            "held-out blocks ({} of {} samples, each fitted on the others): candidate, norm \
+             spread, dip spread",
+            sel.blocks, sel.block_samples
+        );
+        for c in &sel.scores {
+            let mark = if c.candidate == sel.chosen { "*" } else { " " };
+            match &c.failed {
+                Some(why) => {
+                    let _ = writeln!(s, " {mark} {:<58} not fitted: {why}", c.name);
+                }
+                None => {
+                    let _ = writeln!(
+                        s,
+                        " {mark} {:<58} {:>8.3} % {:>9} deg",
+                        c.name,
+                        c.norm_spread.unwrap_or(f64::NAN) * 100.0,
+                        opt(c.dip_std_deg, 3)
+                    );
+                }
+            }
+        }
+    }
+    if let Some(m) = &r.noise_model {
+        let _ = writeln!(
+            s,
+            "weights: norm σ {:.3} %, dip σ {} (quasi-static) + {} per g of dynamics, {} of the \
+             samples quasi-static",
+            m.norm_std * 100.0,
+            opt(m.dip_std_static, 4),
+            opt(m.dip_std_per_dynamics, 3),
+            m.quasi_static_fraction
+                .map_or("-".into(), |q| format!("{:.0} %", q * 100.0))
+        );
+    }
     let sp = &r.spreads;
     let row = |name: &str, b: &super::Spreads, a: &super::Spreads| {
         format!(
@@ -93,6 +130,13 @@ pub fn text(r: &MagReport) -> String {
 
 /// The `[navigation.magnetometer]` table of the calibration.
 pub fn config_toml(r: &MagReport) -> anyhow::Result<String> {
+    if r.model == super::fit::Model::None {
+        anyhow::bail!(
+            "nothing to write: no calibration scored better than the raw readings on held-out \
+             blocks ({})",
+            r.verdict.join("; ")
+        );
+    }
     #[derive(serde::Serialize)]
     struct Navigation {
         magnetometer: MagnetometerConfig,

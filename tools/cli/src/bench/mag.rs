@@ -1,12 +1,17 @@
 //! `auvnav bench mag`: wall time of each magnetometer calibration method on 10 000 simulated
 //! samples (full attitude coverage and AUV-like ±15° tilt), median of the repeats, with the
-//! hard-iron error and the held-out heading error of each.
+//! hard-iron error and the held-out heading error of each; with `--recording`, every method on
+//! measured recordings at several fit fractions, scored on the held-out rest by the same metric
+//! code (the comparison against the simplest baseline and the peers).
 
 use crate::calibrate::mag::command::heading_check;
 use crate::calibrate::mag::fit::SwarmSettings;
 use crate::calibrate::mag::simulated::{Attitudes, samples};
-use crate::calibrate::mag::{MagMethod, ReferenceField, Thresholds, run_method};
+use crate::calibrate::mag::{
+    CalibrateMagOptions, MagMethod, ReferenceField, Thresholds, calibrate_mag, run_method,
+};
 use serde::Serialize;
+use std::path::PathBuf;
 
 #[derive(Debug, Serialize)]
 struct Row {
@@ -18,8 +23,142 @@ struct Row {
     heading_error_rms_deg: Option<f64>,
 }
 
-/// Runs the benchmark; prints a table or JSON.
-pub fn mag(samples_n: usize, repeat: usize, json: bool) -> anyhow::Result<()> {
+/// Every method, the default first.
+const METHODS: [MagMethod; 5] = [
+    MagMethod::Auto,
+    MagMethod::Lm,
+    MagMethod::Sphere,
+    MagMethod::Ellipsoid,
+    MagMethod::Seed,
+];
+
+/// One method on one measured recording and split.
+#[derive(Debug, Serialize)]
+struct MeasuredRow {
+    recording: String,
+    fit_fraction: f64,
+    method: MagMethod,
+    model: String,
+    status: String,
+    wall_s: f64,
+    /// Held-out field-norm spread (fraction of the field) and dip standard deviation (deg).
+    norm_spread: Option<f64>,
+    dip_std_deg: Option<f64>,
+    error: Option<String>,
+}
+
+fn measured(recordings: &[PathBuf], fractions: &[f64]) -> Vec<MeasuredRow> {
+    let mut rows = Vec::new();
+    for path in recordings {
+        for &f in fractions {
+            let raw = {
+                let mut a = CalibrateMagOptions::new(vec![path.clone()]);
+                a.fit_fraction = f;
+                a.method = MagMethod::Sphere;
+                calibrate_mag(&a)
+                    .ok()
+                    .and_then(|r| r.spreads.evaluation_before)
+            };
+            rows.push(MeasuredRow {
+                recording: path.display().to_string(),
+                fit_fraction: f,
+                method: MagMethod::Auto,
+                model: "raw readings".into(),
+                status: "-".into(),
+                wall_s: 0.0,
+                norm_spread: raw.map(|s| s.norm_std_fraction),
+                dip_std_deg: raw.and_then(|s| s.dip_std_deg),
+                error: None,
+            });
+            for method in METHODS {
+                let mut a = CalibrateMagOptions::new(vec![path.clone()]);
+                a.fit_fraction = f;
+                a.method = method;
+                let t = std::time::Instant::now();
+                let r = calibrate_mag(&a);
+                let wall_s = t.elapsed().as_secs_f64();
+                let recording = path.display().to_string();
+                rows.push(match r {
+                    Ok(r) => {
+                        let after = r.spreads.evaluation_after;
+                        MeasuredRow {
+                            recording,
+                            fit_fraction: f,
+                            method,
+                            model: format!("{:?}", r.model),
+                            status: r.status.into(),
+                            wall_s,
+                            norm_spread: after.map(|s| s.norm_std_fraction),
+                            dip_std_deg: after.and_then(|s| s.dip_std_deg),
+                            error: None,
+                        }
+                    }
+                    Err(e) => MeasuredRow {
+                        recording,
+                        fit_fraction: f,
+                        method,
+                        model: "-".into(),
+                        status: "refused".into(),
+                        wall_s,
+                        norm_spread: None,
+                        dip_std_deg: None,
+                        error: Some(e.to_string()),
+                    },
+                });
+            }
+        }
+    }
+    rows
+}
+
+fn print_measured(rows: &[MeasuredRow]) {
+    println!(
+        "\n{:<34} {:>5} {:<10} {:<10} {:<13} {:>9} {:>9} {:>9}",
+        "recording (held-out rest)",
+        "fit",
+        "method",
+        "model",
+        "status",
+        "norm %",
+        "dip °",
+        "wall s"
+    );
+    for r in rows {
+        let name = std::path::Path::new(&r.recording)
+            .file_name()
+            .map_or(r.recording.clone(), |n| n.to_string_lossy().into_owned());
+        let method = if r.model == "raw readings" {
+            "raw".to_string()
+        } else {
+            format!("{:?}", r.method).to_lowercase()
+        };
+        println!(
+            "{:<34} {:>5.2} {:<10} {:<10} {:<13} {:>9} {:>9} {:>9.3}{}",
+            name,
+            r.fit_fraction,
+            method,
+            r.model,
+            r.status,
+            r.norm_spread
+                .map_or("-".into(), |v| format!("{:.3}", v * 100.0)),
+            r.dip_std_deg.map_or("-".into(), |v| format!("{v:.3}")),
+            r.wall_s,
+            r.error
+                .as_ref()
+                .map_or(String::new(), |e| format!("  ({e})"))
+        );
+    }
+}
+
+/// Runs the benchmark; prints a table or JSON. With `recordings`, also every method on each at
+/// each of `fractions`.
+pub fn mag(
+    samples_n: usize,
+    repeat: usize,
+    recordings: &[PathBuf],
+    fractions: &[f64],
+    json: bool,
+) -> anyhow::Result<()> {
     let e = auvnav_sim::effects::Effects {
         mag_hard_iron: [9.0, -11.0, 6.5],
         mag_soft_iron: [1.06, 0.03, -0.04, 0.03, 0.95, 0.02, -0.04, 0.02, 1.02],
@@ -41,7 +180,7 @@ pub fn mag(samples_n: usize, repeat: usize, json: bool) -> anyhow::Result<()> {
     ] {
         let fit = samples(&e, att, samples_n, 0.02, 101);
         let eval = samples(&e, att, samples_n / 2, 0.02, 202);
-        for method in [MagMethod::Ellipsoid, MagMethod::Seed, MagMethod::Lm] {
+        for method in METHODS {
             let mut times = Vec::new();
             let mut last = None;
             for _ in 0..repeat.max(1) {
@@ -77,11 +216,13 @@ pub fn mag(samples_n: usize, repeat: usize, json: bool) -> anyhow::Result<()> {
             });
         }
     }
+    let measured_rows = measured(recordings, fractions);
     if json {
         crate::json::print(&serde_json::json!({
             "samples": samples_n,
             "repeat": repeat,
             "rows": rows,
+            "measured": measured_rows,
         }))?;
     } else {
         println!(
@@ -99,6 +240,9 @@ pub fn mag(samples_n: usize, repeat: usize, json: bool) -> anyhow::Result<()> {
                 r.heading_error_rms_deg
                     .map_or("-".into(), |h| format!("{h:.3}"))
             );
+        }
+        if !measured_rows.is_empty() {
+            print_measured(&measured_rows);
         }
     }
     Ok(())
