@@ -241,7 +241,7 @@ fn mag_csv(file: std::path::PathBuf, columns: Option<[&str; 7]>) -> Vec<auvnav_l
             time_column: columns.map(|c| c[0].to_string()),
             mag_columns: columns.and_then(|c| owned(&c[1..4])),
             accel_columns: columns.and_then(|c| owned(&c[4..7])),
-            mag_unit: None,
+            ..Default::default()
         },
         json: false,
     };

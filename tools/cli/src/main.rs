@@ -634,11 +634,12 @@ fn run_import_mag_csv(a: &auvnav_tools::import::MagCsvOptions) -> anyhow::Result
         auvnav_tools::json::print(&s)?;
     } else {
         eprintln!(
-            "{}: {} magnetometer readings ({:.0} s), {} with an accelerometer reading; field {}, accelerometer {}; {} rows skipped, {} out of order",
+            "{}: {} magnetometer readings ({:.0} s), {} with an accelerometer reading, {} with a gyro reading; field {}, accelerometer {}; {} rows skipped, {} out of order",
             a.out.display(),
             s.readings,
             s.duration_s,
             s.with_accelerometer,
+            s.with_gyro,
             s.field_unit,
             s.accelerometer_unit,
             s.skipped,

@@ -16,6 +16,9 @@ pub struct MagSample {
     pub time_s: f64,
     pub field_ut: Vector3<f64>,
     pub specific_force: Option<Vector3<f64>>,
+    /// The angular rate at the same time (rad/s, the same axes), when recorded: the gyro's mean
+    /// over the interval since the previous reading in a log, the row's gyro columns in a CSV.
+    pub angular_rate: Option<Vector3<f64>>,
     /// The true roll, pitch, yaw (rad) when the recording has a reference attitude (simulated
     /// truth): used only to measure heading errors, never by a fit.
     pub truth_rpy: Option<Vector3<f64>>,
@@ -58,6 +61,7 @@ pub struct VerticalBetweenReadings {
     rate_sum: Vector3<f64>,
     rate_n: usize,
     last_dvl: Option<(f64, Vector3<f64>)>,
+    last_rate: Option<Vector3<f64>>,
 }
 
 impl VerticalBetweenReadings {
@@ -91,6 +95,11 @@ impl VerticalBetweenReadings {
         }
     }
 
+    /// The gyro's mean rate over the interval the last [`Self::take`] closed (rad/s).
+    pub fn last_rate(&self) -> Option<Vector3<f64>> {
+        self.last_rate
+    }
+
     /// The vertical at a reading at `t_s` (None without a specific force since the previous
     /// reading); starts the next interval.
     pub fn take(&mut self, t_s: f64) -> Option<Vector3<f64>> {
@@ -101,6 +110,7 @@ impl VerticalBetweenReadings {
             }
             _ => Vector3::zeros(),
         };
+        self.last_rate = (self.rate_n > 0).then(|| self.rate_sum / self.rate_n as f64);
         (self.force_sum, self.force_n) = (Vector3::zeros(), 0);
         (self.rate_sum, self.rate_n) = (Vector3::zeros(), 0);
         f.map(|f| f - centripetal)
@@ -160,6 +170,7 @@ pub fn read_log(path: &Path) -> Result<Recording> {
                     time_s: x.host_time_ns as f64 * 1e-9,
                     field_ut: field,
                     specific_force: last_force,
+                    angular_rate: vertical.last_rate(),
                     truth_rpy: truth,
                 });
             }
@@ -206,6 +217,11 @@ pub struct CsvColumns {
     pub accel: Option<[String; 3]>,
     /// Field unit: "T", "uT", "nT", "gauss", or None to decide from the magnitude.
     pub mag_unit: Option<String>,
+    /// The three gyro columns; default: the first three whose names contain "gyr".
+    pub gyro: Option<[String; 3]>,
+    /// Gyro unit: "rad/s" or "deg/s", or None to decide from the column name ("deg" in it:
+    /// deg/s, else rad/s).
+    pub gyro_unit: Option<String>,
 }
 
 /// The command-line options that choose a CSV file's columns (`auvnav calibrate mag`,
@@ -225,6 +241,13 @@ pub struct CsvColumnOptions {
     /// CSV: the field unit (T, uT, nT, gauss); default: decided from the readings' magnitude.
     #[cfg_attr(feature = "clap", arg(long, ignore_case = true, value_parser = ["T", "uT", "nT", "gauss"]))]
     pub mag_unit: Option<String>,
+    /// CSV: the three gyro columns X,Y,Z (the rotation constraint); default: the first three
+    /// named `…gyr…`.
+    #[cfg_attr(feature = "clap", arg(long, value_delimiter = ','))]
+    pub gyro_columns: Option<Vec<String>>,
+    /// CSV: the gyro unit; default: deg/s when the column name says "deg", else rad/s.
+    #[cfg_attr(feature = "clap", arg(long, value_parser = ["rad/s", "deg/s"]))]
+    pub gyro_unit: Option<String>,
 }
 
 impl CsvColumnOptions {
@@ -245,6 +268,11 @@ impl CsvColumnOptions {
             mag: three(&self.mag_columns, "mag")?,
             accel: three(&self.accel_columns, "accel")?,
             mag_unit: self.mag_unit.clone(),
+            gyro: three(&self.gyro_columns, "gyro")?,
+            gyro_unit: match self.gyro_unit.as_deref() {
+                None | Some("rad/s" | "deg/s") => self.gyro_unit.clone(),
+                Some(u) => bad_option!("--gyro-unit {u:?}: give rad/s or deg/s"),
+            },
         })
     }
 }
@@ -351,6 +379,15 @@ pub fn read_csv(path: &Path, cols: &CsvColumns) -> Result<Recording> {
         Some([a, b, c]) => Some([find(a)?, find(b)?, find(c)?]),
         None => guess3("acc"),
     };
+    let gyro = match &cols.gyro {
+        Some([a, b, c]) => Some([find(a)?, find(b)?, find(c)?]),
+        None => guess3("gyr"),
+    };
+    let in_degrees = match cols.gyro_unit.as_deref() {
+        Some(u) => u == "deg/s",
+        None => gyro.is_some_and(|g| names[g[0]].to_lowercase().contains("deg")),
+    };
+    let gyro_scale = if in_degrees { 1f64.to_radians() } else { 1.0 };
     let time = match &cols.time {
         Some(t) => Some(find(t)?),
         None => names
@@ -379,6 +416,10 @@ pub fn read_csv(path: &Path, cols: &CsvColumns) -> Result<Recording> {
             let v = Vector3::new(num(a[0])?, num(a[1])?, num(a[2])?);
             v.iter().all(|x| x.is_finite()).then_some(v)
         });
+        let w = gyro.and_then(|g| {
+            let v = Vector3::new(num(g[0])?, num(g[1])?, num(g[2])?) * gyro_scale;
+            v.iter().all(|x| x.is_finite()).then_some(v)
+        });
         let t = match time.and_then(|k| f.get(k)) {
             Some(s) => match s.parse::<f64>() {
                 Ok(v) => v,
@@ -397,7 +438,7 @@ pub fn read_csv(path: &Path, cols: &CsvColumns) -> Result<Recording> {
             },
             None => i as f64,
         };
-        raw.push((t, h, a));
+        raw.push((t, h, a, w));
     }
     if raw.is_empty() {
         malformed!(
@@ -406,7 +447,7 @@ pub fn read_csv(path: &Path, cols: &CsvColumns) -> Result<Recording> {
             out.skipped
         );
     }
-    let mut norms: Vec<f64> = raw.iter().map(|(_, h, _)| h.norm()).collect();
+    let mut norms: Vec<f64> = raw.iter().map(|(_, h, _, _)| h.norm()).collect();
     norms.sort_by(f64::total_cmp);
     let median = norms[norms.len() / 2];
     let (scale, note) = match cols.mag_unit.as_deref().map(str::to_lowercase).as_deref() {
@@ -433,13 +474,24 @@ pub fn read_csv(path: &Path, cols: &CsvColumns) -> Result<Recording> {
         }
     };
     out.unit_note = note;
+    // A row's gyro is the rate at its time; a sample's angular rate is the mean since the
+    // previous reading (as a log's is): the trapezoid of the two rows.
+    let mut previous_rate = None;
     out.samples = raw
         .into_iter()
-        .map(|(t, h, a)| MagSample {
-            time_s: t,
-            field_ut: h * scale,
-            specific_force: a,
-            truth_rpy: None,
+        .map(|(t, h, a, w)| {
+            let mean = match (previous_rate, w) {
+                (Some(p), Some(w)) => Some((p + w) / 2.0),
+                _ => w,
+            };
+            previous_rate = w;
+            MagSample {
+                time_s: t,
+                field_ut: h * scale,
+                specific_force: a,
+                angular_rate: mean,
+                truth_rpy: None,
+            }
         })
         .collect();
     Ok(out)
@@ -519,6 +571,8 @@ mod tests {
             mag: None,
             accel: None,
             mag_unit: None,
+            gyro: None,
+            gyro_unit: None,
         };
         let r = read_csv(&p, &cols).expect("read");
         assert_eq!(r.samples.len(), 2, "two good rows");

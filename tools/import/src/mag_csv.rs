@@ -27,6 +27,8 @@ pub struct MagCsvSummary {
     pub readings: usize,
     /// Of them, rows with an accelerometer reading.
     pub with_accelerometer: usize,
+    /// Of them, rows with a gyro reading (rad/s in the log).
+    pub with_gyro: usize,
     /// Rows left out (a magnetometer value missing or not a number, a bad time).
     pub skipped: usize,
     /// Rows whose time does not increase (left out).
@@ -82,6 +84,7 @@ pub fn mag_csv_messages(
     let mut out = Vec::with_capacity(2 * rec.samples.len());
     let mut last_ns: Option<u64> = None;
     let mut last_t = t0;
+    let mut imu_sequence = 0u64;
     for x in &rec.samples {
         let dt = x.time_s - t0;
         if dt.is_nan() || dt < 0.0 || last_ns.is_some_and(|l| ns_of(dt) <= l) {
@@ -93,19 +96,29 @@ pub fn mag_csv_messages(
         last_t = x.time_s;
         last_ns = Some(host);
         s.readings += 1;
-        if let Some(f) = x.specific_force {
-            s.with_accelerometer += 1;
+        if x.specific_force.is_some() || x.angular_rate.is_some() {
+            let mut status = 0;
+            if x.specific_force.is_some() {
+                s.with_accelerometer += 1;
+                status |= ImuSampleV1::STATUS_ACCEL_VALID;
+            }
+            if x.angular_rate.is_some() {
+                s.with_gyro += 1;
+                status |= ImuSampleV1::STATUS_GYRO_VALID;
+            }
+            imu_sequence += 1;
             out.push((
                 topic::IMU,
                 LogMessage::Imu(ImuSampleV1 {
                     host_time_ns: host,
                     device_time_ns: host,
-                    sequence: s.with_accelerometer as u64,
-                    angular: [0.0; 3],
-                    specific: (f * accel_scale).into(),
+                    sequence: imu_sequence,
+                    // Rates (rad/s, m/s²): the increments flag is not set.
+                    angular: x.angular_rate.unwrap_or_default().into(),
+                    specific: (x.specific_force.unwrap_or_default() * accel_scale).into(),
                     interval_s: interval,
                     temperature_c: 0.0,
-                    status: ImuSampleV1::STATUS_ACCEL_VALID,
+                    status,
                 }),
             ));
         }

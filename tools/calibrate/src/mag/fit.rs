@@ -825,6 +825,7 @@ mod tests {
                     time_s: i as f64,
                     field_ut: s * bb + b,
                     specific_force: Some(c.transpose() * Vector3::new(0.0, 0.0, -9.8)),
+                    angular_rate: None,
                     truth_rpy: None,
                 }
             })

@@ -8,6 +8,7 @@
 
 pub mod command;
 pub mod fit;
+pub mod gyro;
 pub use auvnav_import::mag as input;
 pub mod report;
 pub mod select;
@@ -488,12 +489,14 @@ mod tests {
                 time_s: 0.0,
                 field_ut: 50.0 * Vector3::new(b.cos() * a.cos(), b.cos() * a.sin(), b.sin()),
                 specific_force: None,
+                angular_rate: None,
                 truth_rpy: None,
             });
             ring.push(MagSample {
                 time_s: 0.0,
                 field_ut: Vector3::new(25.0 * a.cos(), 25.0 * a.sin(), 43.0),
                 specific_force: Some(Vector3::new(0.0, 0.0, -9.8)),
+                angular_rate: None,
                 truth_rpy: None,
             });
         }

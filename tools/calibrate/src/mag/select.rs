@@ -38,18 +38,27 @@ pub enum Candidate {
     Ellipsoid,
     /// The weighted two-constraint Levenberg–Marquardt fit in one model.
     Lm(Model),
+    /// Hard iron from the rotation constraint (gyro), one scale from the field's magnitude.
+    Gyro,
 }
 
 impl Candidate {
-    /// Every candidate, simplest first (ties go to the earlier).
-    pub const ALL: [Candidate; 6] = [
-        Candidate::Raw,
-        Candidate::Sphere,
-        Candidate::Lm(Model::HardIron),
-        Candidate::Lm(Model::Diagonal),
-        Candidate::Lm(Model::Full),
-        Candidate::Ellipsoid,
-    ];
+    /// Every candidate, simplest first (ties go to the earlier); the gyro's only when the
+    /// readings carry angular rates.
+    pub fn all(samples: &[MagSample]) -> Vec<Candidate> {
+        let mut v = vec![
+            Candidate::Raw,
+            Candidate::Sphere,
+            Candidate::Lm(Model::HardIron),
+            Candidate::Lm(Model::Diagonal),
+            Candidate::Lm(Model::Full),
+            Candidate::Ellipsoid,
+        ];
+        if super::gyro::has_rates(samples) {
+            v.insert(2, Candidate::Gyro);
+        }
+        v
+    }
 
     pub fn name(self) -> String {
         match self {
@@ -57,6 +66,7 @@ impl Candidate {
             Candidate::Sphere => "sphere fit (hard iron, one scale)".into(),
             Candidate::Ellipsoid => "ellipsoid (10 coefficients)".into(),
             Candidate::Lm(m) => format!("weighted norm + dip, {}", m.name()),
+            Candidate::Gyro => "rotation constraint (gyro): hard iron, one scale".into(),
         }
     }
 
@@ -64,7 +74,7 @@ impl Candidate {
     pub fn model(self) -> Model {
         match self {
             Candidate::Raw => Model::None,
-            Candidate::Sphere => Model::HardIron,
+            Candidate::Sphere | Candidate::Gyro => Model::HardIron,
             Candidate::Ellipsoid => Model::Full,
             Candidate::Lm(m) => m,
         }
@@ -103,6 +113,7 @@ pub fn fit_candidate(
         Candidate::Raw => Ok(plain(Calibration::identity())),
         Candidate::Sphere => Ok(plain(sphere()?)),
         Candidate::Ellipsoid => Ok(plain(fit::ellipsoid(samples, r)?)),
+        Candidate::Gyro => Ok(plain(super::gyro::hard_iron(samples, r)?)),
         Candidate::Lm(model) => {
             let start = match model {
                 Model::Full => fit::ellipsoid(samples, r).or_else(|_| sphere())?,
@@ -245,7 +256,8 @@ pub fn select(samples: &[MagSample], reference: &ReferenceField) -> Option<Selec
         .collect();
     // Every candidate on every fold, in parallel; the results in the candidates' order.
     use rayon::prelude::*;
-    let scored: Vec<(CandidateScore, Vec<Calibration>)> = Candidate::ALL
+    let candidates = Candidate::all(samples);
+    let scored: Vec<(CandidateScore, Vec<Calibration>)> = candidates
         .par_iter()
         .map(|&c| cross_validate(c, samples, reference, &bounds))
         .collect();
@@ -323,7 +335,7 @@ pub fn select(samples: &[MagSample], reference: &ReferenceField) -> Option<Selec
             deg(Some(rd))
         );
     }
-    let k = Candidate::ALL
+    let k = candidates
         .iter()
         .position(|c| *c == chosen.candidate)
         .unwrap_or(0);

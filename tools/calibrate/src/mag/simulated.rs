@@ -85,6 +85,7 @@ pub fn samples(
                 time_s: t,
                 field_ut: Vector3::from(m.field_t) * 1e6,
                 specific_force: Some(f),
+                angular_rate: None,
                 truth_rpy: Some(Vector3::new(roll, pitch, yaw)),
             }
         })

@@ -353,6 +353,7 @@ mod tests {
                 time_s: t,
                 field_ut: Vector3::new(20.0 * a.cos(), 20.0 * a.sin(), 40.0),
                 specific_force: Some(f),
+                angular_rate: None,
                 truth_rpy: None,
             });
         }
