@@ -16,8 +16,7 @@ pub struct MagSample {
     pub time_s: f64,
     pub field_ut: Vector3<f64>,
     pub specific_force: Option<Vector3<f64>>,
-    /// The angular rate at the same time (rad/s, the same axes), when recorded: the gyro's mean
-    /// over the interval since the previous reading in a log, the row's gyro columns in a CSV.
+    /// The gyro's mean rate (rad/s, the same axes) since the previous reading, when recorded.
     pub angular_rate: Option<Vector3<f64>>,
     /// The true roll, pitch, yaw (rad) when the recording has a reference attitude (simulated
     /// truth): used only to measure heading errors, never by a fit.
@@ -219,8 +218,7 @@ pub struct CsvColumns {
     pub mag_unit: Option<String>,
     /// The three gyro columns; default: the first three whose names contain "gyr".
     pub gyro: Option<[String; 3]>,
-    /// Gyro unit: "rad/s" or "deg/s", or None to decide from the column name ("deg" in it:
-    /// deg/s, else rad/s).
+    /// Gyro unit: "rad/s" or "deg/s"; None: deg/s when the column name says "deg", else rad/s.
     pub gyro_unit: Option<String>,
 }
 
@@ -241,8 +239,7 @@ pub struct CsvColumnOptions {
     /// CSV: the field unit (T, uT, nT, gauss); default: decided from the readings' magnitude.
     #[cfg_attr(feature = "clap", arg(long, ignore_case = true, value_parser = ["T", "uT", "nT", "gauss"]))]
     pub mag_unit: Option<String>,
-    /// CSV: the three gyro columns X,Y,Z (the rotation constraint); default: the first three
-    /// named `…gyr…`.
+    /// CSV: the three gyro columns X,Y,Z; default: the first three named `…gyr…`.
     #[cfg_attr(feature = "clap", arg(long, value_delimiter = ','))]
     pub gyro_columns: Option<Vec<String>>,
     /// CSV: the gyro unit; default: deg/s when the column name says "deg", else rad/s.
