@@ -374,8 +374,9 @@ pub fn wake_loop(
     loop {
         match waitset.wait_and_process_once(|_| CallbackProgression::Continue) {
             Ok(WaitSetRunResult::TerminationRequest) => return Ok(()),
-            // Another signal (SIGCONT after a stop, a debugger's) interrupted the wait: a
-            // termination request is reported by the next wait.
+            // SIGTERM or SIGINT came, perhaps followed by another signal (systemd's SIGCONT).
+            Ok(_) if auvnav_shm_schema::bus::termination_signalled() => return Ok(()),
+            // Another signal (SIGCONT after a stop, a debugger's) interrupted the wait.
             Ok(WaitSetRunResult::Interrupt) => continue,
             Ok(_) => {}
             Err(x) => return Err(format!("waiting: {x:?}")),

@@ -11,7 +11,37 @@ use crate::qos::ServiceQos;
 use crate::topic::service_name;
 use iceoryx2::node::NodeWaitFailure;
 use iceoryx2::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
+
+/// Set by SIGTERM or SIGINT and never cleared: a request to stop.
+static TERMINATION: AtomicBool = AtomicBool::new(false);
+
+/// Installs (once per process) a SIGTERM and SIGINT action that sets [`TERMINATION`], chained
+/// before the handler iceoryx2 installed. iceoryx2 keeps only the last signal it caught, and the
+/// processes catch SIGCONT too: `systemctl stop` sends SIGTERM then SIGCONT, and without this flag
+/// the SIGCONT overwrote the SIGTERM before the process looked (a driver never stopped and was
+/// killed at the stop timeout).
+fn watch_termination() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        for sig in [nix::libc::SIGTERM, nix::libc::SIGINT] {
+            // SAFETY: the action stores to an atomic only, which is async-signal-safe.
+            let r = unsafe {
+                signal_hook_registry::register(sig, || TERMINATION.store(true, Ordering::SeqCst))
+            };
+            if let Err(e) = r {
+                tracing::warn!("cannot watch signal {sig} for a stop request: {e}");
+            }
+        }
+    });
+}
+
+/// True once SIGTERM or SIGINT reached the process (after [`Bus::new`]), whatever signals came
+/// after it. Loops that wait on an iceoryx2 WaitSet check it when the wait is interrupted.
+pub fn termination_signalled() -> bool {
+    TERMINATION.load(Ordering::SeqCst)
+}
 
 /// An error of the bus, with the service or node it concerns.
 #[derive(Debug)]
@@ -49,12 +79,13 @@ impl Bus {
             .create::<ipc::Service>()
             .map_err(|e| err(format!("creating node {name:?}"), e))?;
         restrict_global_segment(std::path::Path::new("/dev/shm"));
-        // The first wait installs the signal handlers.
+        // The first wait installs iceoryx2's signal handlers; ours is chained before them.
         let bus = Bus {
             node,
             prefix: prefix.to_string(),
         };
         let _ = bus.termination_requested();
+        watch_termination();
         Ok(bus)
     }
 
@@ -63,13 +94,15 @@ impl Bus {
         &self.prefix
     }
 
-    /// True once SIGTERM or SIGINT was received (reported once per signal). Other signals
-    /// (SIGCONT after a stop, a debugger's) interrupt a wait without being a request to stop.
+    /// True once SIGTERM or SIGINT was received, also when another signal came after it. Other
+    /// signals (SIGCONT after a stop, a debugger's) interrupt a wait without being a request to
+    /// stop.
     pub fn termination_requested(&self) -> bool {
-        matches!(
+        let iceoryx = matches!(
             self.node.wait(Duration::ZERO),
             Err(NodeWaitFailure::TerminationRequest)
-        )
+        );
+        iceoryx || termination_signalled()
     }
 
     /// Removes the resources of dead processes (nodes killed without cleanup).

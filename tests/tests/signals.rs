@@ -2,7 +2,9 @@
 //! offered), and a SIGSTOP/SIGCONT pair (a job control `fg`, a debugger, a container runtime),
 //! leave the bridge and the live view running;
 //! SIGTERM then stops them cleanly (status 0). The daemon, drivers and recorder are tried the same
-//! way in `daemon_faults`.
+//! way in `daemon_faults`. A SIGTERM followed at once by SIGCONT — what `systemctl stop` sends —
+//! still stops every process (iceoryx2 keeps only the last signal it saw, and a process that
+//! catches SIGCONT would forget the SIGTERM).
 
 use auvnav_tests::processes::{Proc, TempDir, binary, signal, unique};
 use std::process::Command;
@@ -34,6 +36,99 @@ fn survives_sigcont_and_stops_on_sigterm(mut p: Proc) {
         "{} did not stop cleanly on SIGTERM: {status:?}",
         p.name
     );
+}
+
+/// systemd's stop: SIGTERM, then SIGCONT a moment later — the SIGCONT is handled after the
+/// SIGTERM and before the process looks for it.
+fn stops_on_sigterm_followed_by_sigcont(mut p: Proc) {
+    std::thread::sleep(Duration::from_millis(1500));
+    assert!(
+        matches!(p.child.try_wait(), Ok(None)),
+        "{} did not start",
+        p.name
+    );
+    signal(&p, "-TERM");
+    std::thread::sleep(Duration::from_millis(2));
+    signal(&p, "-CONT");
+    let status = p.wait_for(Duration::from_secs(10));
+    assert!(
+        status.is_some_and(|s| s.success()),
+        "{} lost the SIGTERM that SIGCONT followed: {status:?}",
+        p.name
+    );
+}
+
+fn live_view(tag: &str) -> Proc {
+    let prefix = unique(tag);
+    Proc::spawn(
+        "auvnav-live",
+        Command::new(binary("auvnav-live")).args(["--prefix", &prefix, "--port", "0"]),
+    )
+    .expect("spawn")
+}
+
+#[test]
+fn the_live_view_stops_on_sigterm_then_sigcont() {
+    stops_on_sigterm_followed_by_sigcont(live_view("sigtc"));
+}
+
+#[test]
+fn the_daemon_stops_on_sigterm_then_sigcont() {
+    let dir = TempDir::new("sigtcd");
+    let prefix = unique("sigtcd");
+    let cfg = dir.path().join("auvnavd.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "prefix = \"{prefix}\"\n[initial]\nlatitude_deg = 45.0\nlongitude_deg = 10.0\n\
+             height_m = 0.0\neuler_deg = [0.0, 0.0, 0.0]\n[checkpoint]\npath = \"{}\"\n",
+            dir.path().join("cp.json").display()
+        ),
+    )
+    .expect("config");
+    let p = Proc::spawn(
+        "auvnavd",
+        Command::new(binary("auvnavd")).arg("--config").arg(&cfg),
+    )
+    .expect("spawn");
+    stops_on_sigterm_followed_by_sigcont(p);
+}
+
+#[test]
+fn the_recorder_stops_on_sigterm_then_sigcont() {
+    let dir = TempDir::new("sigtcr");
+    let prefix = unique("sigtcr");
+    let out = dir.path().join("record.mcap");
+    let p = Proc::spawn(
+        "auvnav record",
+        Command::new(binary("auvnav"))
+            .args(["record", "--prefix", &prefix, "--out"])
+            .arg(&out),
+    )
+    .expect("spawn");
+    stops_on_sigterm_followed_by_sigcont(p);
+}
+
+/// A serial driver whose device does not exist: it retries opening it, and stops on request.
+#[test]
+fn a_driver_stops_on_sigterm_then_sigcont() {
+    let dir = TempDir::new("sigtcv");
+    let prefix = unique("sigtcv");
+    let cfg = dir.path().join("imu.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "prefix = \"{prefix}\"\nprotocol = \"kvh1750\"\n[serial]\nport = \"{}\"\n",
+            dir.path().join("no-such-tty").display()
+        ),
+    )
+    .expect("config");
+    let p = Proc::spawn(
+        "auvnav-imu",
+        Command::new(binary("auvnav-imu")).arg("--config").arg(&cfg),
+    )
+    .expect("spawn");
+    stops_on_sigterm_followed_by_sigcont(p);
 }
 
 #[test]

@@ -3,7 +3,9 @@
 //! and health (`crate::service` is the loop itself).
 
 use crate::service::{Batch, Inputs, Outputs, Wake};
-use auvnav_shm_schema::bus::{Bus, BusError, BusPublisher, BusSubscriber, Sequenced};
+use auvnav_shm_schema::bus::{
+    Bus, BusError, BusPublisher, BusSubscriber, Sequenced, termination_signalled,
+};
 use auvnav_shm_schema::clock::monotonic_ns;
 use auvnav_shm_schema::{
     AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1, MagnetometerV1,
@@ -129,9 +131,12 @@ impl Inputs for BusInputs<'_, '_> {
             self.notified = notified;
             return match r {
                 Ok(WaitSetRunResult::TerminationRequest) => Ok(Wake::Stop),
-                // Another signal (SIGCONT after a stop, a debugger's) interrupted the wait: not
-                // a request to stop (SIGTERM/SIGINT are reported by the next wait).
+                // Another signal interrupted the wait: a stop only if SIGTERM or SIGINT came
+                // before it (systemd sends SIGCONT right after SIGTERM).
+                Ok(WaitSetRunResult::Interrupt) if termination_signalled() => Ok(Wake::Stop),
+                // SIGCONT after a stop, a debugger's: not a request to stop.
                 Ok(WaitSetRunResult::Interrupt) => continue,
+                Ok(_) if termination_signalled() => Ok(Wake::Stop),
                 Ok(_) => Ok(Wake::Run),
                 Err(x) => Err(format!("waiting: {x:?}")),
             };
