@@ -130,7 +130,9 @@ fn run(cfg: &LiveConfig, slow: &SlowClientReports) -> Result<(), String> {
     let mut next_health = 0;
     let mut warned = 0u32;
     let mut solutions_mapped = 0u64;
+    bus.ready(&format!("{}: live view on port {}", cfg.name, gate.port));
     let result = auvnav_bridge::wake_loop(&listeners, Duration::from_millis(100), |now| {
+        bus.keep_alive();
         for s in &mut served {
             loop {
                 let (host_ns, bytes) = match s.port.next_bytes() {

@@ -338,7 +338,14 @@ fn run(cfg: &BridgeConfig) -> Result<(), String> {
     let health_ns = (cfg.health_period_s * 1e9) as u64;
     let mut next_health = 0;
     let mut warned = 0u32;
+    bus.ready(&format!(
+        "{}: {} exports, {} imports",
+        cfg.name,
+        exports.len(),
+        imports.len()
+    ));
     let result = auvnav_bridge::wake_loop(&listeners, Duration::from_millis(tick), |now| {
+        bus.keep_alive();
         for ex in &mut exports {
             loop {
                 let bytes = match ex.port.next_bytes() {

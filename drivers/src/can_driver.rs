@@ -330,6 +330,7 @@ pub fn run_with_source(
     let mut next_health = 0;
     let mut timeouts = 0;
     let mut state = ProcessState::Starting;
+    bus.ready(&format!("{}: reading CAN frames", cfg.name));
     loop {
         if bus.termination_requested() {
             break;

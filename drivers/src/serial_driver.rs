@@ -720,6 +720,7 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
         m.set_name(&name);
         hp.publish(m)
     };
+    bus.ready(&format!("{name}: reading {:?}", cfg.protocol));
     loop {
         if bus.termination_requested() {
             break;

@@ -55,6 +55,13 @@ impl std::fmt::Display for BusError {
 
 impl std::error::Error for BusError {}
 
+impl Drop for Bus {
+    /// The process is leaving the bus: it is stopping.
+    fn drop(&mut self) {
+        self.supervisor.get_mut().stopping();
+    }
+}
+
 fn err(what: impl std::fmt::Display, e: impl std::fmt::Debug) -> BusError {
     BusError(format!("{what}: {e:?}"))
 }
@@ -64,6 +71,8 @@ fn err(what: impl std::fmt::Display, e: impl std::fmt::Debug) -> BusError {
 pub struct Bus {
     node: Node<ipc::Service>,
     prefix: String,
+    /// The service manager (systemd's notify protocol; silent outside systemd).
+    supervisor: std::cell::RefCell<crate::supervisor::Supervisor>,
 }
 
 impl Bus {
@@ -83,6 +92,7 @@ impl Bus {
         let bus = Bus {
             node,
             prefix: prefix.to_string(),
+            supervisor: std::cell::RefCell::new(crate::supervisor::Supervisor::from_env()),
         };
         let _ = bus.termination_requested();
         watch_termination();
@@ -97,12 +107,32 @@ impl Bus {
     /// True once SIGTERM or SIGINT was received, also when another signal came after it. Other
     /// signals (SIGCONT after a stop, a debugger's) interrupt a wait without being a request to
     /// stop.
+    /// Every call is also a turn of the caller's loop: the service manager's keep-alive is sent
+    /// from here when one is due ([`Bus::keep_alive`]).
     pub fn termination_requested(&self) -> bool {
+        self.keep_alive();
         let iceoryx = matches!(
             self.node.wait(Duration::ZERO),
             Err(NodeWaitFailure::TerminationRequest)
         );
         iceoryx || termination_signalled()
+    }
+
+    /// Tells the service manager the process is up (the configuration read, the bus open,
+    /// its ports created), with what it is doing.
+    pub fn ready(&self, status: &str) {
+        self.supervisor.borrow_mut().ready(status);
+    }
+
+    /// A turn of the process's main loop: a watchdog keep-alive when one is due. Call it from the
+    /// loop itself, never from a helper thread (a hung loop must stop the keep-alives).
+    pub fn keep_alive(&self) {
+        self.supervisor.borrow_mut().alive();
+    }
+
+    /// What the process is doing, for `systemctl status` (sent when it changes).
+    pub fn status(&self, status: &str) {
+        self.supervisor.borrow_mut().status(status);
     }
 
     /// Removes the resources of dead processes (nodes killed without cleanup).

@@ -39,6 +39,8 @@ pub mod logging;
 pub mod qos;
 pub mod sensor;
 pub mod stage_times;
+#[cfg(feature = "bus")]
+pub mod supervisor;
 pub mod topic;
 
 pub use bytemuck::{Pod, Zeroable};

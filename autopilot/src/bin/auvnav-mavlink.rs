@@ -66,6 +66,7 @@ fn run(cfg: &MavlinkConfig) -> Result<(), String> {
         cfg.system_id,
         cfg.component_id
     );
+    bus.ready(&format!("sending to {}", cfg.address));
     while !bus.termination_requested() {
         let now = elapsed_ns();
         if connection.is_none() && now >= next_attempt {

@@ -103,6 +103,12 @@ pub fn run(cfg: &auvnav_core::config::DaemonConfig) -> Result<crate::service::Su
         guards: &guards,
         notified: [false; TOPICS.len()],
     };
+    // Ready for the service manager: the configuration was read and the bus is open (STOPPING
+    // is sent when the bus is dropped).
+    bus.ready(&format!(
+        "on the bus under {}/; waiting for the IMU",
+        cfg.prefix
+    ));
     crate::service::run(cfg, &mut inputs, &mut outputs)
 }
 
@@ -117,6 +123,13 @@ struct BusInputs<'a, 'g> {
 }
 
 impl Inputs for BusInputs<'_, '_> {
+    fn supervise(&mut self, status: Option<&str>) {
+        self.bus.keep_alive();
+        if let Some(s) = status {
+            self.bus.status(s);
+        }
+    }
+
     fn wait(&mut self) -> Result<Wake, String> {
         loop {
             // Which topics notified: only their listeners are read (one system call each, plus

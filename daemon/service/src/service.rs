@@ -72,6 +72,36 @@ pub trait Inputs {
     fn gaps(&self) -> u64;
     /// Once a second: the transport's housekeeping (the bus removes dead nodes).
     fn housekeeping(&mut self) {}
+    /// Every turn of the loop (the service manager's keep-alive), with what the daemon is doing
+    /// at each health period.
+    fn supervise(&mut self, _status: Option<&str>) {}
+}
+
+/// The daemon's state in a line for the service manager: the mode and which sensors it hears.
+fn status_line(state: ProcessState, session: &Session, watches: &[Watch]) -> String {
+    let mode = match state {
+        ProcessState::Running if session.aligning() => "aligning",
+        ProcessState::Running => "navigating",
+        _ => "waiting for the IMU",
+    };
+    let heard: Vec<&str> = watches
+        .iter()
+        .filter(|w| w.heard && !w.lost)
+        .map(|w| w.name)
+        .collect();
+    let lost: Vec<&str> = watches.iter().filter(|w| w.lost).map(|w| w.name).collect();
+    let mut s = format!(
+        "{mode}; hearing {}",
+        if heard.is_empty() {
+            "nothing".into()
+        } else {
+            heard.join(", ")
+        }
+    );
+    if !lost.is_empty() {
+        s.push_str(&format!("; lost {}", lost.join(", ")));
+    }
+    s
 }
 
 /// Where the loop's results go. A publication that fails returns false (counted).
@@ -88,6 +118,8 @@ struct Watch {
     deadline_ns: u64,
     last_ns: u64,
     lost: bool,
+    /// Whether the sensor has been heard from at all.
+    heard: bool,
 }
 
 impl Watch {
@@ -97,9 +129,11 @@ impl Watch {
             deadline_ns: (deadline_s * 1e9) as u64,
             last_ns: now,
             lost: false,
+            heard: false,
         }
     }
     fn seen(&mut self, now: u64) {
+        self.heard = true;
         if self.lost {
             tracing::info!(sensor = self.name, "auvnavd: {} back", self.name);
             self.lost = false;
@@ -397,6 +431,7 @@ pub fn run<I: Inputs, O: Outputs>(
         }
         let now = inputs.now_ns();
         sink.woke_ns = now;
+        inputs.supervise(None);
         if let Err(x) = inputs.take(&mut batch) {
             break Err(x);
         }
@@ -446,6 +481,7 @@ pub fn run<I: Inputs, O: Outputs>(
             next_flush = now + 1_000_000_000;
         }
         if now >= next_health {
+            inputs.supervise(Some(&status_line(state, &session, &watches)));
             let h = health(cfg, now, &sink.summary, &session, inputs.gaps(), state);
             if let Err(x) = sink.out.health(&h) {
                 break Err(x);

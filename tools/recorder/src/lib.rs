@@ -305,6 +305,11 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
         out.display()
     );
     let mut failed: Option<String> = None;
+    bus.ready(&format!(
+        "recording {} topics to {}",
+        channels.len(),
+        out.display()
+    ));
     'run: loop {
         if bus.termination_requested() {
             break;
