@@ -21,12 +21,9 @@ use std::time::Duration;
     version = auvnav_version::LONG
 )]
 struct Args {
-    /// The live view's TOML configuration (without one: the defaults, loopback port 8765).
-    #[arg(long)]
-    config: Option<String>,
-    /// Check the configuration, print it with defaults filled in, and exit.
-    #[arg(long, value_name = "FILE")]
-    check_config: Option<String>,
+    /// `--config FILE` (without one: the defaults, loopback port 8765), `--check-config [FILE]`.
+    #[command(flatten)]
+    config: auvnav_shm_schema::cli::ConfigArgs,
     /// Bus prefix (overrides the configuration's `prefix`).
     #[arg(long)]
     prefix: Option<String>,
@@ -244,9 +241,18 @@ fn main() -> ExitCode {
             slow.clone().with_filter(foxglove_info).boxed(),
         ));
     }
-    let loaded = match args.check_config.as_ref().or(args.config.as_ref()) {
-        Some(path) => LiveConfig::load(path),
-        None => Ok(LiveConfig::default()),
+    use auvnav_shm_schema::cli::ConfigRequest;
+    let request = match args.config.request() {
+        Ok(r) => r,
+        Err(x) => {
+            tracing::error!("auvnav-live: {x}");
+            return ExitCode::from(2);
+        }
+    };
+    let (loaded, check) = match &request {
+        ConfigRequest::Run(path) => (LiveConfig::load(path), false),
+        ConfigRequest::Check(path) => (LiveConfig::load(path), true),
+        ConfigRequest::Defaults { check } => (Ok(LiveConfig::default()), *check),
     };
     let mut cfg = match loaded {
         Ok(c) => c,
@@ -261,7 +267,7 @@ fn main() -> ExitCode {
     if let Some(p) = args.port {
         cfg.port = p;
     }
-    if args.check_config.is_some() {
+    if check {
         match toml::to_string_pretty(&cfg) {
             Ok(s) => print!("{s}"),
             Err(x) => tracing::error!("auvnav-live: {x}"),

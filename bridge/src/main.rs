@@ -23,12 +23,9 @@ use zenoh::Wait;
     version = auvnav_version::LONG
 )]
 struct Args {
-    /// The bridge's TOML configuration.
-    #[arg(long)]
-    config: Option<String>,
-    /// Check the configuration, print it with defaults filled in, and exit.
-    #[arg(long, value_name = "FILE")]
-    check_config: Option<String>,
+    /// `--config FILE`, `--check-config [FILE]`.
+    #[command(flatten)]
+    config: auvnav_shm_schema::cli::ConfigArgs,
 }
 
 /// One exported topic.
@@ -511,8 +508,15 @@ fn health(
 fn main() -> ExitCode {
     let args = Args::parse();
     auvnav_shm_schema::logging::init();
-    if let Some(path) = &args.check_config {
-        return match BridgeConfig::load(path) {
+    let (path, check) = match args.config.required() {
+        Ok(x) => x,
+        Err(x) => {
+            tracing::error!("auvnav-bridge: {x}");
+            return ExitCode::from(2);
+        }
+    };
+    if check {
+        return match BridgeConfig::load(&path) {
             Ok(cfg) => {
                 match toml::to_string_pretty(&cfg) {
                     Ok(s) => print!("{s}"),
@@ -526,11 +530,7 @@ fn main() -> ExitCode {
             }
         };
     }
-    let Some(path) = &args.config else {
-        tracing::error!("auvnav-bridge: --config FILE is required (or --check-config FILE)");
-        return ExitCode::from(2);
-    };
-    let cfg = match BridgeConfig::load(path) {
+    let cfg = match BridgeConfig::load(&path) {
         Ok(c) => c,
         Err(x) => {
             tracing::error!("auvnav-bridge: {x}");

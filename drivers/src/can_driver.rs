@@ -382,12 +382,9 @@ pub fn run_with_source(
     about = "CAN sensor driver: SocketCAN + DBC to shared memory"
 )]
 pub struct CanDriverArgs {
-    /// The driver's TOML configuration.
-    #[arg(long)]
-    pub config: String,
-    /// Check the configuration and the DBC mapping, print the configuration, and exit.
-    #[arg(long)]
-    pub check_config: bool,
+    /// `--config FILE`; `--check-config [FILE]` also checks the DBC mapping.
+    #[command(flatten)]
+    pub config: auvnav_shm_schema::cli::ConfigArgs,
     /// Read frames from a candump log (`candump -l` format) instead of the interface, at the
     /// log's pace (see --speed), then exit.
     #[arg(long)]
@@ -480,14 +477,21 @@ pub fn main() -> std::process::ExitCode {
     use std::process::ExitCode;
     let args = CanDriverArgs::parse();
     auvnav_shm_schema::logging::init();
-    let (cfg, mut depth) = match load(&args.config) {
+    let (path, check) = match args.config.required() {
         Ok(x) => x,
         Err(e) => {
             tracing::error!("auvnav-can: {e}");
             return ExitCode::from(2);
         }
     };
-    if args.check_config {
+    let (cfg, mut depth) = match load(&path) {
+        Ok(x) => x,
+        Err(e) => {
+            tracing::error!("auvnav-can: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    if check {
         match toml::to_string_pretty(&cfg) {
             Ok(s) => print!("{s}"),
             Err(e) => tracing::error!("auvnav-can: {e}"),

@@ -860,12 +860,9 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
 #[derive(Debug, clap::Parser)]
 #[command(version = auvnav_version::LONG)]
 pub struct SerialDriverArgs {
-    /// The driver's TOML configuration (see docs/drivers.md).
-    #[arg(long)]
-    pub config: String,
-    /// Check the configuration, print it with defaults filled in, and exit.
-    #[arg(long)]
-    pub check_config: bool,
+    /// `--config FILE` (see docs/drivers.md), `--check-config [FILE]`.
+    #[command(flatten)]
+    pub config: auvnav_shm_schema::cli::ConfigArgs,
 }
 
 /// The command line of the serial driver for `class`: `auvnav-dvl`, `auvnav-imu`, `auvnav-usbl`
@@ -906,14 +903,21 @@ pub fn main_for(class: DeviceClass) -> std::process::ExitCode {
         Err(e) => e.exit(),
     };
     auvnav_shm_schema::logging::init();
-    let cfg = match SerialDriverConfig::load(&args.config, class) {
+    let (path, check) = match args.config.required() {
+        Ok(x) => x,
+        Err(e) => {
+            tracing::error!("auvnav-{}: {e}", class.name());
+            return std::process::ExitCode::from(2);
+        }
+    };
+    let cfg = match SerialDriverConfig::load(&path, class) {
         Ok(c) => c,
         Err(e) => {
             tracing::error!("auvnav-{}: {e}", class.name());
             return std::process::ExitCode::from(2);
         }
     };
-    if args.check_config {
+    if check {
         match toml::to_string_pretty(&cfg) {
             Ok(s) => print!("{s}"),
             Err(e) => tracing::error!("auvnav-{}: {e}", class.name()),

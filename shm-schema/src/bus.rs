@@ -66,6 +66,30 @@ fn err(what: impl std::fmt::Display, e: impl std::fmt::Debug) -> BusError {
     BusError(format!("{what}: {e:?}"))
 }
 
+/// The environment variable naming the directory iceoryx2 keeps its node and service files in
+/// (default `/tmp/iceoryx2/`). The units set it to `/run/auvnav/iceoryx2/`, a runtime directory
+/// every bus unit shares, so that each unit keeps a private `/tmp`.
+pub const BUS_ROOT_ENV: &str = "AUVNAV_BUS_ROOT";
+
+/// The bus's root directory from [`BUS_ROOT_ENV`], if set.
+fn bus_root() -> Result<Option<Path>, BusError> {
+    let Some(root) = std::env::var_os(BUS_ROOT_ENV) else {
+        return Ok(None);
+    };
+    let mut root = root.to_string_lossy().into_owned();
+    if !root.starts_with('/') {
+        return Err(BusError(format!(
+            "{BUS_ROOT_ENV}={root:?}: the bus root must be an absolute path"
+        )));
+    }
+    if !root.ends_with('/') {
+        root.push('/');
+    }
+    Path::new_normalized(root.as_bytes())
+        .map(Some)
+        .map_err(|e| err(format!("{BUS_ROOT_ENV}={root:?}"), e))
+}
+
 /// A process's connection to the bus: its iceoryx2 node and the deployment prefix of its service
 /// names.
 pub struct Bus {
@@ -83,8 +107,13 @@ impl Bus {
         let node_name: NodeName = name
             .try_into()
             .map_err(|e| err(format!("node name {name:?}"), e))?;
-        let node = NodeBuilder::new()
-            .name(&node_name)
+        let mut builder = NodeBuilder::new().name(&node_name);
+        if let Some(root) = bus_root()? {
+            let mut config = iceoryx2::config::Config::global_config().clone();
+            config.global.set_root_path(&root);
+            builder = builder.config(&config);
+        }
+        let node = builder
             .create::<ipc::Service>()
             .map_err(|e| err(format!("creating node {name:?}"), e))?;
         restrict_global_segment(std::path::Path::new("/dev/shm"));

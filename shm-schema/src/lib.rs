@@ -33,6 +33,8 @@
 
 #[cfg(feature = "bus")]
 pub mod bus;
+#[cfg(feature = "bus")]
+pub mod cli;
 pub mod clock;
 #[cfg(feature = "bus")]
 pub mod logging;

@@ -84,7 +84,13 @@ pub fn output_path_problem(path: &str) -> Option<String> {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => std::path::Path::new("."),
     };
-    (!parent.is_dir()).then(|| format!("the folder {} does not exist", parent.display()))
+    (!parent.is_dir()).then(|| {
+        format!(
+            "the folder {0} does not exist: create it (`install -d -o auvnav {0}`; under systemd \
+             the daemon's unit creates /var/lib/auvnav, StateDirectory=auvnav) or name another path",
+            parent.display()
+        )
+    })
 }
 
 #[cfg(test)]

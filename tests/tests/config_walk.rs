@@ -299,3 +299,61 @@ fn addresses_paths_and_names_are_checked() {
         assert!(err.contains(key), "{bin}: {what}: {err}");
     }
 }
+
+/// One convention for every on-board program: `--check-config FILE` and `--config FILE
+/// --check-config` both check the file and print the same thing; `--check-config` with neither a
+/// file nor `--config` is a usage error (status 2) that says what is needed, and two different
+/// files are refused.
+#[test]
+fn every_program_accepts_both_check_config_forms() {
+    let dir = TempDir::new("cfgforms");
+    let d = dir.path();
+    let mut seen = std::collections::HashSet::new();
+    for p in programs(d) {
+        if !seen.insert(p.bin) {
+            continue;
+        }
+        let file = d.join(format!("{}.toml", p.bin));
+        std::fs::write(&file, &p.base).expect("write");
+        let mut printed = Vec::new();
+        for form in [check_file as CheckArgs, check_flag as CheckArgs] {
+            let o = Command::new(binary(p.bin))
+                .args(form(&file))
+                .output()
+                .expect("run");
+            assert_eq!(
+                o.status.code(),
+                Some(0),
+                "{} {:?}: {}",
+                p.bin,
+                form(&file),
+                String::from_utf8_lossy(&o.stderr)
+            );
+            printed.push(String::from_utf8_lossy(&o.stdout).into_owned());
+        }
+        assert_eq!(printed[0], printed[1], "{}: the two forms differ", p.bin);
+        let other = d.join("other.toml");
+        std::fs::write(&other, &p.base).expect("write");
+        let o = Command::new(binary(p.bin))
+            .args(["--check-config", &file.display().to_string()])
+            .args(["--config", &other.display().to_string()])
+            .output()
+            .expect("run");
+        assert_eq!(o.status.code(), Some(2), "{}: two files accepted", p.bin);
+        if p.bin == "auvnav-live" {
+            // The live view has defaults: `--check-config` alone prints them.
+            continue;
+        }
+        let o = Command::new(binary(p.bin))
+            .arg("--check-config")
+            .output()
+            .expect("run");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            o.status.code() == Some(2) && err.contains("--config FILE is required"),
+            "{}: --check-config alone: {:?} {err}",
+            p.bin,
+            o.status.code()
+        );
+    }
+}

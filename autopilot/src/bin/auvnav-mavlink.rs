@@ -19,12 +19,10 @@ use std::time::Duration;
     about = "The navigation solution to an autopilot (ArduSub) over MAVLink: ODOMETRY or GPS_INPUT, origin, heartbeat, status"
 )]
 struct Args {
-    /// The TOML configuration (see docs/operations.md and deploy/auvnav-mavlink.toml).
-    #[arg(long)]
-    config: String,
-    /// Check the configuration, print it with defaults filled in, and exit.
-    #[arg(long)]
-    check_config: bool,
+    /// `--config FILE` (see docs/operations.md and deploy/auvnav-mavlink.toml),
+    /// `--check-config [FILE]`.
+    #[command(flatten)]
+    config: auvnav_shm_schema::cli::ConfigArgs,
 }
 
 /// Nanoseconds since the process started (the heartbeat's clock).
@@ -130,14 +128,21 @@ fn main() -> std::process::ExitCode {
     use clap::Parser;
     let args = Args::parse();
     auvnav_shm_schema::logging::init();
-    let cfg = match MavlinkConfig::load(&args.config) {
+    let (path, check) = match args.config.required() {
+        Ok(x) => x,
+        Err(e) => {
+            tracing::error!("auvnav-mavlink: {e}");
+            return std::process::ExitCode::from(2);
+        }
+    };
+    let cfg = match MavlinkConfig::load(&path) {
         Ok(c) => c,
         Err(e) => {
             tracing::error!("auvnav-mavlink: {e}");
             return std::process::ExitCode::from(2);
         }
     };
-    if args.check_config {
+    if check {
         match toml::to_string_pretty(&cfg) {
             Ok(s) => print!("{s}"),
             Err(e) => tracing::error!("auvnav-mavlink: {e}"),

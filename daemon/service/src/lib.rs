@@ -6,12 +6,9 @@
 #[derive(clap::Parser)]
 #[command(name = "auvnavd", about = "auvnav fusion daemon", version = auvnav_version::LONG)]
 pub struct Args {
-    /// The daemon's TOML configuration.
-    #[arg(long)]
-    pub config: Option<String>,
-    /// Check the configuration, print it with defaults filled in, and exit.
-    #[arg(long, value_name = "FILE")]
-    pub check_config: Option<String>,
+    /// `--config FILE`, `--check-config [FILE]`.
+    #[command(flatten)]
+    pub config: auvnav_shm_schema::cli::ConfigArgs,
 }
 
 pub mod bus_io;

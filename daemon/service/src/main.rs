@@ -8,11 +8,28 @@ use auvnav_core::config::DaemonConfig;
 use auvnavd::Args;
 use std::process::ExitCode;
 
-/// Reads and validates the configuration file; errors name the file.
-fn load(path: &str) -> Result<DaemonConfig, String> {
+/// The state folder the daemon's unit creates (`StateDirectory=auvnav`).
+const STATE_DIRECTORY: &str = "/var/lib/auvnav/";
+
+/// Reads and validates the configuration file; errors name the file. A check (`check`) of a
+/// file whose outputs go to the unit's state folder passes on a machine where that folder does
+/// not exist yet (the unit creates it), with a note.
+fn load(path: &str, check: bool) -> Result<DaemonConfig, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("reading {path}: {e}"))?;
     let cfg = DaemonConfig::from_toml(&text).map_err(|e| format!("{path}: {e}"))?;
-    let problems = cfg.path_problems();
+    let mut problems = cfg.path_problems();
+    if check && !std::path::Path::new(STATE_DIRECTORY).is_dir() {
+        problems.retain(|p| {
+            let in_state = p.contains(&format!("\"{STATE_DIRECTORY}"));
+            if in_state {
+                tracing::warn!(
+                    "auvnavd: {path}: {STATE_DIRECTORY} does not exist here; the unit creates it \
+                     (StateDirectory=auvnav)"
+                );
+            }
+            !in_state
+        });
+    }
     if problems.is_empty() {
         Ok(cfg)
     } else {
@@ -24,8 +41,15 @@ fn main() -> ExitCode {
     use clap::Parser;
     let args = Args::parse();
     auvnav_shm_schema::logging::init();
-    if let Some(path) = &args.check_config {
-        return match load(path) {
+    let (path, check) = match args.config.required() {
+        Ok(x) => x,
+        Err(x) => {
+            tracing::error!("auvnavd: {x}");
+            return ExitCode::from(2);
+        }
+    };
+    if check {
+        return match load(&path, true) {
             Ok(cfg) => {
                 match toml::to_string_pretty(&cfg) {
                     Ok(s) => print!("{s}"),
@@ -39,11 +63,7 @@ fn main() -> ExitCode {
             }
         };
     }
-    let Some(path) = &args.config else {
-        tracing::error!("auvnavd: --config FILE is required (or --check-config FILE)");
-        return ExitCode::from(2);
-    };
-    let cfg = match load(path) {
+    let cfg = match load(&path, false) {
         Ok(c) => c,
         Err(x) => {
             tracing::error!("auvnavd: {x}");

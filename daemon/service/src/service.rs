@@ -79,10 +79,17 @@ pub trait Inputs {
 
 /// The daemon's state in a line for the service manager: the mode and which sensors it hears.
 fn status_line(state: ProcessState, session: &Session, watches: &[Watch]) -> String {
-    let mode = match state {
-        ProcessState::Running if session.aligning() => "aligning",
-        ProcessState::Running => "navigating",
-        _ => "waiting for the IMU",
+    let imu_heard = watches
+        .iter()
+        .any(|w| w.name == "imu" && w.heard && !w.lost);
+    let mode = if session.aligning() {
+        "aligning"
+    } else if state == ProcessState::Running {
+        "navigating"
+    } else if imu_heard {
+        "starting"
+    } else {
+        "waiting for the IMU"
     };
     let heard: Vec<&str> = watches
         .iter()
