@@ -23,7 +23,7 @@ use std::time::Duration;
 struct Args {
     /// `--config FILE` (without one: the defaults, loopback port 8765), `--check-config [FILE]`.
     #[command(flatten)]
-    config: auvnav_shm_schema::cli::ConfigArgs,
+    config: auvnav_version::cli::ConfigArgs,
     /// Bus prefix (overrides the configuration's `prefix`).
     #[arg(long)]
     prefix: Option<String>,
@@ -241,7 +241,7 @@ fn main() -> ExitCode {
             slow.clone().with_filter(foxglove_info).boxed(),
         ));
     }
-    use auvnav_shm_schema::cli::ConfigRequest;
+    use auvnav_version::cli::ConfigRequest;
     let request = match args.config.request() {
         Ok(r) => r,
         Err(x) => {

@@ -25,7 +25,7 @@ use zenoh::Wait;
 struct Args {
     /// `--config FILE`, `--check-config [FILE]`.
     #[command(flatten)]
-    config: auvnav_shm_schema::cli::ConfigArgs,
+    config: auvnav_version::cli::ConfigArgs,
 }
 
 /// One exported topic.

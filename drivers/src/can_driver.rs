@@ -384,7 +384,7 @@ pub fn run_with_source(
 pub struct CanDriverArgs {
     /// `--config FILE`; `--check-config [FILE]` also checks the DBC mapping.
     #[command(flatten)]
-    pub config: auvnav_shm_schema::cli::ConfigArgs,
+    pub config: auvnav_version::cli::ConfigArgs,
     /// Read frames from a candump log (`candump -l` format) instead of the interface, at the
     /// log's pace (see --speed), then exit.
     #[arg(long)]

@@ -862,7 +862,7 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
 pub struct SerialDriverArgs {
     /// `--config FILE` (see docs/drivers.md), `--check-config [FILE]`.
     #[command(flatten)]
-    pub config: auvnav_shm_schema::cli::ConfigArgs,
+    pub config: auvnav_version::cli::ConfigArgs,
 }
 
 /// The command line of the serial driver for `class`: `auvnav-dvl`, `auvnav-imu`, `auvnav-usbl`

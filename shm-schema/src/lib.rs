@@ -33,8 +33,6 @@
 
 #[cfg(feature = "bus")]
 pub mod bus;
-#[cfg(feature = "bus")]
-pub mod cli;
 pub mod clock;
 #[cfg(feature = "bus")]
 pub mod logging;

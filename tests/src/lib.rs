@@ -153,6 +153,52 @@ pub mod processes {
     /// A child process that is killed if the test ends before it was stopped: the harness the
     /// `auvnav` program uses for its own processes.
     pub use auvnav_tools::process::ChildProcess as Proc;
+
+    /// The smallest daemon configuration it navigates with: a vehicle at rest at 45° N, 10° E on
+    /// `prefix`, its checkpoint in `dir` (`dir/cp.json`). Written to `dir/auvnavd.toml`.
+    pub fn still_daemon_config(dir: &Path, prefix: &str) -> PathBuf {
+        let cfg = dir.join("auvnavd.toml");
+        std::fs::write(
+            &cfg,
+            format!(
+                "prefix = \"{prefix}\"\n[initial]\nlatitude_deg = 45.0\nlongitude_deg = 10.0\n\
+                 height_m = 0.0\neuler_deg = [0.0, 0.0, 0.0]\n[checkpoint]\npath = \"{}\"\n",
+                dir.join("cp.json").display()
+            ),
+        )
+        .expect("daemon configuration");
+        cfg
+    }
+
+    /// Publishes `n` IMU samples of a vehicle at rest at 100 Hz (earth rate, gravity) and counts
+    /// the solutions `solutions` receives meanwhile.
+    pub fn feed_still_imu(
+        imu: &mut auvnav_shm_schema::bus::BusPublisher<auvnav_shm_schema::ImuSampleV1>,
+        solutions: &mut auvnav_shm_schema::bus::BusSubscriber<auvnav_shm_schema::NavSolutionV1>,
+        n: u64,
+    ) -> usize {
+        use auvnav_shm_schema::ImuSampleV1;
+        let mut got = 0;
+        for k in 1..=n {
+            imu.publish(ImuSampleV1 {
+                host_time_ns: auvnav_shm_schema::clock::monotonic_ns(),
+                device_time_ns: k * 10_000_000,
+                angular: [1e-5, 0.0, 7.3e-5],
+                specific: [0.0, 0.0, -9.79],
+                interval_s: 0.01,
+                status: ImuSampleV1::STATUS_GYRO_VALID
+                    | ImuSampleV1::STATUS_ACCEL_VALID
+                    | ImuSampleV1::STATUS_DEVICE_TIME_VALID,
+                ..Default::default()
+            })
+            .expect("publish");
+            std::thread::sleep(std::time::Duration::from_millis(10));
+            while solutions.receive().expect("receive").is_some() {
+                got += 1;
+            }
+        }
+        got
+    }
 }
 
 /// Simulated voyages for the DVL-outage tests (water track, beams): IMU grades below the

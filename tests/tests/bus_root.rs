@@ -6,7 +6,7 @@
 
 use auvnav_shm_schema::bus::{BUS_ROOT_ENV, Bus};
 use auvnav_shm_schema::{ImuSampleV1, NavSolutionV1, qos, topic};
-use auvnav_tests::processes::{Proc, TempDir, binary, unique};
+use auvnav_tests::processes::{Proc, TempDir, binary, feed_still_imu, still_daemon_config, unique};
 use std::process::Command;
 use std::time::Duration;
 
@@ -37,16 +37,7 @@ fn the_bus_lives_under_the_configured_root() {
     let prefix = unique("busroot");
     // SAFETY: the only test of this binary; no other thread reads the environment yet.
     unsafe { std::env::set_var(BUS_ROOT_ENV, &root) };
-    let cfg = dir.path().join("auvnavd.toml");
-    std::fs::write(
-        &cfg,
-        format!(
-            "prefix = \"{prefix}\"\n[initial]\nlatitude_deg = 45.0\nlongitude_deg = 10.0\n\
-             height_m = 0.0\neuler_deg = [0.0, 0.0, 0.0]\n[checkpoint]\npath = \"{}\"\n",
-            dir.path().join("cp.json").display()
-        ),
-    )
-    .expect("config");
+    let cfg = still_daemon_config(dir.path(), &prefix);
     let bus = Bus::new(&unique("busroottest"), &prefix).expect("bus");
     let mut imu = bus
         .publisher::<ImuSampleV1>(topic::IMU, qos::SENSOR)
@@ -60,25 +51,7 @@ fn the_bus_lives_under_the_configured_root() {
     )
     .expect("spawn");
     std::thread::sleep(Duration::from_millis(500));
-    let mut got = 0;
-    for k in 1..=300u64 {
-        imu.publish(ImuSampleV1 {
-            host_time_ns: auvnav_shm_schema::clock::monotonic_ns(),
-            device_time_ns: k * 10_000_000,
-            angular: [1e-5, 0.0, 7.3e-5],
-            specific: [0.0, 0.0, -9.79],
-            interval_s: 0.01,
-            status: ImuSampleV1::STATUS_GYRO_VALID
-                | ImuSampleV1::STATUS_ACCEL_VALID
-                | ImuSampleV1::STATUS_DEVICE_TIME_VALID,
-            ..Default::default()
-        })
-        .expect("publish");
-        std::thread::sleep(Duration::from_millis(10));
-        while sol.receive().expect("receive").is_some() {
-            got += 1;
-        }
-    }
+    let got = feed_still_imu(&mut imu, &mut sol, 300);
     assert!(got > 200, "{got} solutions through the bus under {root:?}");
     // iceoryx2 names its files by hashes: the daemon's node and ours are two node directories
     // under the root, and the services' files are there too.

@@ -6,7 +6,9 @@
 //! still stops every process (iceoryx2 keeps only the last signal it saw, and a process that
 //! catches SIGCONT would forget the SIGTERM).
 
-use auvnav_tests::processes::{Proc, TempDir, binary, signal, unique};
+use auvnav_tests::processes::{
+    Proc, TempDir, binary, feed_still_imu, signal, still_daemon_config, unique,
+};
 use std::process::Command;
 use std::time::Duration;
 
@@ -76,16 +78,7 @@ fn the_live_view_stops_on_sigterm_then_sigcont() {
 fn the_daemon_stops_on_sigterm_then_sigcont() {
     let dir = TempDir::new("sigtcd");
     let prefix = unique("sigtcd");
-    let cfg = dir.path().join("auvnavd.toml");
-    std::fs::write(
-        &cfg,
-        format!(
-            "prefix = \"{prefix}\"\n[initial]\nlatitude_deg = 45.0\nlongitude_deg = 10.0\n\
-             height_m = 0.0\neuler_deg = [0.0, 0.0, 0.0]\n[checkpoint]\npath = \"{}\"\n",
-            dir.path().join("cp.json").display()
-        ),
-    )
-    .expect("config");
+    let cfg = still_daemon_config(dir.path(), &prefix);
     let p = Proc::spawn(
         "auvnavd",
         Command::new(binary("auvnavd")).arg("--config").arg(&cfg),
@@ -186,16 +179,7 @@ fn the_daemon_navigates_in_a_network_namespace_without_interfaces() {
     }
     let dir = TempDir::new("netns");
     let prefix = unique("netns");
-    let cfg = dir.path().join("auvnavd.toml");
-    std::fs::write(
-        &cfg,
-        format!(
-            "prefix = \"{prefix}\"\n[initial]\nlatitude_deg = 45.0\nlongitude_deg = 10.0\nheight_m = 0.0\n\
-             euler_deg = [0.0, 0.0, 0.0]\n[checkpoint]\npath = \"{}\"\n",
-            dir.path().join("cp.json").display()
-        ),
-    )
-    .expect("config");
+    let cfg = still_daemon_config(dir.path(), &prefix);
     let bus = Bus::new(&unique("netnstest"), &prefix).expect("bus");
     let mut imu = bus
         .publisher::<ImuSampleV1>(topic::IMU, qos::SENSOR)
@@ -219,25 +203,7 @@ fn the_daemon_navigates_in_a_network_namespace_without_interfaces() {
         ours, theirs,
         "the daemon runs in the host's network namespace"
     );
-    let mut got = 0;
-    for k in 1..=300u64 {
-        let m = ImuSampleV1 {
-            host_time_ns: auvnav_shm_schema::clock::monotonic_ns(),
-            device_time_ns: k * 10_000_000,
-            angular: [1e-5, 0.0, 7.3e-5],
-            specific: [0.0, 0.0, -9.79],
-            interval_s: 0.01,
-            status: ImuSampleV1::STATUS_GYRO_VALID
-                | ImuSampleV1::STATUS_ACCEL_VALID
-                | ImuSampleV1::STATUS_DEVICE_TIME_VALID,
-            ..Default::default()
-        };
-        imu.publish(m).expect("publish");
-        std::thread::sleep(Duration::from_millis(10));
-        while sol.receive().expect("receive").is_some() {
-            got += 1;
-        }
-    }
+    let got = feed_still_imu(&mut imu, &mut sol, 300);
     assert!(
         got > 200,
         "{got} solutions from the daemon in its namespace"

@@ -4,7 +4,7 @@
 //! is stopped (SIGSTOP: what a hung loop looks like to systemd), resumes after SIGCONT, and says
 //! STOPPING on SIGTERM.
 
-use auvnav_tests::processes::{Proc, TempDir, binary, signal, unique};
+use auvnav_tests::processes::{Proc, TempDir, binary, signal, still_daemon_config, unique};
 use std::os::unix::net::UnixDatagram;
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -34,16 +34,7 @@ fn the_daemon_notifies_ready_keeps_alive_from_its_loop_and_stops() {
     let prefix = unique("sdnotify");
     let socket = dir.path().join("notify.sock");
     let sock = UnixDatagram::bind(&socket).expect("bind");
-    let cfg = dir.path().join("auvnavd.toml");
-    std::fs::write(
-        &cfg,
-        format!(
-            "prefix = \"{prefix}\"\n[initial]\nlatitude_deg = 45.0\nlongitude_deg = 10.0\n\
-             height_m = 0.0\neuler_deg = [0.0, 0.0, 0.0]\n[checkpoint]\npath = \"{}\"\n",
-            dir.path().join("cp.json").display()
-        ),
-    )
-    .expect("config");
+    let cfg = still_daemon_config(dir.path(), &prefix);
     let mut p = Proc::spawn(
         "auvnavd",
         Command::new(binary("auvnavd"))
@@ -98,16 +89,7 @@ fn the_daemon_notifies_ready_keeps_alive_from_its_loop_and_stops() {
 fn without_a_service_manager_the_daemon_runs_as_before() {
     let dir = TempDir::new("nonotify");
     let prefix = unique("nonotify");
-    let cfg = dir.path().join("auvnavd.toml");
-    std::fs::write(
-        &cfg,
-        format!(
-            "prefix = \"{prefix}\"\n[initial]\nlatitude_deg = 45.0\nlongitude_deg = 10.0\n\
-             height_m = 0.0\neuler_deg = [0.0, 0.0, 0.0]\n[checkpoint]\npath = \"{}\"\n",
-            dir.path().join("cp.json").display()
-        ),
-    )
-    .expect("config");
+    let cfg = still_daemon_config(dir.path(), &prefix);
     let mut p = Proc::spawn(
         "auvnavd",
         Command::new(binary("auvnavd"))

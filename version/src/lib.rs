@@ -1,6 +1,9 @@
 //! The version every auvnav binary reports (`--version`) and writes into the logs it records:
-//! the workspace version and the commit it was built from.
+//! the workspace version and the commit it was built from; and ([`cli`]) the configuration
+//! options every on-board program shares.
 #![forbid(unsafe_code)]
+
+pub mod cli;
 
 /// The workspace version, e.g. `0.1.0`.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

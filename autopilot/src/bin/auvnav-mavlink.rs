@@ -22,7 +22,7 @@ struct Args {
     /// `--config FILE` (see docs/operations.md and deploy/auvnav-mavlink.toml),
     /// `--check-config [FILE]`.
     #[command(flatten)]
-    config: auvnav_shm_schema::cli::ConfigArgs,
+    config: auvnav_version::cli::ConfigArgs,
 }
 
 /// Nanoseconds since the process started (the heartbeat's clock).

@@ -8,7 +8,7 @@
 pub struct Args {
     /// `--config FILE`, `--check-config [FILE]`.
     #[command(flatten)]
-    pub config: auvnav_shm_schema::cli::ConfigArgs,
+    pub config: auvnav_version::cli::ConfigArgs,
 }
 
 pub mod bus_io;

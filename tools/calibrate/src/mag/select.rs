@@ -1,8 +1,8 @@
 //! The model and method chosen on held-out readings (`--method auto`, the default).
 //!
 //! The fit part of the recording is cut into contiguous blocks; every candidate (no calibration,
-//! the sphere fit, the ellipsoid, the weighted two-constraint fit with one scale, a diagonal or a
-//! full symmetric soft iron) is fitted on all blocks but one and scored on the block left out,
+//! the sphere fit, the rotation constraint when the readings carry the gyro, the ellipsoid, the
+//! weighted two-constraint fit with one scale, a diagonal or a full symmetric soft iron) is fitted on all blocks but one and scored on the block left out,
 //! each block in turn. A block is long against the time the readings' errors stay correlated (a
 //! tenth or more of the recording), so a candidate that fits what the environment did at one time
 //! gains nothing on another block. The scores are the held-out field-norm spread (standard
