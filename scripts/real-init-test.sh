@@ -150,6 +150,8 @@ for u in auvnav-usbl auvnav-gnss auvnav-can; do
   a=$(IN systemctl is-active "$u" || true)
   [ "$a" = inactive ] && pass "optional $u not started" || fail "optional $u is $a"
 done
+pid=$(IN systemctl show -p MainPID --value auvnavd)
+echo "auvnavd scheduling: $(IN chrt -p "$pid" 2>&1 | tr '\n' ' ')"
 st=$(IN systemctl show -p StatusText --value auvnavd)
 echo "auvnavd status: $st"
 case $st in navigating*) pass "the daemon navigates ($st)" ;; *) fail "daemon status: $st" ;; esac

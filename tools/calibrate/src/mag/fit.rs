@@ -18,12 +18,10 @@
 //! division its scale (µT²) would make the equal weights meaningless.
 //!
 //! Long on purpose: the last 68 lines are the unit tests, beside the code they test; the code is
-//! 755 lines.
+//! 825 lines (the weighted fit added its weights and the equal-weight entry point).
 
 use auvnav_sim::rng::Rng;
 use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, SVector, Vector3};
-
-pub use super::weights::Weights;
 
 pub use auvnav_import::mag::MagSample;
 
@@ -51,6 +49,30 @@ impl Calibration {
     /// The soft-iron matrix S = K⁻¹ (the simulator's `mag.soft_iron`), if K is invertible.
     pub fn soft_iron(&self) -> Option<Matrix3<f64>> {
         self.k.try_inverse()
+    }
+}
+
+/// Per-residual weights (1/σ²) of a fit (estimated by [`super::weights`]): one for every norm residual, one per sample for the
+/// gravity–field residual.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Weights {
+    pub norm: f64,
+    /// Per sample; empty means 1 for every sample.
+    pub dip: Vec<f64>,
+}
+
+impl Weights {
+    /// Equal weights (the seed's choice).
+    pub fn equal() -> Weights {
+        Weights {
+            norm: 1.0,
+            dip: Vec::new(),
+        }
+    }
+    /// The weight of sample `i`'s gravity–field residual.
+    #[inline]
+    pub fn dip_of(&self, i: usize) -> f64 {
+        self.dip.get(i).copied().unwrap_or(1.0)
     }
 }
 

@@ -12,33 +12,9 @@
 //! then takes off the bias the magnetometer's own noise puts into the least-squares optimum
 //! ([`remove_noise_bias`]).
 
-use super::fit::{self, Calibration, FitError, LmFit, MagSample, Model};
+use super::fit::{self, Calibration, FitError, LmFit, MagSample, Model, Weights};
 use nalgebra::Vector3;
 use serde::Serialize;
-
-/// Per-residual weights (1/σ²) of a fit: one for every norm residual, one per sample for the
-/// gravity–field residual.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Weights {
-    pub norm: f64,
-    /// Per sample; empty means 1 for every sample.
-    pub dip: Vec<f64>,
-}
-
-impl Weights {
-    /// Equal weights (the seed's choice).
-    pub fn equal() -> Weights {
-        Weights {
-            norm: 1.0,
-            dip: Vec::new(),
-        }
-    }
-    /// The weight of sample `i`'s gravity–field residual.
-    #[inline]
-    pub fn dip_of(&self, i: usize) -> f64 {
-        self.dip.get(i).copied().unwrap_or(1.0)
-    }
-}
 
 /// The estimated noise model behind a set of weights (reported).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
