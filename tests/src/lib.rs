@@ -170,13 +170,16 @@ pub mod processes {
         cfg
     }
 
-    /// Publishes `n` IMU samples of a vehicle at rest at 100 Hz (earth rate, gravity) and counts
-    /// the solutions `solutions` receives meanwhile.
-    pub fn feed_still_imu(
-        imu: &mut auvnav_shm_schema::bus::BusPublisher<auvnav_shm_schema::ImuSampleV1>,
-        solutions: &mut auvnav_shm_schema::bus::BusSubscriber<auvnav_shm_schema::NavSolutionV1>,
-        n: u64,
-    ) -> usize {
+    /// Publishes `n` IMU samples of a vehicle at rest at 100 Hz (earth rate, gravity) on `bus`
+    /// and counts the navigation solutions received meanwhile.
+    pub fn feed_still_imu(bus: &auvnav_shm_schema::bus::Bus, n: u64) -> usize {
+        use auvnav_shm_schema::{NavSolutionV1, qos, topic};
+        let mut imu = bus
+            .publisher::<auvnav_shm_schema::ImuSampleV1>(topic::IMU, qos::SENSOR)
+            .expect("publisher");
+        let mut solutions = bus
+            .subscriber::<NavSolutionV1>(topic::NAV_SOLUTION, qos::NAVIGATION)
+            .expect("subscriber");
         use auvnav_shm_schema::ImuSampleV1;
         let mut got = 0;
         for k in 1..=n {
