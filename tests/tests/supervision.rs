@@ -45,7 +45,16 @@ fn the_daemon_notifies_ready_keeps_alive_from_its_loop_and_stops() {
             .env("WATCHDOG_USEC", "400000"),
     )
     .expect("spawn");
-    let first = collect(&sock, Duration::from_secs(3));
+    // READY within 20 s (a loaded machine starts slowly), then 2 s of keep-alives.
+    let mut first = Vec::new();
+    let deadline = std::time::Instant::now() + Duration::from_secs(20);
+    while !first
+        .iter()
+        .any(|m: &String| m.lines().any(|l| l == "READY=1"))
+        && std::time::Instant::now() < deadline
+    {
+        first.extend(collect(&sock, Duration::from_millis(200)));
+    }
     let ready = first
         .iter()
         .position(|m| m.lines().any(|l| l == "READY=1"))
@@ -55,10 +64,11 @@ fn the_daemon_notifies_ready_keeps_alive_from_its_loop_and_stops() {
         "READY comes with a status: {:?}",
         first[ready]
     );
-    let alive = count(&first[ready..], "WATCHDOG=1");
+    let after = collect(&sock, Duration::from_secs(2));
+    let alive = count(&after, "WATCHDOG=1");
     assert!(
-        alive >= 10,
-        "keep-alives in ~3 s at 0.1 s: {alive} ({first:?})"
+        alive >= 8,
+        "keep-alives in 2 s at 0.1 s (about 20 expected): {alive} ({after:?})"
     );
 
     signal(&p, "-STOP");
@@ -71,7 +81,7 @@ fn the_daemon_notifies_ready_keeps_alive_from_its_loop_and_stops() {
         "a stopped loop sends no keep-alive (a helper thread would): {stopped:?}"
     );
     signal(&p, "-CONT");
-    let resumed = collect(&sock, Duration::from_millis(800));
+    let resumed = collect(&sock, Duration::from_secs(2));
     assert!(
         count(&resumed, "WATCHDOG=1") >= 3,
         "keep-alives resume: {resumed:?}"
