@@ -76,6 +76,17 @@ impl Weights {
     }
 }
 
+/// The median of the positive intervals between consecutive readings (s), if any.
+pub fn median_interval(samples: &[MagSample]) -> Option<f64> {
+    let mut steps: Vec<f64> = samples
+        .windows(2)
+        .map(|w| w[1].time_s - w[0].time_s)
+        .filter(|d| *d > 0.0 && d.is_finite())
+        .collect();
+    steps.sort_by(f64::total_cmp);
+    steps.get(steps.len() / 2).copied()
+}
+
 /// Which parameters a Levenberg–Marquardt fit estimates.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]

@@ -32,16 +32,10 @@ pub fn has_rates(samples: &[MagSample]) -> bool {
 /// The hard iron (and one scale to `field_ut`) from the rotation constraint, with the gyro's bias
 /// estimated beside it.
 pub fn hard_iron(samples: &[MagSample], field_ut: f64) -> Result<Calibration, FitError> {
-    let mut steps: Vec<f64> = samples
-        .windows(2)
-        .map(|w| w[1].time_s - w[0].time_s)
-        .filter(|d| *d > 0.0 && d.is_finite())
-        .collect();
-    if steps.is_empty() {
+    let Some(dt) = super::fit::median_interval(samples) else {
         return Err(FitError::Degenerate("no time between the readings".into()));
-    }
-    steps.sort_by(f64::total_cmp);
-    let limit = 5.0 * steps[steps.len() / 2];
+    };
+    let limit = 5.0 * dt;
     let mut ata = SMatrix::<f64, 9, 9>::zeros();
     let mut aty = SVector::<f64, 9>::zeros();
     let mut used = 0usize;

@@ -46,13 +46,7 @@ pub fn dynamics(samples: &[MagSample]) -> Vec<f64> {
     norms.sort_by(f64::total_cmp);
     let g = norms[norms.len() / 2].max(1e-12);
     // Half-width of the scatter window in samples: half a second at the median interval.
-    let mut steps: Vec<f64> = samples
-        .windows(2)
-        .map(|w| w[1].time_s - w[0].time_s)
-        .filter(|d| *d > 0.0 && d.is_finite())
-        .collect();
-    steps.sort_by(f64::total_cmp);
-    let dt = steps.get(steps.len() / 2).copied().unwrap_or(1.0);
+    let dt = fit::median_interval(samples).unwrap_or(1.0);
     let half = ((0.5 / dt).round() as usize).clamp(1, 500);
     samples
         .iter()

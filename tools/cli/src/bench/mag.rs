@@ -51,14 +51,8 @@ fn measured(recordings: &[PathBuf], fractions: &[f64]) -> Vec<MeasuredRow> {
     let mut rows = Vec::new();
     for path in recordings {
         for &f in fractions {
-            let raw = {
-                let mut a = CalibrateMagOptions::new(vec![path.clone()]);
-                a.fit_fraction = f;
-                a.method = MagMethod::Sphere;
-                calibrate_mag(&a)
-                    .ok()
-                    .and_then(|r| r.spreads.evaluation_before)
-            };
+            // The raw readings' held-out spreads: every method's report has them.
+            let raw_row = rows.len();
             rows.push(MeasuredRow {
                 recording: path.display().to_string(),
                 fit_fraction: f,
@@ -66,8 +60,8 @@ fn measured(recordings: &[PathBuf], fractions: &[f64]) -> Vec<MeasuredRow> {
                 model: "raw readings".into(),
                 status: "-".into(),
                 wall_s: 0.0,
-                norm_spread: raw.map(|s| s.norm_std_fraction),
-                dip_std_deg: raw.and_then(|s| s.dip_std_deg),
+                norm_spread: None,
+                dip_std_deg: None,
                 error: None,
             });
             for method in METHODS {
@@ -78,8 +72,14 @@ fn measured(recordings: &[PathBuf], fractions: &[f64]) -> Vec<MeasuredRow> {
                 let r = calibrate_mag(&a);
                 let wall_s = t.elapsed().as_secs_f64();
                 let recording = path.display().to_string();
-                rows.push(match r {
+                let row = match r {
                     Ok(r) => {
+                        if let Some(b) = r.spreads.evaluation_before
+                            && rows[raw_row].norm_spread.is_none()
+                        {
+                            rows[raw_row].norm_spread = Some(b.norm_std_fraction);
+                            rows[raw_row].dip_std_deg = b.dip_std_deg;
+                        }
                         let after = r.spreads.evaluation_after;
                         MeasuredRow {
                             recording,
@@ -104,7 +104,8 @@ fn measured(recordings: &[PathBuf], fractions: &[f64]) -> Vec<MeasuredRow> {
                         dip_std_deg: None,
                         error: Some(e.to_string()),
                     },
-                });
+                };
+                rows.push(row);
             }
         }
     }
