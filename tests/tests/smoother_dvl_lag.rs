@@ -7,7 +7,7 @@
 //!   estimate is within three of its standard deviations of −1.0 s, and nearer than the
 //!   first-order one.
 //! - Measured: two Snapir segments smoothed alone give the offset that discovery finds against
-//!   the imported reference (−1.008 ± 0.005 s over 12 segments; docs/discovery.md) within 0.05 s,
+//!   the imported reference (−1.008 ± 0.005 s over 12 segments; docs/discovery-results.md) within 0.05 s,
 //!   and the same lever arm within 0.05 m (before the retiming: −0.46 and −0.55 s, lever arms
 //!   0.4–0.5 m apart in x and z).
 

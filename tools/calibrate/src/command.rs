@@ -150,8 +150,13 @@ pub fn calibrate_dvl_surface(
         dvl: cfg.navigation.dvl_installation(),
         compass_deviation_deg: cfg.navigation.compass_deviation_deg,
     };
-    let report =
-        crate::surface::calibrate_surface(&args.voyages, &start, &args.params, args.threshold)?;
+    let report = crate::surface::calibrate_surface(
+        &args.voyages,
+        &start,
+        &args.params,
+        args.threshold,
+        args.moving_bed,
+    )?;
     if let Some(path) = &args.write_config {
         crate::surface::write_config(path, &report)
             .map_err(|e| CalibrationError::output(path, e))?;

@@ -24,7 +24,6 @@ pub mod report;
 pub mod scal;
 pub mod smoother;
 pub mod surface;
-pub mod svg;
 pub mod two_point;
 pub mod voyage;
 

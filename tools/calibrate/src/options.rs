@@ -96,6 +96,11 @@ pub struct CalibrateDvlOptions {
     /// without it.
     #[cfg_attr(feature = "clap", arg(long))]
     pub compass: bool,
+    /// Surface runs over a bed the current carries (a river): each run's bed velocity (north,
+    /// east) is fitted as a nuisance beside the installation, so that the bottom track's lag
+    /// behind the GNSS is not taken for a yaw or a scale.
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub moving_bed: bool,
 }
 
 impl CalibrateDvlOptions {
@@ -121,6 +126,7 @@ impl CalibrateDvlOptions {
             write_config: None,
             report: None,
             compass: false,
+            moving_bed: false,
         }
     }
 }

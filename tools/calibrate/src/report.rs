@@ -10,12 +10,12 @@ use super::objective::VoyageRun;
 use super::options::{CalibrateDvlOptions, Method};
 use super::params::{NAMES, ParameterSet};
 use super::params::{installation, installation_vector};
-use super::svg::{PALETTE, Series, plot};
 use super::two_point::TwoPointVoyage;
 use super::voyage::{DistanceSource, FixSource, Voyage};
 use super::{Evaluation, MethodResult};
 use anyhow::Context;
 use auvnav_core::earth;
+use auvnav_replay::svg::{PALETTE, Series, plot};
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -470,7 +470,7 @@ pub fn config_toml(r: &CalibrationReport) -> anyhow::Result<String> {
     ))
 }
 
-pub use auvnav_replay::write_atomically;
+use auvnav_replay::write_atomically;
 
 pub fn write_config(path: &Path, r: &CalibrationReport) -> anyhow::Result<()> {
     Ok(write_atomically(path, &config_toml(r)?)?)

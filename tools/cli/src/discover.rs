@@ -129,6 +129,9 @@ pub mod command {
         for u in &r.undetermined {
             println!("  undetermined: {}", u.note);
         }
+        if let Some(g) = &r.gnss {
+            super::print_gnss(g);
+        }
         for f in &r.floors {
             println!("  not named: {}", f.describe());
         }
@@ -197,5 +200,41 @@ pub mod command {
             println!("  note: {n}");
         }
         println!("  {:.2} s", r.wall_s);
+    }
+}
+
+/// The GNSS positions' decisions on a surface run's DVL installation.
+fn print_gnss(g: &auvnav_discover::gnss::GnssEvidence) {
+    println!(
+        "  GNSS positions (independent of the DVL; windows of {:.0} m{} over {}):",
+        g.threshold_m,
+        if g.moving_bed {
+            ", each fold's bed velocity fitted"
+        } else {
+            ""
+        },
+        g.folds.join(", ")
+    );
+    for d in &g.decisions {
+        println!("    {}: {}: {}", d.parameter, d.verdict, d.note);
+    }
+    let s = &g.in_sample;
+    println!(
+        "    window RMS on all folds: {:.2} m nominal, {:.2} m two-point, {:.2} m fitted ({} windows)",
+        s.nominal.rms_error_m, s.two_point.rms_error_m, s.calibrated.rms_error_m, s.nominal.windows
+    );
+    for h in &g.held_out {
+        println!(
+            "    held out {} (the others write {}): window RMS {:.2} m nominal, {:.2} m two-point, {:.2} m with what they write",
+            h.run,
+            if h.written.is_empty() {
+                "nothing".to_string()
+            } else {
+                h.written.join(", ")
+            },
+            h.scores.nominal.rms_error_m,
+            h.scores.two_point.rms_error_m,
+            h.scores.calibrated.rms_error_m
+        );
     }
 }

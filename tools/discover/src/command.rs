@@ -4,7 +4,7 @@ pub use super::analysis::*;
 use super::fit::Selection;
 use super::{Channel, ChannelKind, Reference};
 use crate::{DiscoverError, Source};
-use auvnav_calibrate::report::write_atomically;
+use auvnav_replay::write_atomically;
 use auvnav_sim::effects::{Effects, parse_setting};
 use std::path::PathBuf;
 
@@ -71,9 +71,16 @@ pub struct DiscoverOptions {
     pub one_voyage: bool,
     /// The DVL's bottom track may see a moving bed (a river, soft sediment that the current
     /// carries): add `dvl.bed_velocity` (the bed's north and east velocity, fitted per voyage)
-    /// to the candidates.
+    /// to the candidates; on surface runs the GNSS evidence fits each fold's bed velocity as a
+    /// nuisance too.
     #[cfg_attr(feature = "clap", arg(long))]
     pub moving_bed: bool,
+    /// Surface runs (a compass, a DVL and GNSS throughout, no IMU): the distance along the GNSS
+    /// track over which the dead reckoning is compared with the GNSS positions, the evidence that
+    /// decides the DVL installation there (default: a quarter of the shortest fold's track,
+    /// 20 m to 5000 m).
+    #[cfg_attr(feature = "clap", arg(long, value_name = "METRES"))]
+    pub gnss_threshold: Option<f64>,
 }
 
 /// Sets the effects a discover JSON report found, or those of an effect set file (`.toml`).
@@ -123,6 +130,13 @@ pub fn run(a: &DiscoverOptions) -> Result<DiscoverReport, DiscoverError> {
             a.fit_fraction
         )));
     }
+    if let Some(t) = a.gnss_threshold
+        && !(t.is_finite() && t > 0.0)
+    {
+        return Err(DiscoverError::Options(format!(
+            "--gnss-threshold {t}: expected a distance in metres > 0"
+        )));
+    }
     let mut nominal = Effects::default();
     if let Some(p) = &a.nominal_from {
         nominal_from_report(&mut nominal, p)?;
@@ -160,6 +174,9 @@ pub fn run(a: &DiscoverOptions) -> Result<DiscoverReport, DiscoverError> {
     }
     r.inputs = a.logs.iter().map(|p| p.display().to_string()).collect();
     r.reference = a.reference.clone();
+    if !smoothed && super::gnss::all_surface_runs(&a.logs) == Some(true) {
+        super::gnss::decide(&a.logs, a.gnss_threshold, a.moving_bed, &mut r);
+    }
     if smoothed {
         r.notes.push(
             "reference: each log's smoothed motion (IMU, DVL with its installation as filter \

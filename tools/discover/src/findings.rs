@@ -236,6 +236,10 @@ pub struct DiscoverReport {
     /// less those withheld), when effects were withheld and some are left.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub navigation_written: Vec<NavigationGain>,
+    /// Surface runs (compass, DVL and GNSS, no IMU): what their GNSS positions decide of the DVL
+    /// installation ([`crate::gnss`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gnss: Option<Box<crate::gnss::GnssEvidence>>,
     pub wall_s: f64,
     /// The nominal effects.
     #[serde(skip)]
@@ -271,6 +275,7 @@ impl DiscoverReport {
             voyages: None,
             reference_against_imu: Vec::new(),
             withheld: Vec::new(),
+            gnss: None,
             navigation_written: Vec::new(),
             wall_s: 0.0,
             nominal_model: nominal.clone(),

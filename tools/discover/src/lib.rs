@@ -20,6 +20,7 @@ pub mod command;
 mod error;
 pub mod findings;
 pub mod fit;
+pub mod gnss;
 pub mod hidden_effects;
 pub mod imu;
 pub mod navigation;

@@ -144,6 +144,11 @@ pub fn navigation_gain(logs: &[PathBuf], r: &mut DiscoverReport) {
                 r.navigation.push(g);
                 compared.push((l, after.clone(), before));
             }
+            Ok(None) if r.gnss.is_some() => r.notes.push(format!(
+                "{}: a surface run: its navigation is judged by dead reckoning against its GNSS \
+                 positions (the GNSS evidence)",
+                log.display()
+            )),
             Ok(None) => r.notes.push(format!(
                 "{}: no IMU or no reference: navigation error not compared",
                 log.display()

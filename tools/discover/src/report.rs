@@ -7,8 +7,8 @@ use super::findings::{DiscoverReport, NavigationGain, ResidualSeries};
 use super::outputs;
 use super::residuals::{periodogram_nyquist, periodogram_up_to};
 use anyhow::Context;
-use auvnav_calibrate::report::write_atomically;
-use auvnav_calibrate::svg::{PALETTE, Series, plot};
+use auvnav_replay::svg::{PALETTE, Series, plot};
+use auvnav_replay::write_atomically;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -236,6 +236,9 @@ fn markdown(r: &DiscoverReport, figures: &[(ChannelKind, Vec<String>)]) -> Strin
             let _ = writeln!(m, "- {}", u.note);
         }
         let _ = writeln!(m);
+    }
+    if let Some(g) = &r.gnss {
+        m.push_str(&super::gnss::markdown(g));
     }
     if !r.floors.is_empty() {
         let _ = writeln!(

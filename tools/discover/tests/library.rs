@@ -53,6 +53,7 @@ fn failures_are_typed_the_callers_apart_from_the_logs() {
         dvl_beams: false,
         one_voyage: false,
         moving_bed: false,
+        gnss_threshold: None,
     };
     let missing = dir.join("missing.mcap");
 

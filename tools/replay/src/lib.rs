@@ -13,8 +13,9 @@
 //! The crate is the replay itself ([`Replay`]), its feed order ([`order`]), the accuracy against
 //! a truth or reference channel ([`accuracy`]), and a whole replay as one call ([`replay`]: the
 //! configuration, the outputs, the report), with what the other offline tools share: the
-//! configuration file ([`load_config`]), [`interpolate`], [`run_log`] and atomic outputs
-//! ([`partial_path`], [`write_atomically`]). It neither parses arguments nor prints.
+//! configuration file ([`load_config`]), [`interpolate`], [`run_log`], atomic outputs
+//! ([`partial_path`], [`write_atomically`]) and the reports' SVG plots ([`svg`]). It neither
+//! parses arguments nor prints.
 #![forbid(unsafe_code)]
 
 pub mod accuracy;
@@ -23,6 +24,7 @@ pub mod json;
 pub mod order;
 mod run;
 pub mod surface;
+pub mod svg;
 pub use error::{ReplayError, Source};
 pub use run::*;
 

@@ -587,7 +587,7 @@ pub fn smooth_log_with(
             .display()
             .to_string(),
     };
-    let write = auvnav_calibrate::report::write_atomically;
+    let write = auvnav_replay::write_atomically;
     write(
         Path::new(&outputs.geojson),
         &export::geojson(&name, &points, unix_offset),

@@ -4,8 +4,8 @@
 //! and the smoothed DVL installation and IMU biases; Markdown, SVG figures and JSON.
 
 use super::{FixInnovation, LogSmoothReport, SmoothReport};
-use auvnav_calibrate::svg::{PALETTE, Series, plot};
 use auvnav_core::earth::{Geodetic, ned_offset};
+use auvnav_replay::svg::{PALETTE, Series, plot};
 use auvnav_shm_schema::{NavSolutionV1, TruthStateV1};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -90,7 +90,7 @@ fn series(name: &str, points: &[(f64, f64)], color: usize, markers: bool) -> Ser
 
 fn write_log_figures(dir: &Path, stem: &str, l: &LogSmoothReport) -> anyhow::Result<Vec<String>> {
     let f = &l.figures;
-    let write = auvnav_calibrate::report::write_atomically;
+    let write = auvnav_replay::write_atomically;
     let mut names = Vec::new();
     let mut track = vec![
         series("forward", &f.forward_track, 0, false),
@@ -298,7 +298,7 @@ pub fn write(dir: &Path, r: &SmoothReport) -> anyhow::Result<()> {
             let _ = writeln!(md, "![{f}]({f})\n");
         }
     }
-    let write = auvnav_calibrate::report::write_atomically;
+    let write = auvnav_replay::write_atomically;
     write(&dir.join("report.md"), &md)?;
     write(&dir.join("report.json"), &serde_json::to_string_pretty(r)?)?;
     Ok(())

@@ -3,10 +3,10 @@
 
 use super::command::MagReport;
 use super::fit::MagSample;
-use crate::report::write_atomically;
-use crate::svg::{PALETTE, Series, plot};
 use anyhow::Context;
 use auvnav_core::aid::magnetometer::MagnetometerConfig;
+use auvnav_replay::svg::{PALETTE, Series, plot};
+use auvnav_replay::write_atomically;
 use std::fmt::Write as _;
 use std::path::Path;
 

@@ -18,7 +18,7 @@
 
 use crate::voyage::VoyageSpec;
 use crate::{CalibrationError, error::unusable};
-use auvnav_replay::surface::read_surface_run;
+use auvnav_replay::surface::{DVL_GAP_S, read_surface_run};
 pub use auvnav_replay::surface::{SurfaceRun, is_surface_run};
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
@@ -61,6 +61,19 @@ fn windows(run: &SurfaceRun, threshold_m: f64) -> Vec<Window> {
         _ => return Vec::new(),
     };
     let covered = |i: usize| (first..=last).contains(&run.fixes[i].0);
+    // DVL gaps longer than the dead reckoning's gap limit: across one the track is a straight
+    // line between the readings on either side, so a window that spans it scores the gap, not
+    // the installation.
+    let gaps: Vec<(f64, f64)> = run
+        .dvl
+        .windows(2)
+        .filter(|p| p[1].t_s - p[0].t_s > DVL_GAP_S)
+        .map(|p| (p[0].t_s, p[1].t_s))
+        .collect();
+    let spans_gap = |a: usize, b: usize| {
+        let (ta, tb) = (run.fixes[a].0, run.fixes[b].0);
+        gaps.iter().any(|g| g.0 < tb && g.1 > ta)
+    };
     let mut out = Vec::new();
     let mut next_start = f64::NEG_INFINITY;
     for a in 0..run.fixes.len() {
@@ -74,6 +87,9 @@ fn windows(run: &SurfaceRun, threshold_m: f64) -> Vec<Window> {
         if !covered(b) {
             break;
         }
+        if spans_gap(a, b) {
+            continue;
+        }
         out.push(Window {
             a,
             b,
@@ -84,10 +100,18 @@ fn windows(run: &SurfaceRun, threshold_m: f64) -> Vec<Window> {
 }
 
 /// The dead-reckoned displacement error of each window (north, east, m), `None` for a window
-/// the track does not cover.
-fn window_errors(run: &SurfaceRun, c: &Candidate, windows: &[Window]) -> Vec<Option<[f64; 2]>> {
+/// the track does not cover. With `moving_bed`, the run's bed velocity (north, east) that best
+/// explains the errors is taken off: the bottom track measures the boat against a bed the
+/// current carries, so the dead reckoning lags the GNSS by the bed's velocity times the window's
+/// duration — a nuisance of each run, fitted in closed form for every candidate.
+fn window_errors(
+    run: &SurfaceRun,
+    c: &Candidate,
+    windows: &[Window],
+    moving_bed: bool,
+) -> Vec<Option<[f64; 2]>> {
     let track = run.dead_reckon(&c.dvl, &c.compass_deviation_deg);
-    windows
+    let mut errors: Vec<Option<[f64; 2]>> = windows
         .iter()
         .map(|w| {
             let (fa, fb) = (run.fixes[w.a], run.fixes[w.b]);
@@ -97,7 +121,28 @@ fn window_errors(run: &SurfaceRun, c: &Candidate, windows: &[Window]) -> Vec<Opt
                 (tb[1] - ta[1]) - (fb.2 - fa.2),
             ])
         })
-        .collect()
+        .collect();
+    if moving_bed {
+        let duration = |w: &Window| run.fixes[w.b].0 - run.fixes[w.a].0;
+        let (mut ed, mut dd) = ([0.0; 2], 0.0);
+        for (e, w) in errors.iter().zip(windows) {
+            if let Some(e) = e {
+                let d = duration(w);
+                ed = [ed[0] + e[0] * d, ed[1] + e[1] * d];
+                dd += d * d;
+            }
+        }
+        if dd > 0.0 {
+            let bed = [ed[0] / dd, ed[1] / dd];
+            for (e, w) in errors.iter_mut().zip(windows) {
+                if let Some(e) = e {
+                    let d = duration(w);
+                    *e = [e[0] - bed[0] * d, e[1] - bed[1] * d];
+                }
+            }
+        }
+    }
+    errors
 }
 
 /// The score of an installation on runs: per run and over all.
@@ -111,10 +156,13 @@ pub struct SurfaceScore {
     pub mean_error_per_distance_percent: f64,
 }
 
-fn score(runs: &[(&SurfaceRun, Vec<Window>)], inst: &Candidate) -> SurfaceScore {
+fn score(runs: &[(&SurfaceRun, Vec<Window>)], inst: &Candidate, moving_bed: bool) -> SurfaceScore {
     let (mut sq, mut ratios) = (0.0, Vec::new());
     for (run, windows) in runs {
-        for (e, w) in window_errors(run, inst, windows).iter().zip(windows) {
+        for (e, w) in window_errors(run, inst, windows, moving_bed)
+            .iter()
+            .zip(windows)
+        {
             if let Some(e) = e {
                 let m = e[0].hypot(e[1]);
                 sq += m * m;
@@ -152,11 +200,12 @@ fn fit(
     runs: &[(&SurfaceRun, Vec<Window>)],
     start: &Candidate,
     which: &[usize],
+    moving_bed: bool,
 ) -> (Candidate, Vec<f64>) {
     let residuals = |inst: &Candidate| -> Vec<f64> {
         let mut r = Vec::new();
         for (run, windows) in runs {
-            for e in window_errors(run, inst, windows) {
+            for e in window_errors(run, inst, windows, moving_bed) {
                 // A window the track stops covering counts as it did at the start: zero change.
                 let e = e.unwrap_or([0.0, 0.0]);
                 r.extend(e);
@@ -211,7 +260,9 @@ fn fit(
     }
     // Deviations: σ² (JᵀJ)⁻¹, σ² from the residual, widened by the overlap of the windows (each
     // stretch of the track appears in `overlap` windows).
-    let dof = (r.len() as f64 - which.len() as f64).max(1.0);
+    // Each run's bed velocity is two more parameters.
+    let nuisance = if moving_bed { 2 * runs.len() } else { 0 };
+    let dof = (r.len() as f64 - (which.len() + nuisance) as f64).max(1.0);
     let s2 = cost / dof;
     let windows: usize = runs.iter().map(|(_, w)| w.len()).sum();
     let span: f64 = runs
@@ -231,8 +282,17 @@ fn fit(
     let cov = (j.transpose() * &j)
         .try_inverse()
         .unwrap_or_else(|| DMatrix::from_element(which.len(), which.len(), f64::INFINITY));
+    // As many residuals as parameters or fewer leave nothing to estimate the scatter from: the
+    // fit passes through them and determines nothing.
+    let determined = r.len() > which.len() + nuisance;
     let std = (0..which.len())
-        .map(|d| (s2 * overlap * cov[(d, d)]).max(0.0).sqrt())
+        .map(|d| {
+            if determined {
+                (s2 * overlap * cov[(d, d)]).max(0.0).sqrt()
+            } else {
+                f64::INFINITY
+            }
+        })
         .collect();
     (inst, std)
 }
@@ -294,10 +354,11 @@ fn calibrate_on(
     runs: &[(&SurfaceRun, Vec<Window>)],
     start: &Candidate,
     which: &[usize],
+    moving_bed: bool,
 ) -> (Candidate, Vec<FittedParam>) {
     let mut free: Vec<usize> = which.to_vec();
     let mut held: Vec<(usize, f64, f64)> = Vec::new();
-    let (mut fitted, mut std) = fit(runs, start, &free);
+    let (mut fitted, mut std) = fit(runs, start, &free, moving_bed);
     while let Some(worst) = free
         .iter()
         .zip(&std)
@@ -310,7 +371,7 @@ fn calibrate_on(
         if free.is_empty() {
             break;
         }
-        (fitted, std) = fit(runs, start, &free);
+        (fitted, std) = fit(runs, start, &free, moving_bed);
     }
     let mut written = start.clone();
     let mut params = Vec::new();
@@ -398,6 +459,7 @@ pub fn calibrate_surface(
     start: &Candidate,
     names: &[String],
     threshold_m: f64,
+    moving_bed: bool,
 ) -> Result<SurfaceReport, CalibrationError> {
     let which: Vec<usize> = if names.is_empty() {
         (0..PARAMS.len()).collect()
@@ -447,7 +509,7 @@ pub fn calibrate_surface(
         .into_iter()
         .filter(|k| !unexcited.contains(k))
         .collect();
-    let (installation, mut params) = calibrate_on(&with_windows, start, &which);
+    let (installation, mut params) = calibrate_on(&with_windows, start, &which, moving_bed);
     for k in unexcited {
         params.push(FittedParam {
             name: PARAMS[k].name.into(),
@@ -465,9 +527,9 @@ pub fn calibrate_surface(
     let all: Vec<&SurfaceRun> = runs.iter().collect();
     let tp = two_point(&all, start);
     let in_sample = ScoreSet {
-        nominal: score(&with_windows, start),
-        two_point: score(&with_windows, &tp),
-        calibrated: score(&with_windows, &installation),
+        nominal: score(&with_windows, start, moving_bed),
+        two_point: score(&with_windows, &tp, moving_bed),
+        calibrated: score(&with_windows, &installation, moving_bed),
     };
     let mut held_out = Vec::new();
     if runs.len() >= 2 {
@@ -478,16 +540,16 @@ pub fn calibrate_surface(
                 .filter(|(j, _)| *j != k)
                 .map(|(_, (r, w))| (*r, w.clone()))
                 .collect();
-            let (inst, p) = calibrate_on(&others, start, &which);
+            let (inst, p) = calibrate_on(&others, start, &which, moving_bed);
             let other_runs: Vec<&SurfaceRun> = others.iter().map(|(r, _)| *r).collect();
             let tp = two_point(&other_runs, start);
             let this = [(with_windows[k].0, with_windows[k].1.clone())];
             held_out.push(HeldOut {
                 run: runs[k].name.clone(),
                 scores: ScoreSet {
-                    nominal: score(&this, start),
-                    two_point: score(&this, &tp),
-                    calibrated: score(&this, &inst),
+                    nominal: score(&this, start, moving_bed),
+                    two_point: score(&this, &tp, moving_bed),
+                    calibrated: score(&this, &inst, moving_bed),
                 },
                 written: p
                     .iter()
@@ -501,6 +563,7 @@ pub fn calibrate_surface(
     Ok(SurfaceReport {
         runs: runs.iter().map(|r| r.name.clone()).collect(),
         threshold_m,
+        moving_bed,
         params,
         installation,
         in_sample,

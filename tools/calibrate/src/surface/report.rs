@@ -10,6 +10,8 @@ use serde::Serialize;
 pub struct SurfaceReport {
     pub runs: Vec<String>,
     pub threshold_m: f64,
+    /// Whether each run's bed velocity was fitted as a nuisance (`--moving-bed`).
+    pub moving_bed: bool,
     pub params: Vec<FittedParam>,
     /// The installation and deviation card written (the starting ones with the written
     /// parameters).
@@ -79,8 +81,13 @@ pub fn text(r: &SurfaceReport) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "auvnav calibrate dvl (surface runs: compass + DVL dead reckoning against GNSS, windows of {} m): {}",
+        "auvnav calibrate dvl (surface runs: compass + DVL dead reckoning against GNSS, windows of {} m{}): {}",
         r.threshold_m,
+        if r.moving_bed {
+            ", each run's bed velocity fitted"
+        } else {
+            ""
+        },
         r.runs.join(", ")
     );
     for p in &r.params {
