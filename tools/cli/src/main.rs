@@ -251,6 +251,10 @@ enum BenchWhat {
         /// false discoveries near 5 % needs fifty null trials to be told from 10 %).
         #[arg(long, default_value_t = 100)]
         coloured_voyages: usize,
+        /// Shift every trial's seed by this much (0 to 49 999; each kind keeps its block of
+        /// seeds): the same benchmark on draws the defaults have not seen.
+        #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..50_000))]
+        seed_offset: u64,
         /// The measured data directory (`../shared/data`): also time discovery on each data set.
         #[arg(long, value_name = "DIR")]
         data: Option<PathBuf>,
@@ -796,6 +800,7 @@ fn main() -> std::process::ExitCode {
                 floor,
                 coloured,
                 coloured_voyages,
+                seed_offset,
                 data,
                 json,
             } => auvnav_tools::bench::discover(&auvnav_tools::bench::DiscoverBench {
@@ -805,6 +810,7 @@ fn main() -> std::process::ExitCode {
                 floor: floor as usize,
                 coloured,
                 coloured_voyages,
+                seed_offset,
                 data,
                 json,
             }),

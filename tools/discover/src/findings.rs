@@ -239,7 +239,7 @@ pub struct DiscoverReport {
     /// Surface runs (compass, DVL and GNSS, no IMU): what their GNSS positions decide of the DVL
     /// installation ([`crate::gnss`]).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub gnss: Option<Box<crate::gnss::GnssEvidence>>,
+    pub gnss: Option<Box<crate::gnss_evidence::GnssEvidence>>,
     pub wall_s: f64,
     /// The nominal effects.
     #[serde(skip)]

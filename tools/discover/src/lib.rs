@@ -21,6 +21,7 @@ mod error;
 pub mod findings;
 pub mod fit;
 pub mod gnss;
+pub mod gnss_evidence;
 pub mod hidden_effects;
 pub mod imu;
 pub mod navigation;

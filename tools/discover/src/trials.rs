@@ -20,6 +20,9 @@ pub struct TrialsOptions {
     /// Include every trial in the report (`per_run`).
     #[cfg_attr(feature = "clap", arg(long))]
     pub per_run: bool,
+    /// Added to every trial's seed (below 50 000): the same trials on other draws.
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 0))]
+    pub seed_offset: u64,
 }
 
 /// The trials' outcome.
@@ -48,15 +51,23 @@ pub struct TrialsStudy {
 
 impl TrialsStudy {
     pub fn new(a: &TrialsOptions) -> Result<TrialsStudy, StudyError> {
+        if a.seed_offset >= 50_000 {
+            return Err(StudyError::Options(format!(
+                "--seed-offset {}: below 50000, so that the hidden and null trials keep their \
+                 blocks of seeds",
+                a.seed_offset
+            )));
+        }
         Ok(TrialsStudy { args: a.clone() })
     }
 
     /// The seed and the hidden effect of trial `k`.
     pub fn seed_of(&self, k: usize) -> (u64, bool) {
+        let o = self.args.seed_offset;
         if k < self.args.hidden {
-            (k as u64 + 1, true)
+            (o + k as u64 + 1, true)
         } else {
-            (100_001 + (k - self.args.hidden) as u64, false)
+            (o + 100_001 + (k - self.args.hidden) as u64, false)
         }
     }
 }

@@ -11,11 +11,10 @@
 //! between the two solutions around the epoch).
 //!
 //! The crate is the replay itself ([`Replay`]), its feed order ([`order`]), the accuracy against
-//! a truth or reference channel ([`accuracy`]), and a whole replay as one call ([`replay`]: the
-//! configuration, the outputs, the report), with what the other offline tools share: the
-//! configuration file ([`load_config`]), [`interpolate`], [`run_log`], atomic outputs
-//! ([`partial_path`], [`write_atomically`]) and the reports' SVG plots ([`svg`]). It neither
-//! parses arguments nor prints.
+//! a truth or reference channel ([`accuracy`]), a whole replay as one call ([`replay`]), and what
+//! the other offline tools share: [`load_config`], [`interpolate`], [`run_log`], atomic outputs
+//! ([`partial_path`], [`write_atomically`]), the reports' SVG plots ([`svg`]). It neither parses
+//! arguments nor prints.
 #![forbid(unsafe_code)]
 
 pub mod accuracy;

@@ -172,6 +172,7 @@ pub struct DiscoverBench {
     /// The same over three voyages discovered together (half null, half one installation
     /// effect hidden in all three).
     pub coloured_voyages: usize,
+    pub seed_offset: u64,
     /// `../shared/data` (or another copy): time discovery on the measured data sets in it.
     pub data: Option<std::path::PathBuf>,
     pub json: bool,
@@ -239,8 +240,8 @@ fn measured_timings(data: &std::path::Path) -> anyhow::Result<Vec<MeasuredTiming
 /// two effects (seeds 200 001..), the detection floor (seeds 300 000 + 1000 × effect + 100 ×
 /// fraction + k; at most 100 per fraction), the coloured-noise trials (null: seeds 400 001..,
 /// hidden: 410 001..) and the coloured three-voyage trials (null: 420 001.., hidden: 430 001..;
-/// voyage i of trial s simulated with seed 16 s + i) on
-/// all cores, then the measured data sets one at a time.
+/// voyage i of trial s with seed 16 s + i), all shifted by `seed_offset`, on all cores; then
+/// the measured data sets one at a time.
 // Long on purpose: every trial kind of the benchmark (hidden, null, pairs, floors, coloured,
 // voyages) laid out and scored in one place, so their seeds are seen together.
 pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
@@ -249,6 +250,7 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
     let threads = default_threads();
     let dir = std::env::temp_dir().join(format!("auvnav-bench-discover-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
+    let off = o.seed_offset;
     let floor_jobs: Vec<(usize, f64, u64)> = (0..HIDDEN.len())
         .flat_map(|e| {
             FLOOR_FRACTIONS
@@ -261,11 +263,9 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
                 })
         })
         .collect();
-    let (coloured_null, coloured_hidden) = (o.coloured / 2, o.coloured - o.coloured / 2);
-    let (voyages_null, voyages_hidden) = (
-        o.coloured_voyages / 2,
-        o.coloured_voyages - o.coloured_voyages / 2,
-    );
+    let halves = |n: usize| (n / 2, n - n / 2);
+    let (coloured_null, coloured_hidden) = halves(o.coloured);
+    let (voyages_null, voyages_hidden) = halves(o.coloured_voyages);
     let extra = o.pairs + floor_jobs.len() + o.coloured + o.coloured_voyages;
     let installation = installation_effects();
     let total = hidden + null;
@@ -276,6 +276,7 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
             hidden,
             null,
             per_run: false,
+            seed_offset: off,
         })?;
     let results = map_runs(total, threads, |k| -> anyhow::Result<_> {
         let t0 = std::time::Instant::now();
@@ -286,27 +287,26 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
             p.0.update("discovery trials", done, total);
         }
         Ok((t, t0.elapsed().as_secs_f64()))
-    });
-    let results = results?;
+    })?;
     let set_results = map_runs(extra, threads, |k| -> anyhow::Result<_> {
         let floor_end = o.pairs + floor_jobs.len();
         let t = if k < o.pairs {
-            let seed = 200_001 + k as u64;
+            let seed = 200_001 + off + k as u64;
             trial_set(seed, &draw_pair(seed), &dir)?.0
         } else if k < floor_end {
             let (e, f, seed) = floor_jobs[k - o.pairs];
-            trial_set(seed, &[scaled(&draw_of(seed, e), f)], &dir)?.0
+            trial_set(seed + off, &[scaled(&draw_of(seed + off, e), f)], &dir)?.0
         } else if k < floor_end + coloured_null {
-            let seed = 400_001 + (k - floor_end) as u64;
+            let seed = 400_001 + off + (k - floor_end) as u64;
             trial_set_with(seed, &[], &coloured(seed), &dir)?.0
         } else if k < floor_end + o.coloured {
-            let seed = 410_001 + (k - floor_end - coloured_null) as u64;
+            let seed = 410_001 + off + (k - floor_end - coloured_null) as u64;
             trial_set_with(seed, &[draw(seed)], &coloured(seed), &dir)?.0
         } else if k < floor_end + o.coloured + voyages_null {
-            let seed = 420_001 + (k - floor_end - o.coloured) as u64;
+            let seed = 420_001 + off + (k - floor_end - o.coloured) as u64;
             trial_voyages(seed, &[], 3, &dir)?
         } else {
-            let seed = 430_001 + (k - floor_end - o.coloured - voyages_null) as u64;
+            let seed = 430_001 + off + (k - floor_end - o.coloured - voyages_null) as u64;
             let e = installation[(seed as usize) % installation.len()];
             trial_voyages(seed, &[draw_of(seed, e)], 3, &dir)?
         };
