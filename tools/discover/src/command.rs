@@ -209,6 +209,9 @@ pub fn run(a: &DiscoverOptions) -> Result<DiscoverReport, DiscoverError> {
         }
         r.reference_against_imu = against;
     }
+    if !smoothed {
+        super::outputs::reference_caveats(&a.logs, &mut r);
+    }
     if !a.no_navigation {
         let start = std::time::Instant::now();
         super::navigation::navigation_gain(&a.logs, &mut r);

@@ -93,7 +93,9 @@ fn folds(logs: &[PathBuf], threshold_m: Option<f64>) -> Result<(Vec<VoyageSpec>,
         let run = read_surface_run(log, &name, None).map_err(|e| e.to_string())?;
         let (total, middle) = track(&run);
         if logs.len() == 1 {
-            let end = run.fixes.last().map_or(0.0, |f| f.0) + 1.0;
+            // Boundaries to a tenth of a second: the folds' names stay readable.
+            let middle = (10.0 * middle).round() / 10.0;
+            let end = (run.fixes.last().map_or(0.0, |f| f.0) + 1.0).ceil();
             for w in [(0.0, middle), (middle, end)] {
                 specs.push(VoyageSpec {
                     path: log.clone(),
@@ -236,7 +238,17 @@ fn decision(p: &FittedParam, held_out: &[HeldOut], r: &DiscoverReport) -> GnssDe
         } else {
             "not determined"
         };
-        return verdict(v, p.verdict.clone());
+        // The position fit's own wording without the verdict it starts with and the "not
+        // written" it ends with (the decision says both).
+        let why = [
+            "not determined: ",
+            "not excited: ",
+            "consistent with its starting value ",
+        ]
+        .iter()
+        .find_map(|x| p.verdict.strip_prefix(x))
+        .unwrap_or(&p.verdict);
+        return verdict(v, why.trim_end_matches(": not written").to_string());
     }
     let writing: Vec<&HeldOut> = held_out
         .iter()

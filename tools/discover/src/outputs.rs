@@ -348,6 +348,64 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
     Ok(head + &body)
 }
 
+/// The sensors a log's reference solution was computed with (the header's
+/// [`auvnav_log::REFERENCE_AIDED_BY`]) among the channels analysed, and the note's description.
+fn reference_aided_by(
+    log: &std::path::Path,
+    kinds: &[ChannelKind],
+) -> Option<(Vec<String>, String)> {
+    let mut reader = auvnav_log::LogReader::open(log).ok()?;
+    let note = reader
+        .read_header()
+        .ok()?
+        .notes
+        .get(auvnav_log::REFERENCE_AIDED_BY)?
+        .clone();
+    let (names, description) = note.split_once(':').unwrap_or((note.as_str(), ""));
+    let seen = |name: &str| match name {
+        "dvl" => kinds
+            .iter()
+            .any(|k| matches!(k, ChannelKind::Dvl | ChannelKind::DvlBeams)),
+        "imu" => kinds
+            .iter()
+            .any(|k| matches!(k, ChannelKind::Gyro | ChannelKind::Accelerometer)),
+        "depth" => kinds.contains(&ChannelKind::Depth),
+        "magnetometer" => kinds
+            .iter()
+            .any(|k| matches!(k, ChannelKind::Magnetometer | ChannelKind::MagneticField)),
+        _ => false,
+    };
+    let shared: Vec<String> = names
+        .split(',')
+        .map(str::trim)
+        .filter(|n| seen(n))
+        .map(String::from)
+        .collect();
+    (!shared.is_empty()).then(|| (shared, description.trim().to_string()))
+}
+
+/// A note for every log whose reference was computed with sensors the report analysed against
+/// it: what such a reference can show of their effects, and what it cannot.
+pub fn reference_caveats(logs: &[std::path::PathBuf], r: &mut DiscoverReport) {
+    let kinds = analysed(r);
+    for log in logs {
+        if let Some((sensors, description)) = reference_aided_by(log, &kinds) {
+            r.notes.push(format!(
+                "{}: its reference was computed with this log's {} ({description}): the effects \
+                 found on {} describe them against a solution that has already absorbed part of \
+                 their errors, so the navigation error against it does not judge them \
+                 independently. What it can show: the held-out velocity error and whether logs \
+                 analysed one at a time agree on an effect; what it cannot: the position gain of \
+                 an installation of the sensors it was computed with (a GNSS or acoustic \
+                 reference would)",
+                log.display(),
+                sensors.join(" and "),
+                sensors.join(" and ")
+            ));
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -332,6 +332,10 @@ pub fn snapir(a: &SnapirOptions) -> Result<SnapirSummary> {
         "Snapir AUV (ECA A18-D), Phins FOG INS 100 Hz, RDI Workhorse DVL 1 Hz, Delph post-processed reference; time 0 = segment start".into(),
     );
     header.notes.insert(
+        auvnav_log::REFERENCE_AIDED_BY.into(),
+        "imu,dvl: the Delph post-processing of the vehicle's own INS with this DVL".into(),
+    );
+    header.notes.insert(
         "replay.initial_state".into(),
         "from the reference (truth channel) at the segment start".into(),
     );

@@ -53,6 +53,11 @@ pub const MIN_READER_VERSION: u32 = 1;
 pub const HEADER_METADATA: &str = "auvnav.header";
 /// The MCAP profile field.
 pub const PROFILE: &str = "auvnav";
+/// Header note of a log whose truth channel is a reference solution computed with some of the
+/// log's own sensors: their channel names, comma-separated, then `:` and a description (e.g.
+/// `imu,dvl: …`). Effects of those sensors found against that reference are not judged
+/// independently of them.
+pub const REFERENCE_AIDED_BY: &str = "reference.aided_by";
 /// CDR encapsulation header: plain CDR, little endian.
 pub const CDR_HEADER: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
 /// Largest record (or decompressed chunk) the reader accepts (bytes).
