@@ -422,16 +422,11 @@ fn write_config_withholds_the_effects_that_make_the_navigation_worse() {
             .unwrap_or_default()
     };
     assert_eq!(worse("navigation"), vec![true], "{text}");
-    // The reference is the vehicle's INS post-processed with this DVL: the report says what it
-    // cannot show.
+    // The reference is the vehicle's INS post-processed with this DVL: the report says so.
+    let notes = report["notes"].to_string();
     assert!(
-        report["notes"]
-            .as_array()
-            .is_some_and(|n| n.iter().any(|x| x
-                .as_str()
-                .is_some_and(|x| x.contains("computed with this log's imu and dvl")))),
-        "{}",
-        report["notes"]
+        notes.contains("computed with this log's imu and dvl"),
+        "{notes}"
     );
     let withheld: Vec<&str> = report["withheld"]
         .as_array()
