@@ -314,8 +314,8 @@ fn decision(p: &FittedParam, held_out: &[HeldOut], r: &DiscoverReport) -> GnssDe
     verdict(
         "named",
         format!(
-            "GNSS positions over {}-fold windows: {:.4} ± {:.4} {}, {sigmas:.1}σ from nominal; held \
-             out, window RMS {held_text}{agreement}",
+            "GNSS positions ({} folds): {:.4} ± {:.4} {}, {sigmas:.1}σ from nominal; held out, \
+             window RMS {held_text}{agreement}",
             held_out.len(),
             p.estimate,
             p.std,
