@@ -98,6 +98,18 @@ pub mod processes {
         serde_json::from_slice(&o.stdout).unwrap_or(serde_json::Value::Null)
     }
 
+    /// `auvnav import pd0 FILE --out OUT`: a PD0 file with GPS as a surface run.
+    pub fn import_pd0(file: &Path, out: &Path) {
+        auvnav_json(&[
+            "import",
+            "pd0",
+            &file.display().to_string(),
+            "--out",
+            &out.display().to_string(),
+            "--json",
+        ]);
+    }
+
     /// `auvnav import snapir DATA --segment N --out OUT`: one Snapir segment as a log.
     pub fn import_snapir(data: &Path, segment: u32, out: &Path) {
         auvnav_json(&[

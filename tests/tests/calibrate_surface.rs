@@ -121,14 +121,7 @@ fn the_heading_offset_of_a_river_transect_is_found_against_its_gps() {
     };
     let tmp = TempDir::new("surface-winriver");
     let log = tmp.path().join("wr.mcap");
-    auvnav(&[
-        "import",
-        "pd0",
-        &s(&dir.join("raw/winriver02_transect.PD0")),
-        "--out",
-        &s(&log),
-        "--json",
-    ]);
+    auvnav_tests::processes::import_pd0(&dir.join("raw/winriver02_transect.PD0"), &log);
     let r = auvnav(&["calibrate", "dvl", &s(&log), "--threshold", "100", "--json"]);
     let (yaw, written) = param(&r, "dvl.mount_yaw");
     // The ADCP's magnetic heading against true north: about 20° of declination there (WMM), less
@@ -158,20 +151,13 @@ fn a_moving_bed_is_a_nuisance_of_the_position_fit_not_a_yaw_or_a_scale() {
     let yaw = -1.5;
     for seed in [21u64, 22] {
         let log = tmp.path().join(format!("bed-{seed}.mcap"));
-        let o = Command::new(binary("auvnav"))
-            .args([
-                "sim",
-                "--scenario",
-                &s(&scenario),
-                "--seed",
-                &seed.to_string(),
-            ])
-            .args(["--effect", &format!("dvl.mount_yaw={yaw}")])
-            .args(["--effect", "dvl.bed_velocity=-0.12,0.08"])
-            .args(["--effect", "dvl.noise=0.01", "--out", &s(&log)])
-            .output()
-            .expect("sim");
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let yaw_effect = format!("dvl.mount_yaw={yaw}");
+        simulate(
+            &scenario,
+            seed,
+            &[&yaw_effect, "dvl.bed_velocity=-0.12,0.08"],
+            &log,
+        );
         let args = [
             "calibrate",
             "dvl",
@@ -188,6 +174,23 @@ fn a_moving_bed_is_a_nuisance_of_the_position_fit_not_a_yaw_or_a_scale() {
         );
         assert!(!param(&r, "dvl.scale_factor").1, "{r}");
     }
+}
+
+/// `auvnav sim` of `scenario` with `seed`, the effects given and 0.01 m/s of DVL noise, into `out`.
+fn simulate(scenario: &Path, seed: u64, effects: &[&str], out: &Path) {
+    let mut cmd = Command::new(binary("auvnav"));
+    cmd.args([
+        "sim",
+        "--scenario",
+        &s(scenario),
+        "--seed",
+        &seed.to_string(),
+    ]);
+    for e in effects.iter().chain(&["dvl.noise=0.01"]) {
+        cmd.args(["--effect", e]);
+    }
+    let o = cmd.args(["--out", &s(out)]).output().expect("sim");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
 /// Eight 45° legs at the surface: a compass swing through all headings.
@@ -218,20 +221,7 @@ fn a_compass_deviation_card_is_found_on_a_swing_and_not_asked_of_a_run_that_does
     let card = [0.0, 2.5, -1.5, 1.0, 0.0];
     for seed in [5u64, 6] {
         let log = tmp.path().join(format!("swing-{seed}.mcap"));
-        let o = Command::new(binary("auvnav"))
-            .args([
-                "sim",
-                "--scenario",
-                &s(&scenario),
-                "--seed",
-                &seed.to_string(),
-            ])
-            .args(["--effect", "heading.deviation=0,2.5,-1.5,1,0"])
-            .args(["--effect", "dvl.noise=0.01"])
-            .args(["--out", &s(&log)])
-            .output()
-            .expect("sim");
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        simulate(&scenario, seed, &["heading.deviation=0,2.5,-1.5,1,0"], &log);
         let r = auvnav(&[
             "calibrate",
             "dvl",

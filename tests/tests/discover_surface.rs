@@ -65,14 +65,7 @@ fn a_river_transect_names_its_heading_offset_on_the_gnss_positions() {
     };
     let tmp = TempDir::new("discover-winriver");
     let log = tmp.path().join("wr.mcap");
-    auvnav(&[
-        "import",
-        "pd0",
-        &s(&dir.join("raw/winriver02_transect.PD0")),
-        "--out",
-        &s(&log),
-        "--json",
-    ]);
+    auvnav_tests::processes::import_pd0(&dir.join("raw/winriver02_transect.PD0"), &log);
     let r = auvnav(&["discover", &s(&log), "--moving-bed", "--json"]);
     let (verdict, yaw, std) = gnss(&r, "dvl.mount_yaw");
     assert_eq!(verdict, "named", "{}", r["gnss"]);
