@@ -37,6 +37,11 @@ struct Window {
     distance_m: f64,
 }
 
+/// Deviations from its starting value below which a parameter determined to its tolerance but not
+/// written reads as consistent with it; between this and the five that write it, the runs point
+/// at a change without confirming it.
+const CONSISTENT_SIGMAS: f64 = 3.0;
+
 /// Margin at both ends of a run within which no window starts or ends (s): the largest time
 /// offset a candidate may take without changing the windows scored.
 const COVER_S: f64 = 3.0;
@@ -389,9 +394,16 @@ fn calibrate_on(
             }
         };
         let sigmas = (est - s0).abs() / sd;
-        let verdict = if !write && sd <= PARAMS[k].tolerance {
+        let verdict = if !write && sd <= PARAMS[k].tolerance && sigmas < CONSISTENT_SIGMAS {
             format!(
                 "consistent with its starting value ({sigmas:.1}σ, determined to ± {sd:.3} {}): not written",
+                PARAMS[k].unit
+            )
+        } else if !write && sd <= PARAMS[k].tolerance {
+            format!(
+                "points at a change: {sigmas:.1}σ from its starting value, determined to ± {sd:.3} {}, \
+                 short of the five deviations that write it (another run would confirm or refute \
+                 it): not written",
                 PARAMS[k].unit
             )
         } else if !write {
