@@ -20,6 +20,7 @@
 //! velocity-domain significance stays beside it as the second figure.
 
 use super::ChannelKind;
+use super::analysis::json_of;
 use super::findings::{DiscoverReport, FoundEffect};
 pub use super::gnss_evidence::{GnssDecision, GnssEvidence};
 use auvnav_calibrate::surface::{self, Candidate, FittedParam, HeldOut, ScoreSet};
@@ -354,12 +355,9 @@ fn name(
     r.floors.retain(|f| f.name != effect);
     let mut value = nominal.clone();
     value[k] = p.estimate;
-    let mut std: Vec<Option<f64>> = vec![None; nominal.len()];
-    std[k] = Some(p.std);
-    let one_or_all = |v: serde_json::Value| match v {
-        serde_json::Value::Array(a) if a.len() == 1 => a[0].clone(),
-        v => v,
-    };
+    // Components the positions do not estimate have no deviation (null in the report).
+    let mut std = vec![f64::NAN; nominal.len()];
+    std[k] = p.std;
     // A second component of the same effect (the lever arm's y after its x) joins the first.
     if let Some(e) = r.effects.iter_mut().find(|e| e.name == effect) {
         if let (serde_json::Value::Array(v), serde_json::Value::Array(s)) =
@@ -373,9 +371,9 @@ fn name(
     }
     r.effects.push(FoundEffect {
         name: effect.into(),
-        value: one_or_all(serde_json::json!(value)),
-        std: one_or_all(serde_json::json!(std)),
-        nominal: one_or_all(serde_json::json!(nominal)),
+        value: json_of(&value),
+        std: json_of(&std),
+        nominal: json_of(&nominal),
         unit: p.unit.clone(),
         channel: ChannelKind::Dvl,
         evidence: format!("{}: {evidence}", p.name),
