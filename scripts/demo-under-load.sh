@@ -41,6 +41,10 @@ if a.get("aligned_after_s") is not None:
 if e:
     parts.append(f"USBL {u['fused']} fused / {u['rejected']} rejected ({u['outliers_simulated']} outliers), "
                  f"RMS {e['horizontal_error_rms_m']:.2f} m, end {e['horizontal_error_final_m']:.2f} m")
+for s in v.get("stamp_errors") or []:
+    l, late = s["against_line_us"], s["emulator_late_us"]
+    parts.append(f"{s['kind'].upper()} stamp - line p50/p99 {l['p50']:+.0f}/{l['p99']:+.0f} us "
+                 f"(emulator late p99 {late['p99']:.0f} us)")
 parts.append(f"{v['wall_s']:.1f} s wall")
 print("; ".join(parts))
 PY

@@ -3,8 +3,8 @@
 #![forbid(unsafe_code)]
 
 pub use auvnav_protocols::{
-    device, framing, gnss, kvh, nmea, nortek, pd0, seatrac, to_device, to_schema, ubx, wldvl,
-    wldvl_json, xsens,
+    device, framing, gnss, kvh, line_time, nmea, nortek, pd0, seatrac, to_device, to_schema, ubx,
+    wldvl, wldvl_json, xsens,
 };
 
 pub mod can;

@@ -1,7 +1,8 @@
 //! The serial driver process (`auvnav-dvl`, `auvnav-imu`, `auvnav-usbl`, `auvnav-gnss`): owns one
 //! serial port,
-//! stamps every read with the host clock at read return, decodes the device's protocol and
-//! publishes the messages on the bus, reports its health, and survives the line: garbage is
+//! stamps every frame with the host clock at its first byte's arrival (an IMU's samples with its
+//! own clock translated to the host's: `auvnav_protocols::line_time`), decodes the device's
+//! protocol and publishes the messages on the bus, reports its health, and survives the line: garbage is
 //! counted and dropped by the decoder, a silent device is reported, a device that disappears is
 //! reopened with exponential back-off, and the process stops cleanly on SIGTERM/SIGINT.
 //!
@@ -664,6 +665,14 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
     let silence_ns = (t.silence_timeout_s * 1e9) as u64;
     let health_ns = (t.health_period_s * 1e9) as u64;
     let mut decoder = DeviceDecoder::new(cfg.protocol, cfg.settings);
+    decoder.time_the_line(cfg.serial.as_ref().map_or(0.0, |s| {
+        auvnav_protocols::line_time::character_time_ns(
+            s.baud,
+            s.data_bits,
+            s.parity != Parity::None,
+            s.stop_bits,
+        )
+    }));
     let mut health = Health::default();
     let mut port: Option<Link> = None;
     let mut state = ProcessState::Starting;
@@ -675,9 +684,11 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
     let mut next_health = 0u64;
     let mut last_open_error = String::new();
     let mut buf = vec![0u8; 64 * 1024];
-    let mut stage_times =
-        StageTimes::create(&cfg.stage_times_csv, "read_ns,decoded_ns,published_ns")
-            .map_err(|e| DriverError::Output(format!("creating {}: {e}", cfg.stage_times_csv)))?;
+    let mut stage_times = StageTimes::create(
+        &cfg.stage_times_csv,
+        "stamp_ns,read_ns,decoded_ns,published_ns",
+    )
+    .map_err(|e| DriverError::Output(format!("creating {}: {e}", cfg.stage_times_csv)))?;
     let source = cfg.source();
     tracing::info!(
         "{name}: {} on {}{}, publishing on {}/{}{} (mounting rpy {:?} deg, lever arm {:?} m)",
@@ -745,6 +756,7 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
                         tracing::info!("{name}: {source} reopened");
                     }
                     ever_open = true;
+                    decoder.restart_line();
                     port = Some(p);
                     backoff_s = t.reconnect_initial_s;
                     last_bytes = monotonic_ns();
@@ -795,7 +807,7 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
                         }
                     }
                 }
-                decoder.push(&buf[..n]);
+                decoder.push_read(&buf[..n], host_ns);
                 while let Some(out) = decoder.next_output(host_ns) {
                     if let (Output::Gnss(f), Some(gate)) = (&out, surface_gate.as_mut())
                         && !gate.pass(&name, f.host_time_ns)
@@ -803,12 +815,13 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
                         continue;
                     }
                     let decoded_ns = stage_times.as_ref().map(|_| monotonic_ns());
+                    let stamp_ns = out.host_time_ns();
                     match data.publish(out) {
                         Ok(true) => health.published += 1,
                         Ok(false) | Err(_) => health.publish_errors += 1,
                     }
                     if let (Some(s), Some(decoded_ns)) = (stage_times.as_mut(), decoded_ns) {
-                        s.row(&[host_ns, decoded_ns, monotonic_ns()]);
+                        s.row(&[stamp_ns, host_ns, decoded_ns, monotonic_ns()]);
                     }
                 }
                 state = ProcessState::Running;
@@ -843,11 +856,27 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
             surface_gate.as_ref().map_or(0, |g| g.withheld)
         );
     }
+    let clock = match decoder.device_clock_rate() {
+        Some(rate) => format!(
+            "; the device's clock runs {} the host's, {} resets",
+            if (1.0 / rate - 1.0).abs() < 0.01 {
+                format!("{:+.1} ppm against", (1.0 / rate - 1.0) * 1e6)
+            } else {
+                format!("{:.4} times as fast as", 1.0 / rate)
+            },
+            decoder.counters().clock_resets
+        ),
+        None if class == DeviceClass::Imu => format!(
+            "; no model of the device's clock ({} resets)",
+            decoder.counters().clock_resets
+        ),
+        None => String::new(),
+    };
     tracing::info!(
         published = health.published,
         checksum_errors = decoder.stats().checksum_errors,
         reconnects = health.reconnects,
-        "{name}: stopping; {} messages published, {} checksum errors, {} reconnects",
+        "{name}: stopping; {} messages published, {} checksum errors, {} reconnects{clock}",
         health.published,
         decoder.stats().checksum_errors,
         health.reconnects

@@ -225,7 +225,7 @@ message! {
     #[type_name("auvnav/ImuSample/v1")]
     #[schema_name("auvnav_msgs/msg/ImuSampleV1")]
     pub struct ImuSampleV1 {
-        /// Host time at read return (ns, CLOCK_MONOTONIC; simulated time in simulated logs); also the time of validity.
+        /// Host time (ns, CLOCK_MONOTONIC; simulated time in simulated logs) the frame's first byte arrived, or the device's clock translated to it; also the time of validity.
         pub host_time_ns: u64,
         /// Device clock at the sample (ns); valid with status bit DEVICE_TIME_VALID.
         pub device_time_ns: u64,
@@ -289,7 +289,7 @@ message! {
     #[type_name("auvnav/DvlVelocity/v1")]
     #[schema_name("auvnav_msgs/msg/DvlVelocityV1")]
     pub struct DvlVelocityV1 {
-        /// Host time at read return (ns, CLOCK_MONOTONIC; simulated time in simulated logs).
+        /// Host time (ns, CLOCK_MONOTONIC; simulated time in simulated logs) the frame's first byte arrived.
         pub host_time_ns: u64,
         /// Device clock at the ping (ns); valid with DEVICE_TIME_VALID.
         pub device_time_ns: u64,
@@ -344,7 +344,7 @@ message! {
     #[type_name("auvnav/UsblFix/v1")]
     #[schema_name("auvnav_msgs/msg/UsblFixV1")]
     pub struct UsblFixV1 {
-        /// Host time at read return (ns, CLOCK_MONOTONIC; simulated time in simulated logs).
+        /// Host time (ns, CLOCK_MONOTONIC; simulated time in simulated logs) the frame's first byte arrived.
         pub host_time_ns: u64,
         /// Device clock at the fix (ns); valid with VALID_DEVICE_TIME.
         pub device_time_ns: u64,
@@ -395,7 +395,7 @@ message! {
     #[type_name("auvnav/Depth/v1")]
     #[schema_name("auvnav_msgs/msg/DepthV1")]
     pub struct DepthV1 {
-        /// Host time at read return (ns, CLOCK_MONOTONIC; simulated time in simulated logs).
+        /// Host time the reading arrived (ns, CLOCK_MONOTONIC; simulated time in simulated logs): a serial frame's first byte, else the read's return.
         pub host_time_ns: u64,
         /// Device clock (ns); valid with VALID_DEVICE_TIME.
         pub device_time_ns: u64,
@@ -428,7 +428,7 @@ message! {
     #[type_name("auvnav/AcousticRanges/v1")]
     #[schema_name("auvnav_msgs/msg/AcousticRangesV1")]
     pub struct AcousticRangesV1 {
-        /// Host time at read return (ns, CLOCK_MONOTONIC; simulated time in simulated logs).
+        /// Host time the reading arrived (ns, CLOCK_MONOTONIC; simulated time in simulated logs): a serial frame's first byte, else the read's return.
         pub host_time_ns: u64,
         /// Device clock (ns); valid with VALID_DEVICE_TIME.
         pub device_time_ns: u64,
@@ -473,7 +473,7 @@ message! {
     #[type_name("auvnav/Magnetometer/v1")]
     #[schema_name("auvnav_msgs/msg/MagnetometerV1")]
     pub struct MagnetometerV1 {
-        /// Host time at read return (ns, CLOCK_MONOTONIC; simulated time in simulated logs).
+        /// Host time (ns, CLOCK_MONOTONIC; simulated time in simulated logs) the frame's first byte arrived.
         pub host_time_ns: u64,
         /// Device clock (ns); valid with VALID_DEVICE_TIME.
         pub device_time_ns: u64,
@@ -500,7 +500,7 @@ message! {
     #[type_name("auvnav/Attitude/v1")]
     #[schema_name("auvnav_msgs/msg/AttitudeV1")]
     pub struct AttitudeV1 {
-        /// Host time at read return (ns, CLOCK_MONOTONIC; simulated time in simulated logs).
+        /// Host time the reading arrived (ns, CLOCK_MONOTONIC; simulated time in simulated logs): a serial frame's first byte, else the read's return.
         pub host_time_ns: u64,
         /// Device clock (ns); valid with VALID_DEVICE_TIME.
         pub device_time_ns: u64,
@@ -533,7 +533,7 @@ message! {
     #[type_name("auvnav/SoundVelocity/v1")]
     #[schema_name("auvnav_msgs/msg/SoundVelocityV1")]
     pub struct SoundVelocityV1 {
-        /// Host time at read return (ns, CLOCK_MONOTONIC; simulated time in simulated logs).
+        /// Host time the reading arrived (ns, CLOCK_MONOTONIC; simulated time in simulated logs): a serial frame's first byte, else the read's return.
         pub host_time_ns: u64,
         /// Device clock (ns); valid with VALID_DEVICE_TIME.
         pub device_time_ns: u64,
@@ -565,7 +565,7 @@ message! {
     #[type_name("auvnav/GnssFix/v1")]
     #[schema_name("auvnav_msgs/msg/GnssFixV1")]
     pub struct GnssFixV1 {
-        /// Host time at read return (ns, CLOCK_MONOTONIC; simulated time in simulated logs).
+        /// Host time (ns, CLOCK_MONOTONIC; simulated time in simulated logs) the frame's first byte arrived.
         pub host_time_ns: u64,
         /// GNSS time of the fix (ns since the GPS epoch); valid with VALID_DEVICE_TIME.
         pub device_time_ns: u64,

@@ -1,10 +1,13 @@
 //! One device on a serial line: its protocol's stream decoder followed by the conversion to the
 //! schema message the driver publishes. Pure (no I/O, no clock): the driver passes the host time
-//! at read return.
+//! at read return; with the line's timing ([`DeviceDecoder::time_the_line`]) each frame is stamped
+//! when its first byte arrived, and an IMU's samples with its own clock
+//! ([`crate::line_time`]).
 
 use crate::framing::DecoderStats;
 use crate::gnss::{EpochGatherer, GnssSettings};
 use crate::kvh::KvhDecoder;
+use crate::line_time::{ArrivalClock, DeviceClock};
 use crate::nmea::NmeaDecoder;
 use crate::nortek::{NortekDecoder, NortekFrame};
 use crate::pd0::Pd0Decoder;
@@ -136,7 +139,8 @@ impl DeviceClass {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ProtocolSettings {
-    /// Time from validity to the end of the frame on the line, for protocols that do not report it
+    /// Time from validity to the frame's first byte on the line, for protocols that do not report
+    /// it
     /// (PD0, SeaTrac, Nortek) (s, 0..10, default 0).
     pub latency_s: f64,
     /// Xsens output data rate: the integration interval of delta-q/delta-v is its inverse (Hz,
@@ -182,6 +186,19 @@ pub enum Output {
     Gnss(GnssFixV1),
 }
 
+impl Output {
+    /// The message's host time stamp.
+    pub fn host_time_ns(&self) -> u64 {
+        match self {
+            Output::Imu(m) => m.host_time_ns,
+            Output::Dvl(m) => m.host_time_ns,
+            Output::Usbl(m) => m.host_time_ns,
+            Output::Magnetometer(m) => m.host_time_ns,
+            Output::Gnss(m) => m.host_time_ns,
+        }
+    }
+}
+
 enum Inner {
     Pd0(Pd0Decoder),
     Wldvl(WlDecoder),
@@ -206,6 +223,9 @@ pub struct DeviceCounters {
     pub out_of_range: u64,
     /// GNSS epochs without a usable position (no fix, a warning status, dead reckoning).
     pub no_fix: u64,
+    /// Times the model of the device's clock started again: the clock stepped back or away from
+    /// the host's (a device restart).
+    pub clock_resets: u64,
 }
 
 /// The decoder and conversion of one device.
@@ -218,6 +238,28 @@ pub struct DeviceDecoder {
     /// A second message from the last frame (an Xsens packet with both inertial data and the
     /// magnetic field), returned by the next call.
     pending: Option<Output>,
+    /// The line's timing: each frame stamped at its first byte's arrival.
+    arrival: Option<ArrivalClock>,
+    /// The IMU's own clock translated to host time (with the line's timing).
+    device_clock: Option<DeviceClock>,
+}
+
+/// The wrap-around of an IMU's clock (ns): KVH's 32-bit microseconds, Xsens's 32-bit
+/// SampleTimeFine at 10 kHz.
+fn imu_clock_modulus_ns(protocol: Protocol) -> Option<u64> {
+    match protocol {
+        Protocol::Kvh1750 => Some((1u64 << 32) * 1_000),
+        Protocol::Xsens => Some((1u64 << 32) * 100_000),
+        _ => None,
+    }
+}
+
+/// A frame's time: its first byte's arrival when the line is timed, else the read's return.
+fn frame_time(arrival: &Option<ArrivalClock>, frame_start: u64, read_ns: u64) -> u64 {
+    arrival
+        .as_ref()
+        .and_then(|a| a.arrival_ns(frame_start))
+        .unwrap_or(read_ns)
 }
 
 impl DeviceDecoder {
@@ -240,6 +282,52 @@ impl DeviceDecoder {
             last_counter: None,
             counters: DeviceCounters::default(),
             pending: None,
+            arrival: None,
+            device_clock: None,
+        }
+    }
+
+    /// Stamps each frame at its first byte's arrival on a line carrying one character every
+    /// `character_ns` ([`crate::line_time::character_time_ns`]; 0 for a link without a line
+    /// rate), and an IMU's samples that carry the device's clock with that clock translated to
+    /// host time. Bytes must then come in through [`DeviceDecoder::push_read`].
+    pub fn time_the_line(&mut self, character_ns: f64) {
+        self.arrival = Some(ArrivalClock::new(character_ns));
+        self.device_clock = (self.protocol.class() == DeviceClass::Imu)
+            .then(|| DeviceClock::new(imu_clock_modulus_ns(self.protocol)));
+    }
+
+    /// Appends `bytes` of a read that returned at `host_ns`.
+    pub fn push_read(&mut self, bytes: &[u8], host_ns: u64) {
+        if let Some(a) = self.arrival.as_mut() {
+            a.read(bytes.len(), host_ns);
+        }
+        self.push(bytes);
+    }
+
+    /// The port was reopened: the bytes before came over another connection, and the device may
+    /// have restarted its clock.
+    pub fn restart_line(&mut self) {
+        if let Some(a) = self.arrival.as_mut() {
+            a.restart();
+        }
+        if let Some(c) = self.device_clock.as_mut() {
+            c.restart();
+        }
+    }
+
+    /// The IMU clock's rate against the host's (host s per device s), once the model has it.
+    pub fn device_clock_rate(&self) -> Option<f64> {
+        self.device_clock.as_ref().and_then(DeviceClock::rate)
+    }
+
+    /// An IMU sample's host time from the device's clock, when it carries it and the line is
+    /// timed.
+    fn imu_time(&mut self, m: &mut ImuSampleV1) {
+        if let Some(c) = self.device_clock.as_mut()
+            && m.status & ImuSampleV1::STATUS_DEVICE_TIME_VALID != 0
+        {
+            m.host_time_ns = c.stamp(m.device_time_ns, m.host_time_ns);
         }
     }
 
@@ -278,7 +366,10 @@ impl DeviceDecoder {
     }
 
     pub fn counters(&self) -> DeviceCounters {
-        self.counters
+        DeviceCounters {
+            clock_resets: self.device_clock.as_ref().map_or(0, DeviceClock::resets),
+            ..self.counters
+        }
     }
 
     /// Counts a gap in a device counter that wraps at `modulus`. A counter at or beyond the
@@ -300,8 +391,10 @@ impl DeviceDecoder {
     }
 
     /// The next message to publish from the bytes pushed so far, stamped `host_time_ns` (the
-    /// time the read that completed it returned). The sequence number is left 0: the publisher
-    /// assigns it.
+    /// time the read that completed it returned), or, with the line timed, at its first byte's
+    /// arrival (an IMU sample with its device's clock: that clock in host time). The sequence
+    /// number is left 0: the publisher assigns it.
+    // Long on purpose: one arm per protocol, each the decoder's frame to its schema message.
     pub fn next_output(&mut self, host_time_ns: u64) -> Option<Output> {
         let s = self.settings;
         if let Some(out) = self.pending.take() {
@@ -311,11 +404,11 @@ impl DeviceDecoder {
             match &mut self.inner {
                 Inner::Pd0(d) => match d.next_ensemble()? {
                     Ok(e) => {
-                        if let Some(m) = to_schema::pd0_velocity(&e, host_time_ns, s.latency_s, 0) {
+                        let t = frame_time(&self.arrival, d.frame_start(), host_time_ns);
+                        if let Some(m) = to_schema::pd0_velocity(&e, t, s.latency_s, 0) {
                             // The water-mass reference layer of the same ping, next.
                             self.pending =
-                                to_schema::pd0_water_track(&e, host_time_ns, s.latency_s, 0)
-                                    .map(Output::Dvl);
+                                to_schema::pd0_water_track(&e, t, s.latency_s, 0).map(Output::Dvl);
                             return Some(Output::Dvl(m));
                         }
                         self.counters.other_frames += 1;
@@ -324,44 +417,41 @@ impl DeviceDecoder {
                 },
                 Inner::Wldvl(d) => match d.next_frame()? {
                     Ok(WlFrame::Velocity(v)) => {
-                        return Some(Output::Dvl(to_schema::water_linked_velocity(
-                            &v,
-                            host_time_ns,
-                            0,
-                        )));
+                        let t = frame_time(&self.arrival, d.frame_start(), host_time_ns);
+                        return Some(Output::Dvl(to_schema::water_linked_velocity(&v, t, 0)));
                     }
                     Ok(_) => self.counters.other_frames += 1,
                     Err(_) => continue,
                 },
                 Inner::Kvh(d) => {
                     let sample = d.next_sample()?;
+                    let t = frame_time(&self.arrival, d.frame_start(), host_time_ns);
                     self.device_counter(u16::from(sample.sequence), 128);
-                    let mut m = to_schema::kvh_sample(&sample, &s.kvh, host_time_ns, 0);
+                    let mut m = to_schema::kvh_sample(&sample, &s.kvh, t, 0);
                     if !to_schema::KVH_RANGE.check(&mut m) {
                         self.counters.out_of_range += 1;
                     }
+                    self.imu_time(&mut m);
                     return Some(Output::Imu(m));
                 }
                 Inner::Xsens(d) => match d.next_message()? {
                     XbusMessage::MtData2(m) => {
+                        let t = frame_time(&self.arrival, d.frame_start(), host_time_ns);
                         if let Some(c) = m.packet_counter {
                             self.device_counter(c, 1 << 16);
                         }
-                        let imu = to_schema::xsens_sample(&m, s.xsens_rate_hz, host_time_ns, 0)
-                            .map(|mut i| {
-                                if !to_schema::XSENS_RANGE.check(&mut i) {
-                                    self.counters.out_of_range += 1;
-                                }
-                                Output::Imu(i)
-                            });
-                        let mag = to_schema::xsens_magnetometer(
-                            &m,
-                            s.xsens_field_unit_ut,
-                            host_time_ns,
-                            0,
-                        )
-                        .map(Output::Magnetometer);
-                        match (imu, mag) {
+                        let mut imu = to_schema::xsens_sample(&m, s.xsens_rate_hz, t, 0);
+                        if let Some(i) = imu.as_mut() {
+                            if !to_schema::XSENS_RANGE.check(i) {
+                                self.counters.out_of_range += 1;
+                            }
+                            self.imu_time(i);
+                        }
+                        // The field of the same packet, at the same time as its inertial data.
+                        let t = imu.map_or(t, |i| i.host_time_ns);
+                        let mag = to_schema::xsens_magnetometer(&m, s.xsens_field_unit_ut, t, 0)
+                            .map(Output::Magnetometer);
+                        match (imu.map(Output::Imu), mag) {
                             (Some(i), m) => {
                                 self.pending = m;
                                 return Some(i);
@@ -374,9 +464,10 @@ impl DeviceDecoder {
                 },
                 Inner::Nortek(d) => match d.next_frame()? {
                     Ok(NortekFrame::BottomTrack(bt)) => {
+                        let t = frame_time(&self.arrival, d.frame_start(), host_time_ns);
                         return Some(Output::Dvl(to_schema::nortek_velocity(
                             &bt,
-                            host_time_ns,
+                            t,
                             s.latency_s,
                             0,
                         )));
@@ -386,10 +477,9 @@ impl DeviceDecoder {
                 },
                 Inner::WldvlJson(d) => match d.next_frame()? {
                     Ok(JsonFrame::Velocity { velocity, .. }) => {
+                        let t = frame_time(&self.arrival, d.frame_start(), host_time_ns);
                         return Some(Output::Dvl(to_schema::water_linked_velocity(
-                            &velocity,
-                            host_time_ns,
-                            0,
+                            &velocity, t, 0,
                         )));
                     }
                     Ok(_) => self.counters.other_frames += 1,
@@ -410,15 +500,16 @@ impl DeviceDecoder {
                             if matches!(sentence, crate::nmea::NmeaSentence::Other { .. }) {
                                 self.counters.other_frames += 1;
                             }
-                            epochs.push(sentence, host_time_ns);
+                            let t = frame_time(&self.arrival, d.frame_start(), host_time_ns);
+                            epochs.push(sentence, t);
                         }
                         Err(_) => continue,
                     }
                 }
                 Inner::Ubx(d) => match d.next_frame()? {
                     Ok(UbxFrame::NavPvt(p)) => {
-                        match crate::gnss::fix_from_nav_pvt(&p, host_time_ns, &s.gnss, s.latency_s)
-                        {
+                        let t = frame_time(&self.arrival, d.frame_start(), host_time_ns);
+                        match crate::gnss::fix_from_nav_pvt(&p, t, &s.gnss, s.latency_s) {
                             Some(f) => return Some(Output::Gnss(f)),
                             None => self.counters.no_fix += 1,
                         }
@@ -429,9 +520,10 @@ impl DeviceDecoder {
                 Inner::Seatrac(d) => match d.next_frame()? {
                     Ok(f) => match f.message {
                         SeatracMessage::Fix { fix, .. } if f.from_beacon => {
+                            let t = frame_time(&self.arrival, d.frame_start(), host_time_ns);
                             return Some(Output::Usbl(to_schema::seatrac_fix(
                                 &fix,
-                                host_time_ns,
+                                t,
                                 s.latency_s,
                                 0,
                             )));

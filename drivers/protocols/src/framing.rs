@@ -126,6 +126,11 @@ pub struct FrameBuffer {
     pub(crate) buf: BoundedBuffer,
     pub stats: DecoderStats,
     searching: bool,
+    /// Stream offset of the first byte not yet consumed (bytes pushed before it were consumed or
+    /// dropped).
+    offset: u64,
+    /// Stream offset of the first byte of the last frame taken.
+    frame_start: u64,
 }
 
 impl FrameBuffer {
@@ -135,12 +140,29 @@ impl FrameBuffer {
             buf: BoundedBuffer::new(capacity_for(max_frame)),
             stats: DecoderStats::default(),
             searching: false,
+            offset: 0,
+            frame_start: 0,
         }
     }
 
     pub fn push(&mut self, bytes: &[u8]) {
         self.stats.bytes += bytes.len() as u64;
-        self.stats.overflow_bytes += self.buf.push(bytes);
+        let dropped = self.buf.push(bytes);
+        self.stats.overflow_bytes += dropped;
+        self.offset += dropped;
+    }
+
+    /// Stream offset (bytes pushed before it) of the first byte of the last frame taken: where
+    /// the line's timing places the frame.
+    pub fn frame_start(&self) -> u64 {
+        self.frame_start
+    }
+
+    /// Drops `n` bytes from the front, keeping the stream offset.
+    fn advance(&mut self, n: usize) {
+        let n = n.min(self.buf.len());
+        self.buf.consume(n);
+        self.offset += n as u64;
     }
 
     /// The bytes not yet consumed.
@@ -155,12 +177,13 @@ impl FrameBuffer {
             self.stats.resyncs += 1;
         }
         self.stats.bytes_skipped += n as u64;
-        self.buf.consume(n);
+        self.advance(n);
     }
 
     /// Consumes a frame of `n` bytes that decoded.
     pub fn take_frame(&mut self, n: usize) {
-        self.buf.consume(n);
+        self.frame_start = self.offset;
+        self.advance(n);
         self.searching = false;
         self.stats.frames += 1;
     }
@@ -168,13 +191,13 @@ impl FrameBuffer {
     /// Consumes a delimited frame of `n` bytes that failed its checks (the caller counts why).
     pub fn reject_frame(&mut self, n: usize) {
         self.stats.bytes_skipped += n as u64;
-        self.buf.consume(n);
+        self.advance(n);
         self.searching = false;
     }
 
     /// Consumes `n` bytes that need no accounting (line ends between frames).
     pub fn consume(&mut self, n: usize) {
-        self.buf.consume(n);
+        self.advance(n);
     }
 }
 
@@ -189,6 +212,9 @@ pub trait StreamDecoder {
         Vec::new()
     }
     fn stats(&self) -> &DecoderStats;
+    /// Stream offset of the first byte of the last frame returned (see
+    /// [`FrameBuffer::frame_start`]).
+    fn frame_start(&self) -> u64;
 }
 
 /// Feeds `bytes` in reads of `read_size` and hands every frame to `frame`.

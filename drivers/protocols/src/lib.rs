@@ -14,6 +14,7 @@ pub mod device;
 pub mod framing;
 pub mod gnss;
 pub mod kvh;
+pub mod line_time;
 pub mod nmea;
 pub mod nortek;
 pub mod pd0;

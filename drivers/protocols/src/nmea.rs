@@ -369,6 +369,11 @@ impl NmeaDecoder {
         &self.input.stats
     }
 
+    /// Stream offset of the first byte of the last frame returned.
+    pub fn frame_start(&self) -> u64 {
+        self.input.frame_start()
+    }
+
     /// The next sentence, or `None` when no complete line is buffered.
     pub fn next_sentence(&mut self) -> Option<Result<NmeaSentence, NmeaError>> {
         loop {
@@ -436,6 +441,9 @@ impl crate::framing::StreamDecoder for NmeaDecoder {
     }
     fn stats(&self) -> &DecoderStats {
         NmeaDecoder::stats(self)
+    }
+    fn frame_start(&self) -> u64 {
+        self.input.frame_start()
     }
 }
 

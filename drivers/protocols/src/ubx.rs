@@ -185,6 +185,11 @@ impl UbxDecoder {
         &self.input.stats
     }
 
+    /// Stream offset of the first byte of the last frame returned.
+    pub fn frame_start(&self) -> u64 {
+        self.input.frame_start()
+    }
+
     /// The next message, or `None` when no complete one is buffered.
     pub fn next_frame(&mut self) -> Option<Result<UbxFrame, UbxError>> {
         loop {
@@ -291,6 +296,9 @@ impl crate::framing::StreamDecoder for UbxDecoder {
     }
     fn stats(&self) -> &DecoderStats {
         UbxDecoder::stats(self)
+    }
+    fn frame_start(&self) -> u64 {
+        self.input.frame_start()
     }
 }
 

@@ -67,6 +67,12 @@ pub struct DemoArgs {
     /// `127.0.0.1:8765`: open it in Foxglove with `deploy/foxglove-layout.json`.
     #[arg(long, value_name = "ADDRESS:PORT")]
     pub live_view: Option<std::net::SocketAddr>,
+    /// How the processes are scheduled (processes only): `unit`, as the units run them
+    /// (drivers SCHED_FIFO 60, daemon 50, the emulated devices 70; normal where SCHED_FIFO is
+    /// not permitted, and the report says so), or `normal` (everything under the normal
+    /// scheduler: the time stamps alone against the load).
+    #[arg(long, value_enum, default_value_t = crate::process::Scheduling::Unit)]
+    pub scheduling: crate::process::Scheduling,
     /// Print the result as JSON.
     #[arg(long)]
     pub json: bool,
@@ -354,6 +360,7 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
         a.speed,
         a.out.as_deref(),
         a.live_view,
+        a.scheduling,
     )?;
     if a.json {
         crate::json::print(&r)?;
@@ -377,6 +384,7 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
                 .map(|a| format!("; live view on ws://{a}"))
                 .unwrap_or_default()
         );
+        println!("  scheduling: {}", r.scheduling);
         print_phases(&r.phases);
         if r.gnss.is_some() {
             println!(
@@ -391,6 +399,19 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
             acc.horizontal_error_max_m,
             acc.horizontal_error_cep50_m,
         );
+        for e in &r.stamp_errors {
+            println!(
+                "  {} time stamps against the line (µs, p50 / p99 / max): {:+.0} / {:+.0} / {:+.0} ({} frames; the emulator wrote {:.0} / {:.0} / {:.0} late)",
+                e.kind.to_uppercase(),
+                e.against_line_us.p50,
+                e.against_line_us.p99,
+                e.against_line_us.max,
+                e.frames,
+                e.emulator_late_us.p50,
+                e.emulator_late_us.p99,
+                e.emulator_late_us.max,
+            );
+        }
         println!(
             "  replay of the recording byte-identical to the live solution: {}",
             if r.replay_identical { "yes" } else { "NO" }

@@ -11,7 +11,7 @@
 use crate::accuracy::{Accuracy, AccuracyTracker};
 use crate::demo_start::{DemoStart, session_config};
 use crate::phases::{PhaseFigures, PhaseRecorder};
-use crate::process::{ChildProcess, sibling};
+use crate::process::{ChildProcess, Scheduling, scheduled_command, sibling};
 use crate::replay::interpolate;
 use anyhow::{Context, bail};
 use auvnav_drivers::can::DbcDecoder;
@@ -25,6 +25,9 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
+
+/// The line rate of the demo's emulated devices and drivers (bit/s).
+const DEMO_BAUD: u32 = 921_600;
 
 /// What the live demo reports.
 #[derive(Debug, Serialize)]
@@ -56,6 +59,11 @@ pub struct LiveResult {
     /// Every IMU sample of the voyage reached the recording (the host-to-simulator time map is
     /// exact; otherwise samples after a lost one are mapped one interval early).
     pub imu_samples_complete: bool,
+    /// The recorded IMU samples' and USBL fixes' time stamps against when the emulator sent them
+    /// (its lines paced at the drivers' 921 600 baud); a kind is left out when a frame was lost.
+    pub stamp_errors: Vec<crate::emulate_line::StampErrors>,
+    /// How the processes were scheduled (`--scheduling`), and whether SCHED_FIFO was permitted.
+    pub scheduling: String,
     /// `auvnav replay DIR/record.mcap --out DIR/replay_nav.csv` gave a byte-identical file.
     pub replay_identical: bool,
     /// Every process stopped cleanly (exit status 0 after SIGTERM).
@@ -186,8 +194,9 @@ pub fn live_accuracy(nav: &[NavSolutionV1], truth: &[TruthStateV1], map: &HostTo
 
 /// What the recording holds for the phase figures and the summary.
 struct Recording {
-    /// The recorded IMU times.
+    /// The recorded IMU times and USBL fix times.
     imu_ns: Vec<u64>,
+    usbl_ns: Vec<u64>,
     /// The daemon's solutions and aid diagnostics.
     nav: Vec<NavSolutionV1>,
     diagnostics: Vec<auvnav_shm_schema::AidDiagnosticsV1>,
@@ -197,6 +206,7 @@ struct Recording {
 fn read_recording(record: &Path) -> anyhow::Result<Recording> {
     let mut r = Recording {
         imu_ns: Vec::new(),
+        usbl_ns: Vec::new(),
         nav: Vec::new(),
         diagnostics: Vec::new(),
         gnss_fixes: 0,
@@ -205,6 +215,7 @@ fn read_recording(record: &Path) -> anyhow::Result<Recording> {
     while let Some(raw) = reader.next_message()? {
         match raw.decode_any()? {
             LogMessage::Imu(x) => r.imu_ns.push(x.host_time_ns),
+            LogMessage::Usbl(x) => r.usbl_ns.push(x.host_time_ns),
             LogMessage::NavSolution(s) => r.nav.push(s),
             LogMessage::AidDiagnostics(d) => r.diagnostics.push(d),
             LogMessage::Gnss(_) => r.gnss_fixes += 1,
@@ -252,6 +263,7 @@ pub fn run_live(
     speed: f64,
     out: Option<&Path>,
     live_view: Option<std::net::SocketAddr>,
+    scheduling: Scheduling,
 ) -> anyhow::Result<LiveResult> {
     if !(speed.is_finite() && (0.1..=20.0).contains(&speed)) {
         bail!("--speed {speed}: expected 0.1..=20");
@@ -279,6 +291,18 @@ pub fn run_live(
         None => None,
     };
     let me = std::env::current_exe()?;
+    // The units' priorities, where SCHED_FIFO is permitted.
+    let (fifo, scheduled) = match scheduling {
+        Scheduling::Normal => (false, "normal".to_string()),
+        Scheduling::Unit => match crate::process::realtime_permitted() {
+            Ok(()) => (
+                true,
+                "as the units: drivers SCHED_FIFO 60, daemon 50, emulator 70".to_string(),
+            ),
+            Err(why) => (false, format!("normal (SCHED_FIFO not permitted: {why})")),
+        },
+    };
+    let priority = |p: u8| fifo.then_some(p);
     let start = Instant::now();
     let dir = match out {
         Some(d) => d.to_path_buf(),
@@ -341,7 +365,7 @@ pub fn run_live(
         std::fs::write(
             &p,
             format!(
-                "prefix = \"{prefix}\"\nprotocol = \"{protocol}\"\n[serial]\nport = \"{}\"\nbaud = 921600\n{extra}\
+                "prefix = \"{prefix}\"\nprotocol = \"{protocol}\"\n[serial]\nport = \"{}\"\nbaud = {DEMO_BAUD}\n{extra}\
                  [timing]\nreconnect_initial_s = 0.02\nreconnect_max_s = 0.5\nhealth_period_s = 0.5\n",
                 dev.join(class).display()
             ),
@@ -391,7 +415,9 @@ pub fn run_live(
     let mut daemon_p = ChildProcess::spawn_logged(
         "auvnavd",
         &dir,
-        Command::new(daemon).arg("--config").arg(&daemon_cfg),
+        scheduled_command(daemon, priority(50))
+            .arg("--config")
+            .arg(&daemon_cfg),
     )?;
     let mut live_p = match live_view {
         Some(addr) => {
@@ -418,24 +444,32 @@ pub fn run_live(
         ChildProcess::spawn_logged(
             "auvnav-dvl",
             &dir,
-            Command::new(dvl_bin).arg("--config").arg(&dvl_cfg),
+            scheduled_command(dvl_bin, priority(60))
+                .arg("--config")
+                .arg(&dvl_cfg),
         )?,
         ChildProcess::spawn_logged(
             "auvnav-imu",
             &dir,
-            Command::new(imu_bin).arg("--config").arg(&imu_cfg),
+            scheduled_command(imu_bin, priority(60))
+                .arg("--config")
+                .arg(&imu_cfg),
         )?,
         ChildProcess::spawn_logged(
             "auvnav-usbl",
             &dir,
-            Command::new(usbl_bin).arg("--config").arg(&usbl_cfg),
+            scheduled_command(usbl_bin, priority(60))
+                .arg("--config")
+                .arg(&usbl_cfg),
         )?,
     ];
     if let (Some(bin), Some(cfg)) = (&gnss_bin, &gnss_cfg) {
         drivers.push(ChildProcess::spawn_logged(
             "auvnav-gnss",
             &dir,
-            Command::new(bin).arg("--config").arg(cfg),
+            scheduled_command(bin, priority(60))
+                .arg("--config")
+                .arg(cfg),
         )?);
     }
     std::thread::sleep(Duration::from_millis(500));
@@ -456,11 +490,14 @@ pub fn run_live(
     let mut emulator = ChildProcess::spawn_logged(
         "emulate",
         &dir,
-        Command::new(&me)
+        scheduled_command(&me, priority(70))
             .arg("emulate")
             .arg(&voyage)
             .args(&emulated)
             .args(["--speed", &speed.to_string()])
+            .args(["--baud", &DEMO_BAUD.to_string()])
+            .arg("--send-times")
+            .arg(dir.join("send_times.csv"))
             .arg("--link-dir")
             .arg(&dev)
             .args(["--start-delay", &start_delay.to_string()]),
@@ -470,7 +507,7 @@ pub fn run_live(
     drivers.push(ChildProcess::spawn_logged(
         "auvnav-can",
         &dir,
-        Command::new(can_bin)
+        scheduled_command(can_bin, priority(60))
             .arg("--config")
             .arg(&can_cfg)
             .arg("--candump")
@@ -510,11 +547,17 @@ pub fn run_live(
     let nav = read_nav_csv(&live_csv)?;
     let Recording {
         imu_ns: recorded_imu,
+        usbl_ns: recorded_usbl,
         nav: recorded_nav,
         diagnostics,
         gnss_fixes: gnss_fixes_recorded,
     } = read_recording(&record)?;
     let imu_samples_complete = recorded_imu.len() == imu_sim_ns.len();
+    let sent = crate::emulate_line::read_send_times(&dir.join("send_times.csv"))?;
+    let stamp_errors = [("imu", &recorded_imu), ("usbl", &recorded_usbl)]
+        .into_iter()
+        .filter_map(|(kind, stamps)| crate::emulate_line::stamp_errors(&sent, kind, stamps))
+        .collect();
     let map = HostToSim::new(imu_sim_ns, recorded_imu);
     let accuracy = live_accuracy(&nav, &truth, &map);
     let s = |ns: u64| ns as f64 * 1e-9;
@@ -566,6 +609,8 @@ pub fn run_live(
         accuracy,
         phases,
         imu_samples_complete,
+        stamp_errors,
+        scheduling: scheduled,
         replay_identical,
         clean_stop: clean,
         wall_s: start.elapsed().as_secs_f64(),

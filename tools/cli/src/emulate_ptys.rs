@@ -15,6 +15,7 @@
 //! Long on purpose: the last 44 lines are the unit tests, beside the code they test; the code is
 //! 604 lines.
 
+use crate::emulate_line::{Lines, SendRecord};
 use anyhow::{Context, bail};
 use auvnav_drivers::device::{DeviceClass, Protocol, XSENS_FIELD_UNIT_UT};
 use auvnav_drivers::to_device as enc;
@@ -24,7 +25,7 @@ use auvnav_sim::rng::Rng;
 use serde::Serialize;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// The coordinate system an emulated PD0 DVL records its bottom track in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -70,6 +71,21 @@ pub struct EmulateArgs {
     /// Play this many times faster than real time (0.01..1000).
     #[arg(long, default_value_t = 1.0)]
     pub speed: f64,
+    /// Pace every device's bytes at this line rate (bit/s, 8N1): a frame takes its length in
+    /// characters on the line, waits while the line is busy, and reaches the terminal in pieces of
+    /// about 1 ms as its bytes arrive. Without it a frame is written whole when due.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(50..=4_000_000))]
+    pub baud: Option<u32>,
+    /// Deliver each piece up to this much later than its bytes arrived, at random, in order (a
+    /// USB adapter's latency timer, a busy host) (ms, 0..100).
+    #[arg(long, default_value_t = 0.0)]
+    pub jitter_ms: f64,
+    /// Write when each frame's first byte was on the line and when it was written to the terminal
+    /// (CSV: device,kind,index,line_ns,due_ns,written_ns; CLOCK_MONOTONIC ns; due: when the first
+    /// piece's bytes had arrived), to measure a driver's
+    /// time stamps against.
+    #[arg(long, value_name = "FILE")]
+    pub send_times: Option<PathBuf>,
     /// Keep stable links DIR/dvl, DIR/imu, DIR/usbl, DIR/gnss to the pseudo-terminals (needed by
     /// --unplug).
     #[arg(long)]
@@ -355,6 +371,9 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
             bail!("--{name} {p}: expected a probability 0..=1");
         }
     }
+    if !(a.jitter_ms.is_finite() && (0.0..=100.0).contains(&a.jitter_ms)) {
+        bail!("--jitter-ms {}: expected 0..=100 ms", a.jitter_ms);
+    }
     if !(a.start_delay.is_finite() && (0.0..=600.0).contains(&a.start_delay)) {
         bail!("--start-delay {}: expected 0..=600 s", a.start_delay);
     }
@@ -432,7 +451,17 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
     }
     std::thread::sleep(Duration::from_secs_f64(a.start_delay));
     let mut rng = Rng::new(a.seed, "emulate");
-    let start = Instant::now();
+    let mut lines = Lines::new(
+        devices.len(),
+        a.baud,
+        a.jitter_ms,
+        a.send_times.as_deref(),
+        a.seed,
+    )?;
+    let mut kind_counts: std::collections::HashMap<&'static str, u64> = Default::default();
+    // The frame of each device whose piece the terminal last refused (counted once per frame).
+    let mut refused: Vec<Option<u64>> = vec![None; devices.len()];
+    let start_ns = auvnav_drivers::clock::monotonic_ns();
     let mut first_ns: Option<u64> = None;
     let mut truth_seen = false;
     while let Some(raw) = reader.next_message().context("reading the log")? {
@@ -451,16 +480,16 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
                 d.attitude = attitude;
             }
         }
-        let (class, host_ns) = match &m {
-            LogMessage::Imu(s) => (DeviceClass::Imu, s.host_time_ns),
-            LogMessage::Dvl(s) => (DeviceClass::Dvl, s.host_time_ns),
-            LogMessage::Usbl(s) => (DeviceClass::Usbl, s.host_time_ns),
-            LogMessage::Gnss(s) => (DeviceClass::Gnss, s.host_time_ns),
+        let (class, kind, host_ns) = match &m {
+            LogMessage::Imu(s) => (DeviceClass::Imu, "imu", s.host_time_ns),
+            LogMessage::Dvl(s) => (DeviceClass::Dvl, "dvl", s.host_time_ns),
+            LogMessage::Usbl(s) => (DeviceClass::Usbl, "usbl", s.host_time_ns),
+            LogMessage::Gnss(s) => (DeviceClass::Gnss, "gnss", s.host_time_ns),
             // An IMU that carries the magnetic field (Xsens) sends it in its own packets.
-            LogMessage::Magnetometer(s) => (DeviceClass::Imu, s.host_time_ns),
+            LogMessage::Magnetometer(s) => (DeviceClass::Imu, "mag", s.host_time_ns),
             _ => continue,
         };
-        let Some(d) = devices.iter_mut().find(|d| d.class == class) else {
+        let Some(device) = devices.iter().position(|d| d.class == class) else {
             continue;
         };
         let t0 = *first_ns.get_or_insert(host_ns);
@@ -468,6 +497,10 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
         if a.duration.is_some_and(|dur| t > dur) {
             break;
         }
+        // Everything due on the lines before this frame goes out first.
+        let due_ns = start_ns + (t / a.speed * 1e9).round() as u64;
+        deliver(&mut lines, Some(due_ns), &mut devices, &mut refused)?;
+        let d = &mut devices[device];
         // Unplug and replug at the window edges.
         let unplugged = d.unplugs.iter().any(|w| w.contains(t));
         if unplugged && d.master.is_some() {
@@ -503,11 +536,6 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
             continue;
         };
         d.summary.messages += 1;
-        let due = start + Duration::from_secs_f64(t / a.speed);
-        let now = Instant::now();
-        if due > now {
-            std::thread::sleep(due - now);
-        }
         if unplugged {
             d.summary.unplugged += 1;
             continue;
@@ -534,21 +562,26 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
             bytes[i] ^= 0x01;
         }
         out.extend_from_slice(&bytes);
-        let Some(master) = d.master.as_mut() else {
+        if d.master.is_none() {
             continue;
-        };
-        match master.write_all(&out) {
-            Ok(()) => {
-                d.summary.bytes += out.len() as u64;
-                if corrupt {
-                    d.summary.corrupted += 1;
-                } else {
-                    d.summary.written += 1;
-                }
-            }
-            Err(_) => d.summary.blocked += 1,
         }
+        if corrupt {
+            d.summary.corrupted += 1;
+        } else {
+            d.summary.written += 1;
+        }
+        let index = kind_counts.entry(kind).or_default();
+        let record = SendRecord {
+            device: class.name(),
+            kind,
+            index: *index,
+            line_ns: due_ns,
+        };
+        *index += 1;
+        lines.send(device, due_ns, out, record);
     }
+    deliver(&mut lines, None, &mut devices, &mut refused)?;
+    lines.finish()?;
     let summaries: Vec<DeviceSummary> = devices.iter().map(|d| d.summary.clone()).collect();
     if a.json {
         println!(
@@ -598,6 +631,30 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
         let _ = std::fs::remove_dir(dir);
     }
     Ok(summaries)
+}
+
+/// Writes the pieces due by `until_ns` (all with `None`) into the devices' terminals, counting the
+/// bytes taken and the frames of which a piece was refused.
+fn deliver(
+    lines: &mut Lines,
+    until_ns: Option<u64>,
+    devices: &mut [Device],
+    refused: &mut [Option<u64>],
+) -> anyhow::Result<()> {
+    lines.deliver(until_ns, |device, frame, bytes| {
+        let d = &mut devices[device];
+        let ok = d
+            .master
+            .as_mut()
+            .is_some_and(|m| m.write_all(bytes).is_ok());
+        if ok {
+            d.summary.bytes += bytes.len() as u64;
+        } else if refused[device] != Some(frame) {
+            refused[device] = Some(frame);
+            d.summary.blocked += 1;
+        }
+        ok
+    })
 }
 
 /// Used by tests: the link path of a device under a link directory.

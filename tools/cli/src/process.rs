@@ -126,3 +126,43 @@ pub fn sibling(name: &str) -> anyhow::Result<PathBuf> {
     }
     Ok(path)
 }
+
+/// How `auvnav demo` schedules the processes it starts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Scheduling {
+    /// As the units run them: drivers SCHED_FIFO 60, the daemon SCHED_FIFO 50 (the emulated
+    /// devices at 70, so that the "world" sends on time); the recorder and the tools normal.
+    /// Falls back to normal where SCHED_FIFO is not permitted, and says so.
+    Unit,
+    /// Every process under the normal scheduler (the time stamps alone against the load).
+    Normal,
+}
+
+/// Whether this process may start programs under SCHED_FIFO (through `chrt`, from util-linux):
+/// `Err` says why not.
+pub fn realtime_permitted() -> Result<(), String> {
+    match Command::new("chrt")
+        .args(["-f", "1", "true"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+    {
+        Ok(s) if s.success() => Ok(()),
+        Ok(s) => Err(format!("`chrt -f 1 true` exited with {s}")),
+        Err(e) => Err(format!("cannot run chrt: {e}")),
+    }
+}
+
+/// A command running `program` under SCHED_FIFO at `priority` (its threads inherit it), or
+/// normally with `None`.
+pub fn scheduled_command(program: &Path, priority: Option<u8>) -> Command {
+    match priority {
+        Some(p) => {
+            let mut c = Command::new("chrt");
+            c.args(["-f", &p.to_string()]).arg(program);
+            c
+        }
+        None => Command::new(program),
+    }
+}

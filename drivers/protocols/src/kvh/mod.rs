@@ -114,6 +114,11 @@ impl KvhDecoder {
         &self.input.stats
     }
 
+    /// Stream offset of the first byte of the last frame returned.
+    pub fn frame_start(&self) -> u64 {
+        self.input.frame_start()
+    }
+
     pub fn next_sample(&mut self) -> Option<KvhSample> {
         loop {
             let data = self.input.data();
@@ -158,6 +163,9 @@ impl crate::framing::StreamDecoder for KvhDecoder {
     }
     fn stats(&self) -> &DecoderStats {
         &self.input.stats
+    }
+    fn frame_start(&self) -> u64 {
+        self.input.frame_start()
     }
 }
 

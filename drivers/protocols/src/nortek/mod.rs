@@ -299,6 +299,11 @@ impl NortekDecoder {
         &self.input.stats
     }
 
+    /// Stream offset of the first byte of the last frame returned.
+    pub fn frame_start(&self) -> u64 {
+        self.input.frame_start()
+    }
+
     /// The next record; `None` when more bytes are needed. A header whose checksum fails is a
     /// false sync (the search goes on one byte later); a record whose data checksum fails is
     /// counted and returned as an error, and decoding goes on after it.
@@ -382,6 +387,9 @@ impl crate::framing::StreamDecoder for NortekDecoder {
     }
     fn stats(&self) -> &DecoderStats {
         NortekDecoder::stats(self)
+    }
+    fn frame_start(&self) -> u64 {
+        self.input.frame_start()
     }
 }
 

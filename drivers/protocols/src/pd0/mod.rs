@@ -633,6 +633,11 @@ impl Pd0Decoder {
         &self.input.stats
     }
 
+    /// Stream offset of the first byte of the last frame returned.
+    pub fn frame_start(&self) -> u64 {
+        self.input.frame_start()
+    }
+
     fn skip(&mut self, n: usize) {
         self.resume = 1;
         self.input.skip(n);
@@ -891,6 +896,9 @@ impl crate::framing::StreamDecoder for Pd0Decoder {
     }
     fn stats(&self) -> &DecoderStats {
         &self.input.stats
+    }
+    fn frame_start(&self) -> u64 {
+        self.input.frame_start()
     }
 }
 

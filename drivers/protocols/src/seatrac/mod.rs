@@ -464,6 +464,11 @@ impl SeatracDecoder {
         &self.input.stats
     }
 
+    /// Stream offset of the first byte of the last frame returned.
+    pub fn frame_start(&self) -> u64 {
+        self.input.frame_start()
+    }
+
     pub fn next_frame(&mut self) -> Option<Result<SeatracFrame, SeatracError>> {
         let line_end = |b: &u8| *b == b'\r' || *b == b'\n';
         loop {
@@ -523,6 +528,9 @@ impl crate::framing::StreamDecoder for SeatracDecoder {
     }
     fn stats(&self) -> &DecoderStats {
         &self.input.stats
+    }
+    fn frame_start(&self) -> u64 {
+        self.input.frame_start()
     }
 }
 

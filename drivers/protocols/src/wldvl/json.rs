@@ -163,6 +163,11 @@ impl JsonDecoder {
         &self.input.stats
     }
 
+    /// Stream offset of the first byte of the last frame returned.
+    pub fn frame_start(&self) -> u64 {
+        self.input.frame_start()
+    }
+
     /// The next report; `None` when more bytes are needed. Empty lines are skipped silently.
     pub fn next_frame(&mut self) -> Option<Result<JsonFrame, JsonError>> {
         loop {
@@ -206,6 +211,9 @@ impl crate::framing::StreamDecoder for JsonDecoder {
     }
     fn stats(&self) -> &DecoderStats {
         JsonDecoder::stats(self)
+    }
+    fn frame_start(&self) -> u64 {
+        self.input.frame_start()
     }
 }
 

@@ -203,6 +203,11 @@ impl WlDecoder {
         &self.input.stats
     }
 
+    /// Stream offset of the first byte of the last frame returned.
+    pub fn frame_start(&self) -> u64 {
+        self.input.frame_start()
+    }
+
     /// The next line's frame, or `None` when no complete line is buffered.
     pub fn next_frame(&mut self) -> Option<Result<WlFrame, WlError>> {
         loop {
@@ -363,6 +368,9 @@ impl crate::framing::StreamDecoder for WlDecoder {
     }
     fn stats(&self) -> &DecoderStats {
         &self.input.stats
+    }
+    fn frame_start(&self) -> u64 {
+        self.input.frame_start()
     }
 }
 

@@ -323,6 +323,11 @@ impl XbusDecoder {
         &self.input.stats
     }
 
+    /// Stream offset of the first byte of the last frame returned.
+    pub fn frame_start(&self) -> u64 {
+        self.input.frame_start()
+    }
+
     /// The next message; `None` when more bytes are needed. MTData2 payloads that do not parse
     /// are counted as malformed and skipped.
     pub fn next_message(&mut self) -> Option<XbusMessage> {
@@ -401,5 +406,8 @@ impl crate::framing::StreamDecoder for XbusDecoder {
     }
     fn stats(&self) -> &DecoderStats {
         &self.input.stats
+    }
+    fn frame_start(&self) -> u64 {
+        self.input.frame_start()
     }
 }

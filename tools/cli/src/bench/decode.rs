@@ -222,15 +222,15 @@ pub fn decode(repeat: usize, pty_seconds: f64, json: bool) -> anyhow::Result<()>
     } else {
         for l in &latency {
             println!(
-                "pty {} at {} Hz: {}/{} frames; write->read p50 {:.0} us p99 {:.0} us; read->subscriber p50 {:.0} us p99 {:.0} us; total p50 {:.0} us p99 {:.0} us max {:.0} us",
+                "pty {} at {} Hz: {}/{} frames; write->stamp p50 {:+.0} us p99 {:+.0} us; stamp->subscriber p50 {:.0} us p99 {:.0} us; total p50 {:.0} us p99 {:.0} us max {:.0} us",
                 l.protocol,
                 l.rate_hz,
                 l.frames_received,
                 l.frames_written,
-                l.pty_to_read_us.p50,
-                l.pty_to_read_us.p99,
-                l.read_to_subscriber_us.p50,
-                l.read_to_subscriber_us.p99,
+                l.write_to_stamp_us.p50,
+                l.write_to_stamp_us.p99,
+                l.stamp_to_subscriber_us.p50,
+                l.stamp_to_subscriber_us.p99,
                 l.total_us.p50,
                 l.total_us.p99,
                 l.total_us.max

@@ -13,41 +13,19 @@ pub struct PtyLatency {
     pub rate_hz: f64,
     pub frames_written: u64,
     pub frames_received: u64,
-    /// Write call of the frame → the driver's read returned (its host time stamp): the
-    /// terminal and the driver's wake-up (µs).
-    pub pty_to_read_us: Percentiles,
-    /// Read return → message received by a subscriber in another process: decode, publish and
-    /// the shared-memory hop with event wake-up (µs).
-    pub read_to_subscriber_us: Percentiles,
+    /// Write call of the frame → its time stamp (µs): the first byte's estimated arrival,
+    /// through the model of the device's clock. A pseudo-terminal carries a frame written whole
+    /// at no line rate, so a stamp placed back at 921 600 baud can come before the write.
+    pub write_to_stamp_us: Percentiles,
+    /// The message's time stamp → received by a subscriber in another process: the terminal,
+    /// the driver's wake-up, decode, publish and the shared-memory hop with event wake-up (µs).
+    pub stamp_to_subscriber_us: Percentiles,
     /// Write call → message received by the subscriber: an upper bound of byte arrival →
     /// publish (µs).
     pub total_us: Percentiles,
 }
 
-/// p50, p99 and maximum.
-#[derive(Debug, Clone, Copy, Serialize)]
-pub struct Percentiles {
-    pub p50: f64,
-    pub p99: f64,
-    pub max: f64,
-}
-
-pub(crate) fn percentiles(mut v: Vec<f64>) -> Percentiles {
-    if v.is_empty() {
-        return Percentiles {
-            p50: f64::NAN,
-            p99: f64::NAN,
-            max: f64::NAN,
-        };
-    }
-    v.sort_by(f64::total_cmp);
-    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
-    Percentiles {
-        p50: at(0.5),
-        p99: at(0.99),
-        max: v[v.len() - 1],
-    }
-}
+pub use crate::percentiles::{Percentiles, percentiles};
 
 /// Plays KVH 1750 frames (format B, the frame index in the device time stamp) into a
 /// pseudo-terminal read by a real `auvnav-imu` process, and times each frame from its write call
@@ -92,7 +70,8 @@ pub fn pty_latency(rate_hz: f64, seconds: f64) -> anyhow::Result<PtyLatency> {
             while !done.load(Ordering::SeqCst) {
                 auvnav_shm_schema::bus::wait(&wake, Duration::from_millis(20))?;
                 while let Some(m) = sub.receive()? {
-                    got.push((m.device_time_ns / 1000, m.host_time_ns, monotonic_ns()));
+                    let index = (m.device_time_ns as f64 * 1e-9 * rate_hz).round() as u64;
+                    got.push((index, m.host_time_ns, monotonic_ns()));
                 }
             }
             Ok(got)
@@ -125,7 +104,8 @@ pub fn pty_latency(rate_hz: f64, seconds: f64) -> anyhow::Result<PtyLatency> {
             status: 0x77,
             sequence: (i % 128) as u8,
             temperature_raw: 20,
-            timestamp_us: Some(i as u32),
+            // The device's clock: microseconds since the first frame.
+            timestamp_us: Some((i as f64 * 1e6 / rate_hz).round() as u32),
         });
         written[i as usize] = monotonic_ns();
         master.write_all(&frame)?;
@@ -139,21 +119,22 @@ pub fn pty_latency(rate_hz: f64, seconds: f64) -> anyhow::Result<PtyLatency> {
     drop(slave);
     let _ = std::fs::remove_dir_all(&dir);
     let (mut pty, mut hop, mut total) = (Vec::new(), Vec::new(), Vec::new());
-    for (idx, read_ns, recv_ns) in &got {
-        let Some(&w) = written.get(*idx as usize) else {
+    let us = |a: u64, b: u64| (b as f64 - a as f64) * 1e-3;
+    for &(idx, stamp_ns, recv_ns) in &got {
+        let Some(&w) = written.get(idx as usize) else {
             continue;
         };
-        pty.push(read_ns.saturating_sub(w) as f64 * 1e-3);
-        hop.push(recv_ns.saturating_sub(*read_ns) as f64 * 1e-3);
-        total.push(recv_ns.saturating_sub(w) as f64 * 1e-3);
+        pty.push(us(w, stamp_ns));
+        hop.push(us(stamp_ns, recv_ns));
+        total.push(us(w, recv_ns));
     }
     Ok(PtyLatency {
         protocol: "kvh1750".into(),
         rate_hz,
         frames_written: n,
         frames_received: got.len() as u64,
-        pty_to_read_us: percentiles(pty),
-        read_to_subscriber_us: percentiles(hop),
+        write_to_stamp_us: percentiles(pty),
+        stamp_to_subscriber_us: percentiles(hop),
         total_us: percentiles(total),
     })
 }
@@ -168,8 +149,9 @@ pub struct E2eLatency {
     /// IMU frame written to its pseudo-terminal → navigation solution received by a subscriber
     /// (µs): terminal, driver, shared memory, daemon (strapdown + filter), shared memory.
     pub frame_to_solution_us: Percentiles,
-    /// IPC only: the IMU driver's read time stamp → the IMU message received by a subscriber in
-    /// another process (µs): decode, publish and the shared-memory hop with event wake-up.
+    /// IPC only: the IMU driver's read return (from its stage times) → the IMU message received
+    /// by a subscriber in another process (µs): decode, publish and the shared-memory hop with
+    /// event wake-up.
     pub driver_to_subscriber_us: Percentiles,
     /// Where the time goes, per solution (µs): the stages of `frame_to_solution_us`, from the
     /// stage times the IMU driver and the daemon write (their `stage_times_csv`). Percentiles of
@@ -229,6 +211,8 @@ pub struct StageLatency {
 /// A row of the IMU driver's stage times (host clock, ns).
 #[derive(Debug, Clone, Copy, serde::Deserialize)]
 struct DriverStages {
+    /// The message's time stamp (the daemon's and the solution's key).
+    stamp_ns: u64,
     read_ns: u64,
     decoded_ns: u64,
     published_ns: u64,
@@ -256,7 +240,7 @@ fn read_stage_rows<T: serde::de::DeserializeOwned>(
 
 /// The stages of each solution: frame written (`written`, by frame index = solution sequence)
 /// → driver read → decoded → published → daemon woke → topics drained → solution published →
-/// received by the subscriber (`sols`: sequence, driver read stamp, receive time).
+/// received by the subscriber (`sols`: sequence, the IMU message's time stamp, receive time).
 fn stage_latencies(
     written: &[u64],
     sols: &[(u64, u64, u64)],
@@ -264,7 +248,7 @@ fn stage_latencies(
     daemon: &[DaemonStages],
 ) -> (Vec<StageLatency>, u64) {
     let driver: std::collections::HashMap<u64, DriverStages> =
-        driver.iter().map(|r| (r.read_ns, *r)).collect();
+        driver.iter().map(|r| (r.stamp_ns, *r)).collect();
     let daemon: std::collections::HashMap<u64, DaemonStages> =
         daemon.iter().map(|r| (r.imu_host_time_ns, *r)).collect();
     const STAGES: [(&str, &str); 8] = [
@@ -301,17 +285,17 @@ fn stage_latencies(
     let mut values: Vec<Vec<f64>> = vec![Vec::new(); STAGES.len()];
     let mut joined = 0;
     let us = |a: u64, b: u64| (b as f64 - a as f64) * 1e-3;
-    for &(seq, read, recv) in sols {
+    for &(seq, stamp, recv) in sols {
         let (Some(&w), Some(d), Some(m)) = (
             written.get(seq as usize),
-            driver.get(&read),
-            daemon.get(&read),
+            driver.get(&stamp),
+            daemon.get(&stamp),
         ) else {
             continue;
         };
         let times = [
             w,
-            read,
+            d.read_ns,
             d.decoded_ns,
             d.published_ns,
             m.woke_ns,
@@ -657,10 +641,11 @@ pub fn e2e(
         let _ = p.0.set_timeout(Duration::from_millis(1));
     }
     drop(ports);
+    let driver_rows: Vec<DriverStages> = read_stage_rows(&imu_stages)?;
     let (stages, solutions_with_stages) = stage_latencies(
         &written,
         &sols,
-        &read_stage_rows(&imu_stages)?,
+        &driver_rows,
         &read_stage_rows(&daemon_stages)?,
     );
     let _ = std::fs::remove_dir_all(&dir);
@@ -673,9 +658,18 @@ pub fn e2e(
                 .map(|w| recv.saturating_sub(*w) as f64 * 1e-3)
         })
         .collect();
+    // The driver's read return of each IMU message, found by its time stamp.
+    let read_of: std::collections::HashMap<u64, u64> = driver_rows
+        .iter()
+        .map(|r| (r.stamp_ns, r.read_ns))
+        .collect();
     let hop: Vec<f64> = imus
         .iter()
-        .map(|(read, recv)| recv.saturating_sub(*read) as f64 * 1e-3)
+        .filter_map(|(stamp, recv)| {
+            read_of
+                .get(stamp)
+                .map(|read| (*recv as f64 - *read as f64) * 1e-3)
+        })
         .collect();
     let cpu = |a: Option<f64>, b: Option<f64>| match (a, b) {
         (Some(a), Some(b)) if wall > 0.0 => 100.0 * (b - a) / wall,
