@@ -23,7 +23,8 @@ use auvnav_shm_schema::bus::{Bus, BusError, BusPublisher, BusSubscriber, Sequenc
 use auvnav_shm_schema::qos::{self, ServiceQos};
 use auvnav_shm_schema::{
     AcousticRangesV1, AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1,
-    MagnetometerV1, Message, NavSolutionV1, ProcessHealthV1, SoundVelocityV1, UsblFixV1, topic,
+    MagnetometerV1, Message, NavSolutionV1, ProcessHealthV1, SessionEventV1, SoundVelocityV1,
+    UsblFixV1, topic,
 };
 use serde::{Deserialize, Serialize};
 
@@ -306,6 +307,7 @@ topics! {
     topic::NAV_SOLUTION => NavSolutionV1, qos::NAVIGATION;
     topic::NAV_AID_DIAGNOSTICS => AidDiagnosticsV1, qos::NAVIGATION;
     topic::NAV_LATE_AIDS => LateAidV1, qos::NAVIGATION;
+    topic::NAV_SESSION_EVENTS => SessionEventV1, qos::NAVIGATION;
     topic::HEALTH => ProcessHealthV1, qos::HEALTH;
     topic::IMU => ImuSampleV1, qos::SENSOR;
     topic::DVL => DvlVelocityV1, qos::SENSOR;

@@ -904,6 +904,44 @@ impl LateAidV1 {
     pub const TOPIC_SOUND_VELOCITY: u32 = 6;
 }
 
+message! {
+    /// A moment of the fusion daemon's session that a replay must know to reproduce it: where a
+    /// daemon process started its session (from the configuration, or continued from a
+    /// checkpoint after a restart), and each checkpoint it took. Recorded so that a replay of a
+    /// recording that spans a restart starts a new session where the daemon did, from the same
+    /// checkpoint.
+    #[type_name("auvnav/SessionEvent/v1")]
+    #[schema_name("auvnav_msgs/msg/SessionEventV1")]
+    pub struct SessionEventV1 {
+        /// Host time of the IMU sample it happened at (ns, CLOCK_MONOTONIC): the session's first
+        /// sample for a start, the last sample in the state for a checkpoint.
+        pub host_time_ns: u64,
+        /// Sequence number of this record.
+        pub sequence: u64,
+        /// What happened (SessionEventV1::KIND_*: 1 started from the configuration, 2 continued
+        /// from a checkpoint, 3 checkpoint taken).
+        pub kind: u32,
+        /// Reserved, zero.
+        pub reserved: u32,
+        /// For a continued start: the host time of the checkpoint's last IMU sample (ns).
+        pub checkpoint_time_ns: u64,
+        /// For a continued start: how long before the start the checkpoint was written (s), over
+        /// which its covariance was grown.
+        pub elapsed_s: f64,
+        /// For a continued start: the drift the covariance was grown by (m/s).
+        pub drift_m_s: f64,
+        /// For a start: the initial position's standard deviation the session used (m; the
+        /// configuration's, or the wider one of a start with the position unknown).
+        pub initial_position_std_m: f64,
+    }
+}
+
+impl SessionEventV1 {
+    pub const KIND_STARTED: u32 = 1;
+    pub const KIND_CONTINUED: u32 = 2;
+    pub const KIND_CHECKPOINT: u32 = 3;
+}
+
 /// Bytes per [`RawBytesV1`] message.
 pub const RAW_CHUNK: usize = 1024;
 
@@ -953,6 +991,7 @@ pub fn all_schemas() -> Vec<(&'static str, &'static str, String)> {
         entry::<AidDiagnosticsV1>(),
         entry::<ProcessHealthV1>(),
         entry::<LateAidV1>(),
+        entry::<SessionEventV1>(),
         entry::<TruthStateV1>(),
         entry::<RawBytesV1>(),
     ]

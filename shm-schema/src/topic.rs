@@ -28,6 +28,9 @@ pub const NAV_SOLUTION: &str = "nav/solution";
 pub const NAV_AID_DIAGNOSTICS: &str = "nav/aid_diagnostics";
 /// Aid messages the daemon applied late ([`crate::LateAidV1`]), for replay.
 pub const NAV_LATE_AIDS: &str = "nav/late_aids";
+/// The daemon's session starts and checkpoints ([`crate::SessionEventV1`]), for replay across
+/// restarts.
+pub const NAV_SESSION_EVENTS: &str = "nav/session_events";
 /// Process health of every process ([`crate::ProcessHealthV1`]).
 pub const HEALTH: &str = "health";
 /// Raw device bytes of one driver ([`crate::RawBytesV1`]): `raw/<driver name>`.

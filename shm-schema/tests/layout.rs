@@ -123,6 +123,7 @@ fn schemas_describe_the_whole_struct() {
         size_of::<AidDiagnosticsV1>(),
         size_of::<ProcessHealthV1>(),
         size_of::<LateAidV1>(),
+        size_of::<SessionEventV1>(),
         size_of::<TruthStateV1>(),
     ];
     for ((type_name, schema_name, def), size) in all_schemas().into_iter().zip(sizes) {

@@ -65,6 +65,9 @@ impl Outputs for Collected {
         self.late += 1;
         true
     }
+    fn session_event(&mut self, _: &auvnav_shm_schema::SessionEventV1) -> bool {
+        true
+    }
     fn health(&mut self, h: &ProcessHealthV1) -> Result<(), String> {
         self.health.push(*h);
         Ok(())

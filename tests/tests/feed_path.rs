@@ -43,6 +43,7 @@ fn collect(out: &mut Outputs) -> impl FnMut(SessionOutput) -> anyhow::Result<()>
             SessionOutput::Solution(s) => out.0.push(*s),
             SessionOutput::Diagnostics(d) => out.1.push(*d),
             SessionOutput::LateAid(r) => out.2.push(*r),
+            SessionOutput::Started(_) => {}
         }
         Ok(())
     }

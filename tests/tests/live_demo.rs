@@ -279,3 +279,50 @@ fn every_pd0_coordinate_system_navigates_alike_through_the_daemon() {
         }
     }
 }
+
+/// A daemon killed mid-run (SIGKILL) and started again continues from its checkpoint; the
+/// recording says where, and its replay reproduces every solution either daemon published.
+#[test]
+fn a_restarted_daemon_continues_from_its_checkpoint_and_its_recording_replays_across_it() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = TempDir::new("restartdemo");
+    let out = dir.path().join("run");
+    let args = [
+        "--scenario",
+        "lawnmower",
+        "--start",
+        "known",
+        "--seconds",
+        "40",
+        "--speed",
+        "4",
+        "--restart-daemon-at",
+        "20",
+    ];
+    let v = demo(&args, &out);
+    assert_eq!(v["daemon_restarted_at_s"], 20.0, "{v}");
+    assert_eq!(v["replay_identical"], true, "{v}");
+    assert_eq!(v["clean_stop"], true, "{v}");
+    let restarted =
+        std::fs::read_to_string(out.join("auvnavd-restarted.log")).expect("the restarted log");
+    assert!(
+        restarted.contains("continuing from the checkpoint"),
+        "{restarted}"
+    );
+    let o = Command::new(binary("auvnav"))
+        .arg("replay")
+        .arg(out.join("record.mcap"))
+        .args(["--compare-recorded", "--json"])
+        .output()
+        .expect("auvnav replay");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(r["sessions"]["session_starts"], 2, "{}", r["sessions"]);
+    assert_eq!(r["sessions"]["continued"], 1, "{}", r["sessions"]);
+    assert_eq!(r["sessions"]["checkpoint_missing"], 0, "{}", r["sessions"]);
+    let c = &r["recorded_comparison"];
+    assert_eq!(c["differing"], 0, "{c}");
+    assert_eq!(c["unmatched_recorded"], 0, "{c}");
+    // Both daemons' solutions: nearly the 8000 samples of 40 s at 200 Hz, less the restart's gap.
+    assert!(c["compared"].as_u64().expect("compared") > 7000, "{c}");
+}

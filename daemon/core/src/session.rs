@@ -16,7 +16,7 @@ use crate::navigator::{Checkpoint, Navigator, sound_speed_correction};
 use crate::smoother::{NominalParameters, SmootherLog, SmoothingRun};
 use crate::strapdown::NavState;
 use auvnav_shm_schema::{
-    AidDiagnosticsV1, DvlVelocityV1, ImuSampleV1, LateAidV1, NavMode, NavSolutionV1,
+    AidDiagnosticsV1, DvlVelocityV1, ImuSampleV1, LateAidV1, NavMode, NavSolutionV1, SessionEventV1,
 };
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use serde::Serialize;
@@ -29,6 +29,9 @@ pub enum SessionOutput<'a> {
     /// An aid message that came after the IMU stream had passed its due point, applied just
     /// before the IMU sample this record names (the daemon publishes it for replay).
     LateAid(&'a LateAidV1),
+    /// The session started (at its first IMU sample), from the configuration or continued from a
+    /// checkpoint (the daemon publishes it, so that a replay starts a session where it did).
+    Started(&'a SessionEventV1),
 }
 
 /// Where the initial state came from, stated in the outputs of the tools.
@@ -137,6 +140,8 @@ pub struct Session {
     resume: Option<(Checkpoint, f64, f64)>,
     /// Restarts that continued from a checkpoint.
     pub resumed: bool,
+    /// The session's first IMU sample (ns): aid messages stamped before it are not used.
+    first_imu_ns: Option<u64>,
 }
 
 impl Session {
@@ -176,6 +181,7 @@ impl Session {
             reinitialisations: 0,
             resume: None,
             resumed: false,
+            first_imu_ns: None,
         }
     }
 
@@ -185,6 +191,17 @@ impl Session {
     /// as if the vehicle had drifted at `drift_m_s` (one sigma) for that long.
     pub fn resume_from(&mut self, checkpoint: Checkpoint, elapsed_s: f64, drift_m_s: f64) {
         self.resume = Some((checkpoint, elapsed_s.max(0.0), drift_m_s.max(0.0)));
+    }
+
+    /// Hands over to `next`, the session of a daemon process that started after this one (a
+    /// replay of a recording that spans a restart): the smoother's record and the counters
+    /// carry over; the rest is `next`'s.
+    pub fn hand_over(&mut self, mut next: Session) {
+        next.smoothing = std::mem::replace(&mut self.smoothing, Smoothing::Off);
+        next.before_start += self.before_start;
+        next.late_aids += self.late_aids;
+        next.reinitialisations += self.reinitialisations;
+        *self = next;
     }
 
     /// Makes the navigator's covariance not finite, as a numerical failure would: for tests of
@@ -399,6 +416,9 @@ impl Session {
         x: &ImuSampleV1,
         out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
     ) -> Result<(), E> {
+        if self.first_imu_ns.is_none() {
+            self.start_at(x, out)?;
+        }
         while let Some(p) = self.pending.peek() {
             if aid_key(&p.0).0.saturating_add(self.aid_delay_ns) >= x.host_time_ns {
                 break;
@@ -423,18 +443,13 @@ impl Session {
             self.apply(aid, out)?;
         }
         self.last_imu_ns = self.last_imu_ns.max(x.host_time_ns);
-        if self.nav.is_none() && self.fine.is_some() {
-            return self.fine_step(x, out);
-        }
-        if self.nav.is_none() && self.configured_initial.is_none() && self.alignment.is_some() {
-            return self.coarse(x, out);
-        }
         if self.nav.is_none()
             && let Some((cp, elapsed_s, drift_m_s)) = self.resume.take()
             && let Some(mut nav) = Navigator::from_checkpoint(self.cfg.clone(), &cp)
         {
-            // A restart: the checkpoint's state, coasted to this sample over the time the
-            // process was down, with what the vehicle may have done meanwhile in the covariance.
+            // A restart, before any alignment the mission began with: the checkpoint's state,
+            // coasted to this sample over the time the process was down, with what the vehicle
+            // may have done meanwhile in the covariance.
             nav.coast(elapsed_s, x);
             let drift = drift_m_s * elapsed_s;
             nav.grow_variances(drift * drift, drift_m_s * drift_m_s);
@@ -455,6 +470,12 @@ impl Session {
             self.nav = Some(nav);
             self.begin_smoothing_chain();
             return out(SessionOutput::Solution(&sol));
+        }
+        if self.nav.is_none() && self.fine.is_some() {
+            return self.fine_step(x, out);
+        }
+        if self.nav.is_none() && self.configured_initial.is_none() && self.alignment.is_some() {
+            return self.coarse(x, out);
         }
         if self.nav.is_none()
             && let Some(i) = self.configured_initial.clone()
@@ -900,8 +921,41 @@ impl Session {
         }
     }
 
+    /// The session's first IMU sample: says how it starts ([`SessionOutput::Started`]) and drops
+    /// the aid messages stamped before it. A daemon that starts (or restarts) mid-stream sees
+    /// only the aids published after it subscribed, a replay every aid of the recording: from the
+    /// session's first sample on, both use the same ones.
+    fn start_at<E>(
+        &mut self,
+        x: &ImuSampleV1,
+        out: &mut dyn FnMut(SessionOutput) -> Result<(), E>,
+    ) -> Result<(), E> {
+        self.first_imu_ns = Some(x.host_time_ns);
+        let pending = std::mem::take(&mut self.pending);
+        let total = pending.len();
+        self.pending = pending
+            .into_iter()
+            .filter(|p| aid_key(&p.0).0 >= x.host_time_ns)
+            .collect();
+        self.before_start += (total - self.pending.len()) as u64;
+        let mut event = SessionEventV1 {
+            host_time_ns: x.host_time_ns,
+            kind: SessionEventV1::KIND_STARTED,
+            initial_position_std_m: self.cfg.initial_position_std_m,
+            ..Default::default()
+        };
+        if let Some((cp, elapsed_s, drift_m_s)) = &self.resume {
+            event.kind = SessionEventV1::KIND_CONTINUED;
+            event.checkpoint_time_ns = (cp.time_s * 1e9).round() as u64;
+            event.elapsed_s = *elapsed_s;
+            event.drift_m_s = *drift_m_s;
+        }
+        out(SessionOutput::Started(&event))
+    }
+
     /// Queues an aid message (applied before the first IMU sample stamped after its time + the
-    /// aid delay); counted as late when the IMU has already passed that point.
+    /// aid delay); counted as late when the IMU has already passed that point. One stamped
+    /// before the session's first IMU sample is not used (counted before the start).
     fn queue(&mut self, aid: SensorMessage) {
         let aid = match aid {
             SensorMessage::Dvl(mut m) if self.dvl_retime_ns > 0 => {
@@ -911,6 +965,10 @@ impl Session {
             }
             other => other,
         };
+        if self.first_imu_ns.is_some_and(|t| aid_key(&aid).0 < t) {
+            self.before_start += 1;
+            return;
+        }
         let late = aid_key(&aid).0.saturating_add(self.aid_delay_ns) < self.last_imu_ns;
         if late {
             self.late_aids += 1;

@@ -9,7 +9,8 @@ use auvnav_shm_schema::bus::{
 use auvnav_shm_schema::clock::monotonic_ns;
 use auvnav_shm_schema::{
     AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1, MagnetometerV1,
-    Message, NavSolutionV1, ProcessHealthV1, SoundVelocityV1, UsblFixV1, qos, topic,
+    Message, NavSolutionV1, ProcessHealthV1, SessionEventV1, SoundVelocityV1, UsblFixV1, qos,
+    topic,
 };
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::*;
@@ -81,6 +82,9 @@ pub fn run(cfg: &auvnav_core::config::DaemonConfig) -> Result<crate::service::Su
             .map_err(e)?,
         late_aids: bus
             .publisher(topic::NAV_LATE_AIDS, qos::NAVIGATION)
+            .map_err(e)?,
+        session_events: bus
+            .publisher(topic::NAV_SESSION_EVENTS, qos::NAVIGATION)
             .map_err(e)?,
         health: bus.publisher(topic::HEALTH, qos::HEALTH).map_err(e)?,
     };
@@ -193,6 +197,7 @@ struct BusOutputs {
     solution: BusPublisher<NavSolutionV1>,
     diagnostics: BusPublisher<AidDiagnosticsV1>,
     late_aids: BusPublisher<LateAidV1>,
+    session_events: BusPublisher<SessionEventV1>,
     health: BusPublisher<ProcessHealthV1>,
 }
 
@@ -205,6 +210,9 @@ impl Outputs for BusOutputs {
     }
     fn late_aid(&mut self, r: &LateAidV1) -> bool {
         self.late_aids.publish(*r).is_ok()
+    }
+    fn session_event(&mut self, e: &SessionEventV1) -> bool {
+        self.session_events.publish(*e).is_ok()
     }
     fn health(&mut self, h: &ProcessHealthV1) -> Result<(), String> {
         self.health

@@ -11,6 +11,7 @@
 
 use auvnav_core::config::{AlignmentConfig, DaemonConfig, InitialState};
 use auvnav_core::navigator::Checkpoint;
+use auvnav_core::session::Session;
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -183,6 +184,35 @@ fn write_loop(path: &Path, rx: Receiver<CheckpointFile>) -> u64 {
         }
     }
     errors
+}
+
+/// The session the daemon starts with: from the configuration, or continued from the checkpoint
+/// a predecessor left (then true).
+pub fn start_session(cfg: &DaemonConfig) -> (Session, bool) {
+    let mut session_cfg = cfg.session();
+    let resume = load(cfg);
+    if let Start::PositionUnknown(why) = &resume {
+        tracing::warn!(
+            "auvnavd: {why}: starting from the configured start with the position unknown \
+             (standard deviation {} m)",
+            cfg.checkpoint.unknown_position_std_m
+        );
+        session_cfg.navigation.initial_position_std_m = cfg.checkpoint.unknown_position_std_m;
+    }
+    let mut session = Session::new(&session_cfg);
+    if let Start::Resume(cp, elapsed_s) = resume {
+        tracing::warn!(
+            elapsed_s,
+            "auvnavd: continuing from the checkpoint {} written {:.1} s ago (covariance grown by \
+             a drift of {} m/s over that time)",
+            cfg.checkpoint.path,
+            elapsed_s,
+            cfg.checkpoint.drift_m_s
+        );
+        session.resume_from(*cp, elapsed_s, cfg.checkpoint.drift_m_s);
+        return (session, true);
+    }
+    (session, false)
 }
 
 #[cfg(test)]

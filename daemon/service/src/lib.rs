@@ -13,4 +13,5 @@ pub struct Args {
 
 pub mod bus_io;
 pub mod checkpoint;
+mod csv_out;
 pub mod service;

@@ -10,6 +10,7 @@
 //! sample was processed is late: counted and applied at the next one.
 
 use crate::checkpoint;
+use crate::csv_out::Csv;
 use auvnav_core::config::DaemonConfig;
 use auvnav_core::csv;
 use auvnav_core::feed::SensorMessage;
@@ -18,7 +19,8 @@ use auvnav_shm_schema::clock::monotonic_ns;
 use auvnav_shm_schema::stage_times::StageTimes;
 use auvnav_shm_schema::{
     AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1, MagnetometerV1,
-    NavSolutionV1, ProcessHealthV1, ProcessState, SoundVelocityV1, UsblFixV1, topic,
+    NavSolutionV1, ProcessHealthV1, ProcessState, SessionEventV1, SoundVelocityV1, UsblFixV1,
+    topic,
 };
 use std::io::Write;
 
@@ -116,6 +118,9 @@ pub trait Outputs {
     fn solution(&mut self, s: &NavSolutionV1) -> bool;
     fn diagnostics(&mut self, d: &AidDiagnosticsV1) -> bool;
     fn late_aid(&mut self, r: &LateAidV1) -> bool;
+    /// A session start or checkpoint, recorded so that a replay starts its sessions where this
+    /// daemon did.
+    fn session_event(&mut self, e: &SessionEventV1) -> bool;
     fn health(&mut self, h: &ProcessHealthV1) -> Result<(), String>;
 }
 
@@ -164,22 +169,6 @@ impl Watch {
     }
 }
 
-struct Csv {
-    w: std::io::BufWriter<std::fs::File>,
-}
-
-impl Csv {
-    fn create(path: &str, header: &str) -> Result<Option<Csv>, String> {
-        if path.is_empty() {
-            return Ok(None);
-        }
-        let f = std::fs::File::create(path).map_err(|e| format!("creating {path}: {e}"))?;
-        let mut w = std::io::BufWriter::new(f);
-        writeln!(w, "{header}").map_err(|e| format!("writing {path}: {e}"))?;
-        Ok(Some(Csv { w }))
-    }
-}
-
 /// What the loop counts, and returns when it stops.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Summary {
@@ -207,7 +196,7 @@ struct Sink<'a, O: Outputs> {
     summary: Summary,
 }
 
-impl<O: Outputs> Sink<'_, O> {
+impl<'a, O: Outputs> Sink<'a, O> {
     fn on(&mut self, o: SessionOutput) -> Result<(), std::io::Error> {
         match o {
             SessionOutput::Solution(s) => {
@@ -241,6 +230,11 @@ impl<O: Outputs> Sink<'_, O> {
                     self.summary.errors += 1;
                 }
             }
+            SessionOutput::Started(e) => {
+                if !self.out.session_event(e) {
+                    self.summary.errors += 1;
+                }
+            }
             SessionOutput::LateAid(r) => {
                 self.summary.late_aids_applied += 1;
                 if self.summary.late_aids_applied <= 10 {
@@ -262,6 +256,42 @@ impl<O: Outputs> Sink<'_, O> {
             }
         }
         Ok(())
+    }
+
+    /// The outputs of a daemon with `cfg`: its files created, or continued after a restart that
+    /// continues from the checkpoint.
+    fn new(cfg: &DaemonConfig, out: &'a mut O, continuing: bool) -> Result<Self, String> {
+        Ok(Sink {
+            out,
+            nav_csv: Csv::create(&cfg.output.nav_csv, csv::NAV_HEADER, continuing)?,
+            diag_csv: Csv::create(
+                &cfg.output.diagnostics_csv,
+                csv::DIAGNOSTICS_HEADER,
+                continuing,
+            )?,
+            stage_times: StageTimes::create(
+                &cfg.output.stage_times_csv,
+                "imu_host_time_ns,woke_ns,received_ns,computed_ns,published_ns",
+            )
+            .map_err(|x| format!("creating {}: {x}", cfg.output.stage_times_csv))?,
+            woke_ns: 0,
+            received_ns: 0,
+            decimation: u64::from(cfg.output.solution_decimation.max(1)),
+            summary: Summary::default(),
+        })
+    }
+
+    /// Records that a checkpoint was taken, so that a replay takes the same one for a restart
+    /// that continues from it.
+    fn checkpoint_taken(&mut self, cp: &auvnav_core::navigator::Checkpoint) {
+        let event = SessionEventV1 {
+            host_time_ns: (cp.time_s * 1e9).round() as u64,
+            kind: SessionEventV1::KIND_CHECKPOINT,
+            ..Default::default()
+        };
+        if !self.out.session_event(&event) {
+            self.summary.errors += 1;
+        }
     }
 
     fn flush(&mut self) -> std::io::Result<()> {
@@ -317,34 +347,6 @@ fn health(
     m
 }
 
-/// The session the daemon starts with: from the configuration, or continued from the checkpoint
-/// a predecessor left.
-fn start_session(cfg: &DaemonConfig) -> Session {
-    let mut session_cfg = cfg.session();
-    let resume = checkpoint::load(cfg);
-    if let checkpoint::Start::PositionUnknown(why) = &resume {
-        tracing::warn!(
-            "auvnavd: {why}: starting from the configured start with the position unknown \
-             (standard deviation {} m)",
-            cfg.checkpoint.unknown_position_std_m
-        );
-        session_cfg.navigation.initial_position_std_m = cfg.checkpoint.unknown_position_std_m;
-    }
-    let mut session = Session::new(&session_cfg);
-    if let checkpoint::Start::Resume(cp, elapsed_s) = resume {
-        tracing::warn!(
-            elapsed_s,
-            "auvnavd: continuing from the checkpoint {} written {:.1} s ago (covariance grown by \
-             a drift of {} m/s over that time)",
-            cfg.checkpoint.path,
-            elapsed_s,
-            cfg.checkpoint.drift_m_s
-        );
-        session.resume_from(*cp, elapsed_s, cfg.checkpoint.drift_m_s);
-    }
-    session
-}
-
 /// Logs the end of in-motion alignment (once) and each filter reinitialisation.
 struct Reporter {
     was_aligning: bool,
@@ -388,21 +390,8 @@ pub fn run<I: Inputs, O: Outputs>(
     inputs: &mut I,
     outputs: &mut O,
 ) -> Result<Summary, String> {
-    let mut sink = Sink {
-        out: outputs,
-        nav_csv: Csv::create(&cfg.output.nav_csv, csv::NAV_HEADER)?,
-        diag_csv: Csv::create(&cfg.output.diagnostics_csv, csv::DIAGNOSTICS_HEADER)?,
-        stage_times: StageTimes::create(
-            &cfg.output.stage_times_csv,
-            "imu_host_time_ns,woke_ns,received_ns,computed_ns,published_ns",
-        )
-        .map_err(|x| format!("creating {}: {x}", cfg.output.stage_times_csv))?,
-        woke_ns: 0,
-        received_ns: 0,
-        decimation: u64::from(cfg.output.solution_decimation.max(1)),
-        summary: Summary::default(),
-    };
-    let mut session = start_session(cfg);
+    let (mut session, continuing) = checkpoint::start_session(cfg);
+    let mut sink = Sink::new(cfg, outputs, continuing)?;
     let mut checkpoints = checkpoint::Writer::start(cfg);
     let checkpoint_ns = (cfg.checkpoint.interval_s * 1e9) as u64;
     let mut next_checkpoint = 0u64;
@@ -477,6 +466,7 @@ pub fn run<I: Inputs, O: Outputs>(
             && now >= next_checkpoint
             && let Some(cp) = session.checkpoint()
         {
+            sink.checkpoint_taken(&cp);
             w.submit(cp);
             next_checkpoint = now + checkpoint_ns;
         }
@@ -500,6 +490,7 @@ pub fn run<I: Inputs, O: Outputs>(
     if let Some(w) = checkpoints.as_mut()
         && let Some(cp) = session.checkpoint()
     {
+        sink.checkpoint_taken(&cp);
         w.submit(cp);
     }
     sink.summary.checkpoint_errors = checkpoints.map_or(0, checkpoint::Writer::finish);

@@ -73,6 +73,11 @@ pub struct DemoArgs {
     /// scheduler: the time stamps alone against the load).
     #[arg(long, value_enum, default_value_t = crate::process::Scheduling::Unit)]
     pub scheduling: crate::process::Scheduling,
+    /// Kill the daemon (SIGKILL) this many simulated seconds into the run and start it again,
+    /// as systemd would (processes only): it continues from its checkpoint, and the replay of
+    /// the recording must reproduce every recorded solution, before and after the restart.
+    #[arg(long, value_name = "SECONDS")]
+    pub restart_daemon_at: Option<f64>,
     /// Print the result as JSON.
     #[arg(long)]
     pub json: bool,
@@ -361,6 +366,7 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
         a.out.as_deref(),
         a.live_view,
         a.scheduling,
+        a.restart_daemon_at,
     )?;
     if a.json {
         crate::json::print(&r)?;
@@ -412,10 +418,16 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
                 e.emulator_late_us.max,
             );
         }
-        println!(
-            "  replay of the recording byte-identical to the live solution: {}",
-            if r.replay_identical { "yes" } else { "NO" }
-        );
+        match r.daemon_restarted_at_s {
+            Some(at) => println!(
+                "  daemon killed at {at:.0} s and restarted from its checkpoint; replay of the recording reproduces every recorded solution: {}",
+                if r.replay_identical { "yes" } else { "NO" }
+            ),
+            None => println!(
+                "  replay of the recording byte-identical to the live solution: {}",
+                if r.replay_identical { "yes" } else { "NO" }
+            ),
+        }
         println!(
             "  clean stop of every process: {}; {:.1} s wall",
             if r.clean_stop { "yes" } else { "NO" },

@@ -64,6 +64,10 @@ pub struct LiveResult {
     pub stamp_errors: Vec<crate::emulate_line::StampErrors>,
     /// How the processes were scheduled (`--scheduling`), and whether SCHED_FIFO was permitted.
     pub scheduling: String,
+    /// With `--restart-daemon-at`: when (simulated s) the daemon was killed (SIGKILL) and
+    /// started again, to continue from its checkpoint; the replay is then checked against every
+    /// solution the recording holds, before and after the restart.
+    pub daemon_restarted_at_s: Option<f64>,
     /// `auvnav replay DIR/record.mcap --out DIR/replay_nav.csv` gave a byte-identical file.
     pub replay_identical: bool,
     /// Every process stopped cleanly (exit status 0 after SIGTERM).
@@ -264,6 +268,7 @@ pub fn run_live(
     out: Option<&Path>,
     live_view: Option<std::net::SocketAddr>,
     scheduling: Scheduling,
+    restart_daemon_at_s: Option<f64>,
 ) -> anyhow::Result<LiveResult> {
     if !(speed.is_finite() && (0.1..=20.0).contains(&speed)) {
         bail!("--speed {speed}: expected 0.1..=20");
@@ -324,6 +329,11 @@ pub fn run_live(
     let voyage = dir.join("voyage.mcap");
     let simulated = sim::simulate_to_log(&cfg, &voyage)?;
     let seconds = simulated.duration_s;
+    if let Some(at) = restart_daemon_at_s
+        && !(at.is_finite() && at > 0.0 && at < seconds)
+    {
+        bail!("--restart-daemon-at {at}: expected a time within the run's {seconds:.0} s");
+    }
     let mut truth = Vec::new();
     let mut depths = Vec::new();
     let mut imu_sim_ns = Vec::new();
@@ -354,8 +364,15 @@ pub fn run_live(
             nav_csv: dir.join("live_nav.csv").display().to_string(),
             ..Default::default()
         },
+        // As deployed: a checkpoint every 2 s, which a restarted daemon continues from.
+        checkpoint: auvnav_core::config::CheckpointConfig {
+            path: dir.join("auvnavd.checkpoint.json").display().to_string(),
+            ..Default::default()
+        },
         ..Default::default()
     };
+    // A checkpoint of an earlier run in the same folder is not this run's.
+    let _ = std::fs::remove_file(dir.join("auvnavd.checkpoint.json"));
     daemon_config.validate()?;
     let daemon_cfg = dir.join("auvnavd.toml");
     std::fs::write(&daemon_cfg, daemon_config.to_toml()?)?;
@@ -515,6 +532,21 @@ pub fn run_live(
             .args(["--speed", &speed.to_string()]),
     )?);
     let play = Duration::from_secs_f64(seconds / speed + 30.0);
+    // A crash of the daemon mid-run (SIGKILL) and its restart, as systemd would restart it.
+    let mut killed_daemon = None;
+    if let Some(at) = restart_daemon_at_s {
+        std::thread::sleep(Duration::from_secs_f64(at / speed));
+        daemon_p.kill();
+        std::thread::sleep(Duration::from_millis(500));
+        let restarted = ChildProcess::spawn_logged(
+            "auvnavd-restarted",
+            &dir,
+            scheduled_command(daemon, priority(50))
+                .arg("--config")
+                .arg(&daemon_cfg),
+        )?;
+        killed_daemon = Some(std::mem::replace(&mut daemon_p, restarted));
+    }
     let mut clean = emulator.wait_clean(play);
     std::thread::sleep(Duration::from_millis(500));
     // 4. Stop: drivers (the CAN replay ends by itself), then the daemon, then the recorder.
@@ -536,6 +568,7 @@ pub fn run_live(
     let mut process_reports: Vec<(String, String)> = Vec::new();
     for p in drivers
         .iter()
+        .chain(killed_daemon.as_ref())
         .chain([&daemon_p, &recorder, &emulator])
         .chain(live_p.as_ref())
     {
@@ -580,16 +613,25 @@ pub fn run_live(
     }
     let phases = phases.figures(simulated.usbl_outliers);
     let replay_csv = dir.join("replay_nav.csv");
-    let status = Command::new(&me)
+    let mut replay = Command::new(&me);
+    replay
         .arg("replay")
         .arg(&record)
         .arg("--out")
-        .arg(&replay_csv)
+        .arg(&replay_csv);
+    if restart_daemon_at_s.is_some() {
+        // Two daemons wrote the live solution file; the recording holds every solution either
+        // published: the replay is checked against those (exit status 3 on the first that
+        // differs).
+        replay.arg("--compare-recorded");
+    }
+    let status = replay
         .stdout(Stdio::null())
         .status()
         .context("running auvnav replay")?;
-    let replay_identical =
-        status.success() && std::fs::read(&live_csv).ok() == std::fs::read(&replay_csv).ok();
+    let replay_identical = status.success()
+        && (restart_daemon_at_s.is_some()
+            || std::fs::read(&live_csv).ok() == std::fs::read(&replay_csv).ok());
     Ok(LiveResult {
         scenario: cfg.scenario.name.clone(),
         seed,
@@ -611,6 +653,7 @@ pub fn run_live(
         imu_samples_complete,
         stamp_errors,
         scheduling: scheduled,
+        daemon_restarted_at_s: restart_daemon_at_s,
         replay_identical,
         clean_stop: clean,
         wall_s: start.elapsed().as_secs_f64(),

@@ -296,6 +296,10 @@ enum BenchWhat {
         /// (the solution exported at 10 Hz and the ROS 2 topics).
         #[arg(long)]
         outputs: bool,
+        /// `unit`: the processes scheduled as the units run them (drivers SCHED_FIFO 60, daemon
+        /// 50), where permitted, and the report says which it got; `normal`: the normal scheduler.
+        #[arg(long, value_enum, default_value_t = auvnav_tools::process::Scheduling::Unit)]
+        scheduling: auvnav_tools::process::Scheduling,
         #[arg(long)]
         json: bool,
     },
@@ -826,8 +830,9 @@ fn main() -> std::process::ExitCode {
             BenchWhat::E2e {
                 seconds,
                 outputs,
+                scheduling,
                 json,
-            } => auvnav_tools::bench::e2e_bench(seconds, outputs, json),
+            } => auvnav_tools::bench::e2e_bench(seconds, outputs, scheduling, json),
             BenchWhat::Bridge { seconds, json } => auvnav_tools::bench::bridge_bench(seconds, json),
             BenchWhat::Decode {
                 repeat,

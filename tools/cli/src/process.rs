@@ -166,3 +166,19 @@ pub fn scheduled_command(program: &Path, priority: Option<u8>) -> Command {
         None => Command::new(program),
     }
 }
+
+/// Puts the calling thread under SCHED_FIFO at `priority`, or back under the normal scheduler
+/// with `None` (through `chrt -p` on its thread id); `Err` says why not.
+pub fn schedule_this_thread(priority: Option<u8>) -> Result<(), String> {
+    let tid = nix::unistd::gettid().as_raw().to_string();
+    let mut c = Command::new("chrt");
+    match priority {
+        Some(p) => c.args(["-f", "-p", &p.to_string(), &tid]),
+        None => c.args(["-o", "-p", "0", &tid]),
+    };
+    match c.stdout(Stdio::null()).stderr(Stdio::null()).status() {
+        Ok(s) if s.success() => Ok(()),
+        Ok(s) => Err(format!("chrt on thread {tid} exited with {s}")),
+        Err(e) => Err(format!("cannot run chrt: {e}")),
+    }
+}

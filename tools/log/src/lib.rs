@@ -30,8 +30,8 @@
 
 use auvnav_shm_schema::{
     AcousticRangesV1, AidDiagnosticsV1, AttitudeV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1,
-    LateAidV1, MagnetometerV1, Message, NavSolutionV1, ProcessHealthV1, SoundVelocityV1,
-    TruthStateV1, UsblFixV1,
+    LateAidV1, MagnetometerV1, Message, NavSolutionV1, ProcessHealthV1, SessionEventV1,
+    SoundVelocityV1, TruthStateV1, UsblFixV1,
 };
 use mcap::records::{MessageHeader, Metadata, Record, op};
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
@@ -386,6 +386,7 @@ enum MessageKind {
     AidDiagnostics,
     Health,
     LateAid,
+    SessionEvent,
     Truth,
     Unknown,
 }
@@ -406,6 +407,7 @@ impl MessageKind {
             s if s == AidDiagnosticsV1::SCHEMA_NAME => MessageKind::AidDiagnostics,
             s if s == ProcessHealthV1::SCHEMA_NAME => MessageKind::Health,
             s if s == LateAidV1::SCHEMA_NAME => MessageKind::LateAid,
+            s if s == SessionEventV1::SCHEMA_NAME => MessageKind::SessionEvent,
             s if s == TruthStateV1::SCHEMA_NAME => MessageKind::Truth,
             _ => MessageKind::Unknown,
         }
@@ -447,6 +449,7 @@ fn decode_bytes(kind: MessageKind, topic: &str, data: &[u8]) -> Result<LogMessag
         MessageKind::AidDiagnostics => LogMessage::AidDiagnostics(decode_pod(topic, data)?),
         MessageKind::Health => LogMessage::Health(decode_pod(topic, data)?),
         MessageKind::LateAid => LogMessage::LateAid(decode_pod(topic, data)?),
+        MessageKind::SessionEvent => LogMessage::SessionEvent(decode_pod(topic, data)?),
         MessageKind::Truth => LogMessage::Truth(decode_pod(topic, data)?),
         MessageKind::Unknown => LogMessage::Unknown,
     })
@@ -471,6 +474,8 @@ pub enum LogMessage {
     Health(ProcessHealthV1),
     /// An aid message the daemon applied late, and where (replay applies it there too).
     LateAid(LateAidV1),
+    /// A session start or checkpoint of the daemon (replay starts its sessions where it did).
+    SessionEvent(SessionEventV1),
     Truth(TruthStateV1),
     /// A schema this program does not know (a newer or foreign channel): skipped by users.
     Unknown,

@@ -209,6 +209,7 @@ fn push_raw(tables: &mut BTreeMap<String, Builder>, out: &mut Tables, raw: &RawL
         M::AidDiagnostics(x) => b.push(&x),
         M::Health(x) => b.push(&x),
         M::LateAid(x) => b.push(&x),
+        M::SessionEvent(x) => b.push(&x),
         M::Truth(x) => b.push(&x),
         M::Unknown => {}
     }

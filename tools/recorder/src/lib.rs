@@ -14,8 +14,8 @@ use auvnav_log::{Corruption, LogError, LogHeader, LogReader, LogWriter, write_lo
 use auvnav_shm_schema::bus::{Bus, BusSubscriber, Sequenced};
 use auvnav_shm_schema::{
     AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1, MagnetometerV1,
-    Message, NavSolutionV1, ProcessHealthV1, RawBytesV1, SoundVelocityV1, TruthStateV1, UsblFixV1,
-    qos, topic,
+    Message, NavSolutionV1, ProcessHealthV1, RawBytesV1, SessionEventV1, SoundVelocityV1,
+    TruthStateV1, UsblFixV1, qos, topic,
 };
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -270,6 +270,7 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
         channel::<NavSolutionV1>(&bus, topic::NAV_SOLUTION, qos::NAVIGATION)?,
         channel::<AidDiagnosticsV1>(&bus, topic::NAV_AID_DIAGNOSTICS, qos::NAVIGATION)?,
         channel::<LateAidV1>(&bus, topic::NAV_LATE_AIDS, qos::NAVIGATION)?,
+        channel::<SessionEventV1>(&bus, topic::NAV_SESSION_EVENTS, qos::NAVIGATION)?,
         channel::<ProcessHealthV1>(&bus, topic::HEALTH, qos::HEALTH)?,
         channel::<TruthStateV1>(&bus, topic::TRUTH, qos::SENSOR)?,
     ];

@@ -10,17 +10,22 @@
 //! truth channel, the solution is compared with it at every truth epoch (linear interpolation
 //! between the two solutions around the epoch).
 //!
+//! A recording that spans a restart of the daemon is replayed across it ([`restarts`]).
+//!
 //! The crate is the replay itself ([`Replay`]), its feed order ([`order`]), the accuracy against
 //! a truth or reference channel ([`accuracy`]), a whole replay as one call ([`replay`]), and what
 //! the other offline tools share: [`load_config`], [`interpolate`], [`run_log`], atomic outputs
 //! ([`partial_path`], [`write_atomically`]), the reports' SVG plots ([`svg`]). It neither parses
 //! arguments nor prints.
+// Long on purpose: the replay state machine and the outputs and counts it reports; its feed
+// order, restarts and accuracy are modules of their own.
 #![forbid(unsafe_code)]
 
 pub mod accuracy;
 mod error;
 pub mod json;
 pub mod order;
+pub mod restarts;
 mod run;
 pub mod surface;
 pub mod svg;
@@ -247,6 +252,10 @@ pub struct Replay {
     injected: std::collections::VecDeque<LogMessage>,
     /// Where the truth channel's point sits from the IMU, body axes (m); zero: at the IMU.
     reference_lever_arm_m: [f64; 3],
+    /// The daemon's recorded session starts and checkpoints, and the configuration a new
+    /// session starts from.
+    restarts: restarts::Restarts,
+    cfg: ReplayConfig,
 }
 
 impl Replay {
@@ -264,7 +273,14 @@ impl Replay {
             recorded: None,
             injected: std::collections::VecDeque::new(),
             reference_lever_arm_m: [0.0; 3],
+            restarts: restarts::Restarts::default(),
+            cfg: cfg.clone(),
         }
+    }
+
+    /// The daemon's session starts the replay met (restarts of the daemon among them).
+    pub fn restart_counts(&self) -> restarts::RestartCounts {
+        self.restarts.counts
     }
 
     /// The point of the vehicle the truth channel describes, from the IMU in body axes (m, FRD):
@@ -380,6 +396,8 @@ impl Replay {
             }
             SessionOutput::Diagnostics(d) => out(Output::Diagnostics(d)),
             SessionOutput::LateAid(r) => out(Output::LateAid(r)),
+            // The replay starts its sessions from the recorded starts ([`restarts`]).
+            SessionOutput::Started(_) => Ok(()),
         }
     }
 
@@ -405,6 +423,7 @@ impl Replay {
                 self.counts.late_aid_records += 1;
                 self.order.apply_late_record(r);
             }
+            LogMessage::SessionEvent(e) => self.restarts.record(e),
             LogMessage::NavSolution(s) if self.recorded.is_some() => {
                 if let Some(r) = self.recorded.as_mut() {
                     r.queue.push_back(*s);
@@ -488,6 +507,10 @@ impl Replay {
             SensorMessage::Magnetometer(_) => &mut self.counts.magnetometer,
             SensorMessage::SoundVelocity(_) => &mut self.counts.sound_velocity,
         } += 1;
+        if let SensorMessage::Imu(m) = x {
+            self.restarts
+                .before_imu(m.host_time_ns, &mut self.session, &self.cfg);
+        }
         let mut fwd = Self::forward(
             &mut self.prev_solution,
             &mut self.pending_truth,
@@ -497,6 +520,9 @@ impl Replay {
         );
         self.session.feed(x, &mut fwd)?;
         drop(fwd);
+        if let SensorMessage::Imu(m) = x {
+            self.restarts.after_imu(m.host_time_ns, &self.session);
+        }
         self.note_time(x.host_time_ns());
         Ok(())
     }

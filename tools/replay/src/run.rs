@@ -59,6 +59,9 @@ pub struct ReplayReport {
     pub wall_s: f64,
     pub real_time_factor: f64,
     pub counts: ReplayCounts,
+    /// The daemon's session starts the recording holds: restarts of the daemon, each replayed
+    /// from the checkpoint it continued from.
+    pub sessions: crate::restarts::RestartCounts,
     pub navigator: NavCounters,
     /// IMU biases and DVL installation at the end of the replay (estimated where the
     /// configuration switches their states on, otherwise as configured).
@@ -365,6 +368,7 @@ pub fn replay(a: &ReplayOptions) -> Result<ReplayReport, ReplayError> {
             0.0
         },
         counts: replay.counts,
+        sessions: replay.restart_counts(),
         navigator: replay.nav_counters(),
         final_parameters: replay.navigator().map(FinalParameters::of),
         log_error,

@@ -194,8 +194,20 @@ pub fn bridge_bench(seconds: f64, json: bool) -> anyhow::Result<()> {
     let imu_rate_hz = 1000.0;
     let live_view = LiveViewImpact {
         imu_rate_hz,
-        without_live_view: super::e2e(imu_rate_hz, seconds, false, false)?,
-        with_live_view: super::e2e(imu_rate_hz, seconds, true, false)?,
+        without_live_view: super::e2e(
+            imu_rate_hz,
+            seconds,
+            false,
+            false,
+            crate::process::Scheduling::Normal,
+        )?,
+        with_live_view: super::e2e(
+            imu_rate_hz,
+            seconds,
+            true,
+            false,
+            crate::process::Scheduling::Normal,
+        )?,
     };
     let r = BridgeBench { bridge, live_view };
     if json {

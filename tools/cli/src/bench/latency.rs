@@ -144,6 +144,12 @@ pub fn pty_latency(rate_hz: f64, seconds: f64) -> anyhow::Result<PtyLatency> {
 pub struct E2eLatency {
     pub imu_rate_hz: f64,
     pub duration_s: f64,
+    /// How the processes were scheduled (`--scheduling`; SCHED_FIFO where permitted).
+    pub scheduling: String,
+    /// The host's floor: one thread woken through a socket by another at the IMU rate, under
+    /// the same scheduling, measured after the chain (µs). The chain has four such wake-ups
+    /// (terminal → driver, driver → daemon, daemon → subscriber, and the writer's own timer).
+    pub wake_up_floor_us: Percentiles,
     pub imu_frames_written: u64,
     pub solutions_received: u64,
     /// IMU frame written to its pseudo-terminal → navigation solution received by a subscriber
@@ -348,6 +354,7 @@ pub fn e2e(
     seconds: f64,
     live_view: bool,
     outputs: bool,
+    scheduling: crate::process::Scheduling,
 ) -> anyhow::Result<E2eLatency> {
     use auvnav_drivers::clock::monotonic_ns;
     use auvnav_drivers::to_device as enc;
@@ -358,6 +365,19 @@ pub fn e2e(
     use std::sync::atomic::{AtomicBool, Ordering};
     use std::time::{Duration, Instant};
 
+    // As the units run them, where SCHED_FIFO is permitted: drivers 60, daemon 50; this
+    // process's writer (the devices) at 70, so that frames go out on time.
+    let fifo = scheduling == crate::process::Scheduling::Unit
+        && crate::process::realtime_permitted().is_ok()
+        && crate::process::schedule_this_thread(Some(70)).is_ok();
+    let scheduled = if fifo {
+        "as the units: drivers SCHED_FIFO 60, daemon 50, the frame writer 70"
+    } else if scheduling == crate::process::Scheduling::Unit {
+        "normal (SCHED_FIFO not permitted)"
+    } else {
+        "normal"
+    };
+    let priority = |p: u8| fifo.then_some(p);
     let tag = format!("benche2e{}r{}", std::process::id(), rate_hz as u64);
     let dir = std::env::temp_dir().join(&tag);
     std::fs::create_dir_all(&dir)?;
@@ -424,6 +444,10 @@ pub fn e2e(
     let watcher = {
         let (done, ready, tag) = (done.clone(), ready.clone(), tag.clone());
         std::thread::spawn(move || -> anyhow::Result<Seen> {
+            // A consumer of the solution, as a vehicle's outputs are: the normal scheduler.
+            if fifo {
+                let _ = crate::process::schedule_this_thread(None);
+            }
             let bus = Bus::new(&format!("{tag}sub"), &tag)?;
             let mut sol = bus.subscriber::<NavSolutionV1>(topic::NAV_SOLUTION, qos::NAVIGATION)?;
             let wake = bus.listener(topic::NAV_SOLUTION)?;
@@ -446,9 +470,14 @@ pub fn e2e(
         std::thread::sleep(Duration::from_millis(5));
     }
     let spawn = |name: &str, args: &[&std::ffi::OsStr]| {
+        let p = match name {
+            "auvnavd" => priority(50),
+            "auvnav-imu" | "auvnav-dvl" | "auvnav-usbl" => priority(60),
+            _ => None,
+        };
         crate::process::ChildProcess::spawn(
             name,
-            std::process::Command::new(crate::process::sibling(name)?)
+            crate::process::scheduled_command(&crate::process::sibling(name)?, p)
                 .args(args)
                 .stdout(std::process::Stdio::null())
                 .stderr(std::process::Stdio::null()),
@@ -675,9 +704,15 @@ pub fn e2e(
         (Some(a), Some(b)) if wall > 0.0 => 100.0 * (b - a) / wall,
         _ => f64::NAN,
     };
+    let wake_up_floor_us = super::wake_up_floor(rate_hz, seconds.min(10.0), priority(60))?;
+    if fifo {
+        let _ = crate::process::schedule_this_thread(None);
+    }
     Ok(E2eLatency {
         imu_rate_hz: rate_hz,
         duration_s: seconds,
+        scheduling: scheduled.to_string(),
+        wake_up_floor_us,
         imu_frames_written: n,
         solutions_received: sols.len() as u64,
         frame_to_solution_us: percentiles(total),
@@ -737,18 +772,24 @@ fn live_view_client(
 }
 
 /// `auvnav bench e2e`.
-pub fn e2e_bench(seconds: f64, outputs: bool, json: bool) -> anyhow::Result<()> {
+pub fn e2e_bench(
+    seconds: f64,
+    outputs: bool,
+    scheduling: crate::process::Scheduling,
+    json: bool,
+) -> anyhow::Result<()> {
     let mut results = Vec::new();
     for rate in [200.0, 1000.0] {
-        results.push(e2e(rate, seconds, false, outputs)?);
+        results.push(e2e(rate, seconds, false, outputs, scheduling)?);
     }
     if json {
         crate::json::print(&results)?;
     } else {
         for r in &results {
             println!(
-                "e2e at {} Hz IMU (+ DVL 5 Hz, USBL 1 Hz, recorder): {}/{} solutions; frame -> solution p50 {:.0} us, p99 {:.0} us, max {:.0} us; driver -> subscriber p50 {:.0} us, p99 {:.0} us; CPU daemon {:.1} %, recorder {:.1} %",
+                "e2e at {} Hz IMU (+ DVL 5 Hz, USBL 1 Hz, recorder), scheduling {}: {}/{} solutions; frame -> solution p50 {:.0} us, p99 {:.0} us, max {:.0} us; driver -> subscriber p50 {:.0} us, p99 {:.0} us; CPU daemon {:.1} %, recorder {:.1} %; the host's wake-up floor p50 {:.0} us, p99 {:.0} us",
                 r.imu_rate_hz,
+                r.scheduling,
                 r.solutions_received,
                 r.imu_frames_written,
                 r.frame_to_solution_us.p50,
@@ -757,7 +798,9 @@ pub fn e2e_bench(seconds: f64, outputs: bool, json: bool) -> anyhow::Result<()> 
                 r.driver_to_subscriber_us.p50,
                 r.driver_to_subscriber_us.p99,
                 r.daemon_cpu_percent,
-                r.recorder_cpu_percent
+                r.recorder_cpu_percent,
+                r.wake_up_floor_us.p50,
+                r.wake_up_floor_us.p99,
             );
             if let Some(o) = &r.outputs {
                 println!(

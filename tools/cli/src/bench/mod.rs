@@ -1,5 +1,6 @@
 //! `auvnav bench`: throughput, latency and cost figures, one module per kind
-//! ([`throughput`], [`decode`], [`latency`], [`bridge`], [`studies`], [`calibrate`], [`smooth`]).
+//! ([`throughput`], [`decode`], [`latency`], [`wake`], [`bridge`], [`studies`], [`calibrate`],
+//! [`smooth`]).
 
 use anyhow::Context;
 use auvnav_sim::{self as sim, SimConfig, scenario::Scenario};
@@ -14,6 +15,7 @@ mod mag;
 mod smooth;
 mod studies;
 mod throughput;
+mod wake;
 
 pub use bridge::*;
 pub use calibrate::*;
@@ -24,3 +26,4 @@ pub use mag::*;
 pub use smooth::*;
 pub use studies::*;
 pub use throughput::*;
+pub use wake::*;
