@@ -12,8 +12,8 @@
 //! pseudo-terminal (times in seconds of log time from the first message). Every fault is counted
 //! in the summary, so a test can check the driver against what was played.
 //!
-//! Long on purpose: the last 44 lines are the unit tests, beside the code they test; the code is
-//! 604 lines.
+//! Long on purpose: the last 43 lines are the unit tests, beside the code they test; the code is
+//! 664 lines, one loop over the log's devices (the line timing is `emulate_line`).
 
 use crate::emulate_line::{Lines, SendRecord};
 use anyhow::{Context, bail};
@@ -80,9 +80,9 @@ pub struct EmulateArgs {
     /// USB adapter's latency timer, a busy host) (ms, 0..100).
     #[arg(long, default_value_t = 0.0)]
     pub jitter_ms: f64,
-    /// Write when each frame's first byte was on the line and when it was written to the terminal
-    /// (CSV: device,kind,index,line_ns,due_ns,written_ns; CLOCK_MONOTONIC ns; due: when the first
-    /// piece's bytes had arrived), to measure a driver's
+    /// Write when each frame's first byte was on the line, when its first piece was due (its
+    /// bytes arrived) and when it was written to the terminal (CSV:
+    /// device,kind,index,line_ns,due_ns,written_ns; CLOCK_MONOTONIC ns), to measure a driver's
     /// time stamps against.
     #[arg(long, value_name = "FILE")]
     pub send_times: Option<PathBuf>,
@@ -129,7 +129,8 @@ pub struct DeviceSummary {
     /// magnetometer's for an IMU that carries the field (Xsens, in units of the drivers' default
     /// `settings.xsens_field_unit_ut`).
     pub messages: u64,
-    /// Frames written intact.
+    /// Frames sent intact (with `--baud`, onto the line: written in pieces as they arrive; a
+    /// piece the terminal refuses counts its frame in `blocked` too).
     pub written: u64,
     /// Frames written with a corrupted byte.
     pub corrupted: u64,
