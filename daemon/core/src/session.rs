@@ -59,6 +59,16 @@ fn aid_key(m: &SensorMessage) -> (u64, u32, u64) {
     (m.host_time_ns(), order, m.sequence())
 }
 
+/// The time an aid message was stamped with (a DVL reading's before the session retimed it by
+/// `dvl_retime_ns`): whether it came before the session's start is judged on it, because only
+/// messages stamped after the start were surely published after the daemon subscribed.
+fn stamped_ns(m: &SensorMessage, dvl_retime_ns: u64) -> u64 {
+    match m {
+        SensorMessage::Dvl(d) => d.host_time_ns.saturating_sub(dvl_retime_ns),
+        other => other.host_time_ns(),
+    }
+}
+
 /// An aid message waiting for its turn; `late` when it came after the IMU had passed its due
 /// point.
 struct Pending(SensorMessage, bool);
@@ -933,9 +943,10 @@ impl Session {
         self.first_imu_ns = Some(x.host_time_ns);
         let pending = std::mem::take(&mut self.pending);
         let total = pending.len();
+        let retime_ns = self.dvl_retime_ns;
         self.pending = pending
             .into_iter()
-            .filter(|p| aid_key(&p.0).0 >= x.host_time_ns)
+            .filter(|p| stamped_ns(&p.0, retime_ns) >= x.host_time_ns)
             .collect();
         self.before_start += (total - self.pending.len()) as u64;
         let mut event = SessionEventV1 {
@@ -965,7 +976,10 @@ impl Session {
             }
             other => other,
         };
-        if self.first_imu_ns.is_some_and(|t| aid_key(&aid).0 < t) {
+        if self
+            .first_imu_ns
+            .is_some_and(|t| stamped_ns(&aid, self.dvl_retime_ns) < t)
+        {
             self.before_start += 1;
             return;
         }

@@ -68,6 +68,12 @@ pub fn run(cfg: &auvnav_core::config::DaemonConfig) -> Result<crate::service::Su
             .subscriber(topic::SOUND_VELOCITY, qos::SENSOR)
             .map_err(e)?,
     };
+    // Every subscriber is connected from here on: a message stamped later was published later
+    // (a stamp is never after its publication) and reaches the daemon. The session starts at an
+    // IMU sample stamped after this, so that it has every aid stamped after its start, as a
+    // replay of the recording does (a subscriber opened before another could otherwise start
+    // the session on a sample whose neighbours on the later topic were never received).
+    let opened_ns = monotonic_ns();
     let listeners = TOPICS
         .iter()
         .map(|t| bus.listener(t))
@@ -106,6 +112,7 @@ pub fn run(cfg: &auvnav_core::config::DaemonConfig) -> Result<crate::service::Su
         waitset: &waitset,
         guards: &guards,
         notified: [false; TOPICS.len()],
+        opened_ns,
     };
     // Ready for the service manager: the configuration was read and the bus is open (STOPPING
     // is sent when the bus is dropped).
@@ -124,6 +131,9 @@ struct BusInputs<'a, 'g> {
     guards: &'g [WaitSetGuard<'a, 'a, ipc::Service>],
     /// Which topics notified at the last wake-up.
     notified: [bool; TOPICS.len()],
+    /// When the last subscriber was connected (host ns): IMU samples stamped earlier are not
+    /// used.
+    opened_ns: u64,
 }
 
 impl Inputs for BusInputs<'_, '_> {
@@ -176,7 +186,16 @@ impl Inputs for BusInputs<'_, '_> {
             drain(&mut s.imu, &mut batch.imu)?;
             Ok(())
         })()
-        .map_err(|x| x.to_string())
+        .map_err(|x| x.to_string())?;
+        let n = batch.imu.len();
+        batch.imu.retain(|m| m.host_time_ns >= self.opened_ns);
+        if batch.imu.len() < n {
+            tracing::info!(
+                "auvnavd: {} IMU samples stamped before every topic was subscribed not used",
+                n - batch.imu.len()
+            );
+        }
+        Ok(())
     }
 
     fn now_ns(&self) -> u64 {

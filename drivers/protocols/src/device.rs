@@ -254,11 +254,12 @@ fn imu_clock_modulus_ns(protocol: Protocol) -> Option<u64> {
     }
 }
 
-/// A frame's time: its first byte's arrival when the line is timed, else the read's return.
-fn frame_time(arrival: &Option<ArrivalClock>, frame_start: u64, read_ns: u64) -> u64 {
+/// A frame's time: its first byte's arrival when the line is timed
+/// ([`ArrivalClock::frame_ns`]), else the read's return.
+fn frame_time(arrival: &mut Option<ArrivalClock>, frame_start: u64, read_ns: u64) -> u64 {
     arrival
-        .as_ref()
-        .and_then(|a| a.arrival_ns(frame_start))
+        .as_mut()
+        .and_then(|a| a.frame_ns(frame_start))
         .unwrap_or(read_ns)
 }
 
@@ -404,7 +405,7 @@ impl DeviceDecoder {
             match &mut self.inner {
                 Inner::Pd0(d) => match d.next_ensemble()? {
                     Ok(e) => {
-                        let t = frame_time(&self.arrival, d.frame_start(), host_time_ns);
+                        let t = frame_time(&mut self.arrival, d.frame_start(), host_time_ns);
                         if let Some(m) = to_schema::pd0_velocity(&e, t, s.latency_s, 0) {
                             // The water-mass reference layer of the same ping, next.
                             self.pending =
@@ -417,7 +418,7 @@ impl DeviceDecoder {
                 },
                 Inner::Wldvl(d) => match d.next_frame()? {
                     Ok(WlFrame::Velocity(v)) => {
-                        let t = frame_time(&self.arrival, d.frame_start(), host_time_ns);
+                        let t = frame_time(&mut self.arrival, d.frame_start(), host_time_ns);
                         return Some(Output::Dvl(to_schema::water_linked_velocity(&v, t, 0)));
                     }
                     Ok(_) => self.counters.other_frames += 1,
@@ -425,7 +426,7 @@ impl DeviceDecoder {
                 },
                 Inner::Kvh(d) => {
                     let sample = d.next_sample()?;
-                    let t = frame_time(&self.arrival, d.frame_start(), host_time_ns);
+                    let t = frame_time(&mut self.arrival, d.frame_start(), host_time_ns);
                     self.device_counter(u16::from(sample.sequence), 128);
                     let mut m = to_schema::kvh_sample(&sample, &s.kvh, t, 0);
                     if !to_schema::KVH_RANGE.check(&mut m) {
@@ -436,7 +437,7 @@ impl DeviceDecoder {
                 }
                 Inner::Xsens(d) => match d.next_message()? {
                     XbusMessage::MtData2(m) => {
-                        let t = frame_time(&self.arrival, d.frame_start(), host_time_ns);
+                        let t = frame_time(&mut self.arrival, d.frame_start(), host_time_ns);
                         if let Some(c) = m.packet_counter {
                             self.device_counter(c, 1 << 16);
                         }
@@ -464,7 +465,7 @@ impl DeviceDecoder {
                 },
                 Inner::Nortek(d) => match d.next_frame()? {
                     Ok(NortekFrame::BottomTrack(bt)) => {
-                        let t = frame_time(&self.arrival, d.frame_start(), host_time_ns);
+                        let t = frame_time(&mut self.arrival, d.frame_start(), host_time_ns);
                         return Some(Output::Dvl(to_schema::nortek_velocity(
                             &bt,
                             t,
@@ -477,7 +478,7 @@ impl DeviceDecoder {
                 },
                 Inner::WldvlJson(d) => match d.next_frame()? {
                     Ok(JsonFrame::Velocity { velocity, .. }) => {
-                        let t = frame_time(&self.arrival, d.frame_start(), host_time_ns);
+                        let t = frame_time(&mut self.arrival, d.frame_start(), host_time_ns);
                         return Some(Output::Dvl(to_schema::water_linked_velocity(
                             &velocity, t, 0,
                         )));
@@ -500,7 +501,7 @@ impl DeviceDecoder {
                             if matches!(sentence, crate::nmea::NmeaSentence::Other { .. }) {
                                 self.counters.other_frames += 1;
                             }
-                            let t = frame_time(&self.arrival, d.frame_start(), host_time_ns);
+                            let t = frame_time(&mut self.arrival, d.frame_start(), host_time_ns);
                             epochs.push(sentence, t);
                         }
                         Err(_) => continue,
@@ -508,7 +509,7 @@ impl DeviceDecoder {
                 }
                 Inner::Ubx(d) => match d.next_frame()? {
                     Ok(UbxFrame::NavPvt(p)) => {
-                        let t = frame_time(&self.arrival, d.frame_start(), host_time_ns);
+                        let t = frame_time(&mut self.arrival, d.frame_start(), host_time_ns);
                         match crate::gnss::fix_from_nav_pvt(&p, t, &s.gnss, s.latency_s) {
                             Some(f) => return Some(Output::Gnss(f)),
                             None => self.counters.no_fix += 1,
@@ -520,7 +521,7 @@ impl DeviceDecoder {
                 Inner::Seatrac(d) => match d.next_frame()? {
                     Ok(f) => match f.message {
                         SeatracMessage::Fix { fix, .. } if f.from_beacon => {
-                            let t = frame_time(&self.arrival, d.frame_start(), host_time_ns);
+                            let t = frame_time(&mut self.arrival, d.frame_start(), host_time_ns);
                             return Some(Output::Usbl(to_schema::seatrac_fix(
                                 &fix,
                                 t,

@@ -33,6 +33,8 @@ pub struct ArrivalClock {
     reads: VecDeque<(u64, u64)>,
     /// Bytes read so far (the stream offset of the next byte).
     offset: u64,
+    /// The last frame stamped: its first byte's stream offset and its stamp.
+    last_frame: Option<(u64, u64)>,
 }
 
 impl ArrivalClock {
@@ -48,6 +50,7 @@ impl ArrivalClock {
             },
             reads: VecDeque::with_capacity(READS_KEPT),
             offset: 0,
+            last_frame: None,
         }
     }
 
@@ -71,6 +74,41 @@ impl ArrivalClock {
     /// Forgets the reads (a reopened port: the bytes before it came over another connection).
     pub fn restart(&mut self) {
         self.reads.clear();
+        self.last_frame = None;
+    }
+
+    /// The stamp of a frame whose first byte is at stream `offset`: its arrival bound
+    /// ([`ArrivalClock::arrival_ns`]), but never before the previous frame's stamp plus the
+    /// characters between the two first bytes at the line rate (the line cannot carry them
+    /// faster), and always after it. A read that brings several frames bounds the later ones
+    /// more tightly than an earlier read bounded the first, so the bounds alone can go back.
+    /// The same frame asked again gets the same stamp.
+    pub fn frame_ns(&mut self, offset: u64) -> Option<u64> {
+        if let Some((o, t)) = self.last_frame
+            && o == offset
+        {
+            return Some(t);
+        }
+        let mut stamp = self.arrival_ns(offset)?;
+        if let Some((o, t)) = self.last_frame
+            && offset > o
+        {
+            // Not after the read that brought the first byte: the previous stamp may have been
+            // a loose bound.
+            let line = ((offset - o) as f64 * self.character_ns).round() as u64;
+            let brought = self.returned_ns(offset).unwrap_or(u64::MAX);
+            stamp = stamp.max((t + line).min(brought)).max(t + 1);
+        }
+        self.last_frame = Some((offset, stamp));
+        Some(stamp)
+    }
+
+    /// The return time of the read that brought the byte at stream `offset`, if remembered.
+    fn returned_ns(&self, offset: u64) -> Option<u64> {
+        self.reads
+            .iter()
+            .find(|&&(end, _)| end > offset)
+            .map(|&(_, t)| t)
     }
 
     /// The latest time (host ns) the byte at stream `offset` can have arrived: the earliest of the
@@ -125,8 +163,8 @@ pub struct DeviceClock {
     current: Option<(i64, f64, f64)>,
     /// Intercept (ns) and slope (ns per s of device time) of the offset.
     fit: Option<(f64, f64)>,
-    /// The last stamp given: stamps never go back.
-    last_stamp: u64,
+    /// The last stamp given: stamps increase.
+    last_stamp: Option<u64>,
     resets: u64,
 }
 
@@ -140,7 +178,7 @@ impl DeviceClock {
             blocks: VecDeque::with_capacity(BLOCKS_KEPT + 1),
             current: None,
             fit: None,
-            last_stamp: 0,
+            last_stamp: None,
             resets: 0,
         }
     }
@@ -171,8 +209,9 @@ impl DeviceClock {
 
     /// Takes in a frame the device stamped `device_ns` whose first byte arrived by `arrival_ns`
     /// (host), and returns its host time: the model's translation once established, never
-    /// later than the arrival (the arrival is a bound the model may only improve on), never
-    /// before the previous stamp.
+    /// later than the arrival (the arrival is a bound the model may only improve on), always
+    /// after the previous stamp (at least 1 ns: where the model or the first bytes' bounds place
+    /// a sample before the previous one, the consumer integrates the device's own step).
     pub fn stamp(&mut self, device_ns: u64, arrival_ns: u64) -> u64 {
         let unwrapped = match self.last {
             None => None,
@@ -212,8 +251,10 @@ impl DeviceClock {
                 stamp = predicted.round() as u64;
             }
         }
-        stamp = stamp.max(self.last_stamp);
-        self.last_stamp = stamp;
+        if let Some(last) = self.last_stamp {
+            stamp = stamp.max(last + 1);
+        }
+        self.last_stamp = Some(stamp);
         stamp
     }
 
@@ -306,6 +347,44 @@ mod tests {
         assert_eq!(c.arrival_ns(60), None, "not read yet");
     }
 
+    /// A frame read alone and late, then two frames brought by one read: the second frame's
+    /// bound from that read lies before the first frame's looser one, yet its stamp follows it
+    /// by at least the first frame's characters on the line, but never after the read that
+    /// brought it; frames over a link without a line rate, read together, are 1 ns apart; a
+    /// frame asked again keeps its stamp.
+    #[test]
+    fn frame_stamps_increase_at_least_at_the_line_rate() {
+        let mut c = ArrivalClock::new(1_000.0);
+        c.read(10, 200_000); // frame A: bytes 0..10, read 100 µs late
+        assert_eq!(c.frame_ns(0), Some(191_000));
+        c.read(40, 210_000); // frames B (10..30) and C (30..50), in by 210 µs
+        assert_eq!(
+            c.arrival_ns(10),
+            Some(171_000),
+            "B's bound is before A's stamp"
+        );
+        assert_eq!(
+            c.frame_ns(10),
+            Some(201_000),
+            "A's stamp plus A's 10 characters"
+        );
+        assert_eq!(c.frame_ns(10), Some(201_000), "the same frame again");
+        // C's bound is 191 µs and B's stamp plus B's characters 221 µs, after the read that
+        // brought C returned: B's stamp was loose, and C's stamp is that read's return.
+        assert_eq!(c.frame_ns(30), Some(210_000));
+        let mut tcp = ArrivalClock::new(0.0);
+        tcp.read(100, 5_000);
+        assert_eq!(tcp.frame_ns(0), Some(5_000));
+        assert_eq!(tcp.frame_ns(50), Some(5_001));
+        tcp.restart();
+        tcp.read(10, 4_000);
+        assert_eq!(
+            tcp.frame_ns(100),
+            Some(4_000),
+            "a new connection starts afresh"
+        );
+    }
+
     #[test]
     fn a_link_without_a_line_rate_places_bytes_at_their_read() {
         let mut c = ArrivalClock::new(0.0);
@@ -321,6 +400,7 @@ mod tests {
     fn the_device_clock_follows_the_least_delays_and_ignores_late_reads() {
         let mut clock = DeviceClock::new(Some(1 << 32));
         let mut worst_after = 0i64;
+        let mut previous = 0u64;
         let mut state = 7u64;
         for i in 0..20_000u64 {
             let send = 1_000_000_000 + i * 2_000_000; // 500 Hz
@@ -335,6 +415,8 @@ mod tests {
                 100_000 + (u * 2_900_000.0) as u64
             };
             let s = clock.stamp(device, send + delay);
+            assert!(s > previous, "stamps increase: {s} after {previous} at {i}");
+            previous = s;
             if i > 3_000 {
                 let err = s as i64 - send as i64;
                 assert!(err >= 0, "stamp before the send time at {i}: {err} ns");

@@ -25,6 +25,8 @@ pub mod accuracy;
 mod error;
 pub mod json;
 pub mod order;
+mod recorded;
+pub use recorded::RecordedComparison;
 pub mod restarts;
 mod run;
 pub mod surface;
@@ -158,79 +160,6 @@ impl FinalParameters {
             dvl_scale_factor: d.scale,
             dvl_lever_arm_m: d.lever_arm_m.into(),
             dvl_time_offset_s: d.time_offset_s,
-        }
-    }
-}
-
-/// The replay's solutions against the solutions a log recorded (the daemon's live output, on
-/// `nav/solution`): matched by time stamp, compared byte for byte but for the sequence number
-/// (the bus numbers what it carries).
-#[derive(Debug, Clone, Default, Serialize)]
-pub struct RecordedComparison {
-    /// Recorded solutions compared with the replay's solution of the same time.
-    pub compared: u64,
-    /// Of those, how many differ.
-    pub differing: u64,
-    /// Recorded solutions for which the replay produced none at that time.
-    pub unmatched_recorded: u64,
-    /// The first recorded solution that differs or has no match: its time stamp (ns) and what.
-    pub first_difference: Option<(u64, String)>,
-    #[serde(skip)]
-    queue: std::collections::VecDeque<NavSolutionV1>,
-}
-
-impl RecordedComparison {
-    /// True when every recorded solution was reproduced.
-    pub fn identical(&self) -> bool {
-        self.compared > 0 && self.differing == 0 && self.unmatched_recorded == 0
-    }
-
-    fn note(&mut self, t_ns: u64, what: String) {
-        self.first_difference.get_or_insert((t_ns, what));
-    }
-
-    /// A recorded solution the replay has no solution for.
-    fn unmatched(&mut self, r: &NavSolutionV1) {
-        self.unmatched_recorded += 1;
-        self.note(r.host_time_ns, "no replayed solution at this time".into());
-    }
-
-    fn check(&mut self, sol: &NavSolutionV1) {
-        while let Some(r) = self.queue.front().copied() {
-            if r.host_time_ns > sol.host_time_ns {
-                break;
-            }
-            self.queue.pop_front();
-            if r.host_time_ns < sol.host_time_ns {
-                self.unmatched(&r);
-                continue;
-            }
-            self.compared += 1;
-            let (mut a, mut b) = (r, *sol);
-            a.sequence = 0;
-            b.sequence = 0;
-            if bytemuck::bytes_of(&a) != bytemuck::bytes_of(&b) {
-                self.differing += 1;
-                let geo = |x: &NavSolutionV1| auvnav_core::earth::Geodetic {
-                    latitude_rad: x.latitude_rad,
-                    longitude_rad: x.longitude_rad,
-                    height_m: x.height_m,
-                };
-                let d = auvnav_core::earth::ned_offset(&geo(&a), &geo(&b)).norm();
-                self.note(
-                    r.host_time_ns,
-                    format!(
-                        "differs (positions {d:.3e} m apart, modes {} / {})",
-                        a.mode, b.mode
-                    ),
-                );
-            }
-        }
-    }
-
-    fn finish(&mut self) {
-        while let Some(r) = self.queue.pop_front() {
-            self.unmatched(&r);
         }
     }
 }
@@ -426,7 +355,7 @@ impl Replay {
             LogMessage::SessionEvent(e) => self.restarts.record(e),
             LogMessage::NavSolution(s) if self.recorded.is_some() => {
                 if let Some(r) = self.recorded.as_mut() {
-                    r.queue.push_back(*s);
+                    r.push_recorded(*s);
                 }
             }
             m if self.order.push(m) => {
