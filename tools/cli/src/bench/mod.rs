@@ -1,6 +1,6 @@
 //! `auvnav bench`: throughput, latency and cost figures, one module per kind
 //! ([`throughput`], [`decode`], [`latency`], [`wake`], [`bridge`], [`studies`], [`calibrate`],
-//! [`smooth`]).
+//! [`smooth`], and the regression guard [`guard`]).
 
 use anyhow::Context;
 use auvnav_sim::{self as sim, SimConfig, scenario::Scenario};
@@ -10,8 +10,10 @@ mod bridge;
 mod calibrate;
 mod decode;
 mod discover;
+mod guard;
 mod latency;
 mod mag;
+mod reference_workload;
 mod smooth;
 mod studies;
 mod throughput;
@@ -21,6 +23,7 @@ pub use bridge::*;
 pub use calibrate::*;
 pub use decode::*;
 pub use discover::*;
+pub use guard::*;
 pub use latency::*;
 pub use mag::*;
 pub use smooth::*;
