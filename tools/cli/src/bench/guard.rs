@@ -90,6 +90,11 @@ pub struct GuardBaseline {
     pub profiles: std::collections::BTreeMap<String, std::collections::BTreeMap<String, f64>>,
     /// When, where and from which commit each profile's ratios were measured.
     pub measured: std::collections::BTreeMap<String, String>,
+    /// The processor each profile's ratios were measured on ([`cpu_model`]): the ratio of the
+    /// project's code to the reference workload depends on the processor's design (vector units,
+    /// caches), so another processor's ratios are not judged against them.
+    #[serde(default)]
+    pub processors: std::collections::BTreeMap<String, String>,
 }
 
 fn profile() -> &'static str {
@@ -100,7 +105,7 @@ fn profile() -> &'static str {
     }
 }
 
-/// The processor's model name and this machine's CPU count, for the baseline's record.
+/// The processor's model name and this machine's CPU count: where a baseline was measured.
 fn cpu_model() -> String {
     let model = std::fs::read_to_string("/proc/cpuinfo")
         .ok()
@@ -112,8 +117,9 @@ fn cpu_model() -> String {
         })
         .unwrap_or_else(|| "unknown processor".into());
     // Counted from /proc/cpuinfo: this process may already be pinned to one of them.
-    let n = std::fs::read_to_string("/proc/cpuinfo")
-        .map_or(0, |t| t.lines().filter(|l| l.starts_with("processor")).count());
+    let n = std::fs::read_to_string("/proc/cpuinfo").map_or(0, |t| {
+        t.lines().filter(|l| l.starts_with("processor")).count()
+    });
     format!("{model}, {n} CPUs")
 }
 
@@ -446,6 +452,17 @@ fn judge_against(report: &mut GuardReport, path: &Path, limit_percent: f64) -> a
             profile()
         )
     })?;
+    let here = cpu_model();
+    if let Some(there) = b.processors.get(profile())
+        && *there != here
+    {
+        for w in &mut report.workloads {
+            w.verdict = Some(format!(
+                "not judged: the baseline was measured on {there}, this is {here}; write one here with --write-baseline"
+            ));
+        }
+        return Ok(());
+    }
     for w in &mut report.workloads {
         if let Some(&r) = ratios.get(&w.name) {
             report.passed &= judge(w, r, limit_percent);
@@ -470,6 +487,7 @@ fn write_baseline(report: &GuardReport, a: &GuardArgs, path: &Path) -> anyhow::R
             .map(|w| (w.name.clone(), w.median_ratio))
             .collect(),
     );
+    b.processors.insert(profile().into(), cpu_model());
     b.measured.insert(
         profile().into(),
         format!(
