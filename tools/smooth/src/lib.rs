@@ -22,12 +22,13 @@ pub use auvnav_import::fixes;
 pub mod montecarlo;
 pub mod report;
 pub mod retime;
+mod writer;
 
 use auvnav_core::ekf;
 use auvnav_core::smoother::{SmoothedParameters, SmoothedTrack, SmoothedValue, SmootherLog};
 use auvnav_log::{LogHeader, LogMessage, write_log_atomically};
 use auvnav_replay::{Output, Replay, ReplayOptions, replay_config, run_log};
-use auvnav_shm_schema::{AidDiagnosticsV1, AidSource, NavSolutionV1, TruthStateV1, topic};
+use auvnav_shm_schema::{AidDiagnosticsV1, AidSource, NavSolutionV1, TruthStateV1};
 pub use error::SmoothError;
 use serde::Serialize;
 use std::io::Write;
@@ -496,42 +497,45 @@ pub fn smooth_log_with(
         .notes
         .insert("smooth.source_log".into(), log.display().to_string());
     let written = write_log_atomically(&mcap_path, &header, |w| {
-        run_log(log, &mut second, &mut |o| {
-            match o {
-                Output::Solution(s) => {
-                    second_solutions += 1;
-                    let sm = track.apply(s);
-                    // The first solution of each output period (every one without a rate).
-                    let period = period_ns.map(|p| s.host_time_ns / p);
-                    if period.is_none() || period != written_period {
-                        written_period = period;
-                        w.write(topic::NAV_SOLUTION, s)?;
-                        w.write(NAV_SOLUTION_SMOOTHED, &sm)?;
-                        auvnav_core::csv::write_nav_row(&mut csv, &sm)?;
+        writer::write_beside(w, &mut csv, |out| {
+            run_log(log, &mut second, &mut |o| {
+                match o {
+                    Output::Solution(s) => {
+                        second_solutions += 1;
+                        let sm = track.apply(s);
+                        // The first solution of each output period (every one without a rate).
+                        let period = period_ns.map(|p| s.host_time_ns / p);
+                        if period.is_none() || period != written_period {
+                            written_period = period;
+                            out.push(writer::Item::Solution {
+                                filtered: *s,
+                                smoothed: sm,
+                            })?;
+                        }
+                        let filtering = track
+                            .epochs
+                            .time_ns
+                            .first()
+                            .is_some_and(|&t0| s.host_time_ns >= t0);
+                        if filtering {
+                            cmp.solution(s, &sm, &mut figures);
+                            figures.solution(s, &sm);
+                            decimator.push(export::TrackPoint::of(&sm));
+                            first_smoothed.get_or_insert(sm);
+                            last_smoothed = Some(sm);
+                        }
                     }
-                    let filtering = track
-                        .epochs
-                        .time_ns
-                        .first()
-                        .is_some_and(|&t0| s.host_time_ns >= t0);
-                    if filtering {
-                        cmp.solution(s, &sm, &mut figures);
-                        figures.solution(s, &sm);
-                        decimator.push(export::TrackPoint::of(&sm));
-                        first_smoothed.get_or_insert(sm);
-                        last_smoothed = Some(sm);
+                    Output::Diagnostics(d) => {
+                        out.push(writer::Item::Diagnostics(*d))?;
+                        if let Some(i) = fix_innovation(d) {
+                            innovations.push(i);
+                        }
                     }
+                    Output::Truth(t) => out.push(writer::Item::Truth(*t))?,
+                    Output::LateAid(r) => out.push(writer::Item::LateAid(*r))?,
                 }
-                Output::Diagnostics(d) => {
-                    w.write(topic::NAV_AID_DIAGNOSTICS, d)?;
-                    if let Some(i) = fix_innovation(d) {
-                        innovations.push(i);
-                    }
-                }
-                Output::Truth(t) => w.write(topic::TRUTH, t)?,
-                Output::LateAid(r) => w.write(topic::NAV_LATE_AIDS, r)?,
-            }
-            Ok(())
+                Ok(())
+            })
         })?;
         Ok(())
     });
