@@ -96,44 +96,34 @@ mod tests {
         }
     }
 
+    /// The comparison of `replayed` against `recorded`, fed as a replay feeds it.
+    fn compare(recorded: &[NavSolutionV1], replayed: &[NavSolutionV1]) -> RecordedComparison {
+        let mut c = RecordedComparison::default();
+        for s in recorded {
+            c.push_recorded(*s);
+        }
+        for s in replayed {
+            c.check(s);
+        }
+        c.finish();
+        c
+    }
+
     /// Two solutions of one time stamp (two IMU samples stamped alike) are each compared with
     /// their own recorded twin; a replay that lacks one is reported.
     #[test]
     fn solutions_that_share_a_time_are_compared_in_order() {
-        let mut c = RecordedComparison::default();
-        for s in [
+        let recorded = [
             solution(1, 0.1),
             solution(2, 0.2),
             solution(2, 0.3),
             solution(3, 0.4),
-        ] {
-            c.push_recorded(s);
-        }
-        for s in [
-            solution(1, 0.1),
-            solution(2, 0.2),
-            solution(2, 0.3),
-            solution(3, 0.4),
-        ] {
-            c.check(&s);
-        }
-        c.finish();
+        ];
+        let c = compare(&recorded, &recorded);
         assert!(c.identical(), "{c:?}");
         assert_eq!(c.compared, 4);
 
-        let mut c = RecordedComparison::default();
-        for s in [
-            solution(1, 0.1),
-            solution(2, 0.2),
-            solution(2, 0.3),
-            solution(3, 0.4),
-        ] {
-            c.push_recorded(s);
-        }
-        for s in [solution(1, 0.1), solution(2, 0.2), solution(3, 0.4)] {
-            c.check(&s);
-        }
-        c.finish();
+        let c = compare(&recorded, &[recorded[0], recorded[1], recorded[3]]);
         assert_eq!(
             (c.compared, c.differing, c.unmatched_recorded),
             (3, 0, 1),
