@@ -105,9 +105,12 @@ impl ArrivalClock {
 
     /// The return time of the read that brought the byte at stream `offset`, if remembered.
     fn returned_ns(&self, offset: u64) -> Option<u64> {
+        // From the newest, as `arrival_ns` walks them: the frame's byte is in a recent read.
         self.reads
             .iter()
-            .find(|&&(end, _)| end > offset)
+            .rev()
+            .take_while(|&&(end, _)| end > offset)
+            .last()
             .map(|&(_, t)| t)
     }
 

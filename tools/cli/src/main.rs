@@ -345,42 +345,10 @@ enum BenchWhat {
         #[arg(long)]
         json: bool,
     },
-    /// Regression guard: this build's replay and smoothing (whole commands, every solution
-    /// written) against a base build's, or against a fixed reference workload compiled in, run
-    /// alternately on one core and judged as ratios; with --baseline, exit status 3 when slower
-    /// beyond the limit and the run's noise.
-    Guard {
-        /// The other build's `auvnav` (e.g. a base commit built in a worktree); without it, the
-        /// reference workload.
-        #[arg(long)]
-        base: Option<std::path::PathBuf>,
-        /// Alternating pairs of runs per workload.
-        #[arg(long, default_value_t = 5)]
-        pairs: usize,
-        /// Log hours (200 Hz IMU, 1 Hz DVL and depth).
-        #[arg(long, default_value_t = 1.0)]
-        hours: f64,
-        /// Also the decoders' throughput (with --base).
-        #[arg(long)]
-        decode: bool,
-        /// Judge the ratios to the reference workload against this baseline file.
-        #[arg(long)]
-        baseline: Option<std::path::PathBuf>,
-        /// Write the ratios measured as this build profile's baseline into this file.
-        #[arg(long)]
-        write_baseline: Option<std::path::PathBuf>,
-        /// A slowdown beyond this (%, and beyond the run's noise) fails.
-        #[arg(long, default_value_t = 10.0)]
-        limit_percent: f64,
-        /// The CPU to run on (default: the last one allowed).
-        #[arg(long)]
-        cpu: Option<usize>,
-        /// Run the reference workload for --hours and exit (what the guard times).
-        #[arg(long, hide = true)]
-        reference_workload: bool,
-        #[arg(long)]
-        json: bool,
-    },
+    /// Regression guard: this build's replay and smoothing against a base build's, or against a
+    /// fixed reference workload compiled in, run alternately on one core and judged as ratios;
+    /// with --baseline, exit status 3 when slower beyond the limit and the run's noise.
+    Guard(auvnav_tools::bench::GuardArgs),
     /// Real-time factor of INS/DVL/depth replay: one hour of 200 Hz IMU, 1 Hz DVL, 1 Hz depth.
     Replay {
         /// Log hours.
@@ -885,33 +853,7 @@ fn main() -> std::process::ExitCode {
                 repeat,
                 json,
             } => auvnav_tools::bench::replay(hours, repeat, json),
-            BenchWhat::Guard {
-                reference_workload: true,
-                hours,
-                ..
-            } => auvnav_tools::bench::run_reference_workload(hours),
-            BenchWhat::Guard {
-                base,
-                pairs,
-                hours,
-                decode,
-                baseline,
-                write_baseline,
-                limit_percent,
-                cpu,
-                reference_workload: false,
-                json,
-            } => auvnav_tools::bench::guard(&auvnav_tools::bench::GuardArgs {
-                base,
-                pairs,
-                hours,
-                decode,
-                baseline,
-                write_baseline,
-                limit_percent,
-                cpu,
-                json,
-            }),
+            BenchWhat::Guard(args) => auvnav_tools::bench::guard(&args),
             BenchWhat::Smooth {
                 hours,
                 repeat,

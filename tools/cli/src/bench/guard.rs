@@ -7,7 +7,7 @@
 //! itself, so any two builds that have these commands compare alike: `auvnav bench replay
 //! --repeat 1 --json` (the navigation core on messages in memory, and the whole replay from the
 //! log file), `auvnav smooth LOG --out DIR --json` writing every solution (its forward and
-//! backward passes, and the whole command), `auvnav bench decode --json`. Without a base build the
+//! backward passes, and the whole command), `auvnav bench decode --pty-seconds 0 --json`. Without a base build the
 //! other side is [`reference_workload`]: a frozen mix of what the replay does (a strapdown step
 //! with its sines and square roots per sample, a sparse covariance propagation at 20 Hz, a
 //! checksum over the log's bytes), whose time tracks the machine but never the project's code.
@@ -19,25 +19,39 @@ use std::time::Instant;
 
 pub use super::reference_workload::reference_workload;
 
-/// What `auvnav bench guard` is asked to do.
-#[derive(Debug, Clone)]
+/// What `auvnav bench guard` is asked to do (its command line).
+#[derive(clap::Args, Debug, Clone)]
 pub struct GuardArgs {
-    /// The other build's `auvnav`; none: the reference workload.
+    /// The other build's `auvnav` (e.g. a base commit built in a worktree); without it, the
+    /// reference workload.
+    #[arg(long)]
     pub base: Option<PathBuf>,
     /// Alternating pairs of runs per workload.
+    #[arg(long, default_value_t = 5)]
     pub pairs: usize,
-    /// Log hours.
+    /// Log hours (200 Hz IMU, 1 Hz DVL and depth).
+    #[arg(long, default_value_t = 1.0)]
     pub hours: f64,
-    /// Also the decoders (with a base build only: the reference has no decoder).
+    /// Also the decoders' throughput (with --base: the reference has no decoder).
+    #[arg(long)]
     pub decode: bool,
-    /// Judge the ratios against this baseline file (reference mode).
+    /// Judge the ratios to the reference workload against this baseline file.
+    #[arg(long)]
     pub baseline: Option<PathBuf>,
-    /// Write the measured ratios as the baseline of this build's profile.
+    /// Write the ratios measured as this build profile's baseline into this file.
+    #[arg(long)]
     pub write_baseline: Option<PathBuf>,
-    /// A slowdown beyond this (and beyond the run's noise) fails the guard (%).
+    /// A slowdown beyond this (%, and beyond the run's noise) fails.
+    #[arg(long, default_value_t = 10.0)]
     pub limit_percent: f64,
     /// The CPU to run on (default: the last one this process may use).
+    #[arg(long)]
     pub cpu: Option<usize>,
+    /// Run the reference workload for --hours, print its wall time as JSON and exit (what the
+    /// guard times).
+    #[arg(long, hide = true)]
+    pub reference_workload: bool,
+    #[arg(long)]
     pub json: bool,
 }
 
@@ -107,19 +121,14 @@ fn profile() -> &'static str {
 
 /// The processor's model name and this machine's CPU count: where a baseline was measured.
 fn cpu_model() -> String {
-    let model = std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|t| {
-            t.lines()
-                .find(|l| l.starts_with("model name"))
-                .and_then(|l| l.split(':').nth(1))
-                .map(|m| m.trim().to_string())
-        })
-        .unwrap_or_else(|| "unknown processor".into());
+    let info = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
+    let model = info
+        .lines()
+        .find(|l| l.starts_with("model name"))
+        .and_then(|l| l.split(':').nth(1))
+        .map_or("unknown processor", str::trim);
     // Counted from /proc/cpuinfo: this process may already be pinned to one of them.
-    let n = std::fs::read_to_string("/proc/cpuinfo").map_or(0, |t| {
-        t.lines().filter(|l| l.starts_with("processor")).count()
-    });
+    let n = info.lines().filter(|l| l.starts_with("processor")).count();
     format!("{model}, {n} CPUs")
 }
 
@@ -242,7 +251,7 @@ fn reference_time(exe: &Path, hours: f64) -> anyhow::Result<f64> {
 }
 
 /// `auvnav bench guard --reference-workload`: runs it and prints its wall time as JSON.
-pub fn run_reference_workload(hours: f64) -> anyhow::Result<()> {
+fn run_reference_workload(hours: f64) -> anyhow::Result<()> {
     let t = Instant::now();
     std::hint::black_box(reference_workload(hours));
     crate::json::print(&serde_json::json!({ "wall_s": t.elapsed().as_secs_f64() }))?;
@@ -345,6 +354,9 @@ fn judge(w: &mut GuardWorkload, baseline: f64, limit_percent: f64) -> bool {
 
 /// `auvnav bench guard`: fails (exit status 3) when a judged workload slowed down.
 pub fn guard(a: &GuardArgs) -> anyhow::Result<()> {
+    if a.reference_workload {
+        return run_reference_workload(a.hours);
+    }
     anyhow::ensure!(
         a.hours > 0.0 && a.hours.is_finite() && a.pairs >= 1,
         "--hours must be > 0 and --pairs at least 1"
