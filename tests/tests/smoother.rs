@@ -6,14 +6,14 @@
 use auvnav_log::{LogMessage, LogReader};
 use auvnav_shm_schema::TruthStateV1;
 use auvnav_sim::{SimConfig, scenario::Scenario, simulate_to_log};
+use auvnav_tests::processes::TempDir;
 use auvnav_tools::smooth::{SmoothOptions, smooth_log};
 use std::path::{Path, PathBuf};
 
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("auvnav-smoother-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("scratch folder");
-    d
+/// A scratch folder removed when the test ends, failed or passed: the survey's outputs alone are
+/// hundreds of megabytes.
+fn scratch(name: &str) -> TempDir {
+    TempDir::new(&format!("auvnav-smoother-{name}-"))
 }
 
 fn simulate(dir: &Path, scenario: &str, seed: u64, seconds: Option<f64>) -> PathBuf {
@@ -107,22 +107,23 @@ fn dive_config(dir: &Path, truth: &TruthStateV1, rng: &mut u64) -> PathBuf {
 
 #[test]
 fn survey_line_with_fixes_before_and_after_is_smoothed_below_the_forward_error() {
-    let dir = scratch("survey");
+    let scratch = scratch("survey");
+    let dir = scratch.path();
     let mut ratios = Vec::new();
     for seed in [7101u64, 7102] {
-        let log = simulate(&dir, "survey", seed, None);
+        let log = simulate(dir, "survey", seed, None);
         let (first, last) = truth_ends(&log);
         let mut rng = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
         // The fix before the dive is where the filter starts; the one after it comes from the
         // file.
-        let config = dive_config(&dir, &first, &mut rng);
+        let config = dive_config(dir, &first, &mut rng);
         let fixes = dir.join(format!("fixes-{seed}.csv"));
         let text = format!(
             "time_s,latitude_deg,longitude_deg,depth_m,std_m\n{}\n",
             fix_line(&last, 3.0 * gauss(&mut rng), 3.0 * gauss(&mut rng), 3.0)
         );
         std::fs::write(&fixes, text).expect("fix file");
-        let mut a = args(&dir, Some(fixes.clone()));
+        let mut a = args(dir, Some(fixes.clone()));
         a.config = Some(config);
         let fix_file = auvnav_tools::smooth::fixes::read(&fixes).expect("fixes");
         let r = smooth_log(&a, &log, Some(&fix_file)).expect("smooth");
@@ -157,14 +158,14 @@ fn survey_line_with_fixes_before_and_after_is_smoothed_below_the_forward_error()
     for r in &ratios {
         assert!(*r < 0.5, "smoothed / forward RMS {ratios:?}");
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
 fn docking_run_with_usbl_fixes_is_smoothed() {
-    let dir = scratch("docking");
-    let log = simulate(&dir, "docking", 7201, None);
-    let mut a = args(&dir, None);
+    let scratch = scratch("docking");
+    let dir = scratch.path();
+    let log = simulate(dir, "docking", 7201, None);
+    let mut a = args(dir, None);
     a.usbl = Some(auvnav_core::aid::usbl::Coupling::Tight);
     let r = smooth_log(&a, &log, None).expect("smooth");
     let c = r.against_reference.expect("truth channel");
@@ -191,13 +192,13 @@ fn docking_run_with_usbl_fixes_is_smoothed() {
         "smoothed RMS {}",
         c.smoothed.horizontal_error_rms_m
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
 fn bad_input_gives_a_clear_error_or_a_stated_result() {
-    let dir = scratch("bad");
-    let log = simulate(&dir, "straight", 7301, Some(60.0));
+    let scratch = scratch("bad");
+    let dir = scratch.path();
+    let log = simulate(dir, "straight", 7301, Some(60.0));
     // A fix file of garbage, and fixes outside the log: nothing used, all counted.
     let fixes = dir.join("bad.csv");
     std::fs::write(
@@ -208,11 +209,11 @@ fn bad_input_gives_a_clear_error_or_a_stated_result() {
     let fix_file = auvnav_tools::smooth::fixes::read(&fixes).expect("read");
     assert_eq!(fix_file.fixes.len(), 1);
     assert_eq!(fix_file.unparsable_lines, 3);
-    let r = smooth_log(&args(&dir, Some(fixes)), &log, Some(&fix_file)).expect("smooth");
+    let r = smooth_log(&args(dir, Some(fixes)), &log, Some(&fix_file)).expect("smooth");
     assert_eq!(r.fixes.from_file, 0);
     assert_eq!(r.fixes.from_file_outside_log, 1);
     // Without any fix the smoothed track is still a smoothed track.
-    let r = smooth_log(&args(&dir, None), &log, None).expect("smooth without fixes");
+    let r = smooth_log(&args(dir, None), &log, None).expect("smooth without fixes");
     assert!(r.epochs > 1000 && r.solutions_smoothed > 0);
     assert!(r.against_reference.is_some());
     for path in [
@@ -237,17 +238,17 @@ fn bad_input_gives_a_clear_error_or_a_stated_result() {
     )
     .expect("write");
     w.finish().expect("finish");
-    let e = smooth_log(&args(&dir, None), &no_imu, None).expect_err("no IMU");
+    let e = smooth_log(&args(dir, None), &no_imu, None).expect_err("no IMU");
     assert!(format!("{e:#}").contains("no IMU"), "{e:#}");
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// `--solution-rate` writes fewer solutions, each the same row the full-rate output has at that
 /// time, the forward and smoothed channels alike; the figures are those of every solution.
 #[test]
 fn a_solution_rate_writes_the_same_solutions_at_that_rate() {
-    let dir = scratch("rate");
-    let log = simulate(&dir, "straight", 7302, Some(60.0));
+    let scratch = scratch("rate");
+    let dir = scratch.path();
+    let log = simulate(dir, "straight", 7302, Some(60.0));
     for sub in ["full", "rate"] {
         std::fs::create_dir_all(dir.join(sub)).expect("output folder");
     }
@@ -307,7 +308,6 @@ fn a_solution_rate_writes_the_same_solutions_at_that_rate() {
     );
     assert_eq!(channels(&full.outputs.mcap), (all.len(), all.len()));
     assert_eq!(full.against_reference, every_tenth.against_reference);
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The smoother's consistency by Monte Carlo, with small counts (the tool runs 50): sensor errors
