@@ -599,6 +599,14 @@ impl GnssFixV1 {
     pub const DIFFERENTIAL: u32 = 1 << 4;
 }
 
+/// True when every value in `groups` is finite; without a branch per value, for checks that run
+/// at the IMU rate.
+pub fn all_finite(groups: &[&[f64]]) -> bool {
+    groups
+        .iter()
+        .fold(true, |ok, g| g.iter().fold(ok, |ok, x| ok & x.is_finite()))
+}
+
 /// The operating mode of the navigation solution.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u32)]
@@ -685,17 +693,17 @@ impl NavSolutionV1 {
 
     /// True when every floating-point field is finite (what a consumer may steer by).
     pub fn all_finite(&self) -> bool {
-        [self.latitude_rad, self.longitude_rad, self.height_m]
-            .iter()
-            .chain(&self.velocity_ned_m_s)
-            .chain(&self.quaternion_body_to_ned)
-            .chain(&self.euler_rad)
-            .chain(&self.position_std_ned_m)
-            .chain(&self.velocity_std_ned_m_s)
-            .chain(&self.attitude_std_rad)
-            .chain(&self.gyro_bias_rad_s)
-            .chain(&self.accel_bias_m_s2)
-            .all(|x| x.is_finite())
+        all_finite(&[
+            &[self.latitude_rad, self.longitude_rad, self.height_m],
+            &self.velocity_ned_m_s,
+            &self.quaternion_body_to_ned,
+            &self.euler_rad,
+            &self.position_std_ned_m,
+            &self.velocity_std_ned_m_s,
+            &self.attitude_std_rad,
+            &self.gyro_bias_rad_s,
+            &self.accel_bias_m_s2,
+        ])
     }
 
     /// The mode field as a [`NavMode`], or the raw value when it is out of range.

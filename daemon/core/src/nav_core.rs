@@ -96,20 +96,20 @@ pub fn plausible_rates(
 /// True when every element of `p` is finite, its variances are non-negative and every
 /// correlation is within ±1 (up to a relative rounding margin).
 pub fn covariance_is_sound(p: &ekf::Covariance) -> bool {
-    for i in 0..ekf::N {
-        let pii = p[(i, i)];
-        if !(pii.is_finite() && pii >= 0.0) {
-            return false;
-        }
-        for j in 0..i {
-            let pij = p[(i, j)];
-            let pjj = p[(j, j)];
-            if !pij.is_finite() || pij * pij > pii * pjj * (1.0 + 1e-6) + 1e-300 {
-                return false;
-            }
+    let d: [f64; ekf::N] = std::array::from_fn(|i| p[(i, i)]);
+    if !d.iter().all(|v| v.is_finite() && *v >= 0.0) {
+        return false;
+    }
+    // Without a branch per element, over the columns' contiguous slices below the diagonal: an
+    // infinite correlation is beyond the bound, a NaN is refused on its own.
+    let mut unsound = 0u32;
+    for (j, col) in p.data.0.iter().enumerate() {
+        let djj = d[j] * (1.0 + 1e-6);
+        for (pij, dii) in col[j + 1..].iter().zip(&d[j + 1..]) {
+            unsound |= u32::from((pij * pij > dii * djj + 1e-300) | pij.is_nan());
         }
     }
-    true
+    unsound == 0
 }
 
 impl NavCore {
@@ -315,19 +315,20 @@ impl NavCore {
     /// non-negative, with a relative margin for rounding).
     pub fn is_sound(&self) -> bool {
         let s = &self.sd.state;
-        let finite = [
+        let position = [
             s.time_s,
             s.position.latitude_rad,
             s.position.longitude_rad,
             s.position.height_m,
-        ]
-        .iter()
-        .chain(s.velocity_ned.iter())
-        .chain(s.q_body_to_ned.coords.iter())
-        .chain(self.gyro_bias.iter())
-        .chain(self.accel_bias.iter())
-        .chain(self.markov_means.iter())
-        .all(|x| x.is_finite());
+        ];
+        let finite = auvnav_shm_schema::all_finite(&[
+            &position,
+            s.velocity_ned.as_slice(),
+            s.q_body_to_ned.coords.as_slice(),
+            self.gyro_bias.as_slice(),
+            self.accel_bias.as_slice(),
+            self.markov_means.as_slice(),
+        ]);
         finite && covariance_is_sound(&self.kf.p)
     }
 
@@ -441,5 +442,34 @@ impl NavCore {
                 None
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_covariance_is_judged_element_by_element() {
+        let mut p = ekf::Covariance::identity() * 4.0;
+        p[(0, 0)] = 0.0; // a state without variance is sound
+        assert!(covariance_is_sound(&p));
+        let with = |i: usize, j: usize, v: f64| {
+            let mut q = p;
+            q[(i, j)] = v;
+            q[(j, i)] = v;
+            covariance_is_sound(&q)
+        };
+        // Correlations up to ±1 (and the rounding margin), in every place of the triangle.
+        assert!(with(27, 1, 4.0) && with(1, 27, -4.0) && with(5, 4, 4.0 * (1.0 + 4e-7)));
+        assert!(!with(27, 1, 4.01) && !with(2, 26, -4.01) && !with(5, 4, 4.0 * (1.0 + 1e-5)));
+        // A correlation with the state that has no variance.
+        assert!(!with(0, 14, 1e-3));
+        // Values that are not numbers, in the triangle and on the diagonal.
+        for v in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            assert!(!with(20, 7, v), "{v}");
+            assert!(!with(13, 13, v), "{v}");
+        }
+        assert!(!with(13, 13, -1e-9));
     }
 }

@@ -32,11 +32,43 @@ impl NavState {
         *self.q_body_to_ned.to_rotation_matrix().matrix()
     }
 
-    /// Roll, pitch, yaw (rad).
+    /// Roll, pitch, yaw (rad), the ZYX angles of `q_body_to_ned`: the angles nalgebra's
+    /// `euler_angles` gives (away from pitch ±90°), from two arctangents and an arcsine of the
+    /// rotation matrix's elements without dividing them by cos(pitch) first (a positive factor
+    /// common to both arguments of an arctangent does not change it).
     pub fn euler(&self) -> [f64; 3] {
-        let (r, p, y) = self.q_body_to_ned.euler_angles();
-        [r, p, y]
+        let m = self.c_body_to_ned();
+        if m[(2, 0)].abs() < 1.0 {
+            [
+                m[(2, 1)].atan2(m[(2, 2)]),
+                -m[(2, 0)].asin(),
+                m[(1, 0)].atan2(m[(0, 0)]),
+            ]
+        } else {
+            // Pitch at ±90°: roll and yaw are one angle; nalgebra's convention for it.
+            let (r, p, y) = self.q_body_to_ned.euler_angles();
+            [r, p, y]
+        }
     }
+}
+
+/// Below this rotation angle (rad) [`rotation_quaternion`] uses its series: their truncation
+/// error there is below 1e-19, far under the rounding of the sine and cosine themselves.
+const SERIES_MAX_ANGLE_RAD: f64 = 0.1;
+
+/// The unit quaternion of the rotation vector `v` (rad): `UnitQuaternion::from_scaled_axis`,
+/// with cos(θ/2) and sin(θ/2)/θ from their Taylor series to the fifth term for the small angles
+/// of one IMU interval (a sine and cosine per call were a tenth of the replay's time).
+pub fn rotation_quaternion(v: &Vector3<f64>) -> UnitQuaternion<f64> {
+    let theta2 = v.norm_squared();
+    if theta2 >= SERIES_MAX_ANGLE_RAD * SERIES_MAX_ANGLE_RAD {
+        return UnitQuaternion::from_scaled_axis(*v);
+    }
+    // h = θ/2: cos h = 1 - h²/2! + h⁴/4! - …, sin h / h = 1 - h²/3! + h⁴/5! - …
+    let x = 0.25 * theta2;
+    let cos_h = 1.0 - x / 2.0 * (1.0 - x / 12.0 * (1.0 - x / 30.0 * (1.0 - x / 56.0)));
+    let sinc_h = 1.0 - x / 6.0 * (1.0 - x / 20.0 * (1.0 - x / 42.0 * (1.0 - x / 72.0)));
+    UnitQuaternion::new_unchecked(nalgebra::Quaternion::from_parts(cos_h, v * (0.5 * sinc_h)))
 }
 
 /// One IMU interval: angle and velocity increments in body axes over `dt`.
@@ -84,9 +116,7 @@ impl Strapdown {
         let dv_n = c_bn * dv_b - 0.5 * zeta.cross(&(c_bn * inc.dv));
         let v_new = v_old + dv_n + (g - (2.0 * w_ie + w_en).cross(&v_old)) * dt;
 
-        s.q_body_to_ned = UnitQuaternion::from_scaled_axis(-zeta)
-            * s.q_body_to_ned
-            * UnitQuaternion::from_scaled_axis(phi);
+        s.q_body_to_ned = rotation_quaternion(&-zeta) * s.q_body_to_ned * rotation_quaternion(&phi);
         s.q_body_to_ned.renormalize_fast();
 
         let v_mean = 0.5 * (v_old + v_new);
@@ -141,6 +171,7 @@ pub fn truth_position(t: &auvnav_shm_schema::TruthStateV1) -> Geodetic {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f64::consts::FRAC_PI_2;
 
     #[test]
     fn static_level_imu_stays_at_rest() {
@@ -173,5 +204,66 @@ mod tests {
         let d = earth::ned_offset(&pos, &s.position);
         assert!(d.norm() < 1e-4, "{d}");
         assert!(s.q_body_to_ned.angle_to(&q) < 1e-9);
+    }
+
+    /// A small deterministic generator for the checks below.
+    fn uniform(state: &mut u64) -> f64 {
+        *state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (*state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    }
+
+    #[test]
+    fn rotation_quaternion_is_the_exponential_map() {
+        let mut rng = 7u64;
+        // Angles from 1e-12 rad to a full turn, across the series threshold.
+        for k in 0..4000 {
+            let angle = 10f64.powf(-12.0 + 12.8 * (k as f64 / 4000.0)).min(6.2);
+            let axis = Vector3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng));
+            let v = axis.normalize() * angle;
+            let ours = rotation_quaternion(&v);
+            let reference = UnitQuaternion::from_scaled_axis(v);
+            let d = (ours.coords - reference.coords).amax();
+            assert!(
+                d < 4e-16,
+                "angle {angle}: {ours:?} against {reference:?} ({d:e})"
+            );
+            assert!((ours.norm() - 1.0).abs() < 4e-16);
+        }
+        assert_eq!(
+            rotation_quaternion(&Vector3::zeros()),
+            UnitQuaternion::identity()
+        );
+    }
+
+    const ORIGIN: Geodetic = Geodetic {
+        latitude_rad: 0.5,
+        longitude_rad: 0.0,
+        height_m: 0.0,
+    };
+
+    #[test]
+    fn euler_angles_are_nalgebras() {
+        let mut rng = 11u64;
+        for _ in 0..4000 {
+            let e = [
+                std::f64::consts::PI * uniform(&mut rng),
+                0.5 * std::f64::consts::PI * uniform(&mut rng) * 0.999,
+                std::f64::consts::PI * uniform(&mut rng),
+            ];
+            let s = initial_state(0.0, ORIGIN, [0.0; 3], e);
+            let (r, p, y) = s.q_body_to_ned.euler_angles();
+            let ours = s.euler();
+            for (a, b) in ours.iter().zip([r, p, y]) {
+                // Both from the same matrix; the arctangents' arguments differ by a common
+                // positive factor only.
+                assert!((a - b).abs() < 1e-12, "{ours:?} against {:?}", [r, p, y]);
+            }
+        }
+        // At pitch ±90° the angles are nalgebra's.
+        let s = initial_state(0.0, ORIGIN, [0.0; 3], [0.3, FRAC_PI_2, 0.2]);
+        let (r, p, y) = s.q_body_to_ned.euler_angles();
+        assert_eq!(s.euler(), [r, p, y]);
     }
 }

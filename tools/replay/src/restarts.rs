@@ -54,20 +54,25 @@ impl Restarts {
 
     /// Before the IMU sample stamped `t_ns` is fed: hands `session` over to a new one when a
     /// daemon started its session at this sample.
+    #[inline]
     pub fn before_imu(&mut self, t_ns: u64, session: &mut Session, cfg: &SessionConfig) {
         // Starts the replay has passed without meeting their sample (it was lost) are dropped.
         while self.starts.front().is_some_and(|e| e.host_time_ns < t_ns) {
             self.starts.pop_front();
         }
-        let Some(e) = self
-            .starts
-            .front()
-            .filter(|e| e.host_time_ns == t_ns)
-            .copied()
-        else {
-            return;
-        };
-        self.starts.pop_front();
+        if let Some(e) = self.starts.front().filter(|e| e.host_time_ns == t_ns) {
+            let e = *e;
+            self.starts.pop_front();
+            self.start_session(&e, session, cfg);
+        }
+    }
+
+    /// Hands `session` over to one started as the recorded start `e` says. Out of line: a new
+    /// session is built on the stack (tens of kilobytes), which would otherwise make every IMU
+    /// sample's call probe that much stack.
+    #[cold]
+    #[inline(never)]
+    fn start_session(&mut self, e: &SessionEventV1, session: &mut Session, cfg: &SessionConfig) {
         self.counts.session_starts += 1;
         let mut cfg = cfg.clone();
         cfg.navigation.initial_position_std_m = e.initial_position_std_m;
@@ -89,24 +94,33 @@ impl Restarts {
 
     /// After the IMU sample stamped `t_ns` was fed: takes the session's checkpoint when the
     /// daemon took one there.
+    #[inline]
     pub fn after_imu(&mut self, t_ns: u64, session: &Session) {
         if self.checkpoint_at.first().is_some_and(|&t| t <= t_ns) {
-            // Checkpoints at samples the replay has passed cannot be taken any more.
-            let take = self.checkpoint_at.remove(&t_ns);
-            self.checkpoint_at = self.checkpoint_at.split_off(&(t_ns + 1));
-            // Through JSON, as the daemon writes and reads its checkpoint file: the restarted
-            // daemon continued from the values as read back.
-            let as_read = |cp: Checkpoint| {
-                serde_json::to_vec(&cp)
-                    .ok()
-                    .and_then(|b| serde_json::from_slice::<Checkpoint>(&b).ok())
-            };
-            if take && let Some(cp) = session.checkpoint().and_then(as_read) {
-                if self.checkpoints.len() == CHECKPOINTS_KEPT {
-                    self.checkpoints.pop_front();
-                }
-                self.checkpoints.push_back((t_ns, cp));
+            self.take_checkpoint(t_ns, session);
+        }
+    }
+
+    /// Takes the session's checkpoint if the daemon took one at `t_ns` (out of line, as
+    /// [`Restarts::start_session`]).
+    #[cold]
+    #[inline(never)]
+    fn take_checkpoint(&mut self, t_ns: u64, session: &Session) {
+        // Checkpoints at samples the replay has passed cannot be taken any more.
+        let take = self.checkpoint_at.remove(&t_ns);
+        self.checkpoint_at = self.checkpoint_at.split_off(&(t_ns + 1));
+        // Through JSON, as the daemon writes and reads its checkpoint file: the restarted
+        // daemon continued from the values as read back.
+        let as_read = |cp: Checkpoint| {
+            serde_json::to_vec(&cp)
+                .ok()
+                .and_then(|b| serde_json::from_slice::<Checkpoint>(&b).ok())
+        };
+        if take && let Some(cp) = session.checkpoint().and_then(as_read) {
+            if self.checkpoints.len() == CHECKPOINTS_KEPT {
+                self.checkpoints.pop_front();
             }
+            self.checkpoints.push_back((t_ns, cp));
         }
     }
 }
