@@ -222,6 +222,10 @@ enum ImportWhat {
     /// A Water Linked Underwater GPS G2 acoustic log (CSV): per-receiver ranges with the
     /// system's own fixes, for `auvnav discover` (receiver geometry, range noise, outliers).
     UgpsG2(auvnav_tools::import::UgpsOptions),
+    /// A MAVLink telemetry log (`.tlog`, as QGroundControl, BlueOS and pymavlink write it): the
+    /// autopilot's IMU and compass, pressure sensor (depth), attitude estimate and GPS, for
+    /// `auvnav info`, `replay`, `smooth` and `calibrate` on what an ArduSub vehicle recorded.
+    Tlog(auvnav_tools::import::TlogOptions),
 }
 
 #[derive(Subcommand)]
@@ -661,6 +665,34 @@ fn run_import_mag_csv(a: &auvnav_tools::import::MagCsvOptions) -> anyhow::Result
     Ok(())
 }
 
+fn run_import_tlog(a: &auvnav_tools::import::TlogOptions) -> anyhow::Result<()> {
+    let s = auvnav_tools::import::tlog(a)?;
+    if a.json {
+        auvnav_tools::json::print(&s)?;
+    } else {
+        eprintln!(
+            "{}: {:.0} s of telemetry from {} MAVLink frames: {} IMU samples ({}), {} magnetometer, {} depth, {} attitude, {} GNSS fixes ({} without a 3D fix left out); {} bad checksums, {} unknown messages, {} bytes skipped, {} implausible and {} out-of-order readings left out; {} boot(s) of the autopilot",
+            a.out.display(),
+            s.duration_s,
+            s.frames,
+            s.imu,
+            s.imu_source,
+            s.magnetometer,
+            s.depth,
+            s.attitude,
+            s.gnss,
+            s.gnss_without_fix,
+            s.bad_checksum,
+            s.unknown,
+            s.bytes_skipped,
+            s.implausible,
+            s.out_of_order,
+            s.autopilot_boots
+        );
+    }
+    Ok(())
+}
+
 fn run_import_ugps(a: &auvnav_tools::import::UgpsOptions) -> anyhow::Result<()> {
     let s = auvnav_tools::import::ugps(a)?;
     if a.json {
@@ -776,6 +808,7 @@ fn main() -> std::process::ExitCode {
             ImportWhat::Riversurveyor(a) => run_import_riversurveyor(&a),
             ImportWhat::MagCsv(a) => run_import_mag_csv(&a),
             ImportWhat::UgpsG2(a) => run_import_ugps(&a),
+            ImportWhat::Tlog(a) => run_import_tlog(&a),
         },
         Command::Bench { what } => match what {
             BenchWhat::Sim {

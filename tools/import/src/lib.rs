@@ -10,7 +10,8 @@
 //!   Times are the files' own (0 at the segment start) in nanoseconds.
 //! - [`pd0`]: a PD0 file with GPS, [`riversurveyor`]: a SonTek RiverSurveyor MATLAB export
 //!   (bottom track, compass and GPS; read by [`mat5`]), [`mag_csv`]: a magnetometer CSV recording, [`ugps`]: a UGPS
-//!   G2 acoustic log.
+//!   G2 acoustic log, [`tlog`]: a MAVLink telemetry log (an autopilot's IMU, pressure, attitude
+//!   and GPS).
 //! - [`fixes`]: position fixes from a CSV file; [`mag`]: magnetometer recordings (a log or a CSV
 //!   file) as samples for calibration.
 #![forbid(unsafe_code)]
@@ -49,6 +50,7 @@ pub mod mat5;
 mod pd0;
 mod riversurveyor;
 mod snapir;
+mod tlog;
 mod ugps;
 use error::ReadContext;
 pub use error::{ImportError, Source};
@@ -56,6 +58,7 @@ pub use mag_csv::*;
 pub use pd0::*;
 pub use riversurveyor::*;
 pub use snapir::*;
+pub use tlog::*;
 pub use ugps::*;
 
 /// One parsed CSV file: rows of `N` numbers with an increasing first column.

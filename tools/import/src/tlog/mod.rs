@@ -1,0 +1,529 @@
+//! A MAVLink telemetry log (`.tlog`, as pymavlink, QGroundControl and BlueOS write it): records of
+//! an 8-byte big-endian Unix time in microseconds (when the ground station received the frame)
+//! followed by one MAVLink 1 or 2 frame.
+//!
+//! What an ArduSub vehicle's telemetry carries of its sensors becomes auvnav's channels:
+//! `SCALED_IMU` (else the first IMU's `RAW_IMU`, which ArduPilot sends in the same units) as the
+//! IMU and magnetometer, `SCALED_PRESSURE2` (ArduSub's external pressure sensor; another instance
+//! with `--pressure-instance`) as depth, `ATTITUDE` (the autopilot's own estimate) as the attitude
+//! channel and `GPS_RAW_INT` as GNSS fixes. Messages stamped by the autopilot's clock
+//! (`time_boot_ms`, `time_usec` since boot) keep that clock as their device time and are placed
+//! on the receive time base by the smallest receive delay seen (per boot of the autopilot), so
+//! their spacing is the autopilot's, not the telemetry link's.
+
+#[allow(unused_imports)]
+use super::*;
+use auvnav_shm_schema::MagnetometerV1;
+use frames::{Frame, frames};
+use mavlink::Message;
+use mavlink::dialects::ardupilotmega::{self as mav, MavMessage};
+
+mod frames;
+#[cfg(test)]
+mod tests;
+
+/// Standard gravity, the unit ArduPilot's milli-g are of (m/s²).
+const G0: f64 = 9.80665;
+/// The autopilot's clock going back by more than this starts a new boot of the autopilot (s).
+const CLOCK_RESET_S: f64 = 1.0;
+/// A receive delay longer by more than this than the previous one also starts a new boot (a
+/// reboot during a gap in the telemetry); shorter jumps are the link's and keep the boot (s).
+const DELAY_JUMP_S: f64 = 10.0;
+/// A record whose receive time is this far from both neighbours, which agree, has a damaged
+/// time stamp (s).
+const STAMP_JUMP_S: f64 = 3600.0;
+/// The range error of GNSS taken when a fix gives only its HDOP (m per unit of dilution).
+const UERE_M: f64 = 2.5;
+
+/// Command-line arguments of `auvnav import tlog`.
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
+pub struct TlogOptions {
+    /// The MAVLink telemetry log (`.tlog`).
+    pub input: PathBuf,
+    /// Output log (written atomically).
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub out: PathBuf,
+    /// Which SCALED_PRESSURE message is the water pressure sensor: 1 (SCALED_PRESSURE), 2
+    /// (SCALED_PRESSURE2: ArduSub's external sensor) or 3.
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 2))]
+    pub pressure_instance: u8,
+    /// Water density for depth from pressure (kg/m³; ArduSub's default is fresh water, 1000).
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 1025.0))]
+    pub water_density: f64,
+    /// Absolute pressure at the surface (hPa); by default the sensor's first reading, as ArduSub
+    /// takes it at boot.
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub surface_pressure_hpa: Option<f64>,
+    /// Print the summary as JSON.
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub json: bool,
+}
+
+impl TlogOptions {
+    /// The options with their command-line defaults, for `input` and `out`.
+    pub fn new(input: PathBuf, out: PathBuf) -> TlogOptions {
+        TlogOptions {
+            input,
+            out,
+            pressure_instance: 2,
+            water_density: 1025.0,
+            surface_pressure_hpa: None,
+            json: false,
+        }
+    }
+}
+
+/// What `auvnav import tlog` read and wrote.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct TlogSummary {
+    pub file: String,
+    /// MAVLink frames read (any message).
+    pub frames: usize,
+    /// Frames read, by message name (those the import knows).
+    pub by_message: BTreeMap<String, usize>,
+    /// Frames whose checksum did not match (left out).
+    pub bad_checksum: usize,
+    /// Frames of a message the dialect does not know, or whose payload did not parse.
+    pub unknown: usize,
+    /// Bytes skipped to find the next record (damage, a truncated end).
+    pub bytes_skipped: usize,
+    /// Messages left out for a value that is not finite or out of range.
+    pub implausible: usize,
+    /// Records whose receive time goes back (kept in the autopilot's order when they carry its
+    /// clock, else left out).
+    pub out_of_order: usize,
+    /// Boots of the autopilot seen (its clock started again).
+    pub autopilot_boots: usize,
+    /// The IMU message used: "SCALED_IMU", "RAW_IMU", or empty.
+    pub imu_source: String,
+    pub imu: usize,
+    pub magnetometer: usize,
+    pub depth: usize,
+    pub attitude: usize,
+    pub gnss: usize,
+    /// GPS_RAW_INT messages without a 3D fix (left out).
+    pub gnss_without_fix: usize,
+    /// The surface pressure depth was taken against (hPa).
+    pub surface_pressure_hpa: f64,
+    pub duration_s: f64,
+    /// Unix time of the first record (s).
+    pub start_unix_s: f64,
+}
+
+/// A sensor reading before its time is placed: receive time, the autopilot's clock (if the
+/// message carries it) and the message with its host time still 0.
+struct Reading {
+    received_ns: u64,
+    /// The host time given by [`place`].
+    host_ns: u64,
+    device_ns: Option<u64>,
+    topic: &'static str,
+    message: LogMessage,
+}
+
+/// The readings of the frames, by the options; counts into `s`.
+fn readings(frames: &[Frame], o: &TlogOptions, s: &mut TlogSummary) -> Vec<Reading> {
+    let t0_us = frames.first().map_or(0, |f| f.received_us);
+    let scaled_imu = frames
+        .iter()
+        .any(|f| matches!(f.message, MavMessage::SCALED_IMU(_)));
+    s.imu_source = if scaled_imu { "SCALED_IMU" } else { "RAW_IMU" }.into();
+    let mut surface_hpa = o.surface_pressure_hpa;
+    let mut out = Vec::new();
+    for f in frames {
+        *s.by_message
+            .entry(f.message.message_name().to_string())
+            .or_default() += 1;
+        let received_ns = f.received_us.saturating_sub(t0_us).saturating_mul(1000);
+        let mut push = |topic, device_ns: Option<u64>, message| {
+            out.push(Reading {
+                received_ns,
+                host_ns: 0,
+                device_ns,
+                topic,
+                message,
+            })
+        };
+        match &f.message {
+            MavMessage::SCALED_IMU(d) if scaled_imu => {
+                let t = u64::from(d.time_boot_ms) * 1_000_000;
+                let (imu, mag) = imu_and_field(
+                    [d.xacc, d.yacc, d.zacc],
+                    [d.xgyro, d.ygyro, d.zgyro],
+                    [d.xmag, d.ymag, d.zmag],
+                );
+                push(topic::IMU, Some(t), imu);
+                if let Some(m) = mag {
+                    push(topic::MAGNETOMETER, Some(t), m);
+                }
+            }
+            MavMessage::RAW_IMU(d) if !scaled_imu && d.id == 0 => {
+                let t = d.time_usec.saturating_mul(1000);
+                let (imu, mag) = imu_and_field(
+                    [d.xacc, d.yacc, d.zacc],
+                    [d.xgyro, d.ygyro, d.zgyro],
+                    [d.xmag, d.ymag, d.zmag],
+                );
+                push(topic::IMU, Some(t), imu);
+                if let Some(m) = mag {
+                    push(topic::MAGNETOMETER, Some(t), m);
+                }
+            }
+            MavMessage::SCALED_PRESSURE(mav::SCALED_PRESSURE_DATA {
+                time_boot_ms,
+                press_abs,
+                temperature,
+                ..
+            })
+            | MavMessage::SCALED_PRESSURE2(mav::SCALED_PRESSURE2_DATA {
+                time_boot_ms,
+                press_abs,
+                temperature,
+                ..
+            })
+            | MavMessage::SCALED_PRESSURE3(mav::SCALED_PRESSURE3_DATA {
+                time_boot_ms,
+                press_abs,
+                temperature,
+                ..
+            }) if pressure_instance(&f.message) == o.pressure_instance => {
+                let p = f64::from(*press_abs);
+                if !(p.is_finite() && p > 0.0) {
+                    s.implausible += 1;
+                    continue;
+                }
+                let surface = *surface_hpa.get_or_insert(p);
+                let gauge_pa = (p - surface) * 100.0;
+                let depth_m = gauge_pa / (o.water_density * G0);
+                if !(-10.0..=11_000.0).contains(&depth_m) {
+                    s.implausible += 1;
+                    continue;
+                }
+                push(
+                    topic::DEPTH,
+                    Some(u64::from(*time_boot_ms) * 1_000_000),
+                    LogMessage::Depth(DepthV1 {
+                        depth_m,
+                        pressure_pa: gauge_pa,
+                        water_density_kg_m3: o.water_density,
+                        temperature_c: f32::from(*temperature) / 100.0,
+                        validity: DepthV1::VALID_DEPTH
+                            | DepthV1::VALID_PRESSURE
+                            | DepthV1::VALID_TEMPERATURE
+                            | DepthV1::VALID_DEVICE_TIME,
+                        ..Default::default()
+                    }),
+                );
+            }
+            MavMessage::ATTITUDE(d) => {
+                let e = [d.roll, d.pitch, d.yaw].map(f64::from);
+                if !e.iter().all(|x| x.is_finite() && x.abs() <= 2.0 * PI) {
+                    s.implausible += 1;
+                    continue;
+                }
+                push(
+                    topic::ATTITUDE,
+                    Some(u64::from(d.time_boot_ms) * 1_000_000),
+                    LogMessage::Attitude(AttitudeV1 {
+                        euler_rad: e,
+                        validity: AttitudeV1::VALID_ATTITUDE
+                            | AttitudeV1::VALID_DEVICE_TIME
+                            | AttitudeV1::HEADING_TRUE,
+                        ..Default::default()
+                    }),
+                );
+            }
+            MavMessage::GPS_RAW_INT(d) => match gnss_fix(d) {
+                Some(g) => push(topic::GNSS, None, LogMessage::Gnss(g)),
+                None => s.gnss_without_fix += 1,
+            },
+            _ => {}
+        }
+    }
+    s.surface_pressure_hpa = surface_hpa.unwrap_or(f64::NAN);
+    out
+}
+
+const PI: f64 = std::f64::consts::PI;
+
+/// 1, 2 or 3 for the SCALED_PRESSURE messages, 0 for any other.
+fn pressure_instance(m: &MavMessage) -> u8 {
+    match m {
+        MavMessage::SCALED_PRESSURE(_) => 1,
+        MavMessage::SCALED_PRESSURE2(_) => 2,
+        MavMessage::SCALED_PRESSURE3(_) => 3,
+        _ => 0,
+    }
+}
+
+/// An IMU sample from ArduPilot's milli-g and milli-rad/s (body FRD), and the magnetometer
+/// reading (milli-gauss) when the message has one.
+fn imu_and_field(acc: [i16; 3], gyro: [i16; 3], mag: [i16; 3]) -> (LogMessage, Option<LogMessage>) {
+    let imu = LogMessage::Imu(ImuSampleV1 {
+        angular: gyro.map(|x| f64::from(x) / 1e3),
+        specific: acc.map(|x| f64::from(x) / 1e3 * G0),
+        status: ImuSampleV1::STATUS_GYRO_VALID
+            | ImuSampleV1::STATUS_ACCEL_VALID
+            | ImuSampleV1::STATUS_DEVICE_TIME_VALID,
+        ..Default::default()
+    });
+    let field = (mag != [0; 3]).then(|| {
+        LogMessage::Magnetometer(MagnetometerV1 {
+            // 1 mG = 1e-7 T.
+            field_t: mag.map(|x| f64::from(x) / 1e7),
+            validity: MagnetometerV1::VALID_FIELD | MagnetometerV1::VALID_DEVICE_TIME,
+            ..Default::default()
+        })
+    });
+    (imu, field)
+}
+
+/// A GNSS fix from GPS_RAW_INT when it is a 3D fix; its accuracy from `h_acc`/`v_acc`, else
+/// from the dilutions with [`UERE_M`].
+fn gnss_fix(d: &mav::GPS_RAW_INT_DATA) -> Option<GnssFixV1> {
+    if (d.fix_type as u32) < mav::GpsFixType::GPS_FIX_TYPE_3D_FIX as u32 {
+        return None;
+    }
+    let accuracy = |acc_mm: u32, dop: u16| {
+        if acc_mm > 0 {
+            f64::from(acc_mm) * 1e-3
+        } else if dop != u16::MAX {
+            f64::from(dop) * 1e-2 * UERE_M
+        } else {
+            100.0
+        }
+    };
+    let (height_m, height_valid) = if d.alt_ellipsoid != 0 {
+        (f64::from(d.alt_ellipsoid) * 1e-3, GnssFixV1::VALID_HEIGHT)
+    } else {
+        (f64::from(d.alt) * 1e-3, 0)
+    };
+    let differential = if (d.fix_type as u32) >= mav::GpsFixType::GPS_FIX_TYPE_DGPS as u32 {
+        GnssFixV1::DIFFERENTIAL
+    } else {
+        0
+    };
+    Some(GnssFixV1 {
+        latitude_rad: (f64::from(d.lat) * 1e-7).to_radians(),
+        longitude_rad: (f64::from(d.lon) * 1e-7).to_radians(),
+        height_m,
+        horizontal_std_m: accuracy(d.h_acc, d.eph).min(1000.0),
+        vertical_std_m: accuracy(d.v_acc, d.epv).min(1000.0),
+        satellites: u32::from(d.satellites_visible),
+        validity: GnssFixV1::VALID_POSITION | height_valid | differential,
+        ..Default::default()
+    })
+}
+
+/// Host times: a reading with the autopilot's clock at that clock plus the smallest receive delay
+/// of its boot; the others at their receive time. Sorted by host time.
+fn place(mut readings: Vec<Reading>, s: &mut TlogSummary) -> Vec<(&'static str, LogMessage)> {
+    // Boots: the autopilot's clock going back by CLOCK_RESET_S, or the receive delay jumping by
+    // DELAY_JUMP_S, starts a new one.
+    let reset_ns = (CLOCK_RESET_S * 1e9) as i128;
+    let jump_ns = (DELAY_JUMP_S * 1e9) as i128;
+    let mut boot = vec![0usize; readings.len()];
+    let mut offsets: Vec<i128> = Vec::new();
+    let mut last: Option<(u64, i128)> = None;
+    for (i, r) in readings.iter().enumerate() {
+        let Some(dev) = r.device_ns else { continue };
+        let delay = i128::from(r.received_ns) - i128::from(dev);
+        let new_boot = match last {
+            None => true,
+            Some((prev_dev, prev_delay)) => {
+                (dev as i128) < prev_dev as i128 - reset_ns || (delay - prev_delay).abs() > jump_ns
+            }
+        };
+        if new_boot {
+            offsets.push(delay);
+        }
+        let b = offsets.len() - 1;
+        offsets[b] = offsets[b].min(delay);
+        boot[i] = b;
+        last = Some((dev, delay));
+    }
+    s.autopilot_boots = offsets.len();
+    for (r, b) in readings.iter_mut().zip(&boot) {
+        r.host_ns = match r.device_ns {
+            Some(dev) => (i128::from(dev) + offsets[*b]).max(0) as u64,
+            None => r.received_ns,
+        };
+    }
+    readings.sort_by_key(|r| r.host_ns);
+    // Two readings of one channel at the same time (a repeated frame) or going back: left out.
+    let mut last: BTreeMap<&'static str, (u64, u64)> = BTreeMap::new();
+    let mut out = Vec::with_capacity(readings.len());
+    for mut r in readings {
+        let (last_ns, sequence) = last.get(r.topic).copied().unwrap_or((0, 0));
+        if sequence > 0 && r.host_ns <= last_ns {
+            s.out_of_order += 1;
+            continue;
+        }
+        last.insert(r.topic, (r.host_ns, sequence + 1));
+        set_times(&mut r.message, r.host_ns, r.device_ns, sequence);
+        out.push((r.topic, r.message));
+    }
+    out
+}
+
+/// Writes the host time, the device time (when known) and the channel's sequence number into a
+/// reading.
+fn set_times(m: &mut LogMessage, host_ns: u64, device_ns: Option<u64>, sequence: u64) {
+    let dev = device_ns.unwrap_or(0);
+    match m {
+        LogMessage::Imu(x) => {
+            (x.host_time_ns, x.device_time_ns, x.sequence) = (host_ns, dev, sequence)
+        }
+        LogMessage::Magnetometer(x) => {
+            (x.host_time_ns, x.device_time_ns, x.sequence) = (host_ns, dev, sequence)
+        }
+        LogMessage::Depth(x) => {
+            (x.host_time_ns, x.device_time_ns, x.sequence) = (host_ns, dev, sequence)
+        }
+        LogMessage::Attitude(x) => {
+            (x.host_time_ns, x.device_time_ns, x.sequence) = (host_ns, dev, sequence)
+        }
+        LogMessage::Gnss(x) => (x.host_time_ns, x.sequence) = (host_ns, sequence),
+        _ => {}
+    }
+}
+
+/// The host time of a reading the import writes.
+fn host_ns(m: &LogMessage) -> Option<u64> {
+    match m {
+        LogMessage::Imu(x) => Some(x.host_time_ns),
+        LogMessage::Magnetometer(x) => Some(x.host_time_ns),
+        LogMessage::Depth(x) => Some(x.host_time_ns),
+        LogMessage::Attitude(x) => Some(x.host_time_ns),
+        LogMessage::Gnss(x) => Some(x.host_time_ns),
+        _ => None,
+    }
+}
+
+/// The IMU samples' intervals: each the time since the previous sample (the first takes the
+/// second's).
+fn set_imu_intervals(messages: &mut [(&'static str, LogMessage)]) {
+    let mut previous: Option<u64> = None;
+    let mut first: Option<usize> = None;
+    for i in 0..messages.len() {
+        let LogMessage::Imu(x) = &mut messages[i].1 else {
+            continue;
+        };
+        match previous {
+            Some(p) => x.interval_s = (x.host_time_ns - p) as f64 * 1e-9,
+            None => first = Some(i),
+        }
+        previous = Some(x.host_time_ns);
+        if let Some(f) = first.filter(|&f| f != i) {
+            let dt = x.interval_s;
+            if let LogMessage::Imu(y) = &mut messages[f].1 {
+                y.interval_s = dt;
+            }
+            first = None;
+        }
+    }
+}
+
+/// The messages of a tlog (time 0 = its first record) and the summary.
+pub fn tlog_messages(o: &TlogOptions) -> Result<(Vec<(&'static str, LogMessage)>, TlogSummary)> {
+    if !(1..=3).contains(&o.pressure_instance) {
+        bad_option!("--pressure-instance {}: 1, 2 or 3", o.pressure_instance);
+    }
+    if !(990.0..=1050.0).contains(&o.water_density) {
+        bad_option!("--water-density {}: 990..1050 kg/m³", o.water_density);
+    }
+    let bytes =
+        std::fs::read(&o.input).read_context(|| format!("reading {}", o.input.display()))?;
+    let mut s = TlogSummary {
+        file: o.input.display().to_string(),
+        ..Default::default()
+    };
+    let frames = frames(&bytes, &mut s);
+    if frames.is_empty() {
+        malformed!(
+            "{}: no MAVLink frame in {} bytes ({} with a bad checksum)",
+            o.input.display(),
+            bytes.len(),
+            s.bad_checksum
+        );
+    }
+    s.start_unix_s = frames[0].received_us as f64 * 1e-6;
+    let readings = readings(&frames, o, &mut s);
+    let mut messages = place(readings, &mut s);
+    set_imu_intervals(&mut messages);
+    for (_, m) in &messages {
+        match m {
+            LogMessage::Imu(_) => s.imu += 1,
+            LogMessage::Magnetometer(_) => s.magnetometer += 1,
+            LogMessage::Depth(_) => s.depth += 1,
+            LogMessage::Attitude(_) => s.attitude += 1,
+            LogMessage::Gnss(_) => s.gnss += 1,
+            _ => {}
+        }
+    }
+    let times = messages.iter().filter_map(|(_, m)| host_ns(m));
+    let (lo, hi) = times.fold((u64::MAX, 0), |(lo, hi), t| (lo.min(t), hi.max(t)));
+    s.duration_s = hi.saturating_sub(lo) as f64 * 1e-9;
+    if messages.is_empty() {
+        malformed!(
+            "{}: {} MAVLink frames, none with a sensor reading auvnav takes (SCALED_IMU or RAW_IMU, SCALED_PRESSURE{}, ATTITUDE, GPS_RAW_INT)",
+            o.input.display(),
+            s.frames,
+            if o.pressure_instance == 1 {
+                String::new()
+            } else {
+                o.pressure_instance.to_string()
+            }
+        );
+    }
+    Ok((messages, s))
+}
+
+/// Imports a MAVLink telemetry log into a log at `o.out` (written atomically).
+pub fn tlog(o: &TlogOptions) -> Result<TlogSummary> {
+    let (messages, summary) = tlog_messages(o)?;
+    let header = import_header(
+        "auvnav import tlog",
+        summary.file.clone(),
+        format!(
+            "MAVLink telemetry log: the autopilot's IMU ({}) and magnetometer, pressure sensor \
+             (SCALED_PRESSURE instance {}, depth at {} kg/m³ against {:.2} hPa at the surface), \
+             attitude estimate (ATTITUDE) and GPS (GPS_RAW_INT, 3D fixes); autopilot-clock \
+             messages placed by the smallest receive delay; time 0 = Unix time {:.3}",
+            summary.imu_source,
+            o.pressure_instance,
+            o.water_density,
+            summary.surface_pressure_hpa,
+            summary.start_unix_s
+        ),
+        &summary,
+    );
+    write_log_atomically(&o.out, &header, |w: &mut LogWriter<_>| {
+        let source = |s: &str| note(&[("source", s)]);
+        w.declare::<ImuSampleV1>(
+            topic::IMU,
+            &source("the autopilot's IMU (mG, mrad/s → SI), device time = its boot clock"),
+        )?;
+        w.declare::<MagnetometerV1>(topic::MAGNETOMETER, &source("the autopilot's compass"))?;
+        w.declare::<DepthV1>(topic::DEPTH, &source("SCALED_PRESSURE: absolute pressure"))?;
+        w.declare::<AttitudeV1>(
+            topic::ATTITUDE,
+            &source("ATTITUDE: the autopilot's own estimate, not a sensor"),
+        )?;
+        w.declare::<GnssFixV1>(topic::GNSS, &source("GPS_RAW_INT, 3D fixes"))?;
+        for (t, m) in &messages {
+            match m {
+                LogMessage::Imu(x) => w.write(t, x)?,
+                LogMessage::Magnetometer(x) => w.write(t, x)?,
+                LogMessage::Depth(x) => w.write(t, x)?,
+                LogMessage::Attitude(x) => w.write(t, x)?,
+                LogMessage::Gnss(x) => w.write(t, x)?,
+                _ => {}
+            }
+        }
+        Ok(())
+    })
+    .map_err(crate::error::output(&o.out))?;
+    Ok(summary)
+}
