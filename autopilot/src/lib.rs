@@ -62,7 +62,9 @@ pub struct MavlinkConfig {
     #[serde(default = "default_prefix")]
     pub prefix: String,
     /// The autopilot's link: `udpout:HOST:PORT` (BlueOS's MAVLink router, e.g.
-    /// `udpout:192.168.2.1:14550`), `udpin:ADDRESS:PORT`, or `serial:DEVICE:BAUD`.
+    /// `udpout:192.168.2.1:14550`), `udpin:ADDRESS:PORT`, `tcpout:HOST:PORT` (ArduPilot SITL's
+    /// `tcp:127.0.0.1:5760`, a router's TCP server), `tcpin:ADDRESS:PORT`, or
+    /// `serial:DEVICE:BAUD`.
     pub address: String,
     /// The vehicle's system id (the autopilot's `SYSID_THISMAV`, default 1).
     #[serde(default = "default_system_id")]
@@ -143,11 +145,13 @@ impl MavlinkConfig {
             expected,
         };
         let scheme = self.address.split(':').next().unwrap_or_default();
-        if !matches!(scheme, "udpout" | "udpin" | "serial") || self.address.split(':').count() < 3 {
+        if !matches!(scheme, "udpout" | "udpin" | "tcpout" | "tcpin" | "serial")
+            || self.address.split(':').count() < 3
+        {
             return Err(range(
                 "address",
                 format!("{:?}", self.address),
-                "udpout:HOST:PORT, udpin:ADDRESS:PORT or serial:DEVICE:BAUD",
+                "udpout:HOST:PORT, udpin:ADDRESS:PORT, tcpout:HOST:PORT, tcpin:ADDRESS:PORT or serial:DEVICE:BAUD",
             ));
         }
         if !(self.rate_hz.is_finite() && (1.0..=50.0).contains(&self.rate_hz)) {
@@ -198,7 +202,10 @@ pub struct Counters {
 pub struct Link {
     cfg: MavlinkConfig,
     origin: Option<Geodetic>,
-    last_sent_ns: Option<u64>,
+    /// When the solution message is next due: a grid of the configured period, so that the rate
+    /// kept is the configured one whatever the solutions' spacing (a send at the first solution
+    /// after each due time, not a period after the last send).
+    next_due_ns: Option<u64>,
     /// The mode and fused sensors last reported in a STATUSTEXT.
     last_status: Option<(u32, u32)>,
     last_mode: Option<u32>,
@@ -220,7 +227,7 @@ impl Link {
                 longitude_rad: o.longitude_deg.to_radians(),
                 height_m: o.altitude_m,
             }),
-            last_sent_ns: None,
+            next_due_ns: None,
             last_status: None,
             last_mode: None,
             reset_counter: 0,
@@ -283,9 +290,11 @@ impl Link {
             }
         }
         let period_ns = (1e9 / self.cfg.rate_hz) as u64;
+        let t = s.host_time_ns;
+        // Due at or after the grid's time; a clock that went back (a restart) starts it again.
         let due = self
-            .last_sent_ns
-            .is_none_or(|t| s.host_time_ns >= t.saturating_add(period_ns) || s.host_time_ns < t);
+            .next_due_ns
+            .is_none_or(|d| t >= d || t.saturating_add(period_ns) < d);
         let send = match self.cfg.message {
             SolutionMessage::Odometry => usable && self.origin.is_some(),
             SolutionMessage::GpsInput => true,
@@ -294,7 +303,17 @@ impl Link {
             self.counters.withheld += 1;
             return out;
         }
-        self.last_sent_ns = Some(s.host_time_ns);
+        // The next due time on the grid: a send late by less than a period is made up on the
+        // next solution; after a longer gap (or a clock that went back) the grid starts again
+        // from this solution rather than catching up in a burst.
+        let next = self.next_due_ns.map_or(t, |d| d).saturating_add(period_ns);
+        self.next_due_ns = Some(
+            if next.saturating_add(period_ns) < t || next > t.saturating_add(period_ns) {
+                t.saturating_add(period_ns)
+            } else {
+                next
+            },
+        );
         self.counters.solutions += 1;
         out.push(match self.cfg.message {
             SolutionMessage::Odometry => {
@@ -621,6 +640,45 @@ mod tests {
                 .any(|m| matches!(m, mav::MavMessage::SET_GPS_GLOBAL_ORIGIN(o)
                 // The first aligned position: 1.5 m north of 31 deg (1e-7 deg units).
                 if (o.latitude - 310_000_135).abs() <= 1))
+        );
+    }
+
+    /// The ODOMETRY messages `link` sends for solutions every `step_s` from 0 to `seconds`, with
+    /// the stamps jittered by up to a third of a step.
+    fn odometry_sent(link: &mut Link, step_s: f64, seconds: f64) -> usize {
+        let steps = (seconds / step_s).round() as u64;
+        (0..steps)
+            .map(|k| {
+                let jitter = ((k * 7919 % 11) as f64 / 11.0 - 0.5) * step_s / 1.5;
+                let t = 1.0 + k as f64 * step_s + jitter;
+                link.on_solution(&solution(t, NavMode::Navigating, 0.0), 0)
+                    .iter()
+                    .filter(|m| matches!(m, mav::MavMessage::ODOMETRY(_)))
+                    .count()
+            })
+            .sum()
+    }
+
+    #[test]
+    fn the_configured_rate_is_kept_whatever_the_solutions_spacing() {
+        // Solutions at 200, 50, 30 and 13 Hz for 60 s, sent at 10 Hz: 600 within one (the send
+        // waits for a solution at or after each due time, at most one step late, never skipped).
+        for step in [0.005, 0.02, 1.0 / 30.0, 1.0 / 13.0] {
+            let mut link = Link::new(&config(SolutionMessage::Odometry));
+            let n = odometry_sent(&mut link, step, 60.0);
+            assert!((599..=601).contains(&n), "{n} for solutions every {step} s");
+        }
+        // Solutions slower than the rate are each sent.
+        let mut link = Link::new(&config(SolutionMessage::Odometry));
+        assert_eq!(odometry_sent(&mut link, 0.25, 60.0), 240);
+        // A clock that goes back (a restarted daemon) starts the grid again at once.
+        let mut link = Link::new(&config(SolutionMessage::Odometry));
+        odometry_sent(&mut link, 0.02, 10.0);
+        let again = link.on_solution(&solution(0.5, NavMode::Navigating, 0.0), 0);
+        assert!(
+            again
+                .iter()
+                .any(|m| matches!(m, mav::MavMessage::ODOMETRY(_)))
         );
     }
 

@@ -41,12 +41,83 @@ fn utc_now_ns() -> i64 {
         .map_or(0, |d| d.as_nanos() as i64)
 }
 
+/// What the other end sent: counted, the autopilot's identity and status texts logged.
+#[derive(Default)]
+struct Heard {
+    messages: u64,
+    heartbeats: u64,
+    status_texts: u64,
+    unparsed: u64,
+    /// The systems whose heartbeat was seen (logged once each).
+    systems: Vec<u32>,
+}
+
+/// Reads what has arrived without waiting; an I/O error other than "nothing more now" (the
+/// peer closed a TCP link) is returned for the caller to reconnect.
+fn receive(
+    c: &mavlink::Connection<MavMessage>,
+    cfg: &MavlinkConfig,
+    heard: &mut Heard,
+) -> std::io::Result<()> {
+    // Bounded: a flood cannot keep the solutions from going out.
+    for _ in 0..256 {
+        let (header, m) = match c.try_recv() {
+            Ok(x) => x,
+            Err(mavlink::error::MessageReadError::Io(e))
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) =>
+            {
+                return Ok(());
+            }
+            Err(mavlink::error::MessageReadError::Io(e)) => return Err(e),
+            Err(mavlink::error::MessageReadError::Parse(_)) => {
+                heard.unparsed += 1;
+                continue;
+            }
+        };
+        heard.messages += 1;
+        if header.system_id == u32::from(cfg.system_id) && header.component_id == cfg.component_id {
+            continue;
+        }
+        match m {
+            MavMessage::HEARTBEAT(h) => {
+                heard.heartbeats += 1;
+                if !heard.systems.contains(&header.system_id) {
+                    heard.systems.push(header.system_id);
+                    tracing::info!(
+                        "auvnav-mavlink: system {} component {} on {}: {:?} {:?}",
+                        header.system_id,
+                        header.component_id,
+                        cfg.address,
+                        h.mavtype,
+                        h.autopilot
+                    );
+                }
+            }
+            MavMessage::STATUSTEXT(t) => {
+                heard.status_texts += 1;
+                tracing::info!(
+                    "auvnav-mavlink: system {} says ({:?}): {}",
+                    header.system_id,
+                    t.severity,
+                    t.text.to_str().unwrap_or("(not UTF-8)")
+                );
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
 fn run(cfg: &MavlinkConfig) -> Result<(), String> {
     let bus = Bus::new("mavlink", &cfg.prefix).map_err(|e| e.to_string())?;
     let mut solutions = bus
         .subscriber::<NavSolutionV1>(topic::NAV_SOLUTION, qos::NAVIGATION)
         .map_err(|e| e.to_string())?;
     let mut link = Link::new(cfg);
+    let mut heard = Heard::default();
     let mut connection: Option<mavlink::Connection<MavMessage>> = None;
     let mut sequence: u8 = 0;
     let mut send_errors = 0u64;
@@ -71,6 +142,7 @@ fn run(cfg: &MavlinkConfig) -> Result<(), String> {
             match mavlink::connect::<MavMessage>(&cfg.address) {
                 Ok(mut c) => {
                     c.set_protocol_version(mavlink::MavlinkVersion::V2);
+                    c.set_allow_recv_any_version(true);
                     tracing::info!("auvnav-mavlink: {} open", cfg.address);
                     connection = Some(c);
                     last_error.clear();
@@ -109,8 +181,25 @@ fn run(cfg: &MavlinkConfig) -> Result<(), String> {
                 sequence = sequence.wrapping_add(1);
             }
         }
+        if let Some(c) = connection.as_ref()
+            && let Err(e) = receive(c, cfg, &mut heard)
+        {
+            tracing::warn!(
+                "auvnav-mavlink: {} closed ({e}); reconnecting in 1 s",
+                cfg.address
+            );
+            connection = None;
+            next_attempt = now + 1_000_000_000;
+        }
         std::thread::sleep(poll);
     }
+    tracing::info!(
+        "auvnav-mavlink: received {} messages ({} heartbeats of the autopilot, {} status texts, {} that did not parse)",
+        heard.messages,
+        heard.heartbeats,
+        heard.status_texts,
+        heard.unparsed
+    );
     let c = link.counters;
     tracing::info!(
         "auvnav-mavlink: stopping; {} solutions, {} heartbeats, {} origins, {} status texts sent, {} solutions withheld (before alignment or above the rate), {} send errors",
