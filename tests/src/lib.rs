@@ -123,6 +123,26 @@ pub mod processes {
         ]);
     }
 
+    /// True when `python3` imports `modules` (`"zenoh, rosbags"`). When it does not, a test
+    /// skips with a message naming what to `pip install` — outside CI; under CI (`CI` set, where
+    /// `.ci/run` installs them) it fails instead.
+    pub fn python_modules_or_skip(modules: &str, pip_install: &str) -> bool {
+        let has = Command::new("python3")
+            .args(["-c", &format!("import {modules}")])
+            .status()
+            .is_ok_and(|s| s.success());
+        if !has {
+            assert!(
+                std::env::var("CI").is_err(),
+                "python3 cannot import {modules} under CI (.ci/run installs {pip_install})"
+            );
+            eprintln!(
+                "SKIP: python3 cannot import {modules} (python3 -m pip install {pip_install})"
+            );
+        }
+        has
+    }
+
     /// A name unique to this test process and call, for service prefixes and directories.
     pub fn unique(tag: &str) -> String {
         static N: AtomicU32 = AtomicU32::new(0);

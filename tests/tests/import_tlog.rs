@@ -3,24 +3,12 @@
 //! imported (the damaged frame counted), `auvnav info` lists the channels, and `auvnav replay`
 //! navigates on the autopilot's IMU with the depth from its pressure sensor.
 
-use auvnav_tests::processes::{TempDir, auvnav_json};
+use auvnav_tests::processes::{TempDir, auvnav_json, python_modules_or_skip};
 use std::process::Command;
-
-fn pymavlink_available() -> bool {
-    Command::new("python3")
-        .args(["-c", "import pymavlink"])
-        .status()
-        .is_ok_and(|s| s.success())
-}
 
 #[test]
 fn a_pymavlink_telemetry_log_is_imported_and_replayed() {
-    if !pymavlink_available() {
-        assert!(
-            std::env::var("CI").is_err(),
-            "pymavlink is missing under CI (.ci/run installs it)"
-        );
-        eprintln!("SKIP: pymavlink is not installed (python3 -m pip install pymavlink)");
+    if !python_modules_or_skip("pymavlink", "pymavlink") {
         return;
     }
     let tmp = TempDir::new("tlog");

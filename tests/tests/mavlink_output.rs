@@ -7,19 +7,12 @@
 use auvnav_core::earth::{self, Geodetic};
 use auvnav_shm_schema::bus::Bus;
 use auvnav_shm_schema::{NavMode, NavSolutionV1, qos, topic};
-use auvnav_tests::processes::{Proc, TempDir, binary, unique};
+use auvnav_tests::processes::{Proc, TempDir, binary, python_modules_or_skip, unique};
 use nalgebra::{UnitQuaternion, Vector3};
 use std::io::BufRead;
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-fn pymavlink_available() -> bool {
-    Command::new("python3")
-        .args(["-c", "import pymavlink"])
-        .status()
-        .is_ok_and(|s| s.success())
-}
 
 fn origin() -> Geodetic {
     Geodetic {
@@ -55,12 +48,7 @@ fn solution(t: f64, mode: NavMode, health: u32) -> NavSolutionV1 {
 // Long on purpose: one scenario with real processes read top to bottom: each step depends on the
 // state the previous one left.
 fn pymavlink_receives_odometry_origin_heartbeat_and_status_from_auvnav_mavlink() {
-    if !pymavlink_available() {
-        assert!(
-            std::env::var("CI").is_err(),
-            "pymavlink is missing under CI (.ci/run installs it)"
-        );
-        eprintln!("SKIP: pymavlink is not installed (python3 -m pip install pymavlink)");
+    if !python_modules_or_skip("pymavlink", "pymavlink") {
         return;
     }
     let tmp = TempDir::new("mavlink");

@@ -8,18 +8,11 @@ use auvnav_shm_schema::bus::Bus;
 use auvnav_shm_schema::{
     DvlVelocityV1, ImuSampleV1, NavMode, NavSolutionV1, ProcessHealthV1, ProcessState, qos, topic,
 };
-use auvnav_tests::processes::{Proc, TempDir, binary, unique};
+use auvnav_tests::processes::{Proc, TempDir, binary, python_modules_or_skip, unique};
 use std::io::BufRead;
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-fn python_has(modules: &str) -> bool {
-    Command::new("python3")
-        .args(["-c", &format!("import {modules}")])
-        .status()
-        .is_ok_and(|s| s.success())
-}
 
 fn monotonic_ns() -> u64 {
     auvnav_shm_schema::clock::monotonic_ns()
@@ -29,12 +22,7 @@ fn monotonic_ns() -> u64 {
 // Long on purpose: one scenario with real processes read top to bottom: each step depends on the
 // state the previous one left.
 fn a_ros_2_client_decodes_the_bridge_topics_with_rmw_zenoh_keys_tokens_and_hashes() {
-    if !python_has("zenoh, rosbags") {
-        assert!(
-            std::env::var("CI").is_err(),
-            "eclipse-zenoh and rosbags are missing under CI (.ci/run installs them)"
-        );
-        eprintln!("SKIP: python3 -m pip install eclipse-zenoh rosbags");
+    if !python_modules_or_skip("zenoh, rosbags", "eclipse-zenoh rosbags") {
         return;
     }
     let tmp = TempDir::new("ros2");

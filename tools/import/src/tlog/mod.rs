@@ -145,31 +145,35 @@ fn readings(frames: &[Frame], o: &TlogOptions, s: &mut TlogSummary) -> Vec<Readi
                 message,
             })
         };
+        // The IMU: its clock (ns) and the accelerometer, gyro and compass triples.
+        let imu = match &f.message {
+            MavMessage::SCALED_IMU(d) if scaled_imu => Some((
+                u64::from(d.time_boot_ms) * 1_000_000,
+                [
+                    [d.xacc, d.yacc, d.zacc],
+                    [d.xgyro, d.ygyro, d.zgyro],
+                    [d.xmag, d.ymag, d.zmag],
+                ],
+            )),
+            MavMessage::RAW_IMU(d) if !scaled_imu && d.id == 0 => Some((
+                d.time_usec.saturating_mul(1000),
+                [
+                    [d.xacc, d.yacc, d.zacc],
+                    [d.xgyro, d.ygyro, d.zgyro],
+                    [d.xmag, d.ymag, d.zmag],
+                ],
+            )),
+            _ => None,
+        };
+        if let Some((t, [acc, gyro, mag])) = imu {
+            let (imu, field) = imu_and_field(acc, gyro, mag);
+            push(topic::IMU, Some(t), imu);
+            if let Some(m) = field {
+                push(topic::MAGNETOMETER, Some(t), m);
+            }
+            continue;
+        }
         match &f.message {
-            MavMessage::SCALED_IMU(d) if scaled_imu => {
-                let t = u64::from(d.time_boot_ms) * 1_000_000;
-                let (imu, mag) = imu_and_field(
-                    [d.xacc, d.yacc, d.zacc],
-                    [d.xgyro, d.ygyro, d.zgyro],
-                    [d.xmag, d.ymag, d.zmag],
-                );
-                push(topic::IMU, Some(t), imu);
-                if let Some(m) = mag {
-                    push(topic::MAGNETOMETER, Some(t), m);
-                }
-            }
-            MavMessage::RAW_IMU(d) if !scaled_imu && d.id == 0 => {
-                let t = d.time_usec.saturating_mul(1000);
-                let (imu, mag) = imu_and_field(
-                    [d.xacc, d.yacc, d.zacc],
-                    [d.xgyro, d.ygyro, d.zgyro],
-                    [d.xmag, d.ymag, d.zmag],
-                );
-                push(topic::IMU, Some(t), imu);
-                if let Some(m) = mag {
-                    push(topic::MAGNETOMETER, Some(t), m);
-                }
-            }
             MavMessage::SCALED_PRESSURE(mav::SCALED_PRESSURE_DATA {
                 time_boot_ms,
                 press_abs,
