@@ -23,9 +23,11 @@
 //! `auvnav: degraded, DVL lost`). `HEARTBEAT` once a second (an onboard controller, system
 //! status standby, active, critical or emergency by the same mode).
 //!
-//! Long on purpose: the last 162 lines are the unit tests, beside the code they test; the code is
-//! 527 lines.
+//! Long on purpose: the last 201 lines are the unit tests, beside the code they test; the code is
+//! 557 lines.
 #![forbid(unsafe_code)]
+
+pub mod source;
 
 use auvnav_core::earth::{self, Geodetic};
 use auvnav_shm_schema::{NavMode, NavSolutionV1};
@@ -86,6 +88,9 @@ pub struct MavlinkConfig {
     /// solution in mode navigating.
     #[serde(default)]
     pub origin: Option<OriginConfig>,
+    /// The autopilot's sensors onto the bus ([`source`]); none without the table.
+    #[serde(default)]
+    pub source: Option<source::SourceConfig>,
 }
 
 fn default_prefix() -> String {
@@ -167,6 +172,9 @@ impl MavlinkConfig {
         }
         if self.system_id == 0 {
             return Err(range("system_id", "0".into(), "1..=255"));
+        }
+        if let Some((key, value, expected)) = self.source.as_ref().and_then(|s| s.problem()) {
+            return Err(range(key, value, expected));
         }
         if self.component_id == 0 {
             return Err(range("component_id", "0".into(), "1..=255"));
@@ -561,6 +569,7 @@ mod tests {
             rate_hz: 10.0,
             heartbeat_period_s: 1.0,
             origin: None,
+            source: None,
         }
     }
 

@@ -3,11 +3,17 @@
 //!
 //! The solution topic is polled at four times the output rate, without a listener: the daemon's
 //! publish then costs no notification for this process, and only the latest solution matters.
+//! With `[source]` the autopilot's IMU, pressure and attitude messages are published on the bus
+//! (`auvnav_mavlink::source`), and the link is polled at four times the IMU rate.
 #![forbid(unsafe_code)]
 
+use auvnav_mavlink::source::Source;
 use auvnav_mavlink::{Link, MavlinkConfig};
-use auvnav_shm_schema::bus::Bus;
-use auvnav_shm_schema::{NavSolutionV1, qos, topic};
+use auvnav_protocols::autopilot::AutopilotReading;
+use auvnav_shm_schema::bus::{Bus, BusPublisher};
+use auvnav_shm_schema::{
+    AttitudeV1, DepthV1, ImuSampleV1, MagnetometerV1, NavSolutionV1, qos, topic,
+};
 use mavlink::MavConnection;
 use mavlink::dialects::ardupilotmega::MavMessage;
 use std::time::Duration;
@@ -50,6 +56,48 @@ struct Heard {
     unparsed: u64,
     /// The systems whose heartbeat was seen (logged once each).
     systems: Vec<u32>,
+    /// Messages to send back: the stream requests of the source.
+    replies: Vec<MavMessage>,
+}
+
+/// The autopilot as a source: the conversion and its publishers.
+struct SourceIo {
+    source: Source,
+    imu: BusPublisher<ImuSampleV1>,
+    magnetometer: BusPublisher<MagnetometerV1>,
+    depth: BusPublisher<DepthV1>,
+    attitude: BusPublisher<AttitudeV1>,
+    publish_errors: u64,
+}
+
+impl SourceIo {
+    fn new(bus: &Bus, cfg: &auvnav_mavlink::source::SourceConfig) -> Result<SourceIo, String> {
+        let e = |e: auvnav_shm_schema::bus::BusError| e.to_string();
+        Ok(SourceIo {
+            source: Source::new(cfg),
+            imu: bus.publisher(topic::IMU, qos::SENSOR).map_err(e)?,
+            magnetometer: bus.publisher(topic::MAGNETOMETER, qos::SENSOR).map_err(e)?,
+            depth: bus.publisher(topic::DEPTH, qos::SENSOR).map_err(e)?,
+            attitude: bus.publisher(topic::ATTITUDE, qos::SENSOR).map_err(e)?,
+            publish_errors: 0,
+        })
+    }
+
+    fn on_message(&mut self, m: &MavMessage) {
+        let now = auvnav_shm_schema::clock::monotonic_ns();
+        for r in self.source.on_message(m, now) {
+            let sent = match r {
+                AutopilotReading::Imu(x) => self.imu.publish(x),
+                AutopilotReading::Magnetometer(x) => self.magnetometer.publish(x),
+                AutopilotReading::Depth(x) => self.depth.publish(x),
+                AutopilotReading::Attitude(x) => self.attitude.publish(x),
+                AutopilotReading::Gnss(_) => Ok(0),
+            };
+            if sent.is_err() {
+                self.publish_errors += 1;
+            }
+        }
+    }
 }
 
 /// Reads what has arrived without waiting; an I/O error other than "nothing more now" (the
@@ -58,6 +106,7 @@ fn receive(
     c: &mavlink::Connection<MavMessage>,
     cfg: &MavlinkConfig,
     heard: &mut Heard,
+    mut source: Option<&mut SourceIo>,
 ) -> std::io::Result<()> {
     // Bounded: a flood cannot keep the solutions from going out.
     for _ in 0..256 {
@@ -81,11 +130,23 @@ fn receive(
         if header.system_id == u32::from(cfg.system_id) && header.component_id == cfg.component_id {
             continue;
         }
+        if let Some(s) = source.as_deref_mut() {
+            s.on_message(&m);
+        }
         match m {
             MavMessage::HEARTBEAT(h) => {
                 heard.heartbeats += 1;
                 if !heard.systems.contains(&header.system_id) {
                     heard.systems.push(header.system_id);
+                    let autopilot = h.autopilot
+                        != mavlink::dialects::ardupilotmega::MavAutopilot::MAV_AUTOPILOT_INVALID;
+                    if let (true, Some(s), Ok(system)) =
+                        (autopilot, source.as_deref(), u8::try_from(header.system_id))
+                    {
+                        heard
+                            .replies
+                            .extend(s.source.stream_requests(system, header.component_id));
+                    }
                     tracing::info!(
                         "auvnav-mavlink: system {} component {} on {}: {:?} {:?}",
                         header.system_id,
@@ -118,12 +179,20 @@ fn run(cfg: &MavlinkConfig) -> Result<(), String> {
         .map_err(|e| e.to_string())?;
     let mut link = Link::new(cfg);
     let mut heard = Heard::default();
+    let mut source = match &cfg.source {
+        Some(s) => Some(SourceIo::new(&bus, s)?),
+        None => None,
+    };
     let mut connection: Option<mavlink::Connection<MavMessage>> = None;
     let mut sequence: u8 = 0;
     let mut send_errors = 0u64;
     let mut last_error = String::new();
     let mut next_attempt = 0u64;
-    let poll = Duration::from_secs_f64(0.25 / cfg.rate_hz);
+    let fastest_hz = cfg
+        .source
+        .as_ref()
+        .map_or(cfg.rate_hz, |s| cfg.rate_hz.max(s.imu_hz));
+    let poll = Duration::from_secs_f64(0.25 / fastest_hz);
     tracing::info!(
         "auvnav-mavlink: {} at {} Hz to {} as system {} component {}",
         match cfg.message {
@@ -165,6 +234,7 @@ fn run(cfg: &MavlinkConfig) -> Result<(), String> {
             latest = Some(s);
         }
         let mut out = link.on_tick(now);
+        out.append(&mut heard.replies);
         if let Some(s) = latest {
             out.extend(link.on_solution(&s, utc_now_ns()));
         }
@@ -182,7 +252,7 @@ fn run(cfg: &MavlinkConfig) -> Result<(), String> {
             }
         }
         if let Some(c) = connection.as_ref()
-            && let Err(e) = receive(c, cfg, &mut heard)
+            && let Err(e) = receive(c, cfg, &mut heard, source.as_mut())
         {
             tracing::warn!(
                 "auvnav-mavlink: {} closed ({e}); reconnecting in 1 s",
@@ -200,6 +270,20 @@ fn run(cfg: &MavlinkConfig) -> Result<(), String> {
         heard.status_texts,
         heard.unparsed
     );
+    if let Some(s) = &source {
+        let c = s.source.counters;
+        tracing::info!(
+            "auvnav-mavlink: from the autopilot, published {} IMU samples, {} magnetometer, {} depth and {} attitude readings; {} implausible and {} out-of-order readings left out, {} publish errors, {} boot(s) of the autopilot",
+            c.imu,
+            c.magnetometer,
+            c.depth,
+            c.attitude,
+            c.implausible,
+            c.out_of_order,
+            s.publish_errors,
+            s.source.autopilot_boots()
+        );
+    }
     let c = link.counters;
     tracing::info!(
         "auvnav-mavlink: stopping; {} solutions, {} heartbeats, {} origins, {} status texts sent, {} solutions withheld (before alignment or above the rate), {} send errors",

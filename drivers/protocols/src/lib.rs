@@ -10,6 +10,7 @@
 //! drivers start from.
 #![forbid(unsafe_code)]
 
+pub mod autopilot;
 pub mod device;
 pub mod framing;
 pub mod gnss;

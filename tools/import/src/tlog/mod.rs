@@ -13,17 +13,16 @@
 
 #[allow(unused_imports)]
 use super::*;
+use auvnav_protocols::autopilot::{AutopilotConversion, AutopilotReading, Converted, ImuMessage};
 use auvnav_shm_schema::MagnetometerV1;
 use frames::{Frame, frames};
 use mavlink::Message;
-use mavlink::dialects::ardupilotmega::{self as mav, MavMessage};
+use mavlink::dialects::ardupilotmega::MavMessage;
 
 mod frames;
 #[cfg(test)]
 mod tests;
 
-/// Standard gravity, the unit ArduPilot's milli-g are of (m/s²).
-const G0: f64 = 9.80665;
 /// The autopilot's clock going back by more than this starts a new boot of the autopilot (s).
 const CLOCK_RESET_S: f64 = 1.0;
 /// A receive delay longer by more than this than the previous one also starts a new boot (a
@@ -32,8 +31,6 @@ const DELAY_JUMP_S: f64 = 10.0;
 /// A record whose receive time is this far from both neighbours, which agree, has a damaged
 /// time stamp (s).
 const STAMP_JUMP_S: f64 = 3600.0;
-/// The range error of GNSS taken when a fix gives only its HDOP (m per unit of dilution).
-const UERE_M: f64 = 2.5;
 
 /// Command-line arguments of `auvnav import tlog`.
 #[derive(Debug, Clone)]
@@ -118,8 +115,7 @@ struct Reading {
     /// The host time given by [`place`].
     host_ns: u64,
     device_ns: Option<u64>,
-    topic: &'static str,
-    message: LogMessage,
+    message: AutopilotReading,
 }
 
 /// The readings of the frames, by the options; counts into `s`.
@@ -129,195 +125,39 @@ fn readings(frames: &[Frame], o: &TlogOptions, s: &mut TlogSummary) -> Vec<Readi
         .iter()
         .any(|f| matches!(f.message, MavMessage::SCALED_IMU(_)));
     s.imu_source = if scaled_imu { "SCALED_IMU" } else { "RAW_IMU" }.into();
-    let mut surface_hpa = o.surface_pressure_hpa;
+    let mut conversion = AutopilotConversion {
+        imu: if scaled_imu {
+            ImuMessage::ScaledImu
+        } else {
+            ImuMessage::RawImu
+        },
+        pressure_instance: o.pressure_instance,
+        water_density_kg_m3: o.water_density,
+        surface_pressure_hpa: o.surface_pressure_hpa,
+    };
     let mut out = Vec::new();
     for f in frames {
         *s.by_message
             .entry(f.message.message_name().to_string())
             .or_default() += 1;
         let received_ns = f.received_us.saturating_sub(t0_us).saturating_mul(1000);
-        let mut push = |topic, device_ns: Option<u64>, message| {
-            out.push(Reading {
+        match conversion.convert(&f.message) {
+            Converted::Readings {
+                device_ns,
+                readings,
+            } => out.extend(readings.into_iter().map(|message| Reading {
                 received_ns,
                 host_ns: 0,
                 device_ns,
-                topic,
                 message,
-            })
-        };
-        // The IMU: its clock (ns) and the accelerometer, gyro and compass triples.
-        let imu = match &f.message {
-            MavMessage::SCALED_IMU(d) if scaled_imu => Some((
-                u64::from(d.time_boot_ms) * 1_000_000,
-                [
-                    [d.xacc, d.yacc, d.zacc],
-                    [d.xgyro, d.ygyro, d.zgyro],
-                    [d.xmag, d.ymag, d.zmag],
-                ],
-            )),
-            MavMessage::RAW_IMU(d) if !scaled_imu && d.id == 0 => Some((
-                d.time_usec.saturating_mul(1000),
-                [
-                    [d.xacc, d.yacc, d.zacc],
-                    [d.xgyro, d.ygyro, d.zgyro],
-                    [d.xmag, d.ymag, d.zmag],
-                ],
-            )),
-            _ => None,
-        };
-        if let Some((t, [acc, gyro, mag])) = imu {
-            let (imu, field) = imu_and_field(acc, gyro, mag);
-            push(topic::IMU, Some(t), imu);
-            if let Some(m) = field {
-                push(topic::MAGNETOMETER, Some(t), m);
-            }
-            continue;
-        }
-        match &f.message {
-            MavMessage::SCALED_PRESSURE(mav::SCALED_PRESSURE_DATA {
-                time_boot_ms,
-                press_abs,
-                temperature,
-                ..
-            })
-            | MavMessage::SCALED_PRESSURE2(mav::SCALED_PRESSURE2_DATA {
-                time_boot_ms,
-                press_abs,
-                temperature,
-                ..
-            })
-            | MavMessage::SCALED_PRESSURE3(mav::SCALED_PRESSURE3_DATA {
-                time_boot_ms,
-                press_abs,
-                temperature,
-                ..
-            }) if pressure_instance(&f.message) == o.pressure_instance => {
-                let p = f64::from(*press_abs);
-                if !(p.is_finite() && p > 0.0) {
-                    s.implausible += 1;
-                    continue;
-                }
-                let surface = *surface_hpa.get_or_insert(p);
-                let gauge_pa = (p - surface) * 100.0;
-                let depth_m = gauge_pa / (o.water_density * G0);
-                if !(-10.0..=11_000.0).contains(&depth_m) {
-                    s.implausible += 1;
-                    continue;
-                }
-                push(
-                    topic::DEPTH,
-                    Some(u64::from(*time_boot_ms) * 1_000_000),
-                    LogMessage::Depth(DepthV1 {
-                        depth_m,
-                        pressure_pa: gauge_pa,
-                        water_density_kg_m3: o.water_density,
-                        temperature_c: f32::from(*temperature) / 100.0,
-                        validity: DepthV1::VALID_DEPTH
-                            | DepthV1::VALID_PRESSURE
-                            | DepthV1::VALID_TEMPERATURE
-                            | DepthV1::VALID_DEVICE_TIME,
-                        ..Default::default()
-                    }),
-                );
-            }
-            MavMessage::ATTITUDE(d) => {
-                let e = [d.roll, d.pitch, d.yaw].map(f64::from);
-                if !e.iter().all(|x| x.is_finite() && x.abs() <= 2.0 * PI) {
-                    s.implausible += 1;
-                    continue;
-                }
-                push(
-                    topic::ATTITUDE,
-                    Some(u64::from(d.time_boot_ms) * 1_000_000),
-                    LogMessage::Attitude(AttitudeV1 {
-                        euler_rad: e,
-                        validity: AttitudeV1::VALID_ATTITUDE
-                            | AttitudeV1::VALID_DEVICE_TIME
-                            | AttitudeV1::HEADING_TRUE,
-                        ..Default::default()
-                    }),
-                );
-            }
-            MavMessage::GPS_RAW_INT(d) => match gnss_fix(d) {
-                Some(g) => push(topic::GNSS, None, LogMessage::Gnss(g)),
-                None => s.gnss_without_fix += 1,
-            },
-            _ => {}
+            })),
+            Converted::Implausible => s.implausible += 1,
+            Converted::NoFix => s.gnss_without_fix += 1,
+            Converted::NotTaken => {}
         }
     }
-    s.surface_pressure_hpa = surface_hpa.unwrap_or(f64::NAN);
+    s.surface_pressure_hpa = conversion.surface_pressure_hpa.unwrap_or(f64::NAN);
     out
-}
-
-const PI: f64 = std::f64::consts::PI;
-
-/// 1, 2 or 3 for the SCALED_PRESSURE messages, 0 for any other.
-fn pressure_instance(m: &MavMessage) -> u8 {
-    match m {
-        MavMessage::SCALED_PRESSURE(_) => 1,
-        MavMessage::SCALED_PRESSURE2(_) => 2,
-        MavMessage::SCALED_PRESSURE3(_) => 3,
-        _ => 0,
-    }
-}
-
-/// An IMU sample from ArduPilot's milli-g and milli-rad/s (body FRD), and the magnetometer
-/// reading (milli-gauss) when the message has one.
-fn imu_and_field(acc: [i16; 3], gyro: [i16; 3], mag: [i16; 3]) -> (LogMessage, Option<LogMessage>) {
-    let imu = LogMessage::Imu(ImuSampleV1 {
-        angular: gyro.map(|x| f64::from(x) / 1e3),
-        specific: acc.map(|x| f64::from(x) / 1e3 * G0),
-        status: ImuSampleV1::STATUS_GYRO_VALID
-            | ImuSampleV1::STATUS_ACCEL_VALID
-            | ImuSampleV1::STATUS_DEVICE_TIME_VALID,
-        ..Default::default()
-    });
-    let field = (mag != [0; 3]).then(|| {
-        LogMessage::Magnetometer(MagnetometerV1 {
-            // 1 mG = 1e-7 T.
-            field_t: mag.map(|x| f64::from(x) / 1e7),
-            validity: MagnetometerV1::VALID_FIELD | MagnetometerV1::VALID_DEVICE_TIME,
-            ..Default::default()
-        })
-    });
-    (imu, field)
-}
-
-/// A GNSS fix from GPS_RAW_INT when it is a 3D fix; its accuracy from `h_acc`/`v_acc`, else
-/// from the dilutions with [`UERE_M`].
-fn gnss_fix(d: &mav::GPS_RAW_INT_DATA) -> Option<GnssFixV1> {
-    if (d.fix_type as u32) < mav::GpsFixType::GPS_FIX_TYPE_3D_FIX as u32 {
-        return None;
-    }
-    let accuracy = |acc_mm: u32, dop: u16| {
-        if acc_mm > 0 {
-            f64::from(acc_mm) * 1e-3
-        } else if dop != u16::MAX {
-            f64::from(dop) * 1e-2 * UERE_M
-        } else {
-            100.0
-        }
-    };
-    let (height_m, height_valid) = if d.alt_ellipsoid != 0 {
-        (f64::from(d.alt_ellipsoid) * 1e-3, GnssFixV1::VALID_HEIGHT)
-    } else {
-        (f64::from(d.alt) * 1e-3, 0)
-    };
-    let differential = if (d.fix_type as u32) >= mav::GpsFixType::GPS_FIX_TYPE_DGPS as u32 {
-        GnssFixV1::DIFFERENTIAL
-    } else {
-        0
-    };
-    Some(GnssFixV1 {
-        latitude_rad: (f64::from(d.lat) * 1e-7).to_radians(),
-        longitude_rad: (f64::from(d.lon) * 1e-7).to_radians(),
-        height_m,
-        horizontal_std_m: accuracy(d.h_acc, d.eph).min(1000.0),
-        vertical_std_m: accuracy(d.v_acc, d.epv).min(1000.0),
-        satellites: u32::from(d.satellites_visible),
-        validity: GnssFixV1::VALID_POSITION | height_valid | differential,
-        ..Default::default()
-    })
 }
 
 /// Host times: a reading with the autopilot's clock at that clock plus the smallest receive delay
@@ -359,37 +199,27 @@ fn place(mut readings: Vec<Reading>, s: &mut TlogSummary) -> Vec<(&'static str, 
     let mut last: BTreeMap<&'static str, (u64, u64)> = BTreeMap::new();
     let mut out = Vec::with_capacity(readings.len());
     for mut r in readings {
-        let (last_ns, sequence) = last.get(r.topic).copied().unwrap_or((0, 0));
+        let topic = r.message.topic();
+        let (last_ns, sequence) = last.get(topic).copied().unwrap_or((0, 0));
         if sequence > 0 && r.host_ns <= last_ns {
             s.out_of_order += 1;
             continue;
         }
-        last.insert(r.topic, (r.host_ns, sequence + 1));
-        set_times(&mut r.message, r.host_ns, r.device_ns, sequence);
-        out.push((r.topic, r.message));
+        last.insert(topic, (r.host_ns, sequence + 1));
+        r.message.set_times(r.host_ns, r.device_ns, sequence);
+        out.push((topic, log_message(r.message)));
     }
     out
 }
 
-/// Writes the host time, the device time (when known) and the channel's sequence number into a
-/// reading.
-fn set_times(m: &mut LogMessage, host_ns: u64, device_ns: Option<u64>, sequence: u64) {
-    let dev = device_ns.unwrap_or(0);
-    match m {
-        LogMessage::Imu(x) => {
-            (x.host_time_ns, x.device_time_ns, x.sequence) = (host_ns, dev, sequence)
-        }
-        LogMessage::Magnetometer(x) => {
-            (x.host_time_ns, x.device_time_ns, x.sequence) = (host_ns, dev, sequence)
-        }
-        LogMessage::Depth(x) => {
-            (x.host_time_ns, x.device_time_ns, x.sequence) = (host_ns, dev, sequence)
-        }
-        LogMessage::Attitude(x) => {
-            (x.host_time_ns, x.device_time_ns, x.sequence) = (host_ns, dev, sequence)
-        }
-        LogMessage::Gnss(x) => (x.host_time_ns, x.sequence) = (host_ns, sequence),
-        _ => {}
+/// The log's message of a reading.
+fn log_message(r: AutopilotReading) -> LogMessage {
+    match r {
+        AutopilotReading::Imu(x) => LogMessage::Imu(x),
+        AutopilotReading::Magnetometer(x) => LogMessage::Magnetometer(x),
+        AutopilotReading::Depth(x) => LogMessage::Depth(x),
+        AutopilotReading::Attitude(x) => LogMessage::Attitude(x),
+        AutopilotReading::Gnss(x) => LogMessage::Gnss(x),
     }
 }
 

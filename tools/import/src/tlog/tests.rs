@@ -2,6 +2,8 @@
 //! Python package's own writer is the integration test's).
 
 use super::*;
+use auvnav_protocols::autopilot::G0;
+use mavlink::dialects::ardupilotmega as mav;
 use mavlink::{MavHeader, MavlinkVersion};
 
 /// A tlog being written: records of a receive time and a frame.
