@@ -13,6 +13,7 @@ use auvnav_tests::processes::{Proc, TempDir, binary, still_daemon_config, unique
 use mavlink::dialects::ardupilotmega as mav;
 use mavlink::{MavHeader, MavlinkReader, MavlinkVersion};
 use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
@@ -48,22 +49,30 @@ fn heartbeats_from(stream: &TcpStream, source: (u32, u8), seconds: f64) -> usize
     n
 }
 
+/// A loopback server playing the autopilot, and an `auvnav-mavlink` configuration in `dir` on
+/// `prefix` that connects to it as a TCP client, with `more` appended.
+fn server_and_config(dir: &Path, prefix: &str, more: &str) -> (TcpListener, u16, PathBuf) {
+    let server = TcpListener::bind("127.0.0.1:0").expect("a free port");
+    let port = server.local_addr().expect("address").port();
+    let cfg = dir.join("mavlink.toml");
+    std::fs::write(
+        &cfg,
+        format!("prefix = \"{prefix}\"\naddress = \"tcpout:127.0.0.1:{port}\"\n{more}"),
+    )
+    .expect("config");
+    (server, port, cfg)
+}
+
 #[test]
 fn a_tcp_link_carries_heartbeats_both_ways_and_is_opened_again_when_closed() {
     let tmp = TempDir::new("mavtcp");
     let exe = binary("auvnav-mavlink");
-    let server = TcpListener::bind("127.0.0.1:0").expect("a free port");
-    let port = server.local_addr().expect("address").port();
-    let cfg = tmp.path().join("mavlink.toml");
-    std::fs::write(
-        &cfg,
-        format!(
-            "prefix = \"{}\"\naddress = \"tcpout:127.0.0.1:{port}\"\nsystem_id = 1\n\
-             component_id = 197\nmessage = \"odometry\"\nrate_hz = 10.0\nheartbeat_period_s = 0.2\n",
-            unique("mavtcp")
-        ),
-    )
-    .expect("config");
+    let (server, port, cfg) = server_and_config(
+        tmp.path(),
+        &unique("mavtcp"),
+        "system_id = 1\ncomponent_id = 197\nmessage = \"odometry\"\nrate_hz = 10.0\n\
+         heartbeat_period_s = 0.2\n",
+    );
     let log = tmp.path().join("mavlink.err");
     let err = std::fs::File::create(&log).expect("stderr");
     let mut sender = Proc::spawn(
@@ -74,11 +83,6 @@ fn a_tcp_link_carries_heartbeats_both_ways_and_is_opened_again_when_closed() {
 
     let stream = accept(&server, Duration::from_secs(10)).expect("auvnav-mavlink connects");
     // The autopilot's side: a heartbeat and a status text, as ArduSub sends them.
-    let autopilot = MavHeader {
-        system_id: 1,
-        component_id: 1,
-        sequence: 0,
-    };
     let heartbeat = mav::MavMessage::HEARTBEAT(mav::HEARTBEAT_DATA {
         mavtype: mav::MavType::MAV_TYPE_SUBMARINE,
         autopilot: mav::MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
@@ -91,7 +95,7 @@ fn a_tcp_link_carries_heartbeats_both_ways_and_is_opened_again_when_closed() {
     });
     let mut w = stream.try_clone().expect("clone");
     for m in [&heartbeat, &text] {
-        mavlink::write_versioned_msg(&mut w, MavlinkVersion::V2, autopilot, m).expect("send");
+        send_as_autopilot(&mut w, m);
     }
     // 2 s at a heartbeat every 0.2 s.
     let n = heartbeats_from(&stream, (1, 197), 2.0);
@@ -142,17 +146,11 @@ fn send_as_autopilot(w: &mut TcpStream, m: &mav::MavMessage) {
 fn the_autopilots_imu_and_pressure_reach_the_daemon_which_navigates_on_them() {
     let tmp = TempDir::new("mavsource");
     let prefix = unique("mavsource");
-    let server = TcpListener::bind("127.0.0.1:0").expect("a free port");
-    let port = server.local_addr().expect("address").port();
-    let cfg = tmp.path().join("mavlink.toml");
-    std::fs::write(
-        &cfg,
-        format!(
-            "prefix = \"{prefix}\"\naddress = \"tcpout:127.0.0.1:{port}\"\n\
-             [source]\nimu_hz = 50.0\ndepth_hz = 10.0\nsurface_pressure_hpa = 1013.25\n"
-        ),
-    )
-    .expect("config");
+    let (server, _, cfg) = server_and_config(
+        tmp.path(),
+        &prefix,
+        "[source]\nimu_hz = 50.0\ndepth_hz = 10.0\nsurface_pressure_hpa = 1013.25\n",
+    );
     let bus = Bus::new(&unique("mavsourcetest"), &prefix).expect("bus");
     let mut imu = bus
         .subscriber::<ImuSampleV1>(topic::IMU, qos::SENSOR)
