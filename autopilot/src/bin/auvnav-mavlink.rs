@@ -47,6 +47,9 @@ fn utc_now_ns() -> i64 {
         .map_or(0, |d| d.as_nanos() as i64)
 }
 
+/// The autopilot's component id (`MAV_COMP_ID_AUTOPILOT1`).
+const AUTOPILOT_COMPONENT: u8 = 1;
+
 /// What the other end sent: counted, the autopilot's identity and status texts logged.
 #[derive(Default)]
 struct Heard {
@@ -130,7 +133,12 @@ fn receive(
         if header.system_id == u32::from(cfg.system_id) && header.component_id == cfg.component_id {
             continue;
         }
-        if let Some(s) = source.as_deref_mut() {
+        // The source takes the autopilot's own messages only: the vehicle's system, component
+        // MAV_COMP_ID_AUTOPILOT1 (a router also forwards other components' and stations').
+        if let Some(s) = source.as_deref_mut()
+            && header.system_id == u32::from(cfg.system_id)
+            && header.component_id == AUTOPILOT_COMPONENT
+        {
             s.on_message(&m);
         }
         match m {
@@ -138,8 +146,10 @@ fn receive(
                 heard.heartbeats += 1;
                 if !heard.systems.contains(&header.system_id) {
                     heard.systems.push(header.system_id);
-                    let autopilot = h.autopilot
-                        != mavlink::dialects::ardupilotmega::MavAutopilot::MAV_AUTOPILOT_INVALID;
+                    let autopilot = header.system_id == u32::from(cfg.system_id)
+                        && header.component_id == AUTOPILOT_COMPONENT
+                        && h.autopilot
+                            != mavlink::dialects::ardupilotmega::MavAutopilot::MAV_AUTOPILOT_INVALID;
                     if let (true, Some(s), Ok(system)) =
                         (autopilot, source.as_deref(), u8::try_from(header.system_id))
                     {

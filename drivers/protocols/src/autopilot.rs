@@ -292,7 +292,8 @@ impl AutopilotClock {
     /// The host time of a reading stamped `device_ns` by the autopilot that arrived at
     /// `arrival_ns` (host clock).
     pub fn host_ns(&mut self, device_ns: u64, arrival_ns: u64) -> u64 {
-        if self.offset_ns.is_none() || device_ns + 1_000_000_000 < self.last_device_ns {
+        if self.offset_ns.is_none() || device_ns.saturating_add(1_000_000_000) < self.last_device_ns
+        {
             self.offset_ns = None;
             self.boots += 1;
         }
