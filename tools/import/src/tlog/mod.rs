@@ -87,8 +87,9 @@ pub struct TlogSummary {
     pub bytes_skipped: usize,
     /// Messages left out for a value that is not finite or out of range.
     pub implausible: usize,
-    /// Records whose receive time goes back (kept in the autopilot's order when they carry its
-    /// clock, else left out).
+    /// Left out for their time: readings at or before the previous one of their channel (a
+    /// repeated frame, a clock going back within a boot), and records whose receive time stands
+    /// an hour away from both neighbours (a damaged time stamp).
     pub out_of_order: usize,
     /// Boots of the autopilot seen (its clock started again).
     pub autopilot_boots: usize,
