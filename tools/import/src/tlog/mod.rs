@@ -162,7 +162,8 @@ fn readings(frames: &[Frame], o: &TlogOptions, s: &mut TlogSummary) -> Vec<Readi
 }
 
 /// Host times: a reading with the autopilot's clock at that clock plus the smallest receive delay
-/// of its boot; the others at their receive time. Sorted by host time.
+/// of its boot; the others at their receive time. Sorted by host time, with the sequence numbers,
+/// the IMU intervals, and the counts and duration in `s`.
 fn place(mut readings: Vec<Reading>, s: &mut TlogSummary) -> Vec<(&'static str, LogMessage)> {
     // Boots: the autopilot's clock going back by CLOCK_RESET_S, or the receive delay jumping by
     // DELAY_JUMP_S, starts a new one.
@@ -197,17 +198,44 @@ fn place(mut readings: Vec<Reading>, s: &mut TlogSummary) -> Vec<(&'static str, 
     }
     readings.sort_by_key(|r| r.host_ns);
     // Two readings of one channel at the same time (a repeated frame) or going back: left out.
+    // The rest are counted by kind, and each IMU sample's interval is the time since the
+    // previous one (the first takes the second's).
     let mut last: BTreeMap<&'static str, (u64, u64)> = BTreeMap::new();
+    let (mut first_imu, mut last_imu_ns, mut first_ns) = (None, None, None);
     let mut out = Vec::with_capacity(readings.len());
     for mut r in readings {
-        let topic = r.message.topic();
+        let (t, topic) = (r.host_ns, r.message.topic());
         let (last_ns, sequence) = last.get(topic).copied().unwrap_or((0, 0));
-        if sequence > 0 && r.host_ns <= last_ns {
+        if sequence > 0 && t <= last_ns {
             s.out_of_order += 1;
             continue;
         }
-        last.insert(topic, (r.host_ns, sequence + 1));
-        r.message.set_times(r.host_ns, r.device_ns, sequence);
+        last.insert(topic, (t, sequence + 1));
+        r.message.set_times(t, r.device_ns, sequence);
+        match &mut r.message {
+            AutopilotReading::Imu(x) => {
+                s.imu += 1;
+                match last_imu_ns {
+                    Some(p) => {
+                        x.interval_s = (t - p) as f64 * 1e-9;
+                        if let Some((_, LogMessage::Imu(y))) =
+                            first_imu.take().and_then(|f: usize| out.get_mut(f))
+                        {
+                            y.interval_s = x.interval_s;
+                        }
+                    }
+                    None => first_imu = Some(out.len()),
+                }
+                last_imu_ns = Some(t);
+            }
+            AutopilotReading::Magnetometer(_) => s.magnetometer += 1,
+            AutopilotReading::Depth(_) => s.depth += 1,
+            AutopilotReading::Attitude(_) => s.attitude += 1,
+            AutopilotReading::Gnss(_) => s.gnss += 1,
+        }
+        // Sorted by host time: the duration runs from the first kept reading to this one.
+        let first = *first_ns.get_or_insert(t);
+        s.duration_s = (t - first) as f64 * 1e-9;
         out.push((topic, log_message(r.message)));
     }
     out
@@ -221,42 +249,6 @@ fn log_message(r: AutopilotReading) -> LogMessage {
         AutopilotReading::Depth(x) => LogMessage::Depth(x),
         AutopilotReading::Attitude(x) => LogMessage::Attitude(x),
         AutopilotReading::Gnss(x) => LogMessage::Gnss(x),
-    }
-}
-
-/// The host time of a reading the import writes.
-fn host_ns(m: &LogMessage) -> Option<u64> {
-    match m {
-        LogMessage::Imu(x) => Some(x.host_time_ns),
-        LogMessage::Magnetometer(x) => Some(x.host_time_ns),
-        LogMessage::Depth(x) => Some(x.host_time_ns),
-        LogMessage::Attitude(x) => Some(x.host_time_ns),
-        LogMessage::Gnss(x) => Some(x.host_time_ns),
-        _ => None,
-    }
-}
-
-/// The IMU samples' intervals: each the time since the previous sample (the first takes the
-/// second's).
-fn set_imu_intervals(messages: &mut [(&'static str, LogMessage)]) {
-    let mut previous: Option<u64> = None;
-    let mut first: Option<usize> = None;
-    for i in 0..messages.len() {
-        let LogMessage::Imu(x) = &mut messages[i].1 else {
-            continue;
-        };
-        match previous {
-            Some(p) => x.interval_s = (x.host_time_ns - p) as f64 * 1e-9,
-            None => first = Some(i),
-        }
-        previous = Some(x.host_time_ns);
-        if let Some(f) = first.filter(|&f| f != i) {
-            let dt = x.interval_s;
-            if let LogMessage::Imu(y) = &mut messages[f].1 {
-                y.interval_s = dt;
-            }
-            first = None;
-        }
     }
 }
 
@@ -285,21 +277,7 @@ pub fn tlog_messages(o: &TlogOptions) -> Result<(Vec<(&'static str, LogMessage)>
     }
     s.start_unix_s = frames[0].received_us as f64 * 1e-6;
     let readings = readings(&frames, o, &mut s);
-    let mut messages = place(readings, &mut s);
-    set_imu_intervals(&mut messages);
-    for (_, m) in &messages {
-        match m {
-            LogMessage::Imu(_) => s.imu += 1,
-            LogMessage::Magnetometer(_) => s.magnetometer += 1,
-            LogMessage::Depth(_) => s.depth += 1,
-            LogMessage::Attitude(_) => s.attitude += 1,
-            LogMessage::Gnss(_) => s.gnss += 1,
-            _ => {}
-        }
-    }
-    let times = messages.iter().filter_map(|(_, m)| host_ns(m));
-    let (lo, hi) = times.fold((u64::MAX, 0), |(lo, hi), t| (lo.min(t), hi.max(t)));
-    s.duration_s = hi.saturating_sub(lo) as f64 * 1e-9;
+    let messages = place(readings, &mut s);
     if messages.is_empty() {
         malformed!(
             "{}: {} MAVLink frames, none with a sensor reading auvnav takes (SCALED_IMU or RAW_IMU, SCALED_PRESSURE{}, ATTITUDE, GPS_RAW_INT)",

@@ -138,6 +138,8 @@ fn telemetry_becomes_sensor_channels_on_the_autopilots_clock() {
     assert_eq!((s.gnss, s.gnss_without_fix), (98, 1));
     assert_eq!(s.by_message.get("SCALED_IMU"), Some(&999));
     assert!((s.surface_pressure_hpa - 1013.25).abs() < 1e-4);
+    // From the first IMU sample to the last, 20 ms apart across the reboot.
+    assert!((s.duration_s - 19.98).abs() < 1e-3, "{}", s.duration_s);
     assert!((s.start_unix_s - (UNIX0_US + 3000) as f64 * 1e-6).abs() < 1e-6);
 
     let imu: Vec<ImuSampleV1> = messages
