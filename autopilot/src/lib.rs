@@ -23,8 +23,8 @@
 //! `auvnav: degraded, DVL lost`). `HEARTBEAT` once a second (an onboard controller, system
 //! status standby, active, critical or emergency by the same mode).
 //!
-//! Long on purpose: the last 201 lines are the unit tests, beside the code they test; the code is
-//! 557 lines.
+//! Long on purpose: the last 280 lines are the unit tests, beside the code they test; the code is
+//! 645 lines.
 #![forbid(unsafe_code)]
 
 pub mod source;
@@ -218,6 +218,15 @@ pub struct Link {
     last_status: Option<(u32, u32)>,
     last_mode: Option<u32>,
     reset_counter: u8,
+    /// The origin the autopilot reported (its `GPS_GLOBAL_ORIGIN`), once it has.
+    autopilot_origin: Option<Geodetic>,
+    /// Until when positions wait for the autopilot's origin (the wall clock of
+    /// [`Link::on_tick`]): set when the link opens and when the autopilot is first heard,
+    /// [`ORIGIN_WAIT_NS`] later.
+    origin_wait_until_ns: Option<u64>,
+    /// The wall clock at the last [`Link::on_tick`].
+    now_ns: u64,
+    autopilot_heard: bool,
     next_heartbeat_ns: u64,
     pub counters: Counters,
 }
@@ -239,6 +248,10 @@ impl Link {
             last_status: None,
             last_mode: None,
             reset_counter: 0,
+            autopilot_origin: None,
+            origin_wait_until_ns: None,
+            now_ns: 0,
+            autopilot_heard: false,
             next_heartbeat_ns: 0,
             counters: Counters::default(),
         }
@@ -303,8 +316,13 @@ impl Link {
         let due = self
             .next_due_ns
             .is_none_or(|d| t >= d || t.saturating_add(period_ns) < d);
+        // A restarted link must not send positions from an origin of its own to an autopilot
+        // that has one already: they wait (briefly) for the autopilot to say which.
+        let waiting = self
+            .origin_wait_until_ns
+            .is_some_and(|until| self.now_ns < until);
         let send = match self.cfg.message {
-            SolutionMessage::Odometry => usable && self.origin.is_some(),
+            SolutionMessage::Odometry => usable && self.origin.is_some() && !waiting,
             SolutionMessage::GpsInput => true,
         };
         if !(due && send) {
@@ -337,8 +355,69 @@ impl Link {
         out
     }
 
+    /// The link to the autopilot opened at wall time `now_ns`: positions wait up to
+    /// [`ORIGIN_WAIT_NS`] for the autopilot to be heard and say its origin.
+    pub fn on_link_open(&mut self, now_ns: u64) {
+        if self.autopilot_origin.is_none() {
+            self.origin_wait_until_ns = Some(now_ns.saturating_add(ORIGIN_WAIT_NS));
+        }
+    }
+
+    /// The autopilot's heartbeat came at wall time `now_ns`: the first one gives it
+    /// [`ORIGIN_WAIT_NS`] to answer the origin request.
+    pub fn on_autopilot_heard(&mut self, now_ns: u64) {
+        if !self.autopilot_heard && self.autopilot_origin.is_none() {
+            self.origin_wait_until_ns = Some(now_ns.saturating_add(ORIGIN_WAIT_NS));
+        }
+        self.autopilot_heard = true;
+    }
+
+    /// The autopilot's own origin, from its `GPS_GLOBAL_ORIGIN`. EKF3 keeps the first origin it
+    /// is given — from a GPS, its `ORIGIN_*` parameters, or an earlier run of this link — and
+    /// reads ODOMETRY's positions from it; so once the autopilot has one, positions go out from
+    /// it, whatever this link took from its first solution or was configured with. A change
+    /// after solutions went out steps the reset counter, so that the autopilot takes the jump.
+    /// Returns a line to log when the origin in use changed.
+    pub fn on_autopilot_origin(&mut self, o: Geodetic) -> Option<String> {
+        if self.cfg.message != SolutionMessage::Odometry || self.autopilot_origin == Some(o) {
+            return None;
+        }
+        self.autopilot_origin = Some(o);
+        self.origin_wait_until_ns = None;
+        let ours = self.origin.replace(o);
+        let place = format!(
+            "{:.7}° {:.7}° {:.2} m",
+            o.latitude_rad.to_degrees(),
+            o.longitude_rad.to_degrees(),
+            o.height_m
+        );
+        let Some(ours) = ours else {
+            return Some(format!("taking the autopilot's origin {place}"));
+        };
+        let (d, dh) = origin_distance(&ours, &o);
+        // SET_GPS_GLOBAL_ORIGIN's 1e-7° and millimetres: the autopilot's copy of ours.
+        if d < 0.05 && dh.abs() < 0.05 {
+            self.origin = Some(ours);
+            return None;
+        }
+        if self.counters.solutions > 0 {
+            self.reset_counter = self.reset_counter.wrapping_add(1);
+        }
+        let whose = if self.cfg.origin.is_some() {
+            "the configured [origin]"
+        } else {
+            "the first solution's"
+        };
+        Some(format!(
+            "the autopilot's origin {place} is {d:.2} m ({dh:+.2} m in height) from {whose}: \
+             positions now go out from the autopilot's (reset counter {})",
+            self.reset_counter
+        ))
+    }
+
     /// The messages due at wall time `now_ns`: the heartbeat and, with it, the origin.
     pub fn on_tick(&mut self, now_ns: u64) -> Vec<mav::MavMessage> {
+        self.now_ns = now_ns;
         if now_ns < self.next_heartbeat_ns {
             return Vec::new();
         }
@@ -354,8 +433,9 @@ impl Link {
         out
     }
 
-    /// `SET_GPS_GLOBAL_ORIGIN`: what ArduSub 4.1–4.5 (BlueOS's releases) take. MAVLink marks it
-    /// superseded by `MAV_CMD_DO_SET_GLOBAL_ORIGIN` (2025), which those releases do not handle.
+    /// `SET_GPS_GLOBAL_ORIGIN`: what ArduSub takes, from 4.1 to 4.7-dev (checked in SITL). MAVLink
+    /// marks it superseded by `MAV_CMD_DO_SET_GLOBAL_ORIGIN` (2025), which 4.7-dev handles too but
+    /// the 4.1–4.5 releases on BlueOS vehicles do not.
     #[allow(deprecated)]
     fn origin_message(&self) -> Option<mav::MavMessage> {
         let o = self.origin?;
@@ -435,6 +515,21 @@ fn heartbeat(mode: Option<NavMode>) -> mav::MavMessage {
         },
         mavlink_version: 3,
     })
+}
+
+/// How long positions wait for the autopilot's origin after the link opens or the autopilot is
+/// first heard (ns): ArduPilot answers the request within a loop; a heartbeat period and a
+/// second to spare.
+pub const ORIGIN_WAIT_NS: u64 = 2_000_000_000;
+
+/// Horizontal distance and height difference of `b` from `a` (m), for origins metres apart.
+fn origin_distance(a: &Geodetic, b: &Geodetic) -> (f64, f64) {
+    let north =
+        (b.latitude_rad - a.latitude_rad) * (earth::meridian_radius(a.latitude_rad) + a.height_m);
+    let east = (b.longitude_rad - a.longitude_rad)
+        * (earth::prime_vertical_radius(a.latitude_rad) + a.height_m)
+        * a.latitude_rad.cos();
+    (north.hypot(east), b.height_m - a.height_m)
 }
 
 /// `ODOMETRY` quality by mode (−1 failed, 1 worst, 100 best).
@@ -754,5 +849,89 @@ mod tests {
         let _ = link.on_solution(&solution(0.0, NavMode::Navigating, 0.0), 0);
         assert_eq!(link.on_tick(1_000_000_000).len(), 2);
         assert_eq!(link.counters.heartbeats, 2);
+    }
+
+    #[test]
+    fn positions_go_out_from_the_autopilots_origin_and_a_change_steps_the_reset_counter() {
+        let mut link = Link::new(&config(SolutionMessage::Odometry));
+        let odometry = |out: Vec<mav::MavMessage>| {
+            out.into_iter().find_map(|m| match m {
+                mav::MavMessage::ODOMETRY(o) => Some(o),
+                _ => None,
+            })
+        };
+        // The first solution, 12 m north and 5 m east of the test origin, becomes this link's
+        // origin.
+        let first = odometry(link.on_solution(&solution(0.0, NavMode::Navigating, 12.0), 0))
+            .expect("an ODOMETRY");
+        assert!(first.x.abs() < 1e-3 && first.reset_counter == 0);
+        // The autopilot repeats it (to its 1e-7° and millimetres): nothing changes.
+        let ours = link.origin().expect("an origin");
+        let echo = Geodetic {
+            latitude_rad: ((ours.latitude_rad.to_degrees() * 1e7).round() * 1e-7).to_radians(),
+            longitude_rad: ((ours.longitude_rad.to_degrees() * 1e7).round() * 1e-7).to_radians(),
+            height_m: (ours.height_m * 1e3).round() * 1e-3,
+        };
+        assert_eq!(link.on_autopilot_origin(echo), None);
+        assert_eq!(link.origin(), Some(ours));
+        // The autopilot's EKF has another origin (set before this link started): positions go
+        // out from it, and the jump comes with a new reset counter.
+        let theirs = Geodetic {
+            latitude_rad: 31f64.to_radians(),
+            longitude_rad: 120f64.to_radians(),
+            height_m: -20.0,
+        };
+        let said = link.on_autopilot_origin(theirs).expect("a change to log");
+        assert!(said.contains("13.00 m"), "{said}");
+        let next = odometry(link.on_solution(&solution(0.2, NavMode::Navigating, 12.0), 0))
+            .expect("an ODOMETRY");
+        assert!((next.x - 12.0).abs() < 1e-3 && (next.y - 5.0).abs() < 1e-3);
+        assert_eq!(next.reset_counter, 1);
+        // A link that has sent nothing yet takes the autopilot's origin without a reset.
+        let mut fresh = Link::new(&config(SolutionMessage::Odometry));
+        assert!(fresh.on_autopilot_origin(theirs).is_some());
+        let o = odometry(fresh.on_solution(&solution(0.0, NavMode::Navigating, 3.0), 0))
+            .expect("an ODOMETRY");
+        assert!((o.x - 3.0).abs() < 1e-3 && o.reset_counter == 0);
+        // GPS_INPUT carries positions of its own: the origin does not matter.
+        let mut gps = Link::new(&config(SolutionMessage::GpsInput));
+        assert_eq!(gps.on_autopilot_origin(theirs), None);
+    }
+
+    #[test]
+    fn an_opened_link_waits_for_the_autopilots_origin_before_sending_positions() {
+        let mut link = Link::new(&config(SolutionMessage::Odometry));
+        let odometry = |link: &mut Link, t: f64| {
+            link.on_solution(&solution(t, NavMode::Navigating, 12.0), 0)
+                .into_iter()
+                .find_map(|m| match m {
+                    mav::MavMessage::ODOMETRY(o) => Some(o),
+                    _ => None,
+                })
+        };
+        link.on_link_open(0);
+        link.on_autopilot_heard(500_000_000);
+        // Heard at 0.5 s: no positions until 2.5 s by the link's clock unless the origin comes
+        // (the solutions' own stamps are another clock).
+        link.on_tick(1_000_000_000);
+        assert!(odometry(&mut link, 1.0).is_none());
+        link.on_tick(2_000_000_000);
+        assert!(odometry(&mut link, 2.0).is_none());
+        let theirs = Geodetic {
+            latitude_rad: 31f64.to_radians(),
+            longitude_rad: 120f64.to_radians(),
+            height_m: -20.0,
+        };
+        assert!(link.on_autopilot_origin(theirs).is_some());
+        let o = odometry(&mut link, 2.1).expect("positions once the origin is known");
+        // From the autopilot's origin, with no reset: nothing was sent from another.
+        assert!((o.x - 12.0).abs() < 1e-3 && o.reset_counter == 0);
+        // An autopilot without an origin: positions go out from this link's after the wait.
+        let mut lone = Link::new(&config(SolutionMessage::Odometry));
+        lone.on_link_open(0);
+        lone.on_tick(1_900_000_000);
+        assert!(odometry(&mut lone, 1.9).is_none());
+        lone.on_tick(2_000_000_000);
+        assert!(odometry(&mut lone, 2.0).is_some_and(|o| o.x.abs() < 1e-3));
     }
 }

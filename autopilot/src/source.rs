@@ -41,6 +41,10 @@ pub struct SourceConfig {
     /// `ATTITUDE` (the autopilot's own estimate) → `attitude`; default false.
     #[serde(default)]
     pub attitude: bool,
+    /// `VISION_POSITION_DELTA` (a DVL extension's, e.g. Water Linked's on BlueOS: any component
+    /// of the vehicle's system) → `dvl`, stamped at its arrival; default false.
+    #[serde(default)]
+    pub dvl: bool,
 }
 
 fn yes() -> bool {
@@ -88,6 +92,7 @@ pub struct SourceCounters {
     pub magnetometer: u64,
     pub depth: u64,
     pub attitude: u64,
+    pub dvl: u64,
     /// Sensor messages with a value that is not finite or out of range.
     pub implausible: u64,
     /// Readings stamped at or before the previous one of their channel (left out).
@@ -100,7 +105,7 @@ pub struct Source {
     conversion: AutopilotConversion,
     clock: AutopilotClock,
     /// Per channel: the last host time and the next sequence number.
-    last: [(u64, u64); 4],
+    last: [(u64, u64); 5],
     last_imu_device_ns: Option<u64>,
     pub counters: SourceCounters,
 }
@@ -116,7 +121,7 @@ impl Source {
                 surface_pressure_hpa: cfg.surface_pressure_hpa,
             },
             clock: AutopilotClock::default(),
-            last: [(0, 0); 4],
+            last: [(0, 0); 5],
             last_imu_device_ns: None,
             counters: SourceCounters::default(),
         }
@@ -131,16 +136,21 @@ impl Source {
     pub fn on_message(&mut self, m: &mav::MavMessage, arrival_ns: u64) -> Vec<AutopilotReading> {
         let (device_ns, readings) = match self.conversion.convert(m) {
             Converted::Readings {
-                device_ns: Some(d),
+                device_ns,
                 readings,
-            } => (d, readings),
+            } => (device_ns, readings),
             Converted::Implausible => {
                 self.counters.implausible += 1;
                 return Vec::new();
             }
             _ => return Vec::new(),
         };
-        let host_ns = self.clock.host_ns(device_ns, arrival_ns);
+        // The autopilot's clock where the message has it; the sender's own (a DVL extension's)
+        // is not the autopilot's: such readings are placed at their arrival.
+        let host_ns = match device_ns {
+            Some(d) => self.clock.host_ns(d, arrival_ns),
+            None => arrival_ns,
+        };
         let mut out = Vec::new();
         for mut r in readings {
             let (channel, wanted) = match r {
@@ -148,6 +158,7 @@ impl Source {
                 AutopilotReading::Magnetometer(_) => (1, self.cfg.imu),
                 AutopilotReading::Depth(_) => (2, self.cfg.depth),
                 AutopilotReading::Attitude(_) => (3, self.cfg.attitude),
+                AutopilotReading::Dvl(_) => (4, self.cfg.dvl),
                 AutopilotReading::Gnss(_) => continue,
             };
             if !wanted {
@@ -159,9 +170,10 @@ impl Source {
                 continue;
             }
             self.last[channel] = (host_ns, sequence + 1);
-            r.set_times(host_ns, Some(device_ns), sequence);
+            r.set_times(host_ns, device_ns, sequence);
             match &mut r {
                 AutopilotReading::Imu(x) => {
+                    let device_ns = device_ns.unwrap_or(host_ns);
                     // The interval since the previous sample by the autopilot's clock.
                     let nominal = 1.0 / self.cfg.imu_hz;
                     x.interval_s = self
@@ -175,6 +187,7 @@ impl Source {
                 AutopilotReading::Magnetometer(_) => self.counters.magnetometer += 1,
                 AutopilotReading::Depth(_) => self.counters.depth += 1,
                 AutopilotReading::Attitude(_) => self.counters.attitude += 1,
+                AutopilotReading::Dvl(_) => self.counters.dvl += 1,
                 AutopilotReading::Gnss(_) => {}
             }
             out.push(r);
@@ -293,5 +306,43 @@ mod tests {
         bad.imu_hz = 0.0;
         assert_eq!(bad.problem().map(|p| p.0), Some("source.imu_hz"));
         assert_eq!(cfg().problem(), None);
+    }
+
+    #[test]
+    fn a_dvl_extensions_velocity_is_taken_when_asked_at_its_arrival() {
+        let delta = |confidence: f32, forward_m: f32| {
+            mav::MavMessage::VISION_POSITION_DELTA(mav::VISION_POSITION_DELTA_DATA {
+                time_usec: 1_733_436_754_000_000,
+                time_delta_usec: 200_000,
+                position_delta: [forward_m, -0.02, 0.0],
+                confidence,
+                ..Default::default()
+            })
+        };
+        // Off by default.
+        let mut off = Source::new(&cfg());
+        assert!(off.on_message(&delta(90.0, 0.1), 5_000_000_000).is_empty());
+        let mut c = cfg();
+        c.dvl = true;
+        let mut s = Source::new(&c);
+        let got = s.on_message(&delta(90.0, 0.1), 5_000_000_000);
+        let [AutopilotReading::Dvl(v)] = got.as_slice() else {
+            panic!("one DVL reading: {got:?}");
+        };
+        // 0.1 m ahead and 2 cm to port in 0.2 s; the confidence back to the figure of merit.
+        assert!(
+            (v.velocity_dvl_m_s[0] - 0.5).abs() < 1e-6
+                && (v.velocity_dvl_m_s[1] + 0.1).abs() < 1e-6
+        );
+        assert!((v.figure_of_merit_m_s - 0.04).abs() < 1e-6);
+        assert_eq!(
+            (v.host_time_ns, v.validity_time_ns),
+            (5_000_000_000, 5_000_000_000)
+        );
+        assert_eq!(s.counters.dvl, 1);
+        // A confidence out of range, or 30 m in 0.2 s: counted, not published.
+        assert!(s.on_message(&delta(150.0, 0.1), 5_200_000_000).is_empty());
+        assert!(s.on_message(&delta(90.0, 30.0), 5_400_000_000).is_empty());
+        assert_eq!((s.counters.dvl, s.counters.implausible), (1, 2));
     }
 }

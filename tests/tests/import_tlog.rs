@@ -1,7 +1,8 @@
 //! `auvnav import tlog` on a telemetry log written by pymavlink (PyPI), an encoder and a tlog
 //! writer independent of the one the import's unit tests use: every reading the script wrote is
-//! imported (the damaged frame counted), `auvnav info` lists the channels, and `auvnav replay`
-//! navigates on the autopilot's IMU with the depth from its pressure sensor.
+//! imported (the damaged frame counted), `auvnav info` lists the channels, `auvnav replay`
+//! navigates on the autopilot's IMU with the depth from its pressure sensor, and `auvnav calibrate
+//! dvl` takes the DVL extension's velocities.
 
 use auvnav_tests::processes::{TempDir, auvnav_json, python_modules_or_skip};
 use std::process::Command;
@@ -31,6 +32,7 @@ fn a_pymavlink_telemetry_log_is_imported_and_replayed() {
     assert_eq!(s["depth"], wrote["pressure"]);
     assert_eq!(s["attitude"], wrote["attitude"]);
     assert_eq!(s["gnss"], wrote["gps"]);
+    assert_eq!(s["dvl"], wrote["dvl"]);
     assert_eq!(s["bad_checksum"], wrote["damaged"]);
     assert_eq!(
         (s["bytes_skipped"].as_u64(), s["unknown"].as_u64()),
@@ -41,16 +43,17 @@ fn a_pymavlink_telemetry_log_is_imported_and_replayed() {
 
     let info = auvnav_json(&["info", &log_s, "--json"]);
     let text = info.to_string();
-    for topic in ["imu", "magnetometer", "depth", "attitude", "gnss"] {
+    for topic in ["imu", "magnetometer", "depth", "attitude", "gnss", "dvl"] {
         assert!(text.contains(&format!("\"{topic}\"")), "{topic} in {text}");
     }
 
-    // The vehicle rests 5 m deep: the depth from the pressure holds the height at -5 m.
+    // The vehicle runs 5 m deep at 0.5 m/s on 30°: the depth from the pressure holds the height
+    // at -5 m.
     let config = tmp.path().join("initial.toml");
     std::fs::write(
         &config,
         "[initial]\nlatitude_deg = 47.5\nlongitude_deg = -122.3\nheight_m = -5.0\n\
-         velocity_ned_m_s = [0.0, 0.0, 0.0]\neuler_deg = [0.0, 0.0, 30.0]\n",
+         velocity_ned_m_s = [0.4330127, 0.25, 0.0]\neuler_deg = [0.0, 0.0, 30.0]\n",
     )
     .expect("configuration");
     let out = tmp.path().join("solution.csv");
@@ -78,4 +81,20 @@ fn a_pymavlink_telemetry_log_is_imported_and_replayed() {
         .map(|v| v.parse().unwrap_or(f64::NAN))
         .collect();
     assert!((last[h] + 5.0).abs() < 0.1, "height {}", last[h]);
+
+    // The DVL extension's velocities against the GPS fixes of the 30 m track: a calibration.
+    let c = auvnav_json(&[
+        "calibrate",
+        "dvl",
+        &log_s,
+        "--config",
+        &config.display().to_string(),
+        "--threshold",
+        "20",
+        "--json",
+    ]);
+    let voyage = &c["voyages"][0];
+    assert_eq!(voyage["fixes"], wrote["gps"], "{c}");
+    assert!(voyage["dvl_fused_after"].as_u64() > Some(200), "{c}");
+    assert!(voyage["distance_m"].as_f64() > Some(25.0), "{c}");
 }

@@ -12,7 +12,7 @@ use auvnav_mavlink::{Link, MavlinkConfig};
 use auvnav_protocols::autopilot::AutopilotReading;
 use auvnav_shm_schema::bus::{Bus, BusPublisher};
 use auvnav_shm_schema::{
-    AttitudeV1, DepthV1, ImuSampleV1, MagnetometerV1, NavSolutionV1, qos, topic,
+    AttitudeV1, DepthV1, DvlVelocityV1, ImuSampleV1, MagnetometerV1, NavSolutionV1, qos, topic,
 };
 use mavlink::MavConnection;
 use mavlink::dialects::ardupilotmega::MavMessage;
@@ -59,8 +59,27 @@ struct Heard {
     unparsed: u64,
     /// The systems whose heartbeat was seen (logged once each).
     systems: Vec<u32>,
-    /// Messages to send back: the stream requests of the source.
+    /// Messages to send back: the stream requests of the source, the origin request.
     replies: Vec<MavMessage>,
+    /// The autopilot's origin (`GPS_GLOBAL_ORIGIN`), when one came since the last look.
+    origin: Option<auvnav_core::earth::Geodetic>,
+    /// Whether the autopilot has reported its origin; until it has, every fifth of its
+    /// heartbeats asks for it.
+    origin_known: bool,
+    autopilot_heartbeats: u64,
+    /// The autopilot's heartbeat came since the link last looked.
+    autopilot_heard: bool,
+}
+
+/// `MAV_CMD_REQUEST_MESSAGE` for the autopilot's `GPS_GLOBAL_ORIGIN` (answered once it has one).
+fn origin_request(system: u8) -> MavMessage {
+    MavMessage::COMMAND_LONG(mavlink::dialects::ardupilotmega::COMMAND_LONG_DATA {
+        target_system: system,
+        target_component: AUTOPILOT_COMPONENT,
+        command: mavlink::dialects::ardupilotmega::MavCmd::MAV_CMD_REQUEST_MESSAGE,
+        param1: 49.0, // GPS_GLOBAL_ORIGIN
+        ..Default::default()
+    })
 }
 
 /// The autopilot as a source: the conversion and its publishers.
@@ -70,6 +89,7 @@ struct SourceIo {
     magnetometer: BusPublisher<MagnetometerV1>,
     depth: BusPublisher<DepthV1>,
     attitude: BusPublisher<AttitudeV1>,
+    dvl: BusPublisher<DvlVelocityV1>,
     publish_errors: u64,
 }
 
@@ -82,6 +102,7 @@ impl SourceIo {
             magnetometer: bus.publisher(topic::MAGNETOMETER, qos::SENSOR).map_err(e)?,
             depth: bus.publisher(topic::DEPTH, qos::SENSOR).map_err(e)?,
             attitude: bus.publisher(topic::ATTITUDE, qos::SENSOR).map_err(e)?,
+            dvl: bus.publisher(topic::DVL, qos::SENSOR).map_err(e)?,
             publish_errors: 0,
         })
     }
@@ -94,6 +115,7 @@ impl SourceIo {
                 AutopilotReading::Magnetometer(x) => self.magnetometer.publish(x),
                 AutopilotReading::Depth(x) => self.depth.publish(x),
                 AutopilotReading::Attitude(x) => self.attitude.publish(x),
+                AutopilotReading::Dvl(x) => self.dvl.publish(x),
                 AutopilotReading::Gnss(_) => Ok(0),
             };
             if sent.is_err() {
@@ -135,15 +157,39 @@ fn receive(
         }
         // The source takes the autopilot's own messages only: the vehicle's system, component
         // MAV_COMP_ID_AUTOPILOT1 (a router also forwards other components' and stations').
+        // A DVL extension's VISION_POSITION_DELTA comes from its own component.
+        let dvl = matches!(m, MavMessage::VISION_POSITION_DELTA(_));
         if let Some(s) = source.as_deref_mut()
             && header.system_id == u32::from(cfg.system_id)
-            && header.component_id == AUTOPILOT_COMPONENT
+            && (header.component_id == AUTOPILOT_COMPONENT || dvl)
         {
             s.on_message(&m);
         }
+        let from_autopilot = header.system_id == u32::from(cfg.system_id)
+            && header.component_id == AUTOPILOT_COMPONENT;
         match m {
+            MavMessage::GPS_GLOBAL_ORIGIN(o) if from_autopilot => {
+                heard.origin_known = true;
+                heard.origin = Some(auvnav_core::earth::Geodetic {
+                    latitude_rad: (f64::from(o.latitude) * 1e-7).to_radians(),
+                    longitude_rad: (f64::from(o.longitude) * 1e-7).to_radians(),
+                    height_m: f64::from(o.altitude) * 1e-3,
+                });
+            }
             MavMessage::HEARTBEAT(h) => {
                 heard.heartbeats += 1;
+                if from_autopilot {
+                    heard.autopilot_heard = true;
+                }
+                if from_autopilot && cfg.message == auvnav_mavlink::SolutionMessage::Odometry {
+                    if !heard.origin_known
+                        && heard.autopilot_heartbeats.is_multiple_of(5)
+                        && let Ok(system) = u8::try_from(header.system_id)
+                    {
+                        heard.replies.push(origin_request(system));
+                    }
+                    heard.autopilot_heartbeats += 1;
+                }
                 if !heard.systems.contains(&header.system_id) {
                     heard.systems.push(header.system_id);
                     let autopilot = header.system_id == u32::from(cfg.system_id)
@@ -223,6 +269,7 @@ fn run(cfg: &MavlinkConfig) -> Result<(), String> {
                     c.set_protocol_version(mavlink::MavlinkVersion::V2);
                     c.set_allow_recv_any_version(true);
                     tracing::info!("auvnav-mavlink: {} open", cfg.address);
+                    link.on_link_open(now);
                     connection = Some(c);
                     last_error.clear();
                 }
@@ -242,6 +289,14 @@ fn run(cfg: &MavlinkConfig) -> Result<(), String> {
         let mut latest = None;
         while let Ok(Some(s)) = solutions.receive() {
             latest = Some(s);
+        }
+        if std::mem::take(&mut heard.autopilot_heard) {
+            link.on_autopilot_heard(now);
+        }
+        if let Some(o) = heard.origin.take()
+            && let Some(change) = link.on_autopilot_origin(o)
+        {
+            tracing::warn!("auvnav-mavlink: {change}");
         }
         let mut out = link.on_tick(now);
         out.append(&mut heard.replies);
@@ -283,11 +338,12 @@ fn run(cfg: &MavlinkConfig) -> Result<(), String> {
     if let Some(s) = &source {
         let c = s.source.counters;
         tracing::info!(
-            "auvnav-mavlink: from the autopilot, published {} IMU samples, {} magnetometer, {} depth and {} attitude readings; {} implausible and {} out-of-order readings left out, {} publish errors, {} boot(s) of the autopilot",
+            "auvnav-mavlink: from the autopilot, published {} IMU samples, {} magnetometer, {} depth, {} attitude and {} DVL readings; {} implausible and {} out-of-order readings left out, {} publish errors, {} boot(s) of the autopilot",
             c.imu,
             c.magnetometer,
             c.depth,
             c.attitude,
+            c.dvl,
             c.implausible,
             c.out_of_order,
             s.publish_errors,

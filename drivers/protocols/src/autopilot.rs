@@ -1,11 +1,15 @@
 //! An autopilot's sensor messages over MAVLink (ArduPilot, ArduSub) as the schema's sensor
 //! messages: `SCALED_IMU` (or the first IMU's `RAW_IMU`, which ArduPilot sends in the same units)
 //! as an IMU sample and a magnetometer reading, a `SCALED_PRESSURE` instance as depth, `ATTITUDE`
-//! (the autopilot's own estimate) as an attitude and `GPS_RAW_INT` 3D fixes as GNSS fixes. Used
+//! (the autopilot's own estimate) as an attitude, `GPS_RAW_INT` 3D fixes as GNSS fixes and
+//! `VISION_POSITION_DELTA` — what the Water Linked DVL extension of BlueOS sends: the DVL's
+//! velocity times the ping interval, in the vehicle's frame — as a DVL velocity. Used
 //! on telemetry logs (`auvnav import tlog`) and on the live link (`auvnav-mavlink`'s source).
 //! Host times are the caller's: a reading carries the autopilot's clock where the message has it.
 
-use auvnav_shm_schema::{AttitudeV1, DepthV1, GnssFixV1, ImuSampleV1, MagnetometerV1, topic};
+use auvnav_shm_schema::{
+    AttitudeV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, topic,
+};
 use mavlink::dialects::ardupilotmega::{self as mav, MavMessage};
 
 /// Standard gravity, the unit ArduPilot's milli-g are of (m/s²).
@@ -21,7 +25,12 @@ pub enum AutopilotReading {
     Depth(DepthV1),
     Attitude(AttitudeV1),
     Gnss(GnssFixV1),
+    Dvl(DvlVelocityV1),
 }
+
+/// The figure of merit a `VISION_POSITION_DELTA` confidence of 0 % stands for (m/s): the Water
+/// Linked extension sends 100 × (1 − min(fom, 0.4) / 0.4).
+pub const DVL_FOM_AT_ZERO_CONFIDENCE: f64 = 0.4;
 
 impl AutopilotReading {
     /// The topic the reading goes to.
@@ -32,6 +41,7 @@ impl AutopilotReading {
             AutopilotReading::Depth(_) => topic::DEPTH,
             AutopilotReading::Attitude(_) => topic::ATTITUDE,
             AutopilotReading::Gnss(_) => topic::GNSS,
+            AutopilotReading::Dvl(_) => topic::DVL,
         }
     }
 
@@ -53,6 +63,9 @@ impl AutopilotReading {
                 (x.host_time_ns, x.device_time_ns, x.sequence) = (host_ns, dev, sequence)
             }
             AutopilotReading::Gnss(x) => (x.host_time_ns, x.sequence) = (host_ns, sequence),
+            AutopilotReading::Dvl(x) => {
+                (x.host_time_ns, x.validity_time_ns, x.sequence) = (host_ns, host_ns, sequence)
+            }
         }
     }
 }
@@ -201,6 +214,11 @@ impl AutopilotConversion {
                     }),
                 )
             }
+            // The sender's clock (the extension's), not the autopilot's: placed at reception.
+            MavMessage::VISION_POSITION_DELTA(d) => match dvl_velocity(d) {
+                Some(v) => one(None, AutopilotReading::Dvl(v)),
+                None => Converted::Implausible,
+            },
             MavMessage::GPS_RAW_INT(d) => match gnss_fix(d) {
                 Some(g) => one(None, AutopilotReading::Gnss(g)),
                 None => Converted::NoFix,
@@ -238,6 +256,29 @@ fn imu_and_field(
         device_ns,
         readings,
     }
+}
+
+/// The DVL velocity of a `VISION_POSITION_DELTA`: the position change over its interval, in the
+/// vehicle's frame; the confidence back to the DVL's figure of merit. None for an interval that
+/// is not 1 ms to 10 s, a value that is not finite, or a speed above 20 m/s.
+fn dvl_velocity(d: &mav::VISION_POSITION_DELTA_DATA) -> Option<DvlVelocityV1> {
+    let dt = d.time_delta_usec as f64 * 1e-6;
+    let v = d.position_delta.map(|x| f64::from(x) / dt);
+    let confidence = f64::from(d.confidence);
+    if !(1e-3..=10.0).contains(&dt)
+        || !v.iter().all(|x| x.is_finite())
+        || v.iter().map(|x| x * x).sum::<f64>() > 400.0
+        || !(0.0..=100.0).contains(&confidence)
+    {
+        return None;
+    }
+    Some(DvlVelocityV1 {
+        velocity_dvl_m_s: v,
+        figure_of_merit_m_s: DVL_FOM_AT_ZERO_CONFIDENCE * (1.0 - confidence / 100.0),
+        validity: DvlVelocityV1::VALID_VELOCITY | DvlVelocityV1::VALID_FOM,
+        beams_used: 4,
+        ..Default::default()
+    })
 }
 
 /// A GNSS fix from GPS_RAW_INT when it is a 3D fix; its accuracy from `h_acc`/`v_acc`, else

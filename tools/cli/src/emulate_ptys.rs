@@ -13,7 +13,7 @@
 //! in the summary, so a test can check the driver against what was played.
 //!
 //! Long on purpose: the last 43 lines are the unit tests, beside the code they test; the code is
-//! 664 lines, one loop over the log's devices (the line timing is `emulate_line`).
+//! 674 lines, one loop over the log's devices (the line timing is `emulate_line`).
 
 use crate::emulate_line::{Lines, SendRecord};
 use anyhow::{Context, bail};
@@ -227,25 +227,7 @@ struct Device {
 
 impl Device {
     fn plug(&mut self) -> anyhow::Result<String> {
-        let (master, slave) =
-            serialport::TTYPort::pair().context("creating a pseudo-terminal pair")?;
-        let path = slave
-            .name()
-            .context("the pseudo-terminal has no slave path")?;
-        let mut master = master;
-        use serialport::SerialPort;
-        master
-            .set_timeout(Duration::from_secs(1))
-            .context("setting the terminal's write timeout")?;
-        if let Some(link) = &self.link {
-            // Replace the link atomically: a driver never sees it missing or half-written.
-            let tmp = link.with_extension("new");
-            let _ = std::fs::remove_file(&tmp);
-            std::os::unix::fs::symlink(&path, &tmp)
-                .with_context(|| format!("linking {} to {path}", tmp.display()))?;
-            std::fs::rename(&tmp, link)
-                .with_context(|| format!("moving the link to {}", link.display()))?;
-        }
+        let (master, slave, path) = open_terminal(self.link.as_deref())?;
         self.master = Some(master);
         self.slave = Some(slave);
         Ok(path)
@@ -354,6 +336,33 @@ fn protocol_for(class: DeviceClass, name: &Option<String>) -> anyhow::Result<Opt
             )
         }
     }
+}
+
+/// A new pseudo-terminal pair for an emulated device: the master (written, with a one-second
+/// write timeout), the slave (kept open so that the terminal exists while no driver has it) and
+/// the slave's path. With `link`, a symbolic link there points at the slave, replaced atomically
+/// (a driver never sees it missing or half-written), as udev's `/dev/serial/by-id` links do.
+pub fn open_terminal(
+    link: Option<&Path>,
+) -> anyhow::Result<(serialport::TTYPort, serialport::TTYPort, String)> {
+    use serialport::SerialPort;
+    let (mut master, slave) =
+        serialport::TTYPort::pair().context("creating a pseudo-terminal pair")?;
+    let path = slave
+        .name()
+        .context("the pseudo-terminal has no slave path")?;
+    master
+        .set_timeout(Duration::from_secs(1))
+        .context("setting the terminal's write timeout")?;
+    if let Some(link) = link {
+        let tmp = link.with_extension("new");
+        let _ = std::fs::remove_file(&tmp);
+        std::os::unix::fs::symlink(&path, &tmp)
+            .with_context(|| format!("linking {} to {path}", tmp.display()))?;
+        std::fs::rename(&tmp, link)
+            .with_context(|| format!("moving the link to {}", link.display()))?;
+    }
+    Ok((master, slave, path))
 }
 
 /// Runs the emulator; returns the per-device summary (also printed).

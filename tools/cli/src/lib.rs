@@ -22,6 +22,7 @@ pub mod phases;
 pub mod process;
 pub use auvnav_studies::progress;
 pub mod replay;
+pub mod sitl_sensors;
 pub mod smooth;
 pub use auvnav_studies::perturbed_start;
 pub mod usbl;

@@ -39,6 +39,9 @@ enum Command {
     Decode(auvnav_tools::decode::DecodeArgs),
     /// Play a log's sensor messages into pseudo-terminals in the devices' protocols.
     Emulate(auvnav_tools::emulate_ptys::EmulateArgs),
+    /// The IMU and DVL of ArduPilot SITL's vehicle, from its true state through the simulator's
+    /// sensor models, into pseudo-terminals: the sensor side of a closed loop with an autopilot.
+    SitlSensors(auvnav_tools::sitl_sensors::SitlSensorsArgs),
     /// Record every topic of a deployment to a log (MCAP); or recover a killed recorder's log.
     Record(auvnav_recorder::RecordArgs),
     /// S-ALIGN fine-alignment Monte Carlo: error models 1/2/3 on moored, straight, turning runs.
@@ -671,7 +674,7 @@ fn run_import_tlog(a: &auvnav_tools::import::TlogOptions) -> anyhow::Result<()> 
         auvnav_tools::json::print(&s)?;
     } else {
         eprintln!(
-            "{}: {:.0} s of telemetry from {} MAVLink frames: {} IMU samples ({}), {} magnetometer, {} depth, {} attitude, {} GNSS fixes ({} without a 3D fix left out); {} bad checksums, {} unknown messages, {} bytes skipped, {} implausible and {} out-of-order readings left out; {} boot(s) of the autopilot",
+            "{}: {:.0} s of telemetry from {} MAVLink frames: {} IMU samples ({}), {} magnetometer, {} depth, {} attitude, {} GNSS fixes ({} without a 3D fix left out), {} DVL velocities; {} bad checksums, {} unknown messages, {} bytes skipped, {} implausible and {} out-of-order readings left out; {} boot(s) of the autopilot",
             a.out.display(),
             s.duration_s,
             s.frames,
@@ -682,6 +685,7 @@ fn run_import_tlog(a: &auvnav_tools::import::TlogOptions) -> anyhow::Result<()> 
             s.attitude,
             s.gnss,
             s.gnss_without_fix,
+            s.dvl,
             s.bad_checksum,
             s.unknown,
             s.bytes_skipped,
@@ -776,6 +780,7 @@ fn main() -> std::process::ExitCode {
         Command::Decode(a) => auvnav_tools::decode::run(&a).map(|_| ()),
         Command::Discover(a) => auvnav_tools::discover::command::run(&a).map(|_| ()),
         Command::Emulate(a) => auvnav_tools::emulate_ptys::run(&a).map(|_| ()),
+        Command::SitlSensors(a) => auvnav_tools::sitl_sensors::run(&a).map(|_| ()),
         Command::Record(a) => auvnav_recorder::run(&a).map(|_| ()),
         Command::AlignMeasured(a) => auvnav_tools::align::run_measured(&a).map(|_| ()),
         Command::Align(a) => print_report(

@@ -6,7 +6,8 @@
 //! `SCALED_IMU` (else the first IMU's `RAW_IMU`, which ArduPilot sends in the same units) as the
 //! IMU and magnetometer, `SCALED_PRESSURE2` (ArduSub's external pressure sensor; another instance
 //! with `--pressure-instance`) as depth, `ATTITUDE` (the autopilot's own estimate) as the attitude
-//! channel and `GPS_RAW_INT` as GNSS fixes. Messages stamped by the autopilot's clock
+//! channel, `GPS_RAW_INT` as GNSS fixes and `VISION_POSITION_DELTA` (a DVL extension's) as DVL
+//! velocities. Messages stamped by the autopilot's clock
 //! (`time_boot_ms`, `time_usec` since boot) keep that clock as their device time and are placed
 //! on the receive time base by the smallest receive delay seen (per boot of the autopilot), so
 //! their spacing is the autopilot's, not the telemetry link's.
@@ -100,6 +101,8 @@ pub struct TlogSummary {
     pub depth: usize,
     pub attitude: usize,
     pub gnss: usize,
+    /// DVL velocities (VISION_POSITION_DELTA).
+    pub dvl: usize,
     /// GPS_RAW_INT messages without a 3D fix (left out).
     pub gnss_without_fix: usize,
     /// The surface pressure depth was taken against (hPa).
@@ -232,6 +235,7 @@ fn place(mut readings: Vec<Reading>, s: &mut TlogSummary) -> Vec<(&'static str, 
             AutopilotReading::Depth(_) => s.depth += 1,
             AutopilotReading::Attitude(_) => s.attitude += 1,
             AutopilotReading::Gnss(_) => s.gnss += 1,
+            AutopilotReading::Dvl(_) => s.dvl += 1,
         }
         // Sorted by host time: the duration runs from the first kept reading to this one.
         let first = *first_ns.get_or_insert(t);
@@ -249,6 +253,7 @@ fn log_message(r: AutopilotReading) -> LogMessage {
         AutopilotReading::Depth(x) => LogMessage::Depth(x),
         AutopilotReading::Attitude(x) => LogMessage::Attitude(x),
         AutopilotReading::Gnss(x) => LogMessage::Gnss(x),
+        AutopilotReading::Dvl(x) => LogMessage::Dvl(x),
     }
 }
 
@@ -280,7 +285,7 @@ pub fn tlog_messages(o: &TlogOptions) -> Result<(Vec<(&'static str, LogMessage)>
     let messages = place(readings, &mut s);
     if messages.is_empty() {
         malformed!(
-            "{}: {} MAVLink frames, none with a sensor reading auvnav takes (SCALED_IMU or RAW_IMU, SCALED_PRESSURE{}, ATTITUDE, GPS_RAW_INT)",
+            "{}: {} MAVLink frames, none with a sensor reading auvnav takes (SCALED_IMU or RAW_IMU, SCALED_PRESSURE{}, ATTITUDE, GPS_RAW_INT, VISION_POSITION_DELTA)",
             o.input.display(),
             s.frames,
             if o.pressure_instance == 1 {
@@ -302,7 +307,8 @@ pub fn tlog(o: &TlogOptions) -> Result<TlogSummary> {
         format!(
             "MAVLink telemetry log: the autopilot's IMU ({}) and magnetometer, pressure sensor \
              (SCALED_PRESSURE instance {}, depth at {} kg/m³ against {:.2} hPa at the surface), \
-             attitude estimate (ATTITUDE) and GPS (GPS_RAW_INT, 3D fixes); autopilot-clock \
+             attitude estimate (ATTITUDE), GPS (GPS_RAW_INT, 3D fixes) and DVL \
+             (VISION_POSITION_DELTA, at reception); autopilot-clock \
              messages placed by the smallest receive delay; time 0 = Unix time {:.3}",
             summary.imu_source,
             o.pressure_instance,
@@ -325,6 +331,10 @@ pub fn tlog(o: &TlogOptions) -> Result<TlogSummary> {
             &source("ATTITUDE: the autopilot's own estimate, not a sensor"),
         )?;
         w.declare::<GnssFixV1>(topic::GNSS, &source("GPS_RAW_INT, 3D fixes"))?;
+        w.declare::<DvlVelocityV1>(
+            topic::DVL,
+            &source("VISION_POSITION_DELTA: a DVL extension's position change over its interval"),
+        )?;
         for (t, m) in &messages {
             match m {
                 LogMessage::Imu(x) => w.write(t, x)?,
@@ -332,6 +342,7 @@ pub fn tlog(o: &TlogOptions) -> Result<TlogSummary> {
                 LogMessage::Depth(x) => w.write(t, x)?,
                 LogMessage::Attitude(x) => w.write(t, x)?,
                 LogMessage::Gnss(x) => w.write(t, x)?,
+                LogMessage::Dvl(x) => w.write(t, x)?,
                 _ => {}
             }
         }
