@@ -217,6 +217,8 @@ pub struct Link {
     /// The mode and fused sensors last reported in a STATUSTEXT.
     last_status: Option<(u32, u32)>,
     last_mode: Option<u32>,
+    /// The last solution's sequence number: a new session of the daemon starts it again.
+    last_sequence: Option<u64>,
     reset_counter: u8,
     /// The origin the autopilot reported (its `GPS_GLOBAL_ORIGIN`), once it has.
     autopilot_origin: Option<Geodetic>,
@@ -247,6 +249,7 @@ impl Link {
             next_due_ns: None,
             last_status: None,
             last_mode: None,
+            last_sequence: None,
             reset_counter: 0,
             autopilot_origin: None,
             origin_wait_until_ns: None,
@@ -275,12 +278,17 @@ impl Link {
     pub fn on_solution(&mut self, s: &NavSolutionV1, utc_ns: i64) -> Vec<mav::MavMessage> {
         let mut out = Vec::new();
         let mode = mode_of(s.mode);
-        // The filter restarted: the autopilot must take the jump, not filter it away.
-        if matches!(mode, Some(NavMode::Invalid | NavMode::PositionUnknown))
-            && self.last_mode != Some(s.mode)
+        // The filter restarted, or the daemon did (a new session numbers its solutions from 1
+        // again, from its checkpoint or its configuration): the autopilot must take the jump,
+        // not filter it away.
+        let new_session = self.last_sequence.is_some_and(|q| s.sequence < q);
+        if (matches!(mode, Some(NavMode::Invalid | NavMode::PositionUnknown))
+            && self.last_mode != Some(s.mode))
+            || (new_session && self.counters.solutions > 0)
         {
             self.reset_counter = self.reset_counter.wrapping_add(1);
         }
+        self.last_sequence = Some(s.sequence);
         self.last_mode = Some(s.mode);
         if self.last_status != Some((s.mode, s.sensor_health)) {
             let previous = self.last_status.map(|(_, h)| h);
@@ -933,5 +941,27 @@ mod tests {
         assert!(odometry(&mut lone, 1.9).is_none());
         lone.on_tick(2_000_000_000);
         assert!(odometry(&mut lone, 2.0).is_some_and(|o| o.x.abs() < 1e-3));
+    }
+
+    #[test]
+    fn a_restarted_daemon_steps_the_reset_counter() {
+        let mut link = Link::new(&config(SolutionMessage::Odometry));
+        let mut sent = Vec::new();
+        for (k, t) in (0..30).map(|k| (k, k as f64 * 0.1)) {
+            let mut s = solution(t, NavMode::Navigating, 0.0);
+            // The daemon restarts after 2 s: its solutions are numbered from 1 again.
+            s.sequence = if k < 20 { k + 1 } else { k - 19 };
+            sent.extend(link.on_solution(&s, 0));
+        }
+        let counters: Vec<u8> = sent
+            .iter()
+            .filter_map(|m| match m {
+                mav::MavMessage::ODOMETRY(o) => Some(o.reset_counter),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(counters.len(), 30);
+        assert!(counters[..20].iter().all(|c| *c == 0), "{counters:?}");
+        assert!(counters[20..].iter().all(|c| *c == 1), "{counters:?}");
     }
 }

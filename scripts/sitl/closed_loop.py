@@ -13,6 +13,9 @@ ArduSub's EKF3 navigates on it while this script flies the vehicle as a ground s
   position hold        POSHOLD for --hold-s: the radius SITL's true position wanders
   degraded             the DVL driver stopped for 20 s: auvnav degraded (quality 50), EKF3 on it
   lost stream          auvnav-mavlink stopped for 10 s: what EKF3 does, and its recovery
+  new auvnav-mavlink   restarted away from its first origin: EKF3 must not jump
+  daemon restart       auvnavd stopped 5 s and started from its checkpoint: EKF3 takes it back
+  telemetry log        SITL's own tlog through `auvnav import tlog`, `info` and `replay`
 
 Run through scripts/sitl/closed-loop.sh, which builds SITL and auvnav first. Prints a table, writes
 OUT/figures.json, and exits non-zero when a check fails.
@@ -147,9 +150,15 @@ class Loop:
         return None
 
     def set_mode(self, name):
-        self.gcs.mav.set_mode_send(1, mavutil.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-                                   MODES[name])
-        ok = self.pump(10, lambda: getattr(self, "mode", None) == MODES[name])
+        # Asked again each second, as a ground station's pilot would: a mode the vehicle cannot
+        # take yet (GUIDED before EKF3 has a position) is refused with a status text.
+        ok = False
+        for _ in range(10):
+            self.gcs.mav.set_mode_send(1, mavutil.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                                       MODES[name])
+            ok = self.pump(1, lambda: getattr(self, "mode", None) == MODES[name])
+            if ok:
+                break
         if not ok:
             raise RuntimeError(f"SITL did not take mode {name}: {self.recent_texts()}")
 
@@ -160,6 +169,15 @@ class Loop:
         mask = 0b0000111111111000  # position only
         self.gcs.mav.set_position_target_local_ned_send(
             0, 1, 1, mavutil.mavlink.MAV_FRAME_LOCAL_NED, mask, n, e, d, 0, 0, 0, 0, 0, 0, 0, 0)
+
+    def reached(self, target, within):
+        """True position within `within` of the target horizontally, and EKF3's depth within it
+        of the target's: EKF3's vertical is ArduSub's own pressure-sensor loop, referenced to
+        the surface at boot, not to the origin's altitude."""
+        p, e = self.truth_ned(), self.latest("ekf")
+        return (p is not None and e is not None
+                and math.hypot(p[0] - target[0], p[1] - target[1]) < within
+                and abs(e[1][2] - target[2]) < within)
 
     def truth_at(self, t):
         """SITL's true position in EKF3's frame at monotonic time t (the latest before it)."""
@@ -355,7 +373,8 @@ def fly(loop):
     t_start = loop.t_auvnav
     # EKF3's words for the source it starts on: auvnav as external navigation, or as a GPS.
     taken = "is using external nav data" if loop.a.message == "odometry" else "is using GPS"
-    ext = loop.pump(90, lambda: loop.said(taken) and hasattr(loop, "origin"))
+    ext = loop.pump(90, lambda: loop.said(taken) and hasattr(loop, "origin")
+                    and (loop.latest("ekf_status") or (0, (0,)))[1][0] & EKF_POS_HORIZ_ABS)
     phases["ext_nav"] = now_ns()
     check("ekf_takes_external_nav", ext,
           f"{(now_ns() - t_start) / 1e9:.1f} s after auvnav started; origin "
@@ -380,8 +399,7 @@ def fly(loop):
     reached = []
     for c in corners:
         t_c = time.time()
-        near = lambda: (loop.truth_ned() is not None
-                        and math.dist(loop.truth_ned(), c) < a.reach_m)
+        near = lambda: loop.reached(c, a.reach_m)
         ok = False
         while time.time() - t_c < a.leg_timeout_s and not ok:
             loop.target(*c)
@@ -411,7 +429,7 @@ def fly(loop):
     loop.set_mode("GUIDED")
     t_c = time.time()
     while time.time() - t_c < a.leg_timeout_s and not loop.pump(
-            1.0, lambda: math.dist(loop.truth_ned(), far) < a.reach_m):
+            1.0, lambda: loop.reached(far, a.reach_m)):
         loop.target(*far)
     loop.set_mode("POSHOLD")
     old = loop.procs["auvnav-mavlink"]
@@ -464,6 +482,28 @@ def fly(loop):
           f"{'recovered' if recovered else 'NOT recovered'} "
           f"{(now_ns() - t_r) / 1e9:.1f} s after the stream resumed; EKF3 to truth "
           f"{math.hypot(p_t[0] - p_e[0], p_t[1] - p_e[1]):.2f} m after")
+    # auvnavd restarted mid-dive (an update, a crash): it continues from its checkpoint with the
+    # covariance grown by the time it was away; EKF3 must take it back without a jump.
+    old = loop.procs["auvnavd"]
+    t_s = now_ns()
+    os.killpg(old.pid, signal.SIGTERM)
+    old.wait(timeout=10)
+    loop.procs["auvnavd.1"] = old
+    loop.pump(5)
+    loop.spawn("auvnavd", [os.path.join(a.bin, "auvnavd"), "--config",
+                           f"{loop.out}/auvnavd.toml"], log_name="auvnavd.2")
+    t_b = now_ns()
+    back = loop.pump(30, lambda: (loop.latest("ekf_status") or (0, (0,)))[0] > t_b + 2e9
+                     and loop.latest("ekf_status")[1][0] & EKF_POS_HORIZ_ABS)
+    loop.pump(20)
+    p_t, p_e = loop.truth_ned(), (loop.latest("ekf") or (0, (0, 0, 0)))[1]
+    err = math.hypot(p_t[0] - p_e[0], p_t[1] - p_e[1])
+    texts = [x for t, c, x in loop.texts if c == 197 and t >= t_s]
+    check("daemon_restart", back and err < 1.0,
+          f"auvnavd stopped 5 s and started again from its checkpoint: EKF3 "
+          f"{'back on' if back else 'NOT back on'} external navigation "
+          f"{(now_ns() - t_b) / 1e9 - 20:.1f} s after; 20 s later {err:.2f} m from truth; "
+          f"auvnav said: {'; '.join(texts) or 'nothing'}")
     loop.gcs.mav.command_long_send(1, 1, mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0,
                                    0, 0, 0, 0, 0, 0)
     loop.pump(2)

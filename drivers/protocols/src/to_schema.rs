@@ -75,6 +75,17 @@ mod tests {
             8,
         );
         assert_eq!(invalid.validity & need, 0);
+        // An empty covariance is none given, not a perfect velocity: the navigator's noise then.
+        let unknown = water_linked_velocity(
+            &Velocity {
+                covariance: [0.0; 9],
+                ..v
+            },
+            0,
+            9,
+        );
+        assert_eq!(unknown.validity & DvlVelocityV1::VALID_STD, 0);
+        assert_ne!(unknown.validity & DvlVelocityV1::VALID_VELOCITY, 0);
     }
 
     #[test]

@@ -205,6 +205,17 @@ fn spawn_reader(
         loop {
             let (header, msg) = match conn.recv() {
                 Ok(m) => m,
+                // The TCP transport's read timeout: nothing this moment, the link is open.
+                Err(mavlink::error::MessageReadError::Io(e))
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock
+                            | std::io::ErrorKind::TimedOut
+                            | std::io::ErrorKind::Interrupted
+                    ) =>
+                {
+                    continue;
+                }
                 Err(mavlink::error::MessageReadError::Io(e)) => {
                     return format!("SITL's link closed: {e}");
                 }

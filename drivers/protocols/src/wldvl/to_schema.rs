@@ -51,31 +51,3 @@ pub fn water_linked_velocity(v: &Velocity, host_time_ns: u64, sequence: u64) -> 
     }
     m
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_zero_covariance_is_no_standard_deviation() {
-        let mut v = Velocity {
-            velocity_m_s: [0.3, 0.0, 0.01],
-            valid: true,
-            altitude_m: 20.0,
-            figure_of_merit_m_s: 0.002,
-            covariance: [4e-6, 0.0, 0.0, 0.0, 4e-6, 0.0, 0.0, 0.0, 9e-6],
-            time_of_validity_us: 1_000_000,
-            time_of_transmission_us: 1_020_000,
-            time_since_last_ms: 200.0,
-            status: 0,
-        };
-        let m = water_linked_velocity(&v, 5_000_000_000, 1);
-        assert_ne!(m.validity & DvlVelocityV1::VALID_STD, 0);
-        assert!((m.velocity_std_m_s[2] - 0.003).abs() < 1e-12);
-        assert_eq!(m.validity_time_ns, 4_980_000_000);
-        v.covariance = [0.0; 9];
-        let m = water_linked_velocity(&v, 5_000_000_000, 2);
-        assert_eq!(m.validity & DvlVelocityV1::VALID_STD, 0);
-        assert_ne!(m.validity & DvlVelocityV1::VALID_VELOCITY, 0);
-    }
-}
