@@ -192,6 +192,12 @@ fn protocol(name: &str) -> anyhow::Result<Protocol> {
     Protocol::from_name(name).with_context(|| format!("unknown protocol {name}"))
 }
 
+/// A read that found nothing yet (the transport's timeout), not a closed link.
+fn quiet(e: &std::io::Error) -> bool {
+    use std::io::ErrorKind::{Interrupted, TimedOut, WouldBlock};
+    matches!(e.kind(), WouldBlock | TimedOut | Interrupted)
+}
+
 /// Reads SITL's link on its own thread: hands every state on, asks for SIM_STATE whenever the
 /// autopilot's heartbeat comes and no state has for a second. Returns why it ended.
 fn spawn_reader(
@@ -206,16 +212,7 @@ fn spawn_reader(
             let (header, msg) = match conn.recv() {
                 Ok(m) => m,
                 // The TCP transport's read timeout: nothing this moment, the link is open.
-                Err(mavlink::error::MessageReadError::Io(e))
-                    if matches!(
-                        e.kind(),
-                        std::io::ErrorKind::WouldBlock
-                            | std::io::ErrorKind::TimedOut
-                            | std::io::ErrorKind::Interrupted
-                    ) =>
-                {
-                    continue;
-                }
+                Err(mavlink::error::MessageReadError::Io(e)) if quiet(&e) => continue,
                 Err(mavlink::error::MessageReadError::Io(e)) => {
                     return format!("SITL's link closed: {e}");
                 }
