@@ -158,15 +158,14 @@ fn receive(
         // The source takes the autopilot's own messages only: the vehicle's system, component
         // MAV_COMP_ID_AUTOPILOT1 (a router also forwards other components' and stations').
         // A DVL extension's VISION_POSITION_DELTA comes from its own component.
-        let dvl = matches!(m, MavMessage::VISION_POSITION_DELTA(_));
+        let vehicle = header.system_id == u32::from(cfg.system_id);
+        let from_autopilot = vehicle && header.component_id == AUTOPILOT_COMPONENT;
+        let dvl = vehicle && matches!(m, MavMessage::VISION_POSITION_DELTA(_));
         if let Some(s) = source.as_deref_mut()
-            && header.system_id == u32::from(cfg.system_id)
-            && (header.component_id == AUTOPILOT_COMPONENT || dvl)
+            && (from_autopilot || dvl)
         {
             s.on_message(&m);
         }
-        let from_autopilot = header.system_id == u32::from(cfg.system_id)
-            && header.component_id == AUTOPILOT_COMPONENT;
         match m {
             MavMessage::GPS_GLOBAL_ORIGIN(o) if from_autopilot => {
                 heard.origin_known = true;

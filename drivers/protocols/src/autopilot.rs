@@ -275,8 +275,8 @@ fn dvl_velocity(d: &mav::VISION_POSITION_DELTA_DATA) -> Option<DvlVelocityV1> {
     Some(DvlVelocityV1 {
         velocity_dvl_m_s: v,
         figure_of_merit_m_s: DVL_FOM_AT_ZERO_CONFIDENCE * (1.0 - confidence / 100.0),
+        // The message does not say how many beams the DVL used: 0, as for a Water Linked report.
         validity: DvlVelocityV1::VALID_VELOCITY | DvlVelocityV1::VALID_FOM,
-        beams_used: 4,
         ..Default::default()
     })
 }
