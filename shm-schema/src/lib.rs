@@ -453,6 +453,48 @@ message! {
     }
 }
 
+message! {
+    /// Where an acoustic array is while it listens: the pose of a moving array's frame (a boat's
+    /// hull with the receivers of an underwater GPS hung from it, or the transducer of a ship
+    /// ranging to a single beacon) from the boat's GNSS and heading. The receivers' offsets in
+    /// that frame come from the navigator's configuration or from `AcousticRangesV1`.
+    #[type_name("auvnav/AcousticArrayPose/v1")]
+    #[schema_name("auvnav_msgs/msg/AcousticArrayPoseV1")]
+    pub struct AcousticArrayPoseV1 {
+        /// Host time the reading arrived (ns, CLOCK_MONOTONIC; simulated time in simulated logs).
+        pub host_time_ns: u64,
+        /// Device clock (ns); valid with VALID_DEVICE_TIME.
+        pub device_time_ns: u64,
+        /// Sequence number assigned by the publisher.
+        pub sequence: u64,
+        /// Geodetic latitude of the array frame's origin, WGS-84 (rad, -pi/2..pi/2); valid with VALID_POSITION.
+        pub latitude_rad: f64,
+        /// Longitude of the array frame's origin, WGS-84 (rad, -pi..pi); valid with VALID_POSITION.
+        pub longitude_rad: f64,
+        /// Height of the origin above the WGS-84 ellipsoid (m, -1000..10000); valid with VALID_HEIGHT (else the surface: 0).
+        pub height_m: f64,
+        /// Roll, pitch, heading of the array frame w.r.t. north-east-down (rad, ZYX Euler angles; heading -pi..2pi); heading valid with VALID_HEADING, roll and pitch with VALID_TILT (else level).
+        pub euler_rad: [f64; 3],
+        /// One-sigma horizontal position uncertainty (m, 0..1000); valid with VALID_STD.
+        pub horizontal_std_m: f32,
+        /// One-sigma heading uncertainty (rad, 0..pi); valid with VALID_STD.
+        pub heading_std_rad: f32,
+        /// Validity bit flags (AcousticArrayPoseV1::VALID_*).
+        pub validity: u32,
+        /// Reserved, zero.
+        pub reserved: u32,
+    }
+}
+
+impl AcousticArrayPoseV1 {
+    pub const VALID_POSITION: u32 = 1 << 0;
+    pub const VALID_HEIGHT: u32 = 1 << 1;
+    pub const VALID_HEADING: u32 = 1 << 2;
+    pub const VALID_TILT: u32 = 1 << 3;
+    pub const VALID_STD: u32 = 1 << 4;
+    pub const VALID_DEVICE_TIME: u32 = 1 << 5;
+}
+
 impl AcousticRangesV1 {
     /// Range of receiver i valid: `VALID_RANGE << i`, i in 0..4.
     pub const VALID_RANGE: u32 = 1 << 0;
@@ -723,6 +765,8 @@ pub enum AidSource {
     UsblSlantRange = 5,
     ZeroVelocity = 6,
     Magnetometer = 7,
+    /// One range of an acoustic system (LBL beacon, a receiver of a moving array, a single beacon).
+    AcousticRange = 8,
 }
 
 impl TryFrom<u32> for AidSource {
@@ -736,6 +780,7 @@ impl TryFrom<u32> for AidSource {
             5 => AidSource::UsblSlantRange,
             6 => AidSource::ZeroVelocity,
             7 => AidSource::Magnetometer,
+            8 => AidSource::AcousticRange,
             other => return Err(other),
         })
     }
@@ -896,7 +941,7 @@ message! {
         pub aid_host_time_ns: u64,
         /// Sequence number of the aid message (assigned by its publisher).
         pub aid_sequence: u64,
-        /// The aid's topic (LateAidV1::TOPIC_*: 1 DVL, 2 depth, 3 GNSS, 4 USBL, 5 magnetometer).
+        /// The aid's topic (LateAidV1::TOPIC_*: 1 DVL, 2 depth, 3 GNSS, 4 USBL, 5 magnetometer, 6 sound velocity, 7 acoustic ranges, 8 acoustic array pose).
         pub aid_topic: u32,
         /// Reserved, zero.
         pub reserved: u32,
@@ -910,6 +955,8 @@ impl LateAidV1 {
     pub const TOPIC_USBL: u32 = 4;
     pub const TOPIC_MAGNETOMETER: u32 = 5;
     pub const TOPIC_SOUND_VELOCITY: u32 = 6;
+    pub const TOPIC_ACOUSTIC_RANGES: u32 = 7;
+    pub const TOPIC_ACOUSTIC_ARRAY_POSE: u32 = 8;
 }
 
 message! {
@@ -992,6 +1039,7 @@ pub fn all_schemas() -> Vec<(&'static str, &'static str, String)> {
         entry::<DepthV1>(),
         entry::<MagnetometerV1>(),
         entry::<AcousticRangesV1>(),
+        entry::<AcousticArrayPoseV1>(),
         entry::<GnssFixV1>(),
         entry::<NavSolutionV1>(),
         entry::<SoundVelocityV1>(),

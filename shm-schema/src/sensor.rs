@@ -2,8 +2,8 @@
 //! simulator carry to the core's feed path (`auvnav_core::feed`). It lives with the messages so
 //! that a reader of logs can hand them over without the navigation core.
 use crate::{
-    DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1, MagnetometerV1, SoundVelocityV1,
-    UsblFixV1,
+    AcousticArrayPoseV1, AcousticRangesV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1,
+    LateAidV1, MagnetometerV1, SoundVelocityV1, UsblFixV1,
 };
 
 /// A sensor message for the navigation session.
@@ -17,6 +17,10 @@ pub enum SensorMessage {
     Magnetometer(MagnetometerV1),
     /// The speed of sound (a CTD), for `dvl_sound_speed_source = "topic"`.
     SoundVelocity(SoundVelocityV1),
+    /// Ranges of an acoustic system, for the range aid (`[navigation.ranges]`).
+    AcousticRanges(AcousticRangesV1),
+    /// Where a moving acoustic array is, for the range aid: not an aid itself.
+    AcousticArrayPose(AcousticArrayPoseV1),
 }
 
 impl SensorMessage {
@@ -30,6 +34,8 @@ impl SensorMessage {
             SensorMessage::Usbl(m) => m.host_time_ns,
             SensorMessage::Magnetometer(m) => m.host_time_ns,
             SensorMessage::SoundVelocity(m) => m.host_time_ns,
+            SensorMessage::AcousticRanges(m) => m.host_time_ns,
+            SensorMessage::AcousticArrayPose(m) => m.host_time_ns,
         }
     }
 
@@ -43,6 +49,8 @@ impl SensorMessage {
             SensorMessage::Usbl(m) => m.sequence,
             SensorMessage::Magnetometer(m) => m.sequence,
             SensorMessage::SoundVelocity(m) => m.sequence,
+            SensorMessage::AcousticRanges(m) => m.sequence,
+            SensorMessage::AcousticArrayPose(m) => m.sequence,
         }
     }
 
@@ -56,6 +64,8 @@ impl SensorMessage {
             SensorMessage::Usbl(_) => LateAidV1::TOPIC_USBL,
             SensorMessage::Magnetometer(_) => LateAidV1::TOPIC_MAGNETOMETER,
             SensorMessage::SoundVelocity(_) => LateAidV1::TOPIC_SOUND_VELOCITY,
+            SensorMessage::AcousticRanges(_) => LateAidV1::TOPIC_ACOUSTIC_RANGES,
+            SensorMessage::AcousticArrayPose(_) => LateAidV1::TOPIC_ACOUSTIC_ARRAY_POSE,
         })
     }
 }

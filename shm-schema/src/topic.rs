@@ -12,9 +12,12 @@ pub const USBL: &str = "usbl";
 pub const DEPTH: &str = "depth";
 /// Magnetometer ([`crate::MagnetometerV1`]).
 pub const MAGNETOMETER: &str = "magnetometer";
-/// Per-receiver acoustic ranges with the device's fix ([`crate::AcousticRangesV1`]; recorded and
-/// imported, not yet fused by the daemon).
+/// Per-receiver acoustic ranges with the device's fix ([`crate::AcousticRangesV1`]; fused by the
+/// daemon's range aid, `[navigation.ranges]`).
 pub const ACOUSTIC_RANGES: &str = "acoustic_ranges";
+/// The pose of a moving acoustic array from its boat's GNSS and heading
+/// ([`crate::AcousticArrayPoseV1`]).
+pub const ACOUSTIC_ARRAY_POSE: &str = "acoustic_array_pose";
 /// GNSS fixes ([`crate::GnssFixV1`]).
 pub const GNSS: &str = "gnss";
 /// The speed of sound from a CTD or sound-velocity probe ([`crate::SoundVelocityV1`]).
@@ -44,7 +47,17 @@ pub const TRUTH: &str = "truth";
 pub const DEFAULT_PREFIX: &str = "auvnav";
 
 /// Every topic that carries sensor data into the fusion daemon.
-pub const SENSOR_TOPICS: [&str; 7] = [IMU, DVL, USBL, DEPTH, MAGNETOMETER, GNSS, SOUND_VELOCITY];
+pub const SENSOR_TOPICS: [&str; 9] = [
+    IMU,
+    DVL,
+    USBL,
+    DEPTH,
+    MAGNETOMETER,
+    GNSS,
+    SOUND_VELOCITY,
+    ACOUSTIC_RANGES,
+    ACOUSTIC_ARRAY_POSE,
+];
 
 /// The iceoryx2 service name of `topic` under a deployment prefix: `"{prefix}/{topic}"`.
 pub fn service_name(prefix: &str, topic: &str) -> String {

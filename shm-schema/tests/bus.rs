@@ -52,6 +52,7 @@ fn every_type_roundtrips_through_iceoryx2() {
     roundtrip_iceoryx2::<MagnetometerV1>(&node, &prefix);
     roundtrip_iceoryx2::<SoundVelocityV1>(&node, &prefix);
     roundtrip_iceoryx2::<AcousticRangesV1>(&node, &prefix);
+    roundtrip_iceoryx2::<AcousticArrayPoseV1>(&node, &prefix);
     roundtrip_iceoryx2::<GnssFixV1>(&node, &prefix);
     roundtrip_iceoryx2::<NavSolutionV1>(&node, &prefix);
     roundtrip_iceoryx2::<AidDiagnosticsV1>(&node, &prefix);

@@ -29,6 +29,11 @@ fn layouts_are_pinned() {
             size_of::<AcousticRangesV1>(),
             align_of::<AcousticRangesV1>(),
         ),
+        (
+            "AcousticArrayPoseV1",
+            size_of::<AcousticArrayPoseV1>(),
+            align_of::<AcousticArrayPoseV1>(),
+        ),
         ("GnssFixV1", size_of::<GnssFixV1>(), align_of::<GnssFixV1>()),
         (
             "SoundVelocityV1",
@@ -70,6 +75,7 @@ fn layouts_are_pinned() {
         ("DepthV1", 56, 8),
         ("MagnetometerV1", 56, 8),
         ("AcousticRangesV1", 224, 8),
+        ("AcousticArrayPoseV1", 88, 8),
         ("GnssFixV1", 96, 8),
         ("SoundVelocityV1", 56, 8),
         ("AttitudeV1", 72, 8),
@@ -116,6 +122,7 @@ fn schemas_describe_the_whole_struct() {
         size_of::<DepthV1>(),
         size_of::<MagnetometerV1>(),
         size_of::<AcousticRangesV1>(),
+        size_of::<AcousticArrayPoseV1>(),
         size_of::<GnssFixV1>(),
         size_of::<NavSolutionV1>(),
         size_of::<SoundVelocityV1>(),

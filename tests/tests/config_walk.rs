@@ -98,8 +98,9 @@ fn programs(dir: &Path) -> Vec<Program> {
     let daemon_tables = format!(
         "{initial}\
          [navigation.dvl]\nmount_deg = [0.1, 0.2, 0.3]\nscale_factor = 1.002\nlever_arm_m = [0.5, 0.0, 0.2]\ntime_offset_s = 0.01\n\
-         [navigation.usbl]\ncoupling = \"tight\"\nfilter = \"aukf\"\narray_latitude_deg = 31.0\n\
+         [navigation.usbl]\ncoupling = \"loose\"\nfilter = \"aukf\"\narray_latitude_deg = 31.0\n\
          array_longitude_deg = 120.0\narray_height_m = -55.0\n\
+         [navigation.ranges]\narray = \"moving\"\nreceivers_m = [[0.5, 1.0, 10.0], [-0.5, 1.0, 10.0]]\n\
          [navigation.magnetometer]\nmodel_date = 2026.5\n"
     );
     let serial = |protocol: &str, class: &str| {
@@ -116,7 +117,7 @@ fn programs(dir: &Path) -> Vec<Program> {
             base: daemon_flat,
         },
         Program {
-            name: "auvnavd ([navigation.dvl], [navigation.usbl], [navigation.magnetometer])",
+            name: "auvnavd ([navigation.dvl], [navigation.usbl], [navigation.ranges], [navigation.magnetometer])",
             bin: "auvnavd",
             check: check_file,
             base: daemon_tables,

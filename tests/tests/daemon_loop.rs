@@ -150,6 +150,8 @@ fn the_daemon_loop_on_canned_messages_navigates_as_the_session_does() {
             S::Usbl(x) => batch.usbl.push(x),
             S::Magnetometer(x) => batch.magnetometer.push(x),
             S::SoundVelocity(x) => batch.sound_velocity.push(x),
+            S::AcousticRanges(x) => batch.acoustic_ranges.push(x),
+            S::AcousticArrayPose(x) => batch.acoustic_array_pose.push(x),
         }
     }
     batches.push_back((end, batch));

@@ -508,6 +508,14 @@ fn arbitrary_sensor_values_never_give_a_nan_solution() {
                     scramble(&mut v, a, b, &extremes);
                     SensorMessage::SoundVelocity(v)
                 }
+                SensorMessage::AcousticRanges(mut v) => {
+                    scramble(&mut v, a, b, &extremes);
+                    SensorMessage::AcousticRanges(v)
+                }
+                SensorMessage::AcousticArrayPose(mut v) => {
+                    scramble(&mut v, a, b, &extremes);
+                    SensorMessage::AcousticArrayPose(v)
+                }
             })
         },
         |_, _| {},

@@ -176,6 +176,10 @@ pub struct NavConfig {
     /// Default none: USBL fixes are counted and not used.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub usbl: Option<crate::aid::usbl::UsblConfig>,
+    /// Acoustic ranges (`[navigation.ranges]`): LBL beacons, a moving array's receivers or a
+    /// single beacon, each range fused alone. Uses the acoustic error states the tight USBL uses:
+    /// not with `usbl.coupling = "tight"`.
+    pub ranges: Option<crate::aid::ranges::RangesConfig>,
     /// Magnetic heading aid (`[navigation.magnetometer]`): the calibration (what `auvnav
     /// calibrate mag` writes), the field model, noise and gate. Default none: readings are
     /// counted and not used.
@@ -242,6 +246,7 @@ impl Default for NavConfig {
             dvl_assumed_sound_speed_m_s: 1500.0,
             dvl: None,
             usbl: None,
+            ranges: None,
             magnetometer: None,
         }
     }
@@ -916,6 +921,21 @@ impl NavConfig {
         }
         if let Some(u) = &self.usbl {
             out.extend(u.problems().into_iter().map(|p| format!("navigation.{p}")));
+        }
+        if let Some(r) = &self.ranges {
+            out.extend(r.problems().into_iter().map(|p| format!("navigation.{p}")));
+            if self
+                .usbl
+                .as_ref()
+                .is_some_and(|u| u.coupling == crate::aid::usbl::Coupling::Tight)
+            {
+                out.push(
+                    "navigation.ranges: not with navigation.usbl.coupling = \"tight\" (both use \
+                     the acoustic error states); fuse the docking array's hydrophones as ranges, \
+                     or its fixes loosely"
+                        .into(),
+                );
+            }
         }
         if let Some(m) = &self.magnetometer {
             out.extend(m.problems().into_iter().map(|p| format!("navigation.{p}")));

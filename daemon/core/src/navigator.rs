@@ -18,6 +18,7 @@ use crate::aid::depth::DepthAid;
 use crate::aid::dvl::{DvlAid, DvlEstimation, DvlParameters, SoundSpeed};
 use crate::aid::gnss::GnssAid;
 use crate::aid::magnetometer::MagnetometerAid;
+use crate::aid::ranges::RangeAid;
 use crate::aid::usbl::UsblAid;
 use crate::aid::zero_velocity::ZeroVelocityAid;
 pub use crate::config::NavConfig;
@@ -26,8 +27,8 @@ use crate::ekf::{self, ProcessNoise, StateVector};
 use crate::nav_core::{ImuTiming, NavCore};
 use crate::strapdown::NavState;
 use auvnav_shm_schema::{
-    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, NavMode,
-    NavSolutionV1, SoundVelocityV1, UsblFixV1,
+    AcousticArrayPoseV1, AcousticRangesV1, AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1,
+    ImuSampleV1, MagnetometerV1, NavMode, NavSolutionV1, SoundVelocityV1, UsblFixV1,
 };
 use nalgebra::Vector3;
 use serde::Serialize;
@@ -98,6 +99,20 @@ pub struct NavCounters {
     pub usbl_reopened: u64,
     /// USBL updates that failed numerically (covariance not positive definite).
     pub usbl_failed: u64,
+    /// Acoustic ranges (one per receiver) fused, rejected by the gate, and invalid (out of
+    /// range, or from a receiver the configuration does not place).
+    pub ranges_fused: u64,
+    pub ranges_rejected: u64,
+    pub ranges_invalid: u64,
+    /// Range messages received without a `[navigation.ranges]` configuration, and older than
+    /// its `max_latency_s`.
+    pub ranges_unconfigured: u64,
+    pub ranges_late: u64,
+    /// Ranges of a moving array without its pose at the time.
+    pub ranges_without_array_pose: u64,
+    /// Array poses taken, and refused (invalid, or the array is configured fixed).
+    pub array_poses: u64,
+    pub array_poses_invalid: u64,
     pub magnetometer_fused: u64,
     /// Magnetic headings rejected by the innovation gate.
     pub magnetometer_rejected: u64,
@@ -123,6 +138,7 @@ pub struct Navigator {
     gnss: GnssAid,
     zero_velocity: ZeroVelocityAid,
     usbl: UsblAid,
+    ranges: RangeAid,
     magnetometer: Option<MagnetometerAid>,
     magnetometer_unconfigured: u64,
     dvl_timeout_s: f64,
@@ -206,6 +222,7 @@ impl Navigator {
         };
         let mut core = NavCore::new(initial, &p0, Self::process_noise(&cfg), timing);
         let usbl = UsblAid::new(cfg.usbl.as_ref(), &mut core.kf);
+        let ranges = RangeAid::new(cfg.ranges.as_ref(), &mut core.kf);
         let d = cfg.dvl_installation();
         let dvl = DvlParameters::new(d.mount_deg, d.scale_factor, d.lever_arm_m, d.time_offset_s);
         let mut dvl = DvlAid::new(
@@ -254,6 +271,7 @@ impl Navigator {
                 cfg.zero_velocity_gate_chi2,
             ),
             usbl,
+            ranges,
             magnetometer: cfg.magnetometer.as_ref().map(MagnetometerAid::new),
             magnetometer_unconfigured: 0,
             core,
@@ -473,6 +491,7 @@ impl Navigator {
             return None;
         }
         self.usbl.after_imu(&self.core.sd.state);
+        self.ranges.after_imu(&self.core.sd.state);
         if self.core.pending_dt >= self.core.covariance_interval_s {
             self.core.propagate_covariance();
             self.covariance_changed = true;
@@ -510,6 +529,32 @@ impl Navigator {
         self.apply(u)
     }
 
+    /// Fuses each receiver's range of an acoustic system alone (`crate::aid::ranges`): the
+    /// diagnostics of each range (receiver k's in slot k), none when the message is not used
+    /// (counted: unconfigured, late).
+    pub fn on_acoustic_ranges(&mut self, m: &AcousticRangesV1) -> [Option<AidDiagnosticsV1>; 4] {
+        let mut out = [None; 4];
+        if !self.ranges.accepts(&self.core, m) {
+            return out;
+        }
+        for (k, slot) in out.iter_mut().enumerate() {
+            if let Some(u) = self.ranges.fuse_one(&mut self.core, m, k) {
+                *slot = Some(self.apply(u));
+            }
+        }
+        out
+    }
+
+    /// Takes a moving acoustic array's pose (`crate::aid::ranges`).
+    pub fn on_acoustic_array_pose(&mut self, m: &AcousticArrayPoseV1) {
+        self.ranges.on_array_pose(m);
+    }
+
+    /// The range aid's common bias (m) and sound-speed scale error, when configured.
+    pub fn range_estimates(&self) -> Option<(f64, f64)> {
+        self.ranges.estimates(&self.core)
+    }
+
     /// Fuses a magnetometer reading as a magnetic heading (`crate::aid::magnetometer`); `None`
     /// (counted) without a `[navigation.magnetometer]` configuration.
     pub fn on_magnetometer(&mut self, m: &MagnetometerV1) -> Option<AidDiagnosticsV1> {
@@ -537,6 +582,7 @@ impl Navigator {
             }
             _ => self.sound_velocity_ignored += 1,
         }
+        self.ranges.on_sound_velocity(m);
     }
 
     /// The estimated water current, north and east (m/s), and its standard deviations, when the
@@ -613,6 +659,14 @@ impl Navigator {
             usbl_unconfigured: usbl.unconfigured,
             usbl_reopened: usbl.reopened,
             usbl_failed: usbl.failed,
+            ranges_fused: self.ranges.counters.fused,
+            ranges_rejected: self.ranges.counters.rejected,
+            ranges_invalid: self.ranges.counters.invalid,
+            ranges_unconfigured: self.ranges.counters.unconfigured,
+            ranges_late: self.ranges.counters.late,
+            ranges_without_array_pose: self.ranges.counters.no_array_pose,
+            array_poses: self.ranges.counters.array_poses,
+            array_poses_invalid: self.ranges.counters.array_poses_invalid,
             magnetometer_fused: mag.common.fused,
             magnetometer_rejected: mag.common.rejected,
             magnetometer_invalid: mag.common.invalid,
@@ -640,7 +694,11 @@ impl Navigator {
         if dvl_ok {
             health |= NavSolutionV1::HEALTH_DVL;
         }
-        let usbl_fused_s = self.usbl.last_fused_s();
+        // The acoustic position aid: the USBL's fixes or the range aid's ranges.
+        let usbl_fused_s = match (self.usbl.last_fused_s(), self.ranges.last_fused_s()) {
+            (Some(a), Some(b)) => Some(a.max(b)),
+            (a, b) => a.or(b),
+        };
         if usbl_fused_s.is_some_and(|t| s.time_s - t <= self.dvl_timeout_s) {
             health |= NavSolutionV1::HEALTH_USBL;
         }

@@ -53,7 +53,7 @@ fn aid_key(m: &SensorMessage) -> (u64, u32, u64) {
     // IMU samples are never queued (processed as they come): last. A sound-velocity reading is
     // not an aid but what corrects the DVL: first among messages of the same time.
     let order = match m {
-        SensorMessage::SoundVelocity(_) => 0,
+        SensorMessage::SoundVelocity(_) | SensorMessage::AcousticArrayPose(_) => 0,
         other => other.aid_topic().unwrap_or(u32::MAX),
     };
     (m.host_time_ns(), order, m.sequence())
@@ -894,6 +894,18 @@ impl Session {
             // Not an aid: it sets the DVL's sound-speed correction.
             SensorMessage::SoundVelocity(m) => {
                 nav.on_sound_velocity(&m);
+                return Ok(());
+            }
+            // Not an aid: where a moving acoustic array is.
+            SensorMessage::AcousticArrayPose(m) => {
+                nav.on_acoustic_array_pose(&m);
+                return Ok(());
+            }
+            // One diagnostics per receiver's range.
+            SensorMessage::AcousticRanges(m) => {
+                for d in nav.on_acoustic_ranges(&m).iter().flatten() {
+                    out(SessionOutput::Diagnostics(d))?;
+                }
                 return Ok(());
             }
             // Not an aid (the feed never queues IMU samples).

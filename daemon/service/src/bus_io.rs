@@ -8,9 +8,9 @@ use auvnav_shm_schema::bus::{
 };
 use auvnav_shm_schema::clock::monotonic_ns;
 use auvnav_shm_schema::{
-    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1, MagnetometerV1,
-    Message, NavSolutionV1, ProcessHealthV1, SessionEventV1, SoundVelocityV1, UsblFixV1, qos,
-    topic,
+    AcousticArrayPoseV1, AcousticRangesV1, AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1,
+    ImuSampleV1, LateAidV1, MagnetometerV1, Message, NavSolutionV1, ProcessHealthV1,
+    SessionEventV1, SoundVelocityV1, UsblFixV1, qos, topic,
 };
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::*;
@@ -18,7 +18,7 @@ use iceoryx2::waitset::{WaitSet, WaitSetGuard, WaitSetRunResult};
 use std::time::Duration;
 
 /// The sensor topics, in the order of the listeners.
-const TOPICS: [&str; 7] = [
+const TOPICS: [&str; 9] = [
     topic::IMU,
     topic::DVL,
     topic::DEPTH,
@@ -26,6 +26,8 @@ const TOPICS: [&str; 7] = [
     topic::USBL,
     topic::MAGNETOMETER,
     topic::SOUND_VELOCITY,
+    topic::ACOUSTIC_RANGES,
+    topic::ACOUSTIC_ARRAY_POSE,
 ];
 
 fn drain<T: Message + Sequenced>(
@@ -47,6 +49,8 @@ struct Subscribers {
     usbl: BusSubscriber<UsblFixV1>,
     magnetometer: BusSubscriber<MagnetometerV1>,
     sound_velocity: BusSubscriber<SoundVelocityV1>,
+    acoustic_ranges: BusSubscriber<AcousticRangesV1>,
+    acoustic_array_pose: BusSubscriber<AcousticArrayPoseV1>,
 }
 
 /// Runs the daemon's loop on the bus of `cfg` until SIGTERM or SIGINT.
@@ -66,6 +70,12 @@ pub fn run(cfg: &auvnav_core::config::DaemonConfig) -> Result<crate::service::Su
             .map_err(e)?,
         sound_velocity: bus
             .subscriber(topic::SOUND_VELOCITY, qos::SENSOR)
+            .map_err(e)?,
+        acoustic_ranges: bus
+            .subscriber(topic::ACOUSTIC_RANGES, qos::SENSOR)
+            .map_err(e)?,
+        acoustic_array_pose: bus
+            .subscriber(topic::ACOUSTIC_ARRAY_POSE, qos::SENSOR)
             .map_err(e)?,
     };
     // Every subscriber is connected from here on: a message stamped later was published later
@@ -183,6 +193,8 @@ impl Inputs for BusInputs<'_, '_> {
             drain(&mut s.usbl, &mut batch.usbl)?;
             drain(&mut s.magnetometer, &mut batch.magnetometer)?;
             drain(&mut s.sound_velocity, &mut batch.sound_velocity)?;
+            drain(&mut s.acoustic_ranges, &mut batch.acoustic_ranges)?;
+            drain(&mut s.acoustic_array_pose, &mut batch.acoustic_array_pose)?;
             drain(&mut s.imu, &mut batch.imu)?;
             Ok(())
         })()

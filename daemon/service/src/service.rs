@@ -18,9 +18,9 @@ use auvnav_core::session::{Session, SessionOutput};
 use auvnav_shm_schema::clock::monotonic_ns;
 use auvnav_shm_schema::stage_times::StageTimes;
 use auvnav_shm_schema::{
-    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1, MagnetometerV1,
-    NavSolutionV1, ProcessHealthV1, ProcessState, SessionEventV1, SoundVelocityV1, UsblFixV1,
-    topic,
+    AcousticArrayPoseV1, AcousticRangesV1, AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1,
+    ImuSampleV1, LateAidV1, MagnetometerV1, NavSolutionV1, ProcessHealthV1, ProcessState,
+    SessionEventV1, SoundVelocityV1, UsblFixV1, topic,
 };
 use std::io::Write;
 
@@ -34,6 +34,8 @@ pub struct Batch {
     pub usbl: Vec<UsblFixV1>,
     pub magnetometer: Vec<MagnetometerV1>,
     pub sound_velocity: Vec<SoundVelocityV1>,
+    pub acoustic_ranges: Vec<AcousticRangesV1>,
+    pub acoustic_array_pose: Vec<AcousticArrayPoseV1>,
 }
 
 impl Batch {
@@ -48,6 +50,16 @@ impl Batch {
                 self.sound_velocity
                     .drain(..)
                     .map(SensorMessage::SoundVelocity),
+            )
+            .chain(
+                self.acoustic_array_pose
+                    .drain(..)
+                    .map(SensorMessage::AcousticArrayPose),
+            )
+            .chain(
+                self.acoustic_ranges
+                    .drain(..)
+                    .map(SensorMessage::AcousticRanges),
             )
             .chain(self.imu.drain(..).map(SensorMessage::Imu))
     }

@@ -29,9 +29,9 @@
 #![forbid(unsafe_code)]
 
 use auvnav_shm_schema::{
-    AcousticRangesV1, AidDiagnosticsV1, AttitudeV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1,
-    LateAidV1, MagnetometerV1, Message, NavSolutionV1, ProcessHealthV1, SessionEventV1,
-    SoundVelocityV1, TruthStateV1, UsblFixV1,
+    AcousticArrayPoseV1, AcousticRangesV1, AidDiagnosticsV1, AttitudeV1, DepthV1, DvlVelocityV1,
+    GnssFixV1, ImuSampleV1, LateAidV1, MagnetometerV1, Message, NavSolutionV1, ProcessHealthV1,
+    SessionEventV1, SoundVelocityV1, TruthStateV1, UsblFixV1,
 };
 use mcap::records::{MessageHeader, Metadata, Record, op};
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
@@ -389,6 +389,7 @@ enum MessageKind {
     SoundVelocity,
     Attitude,
     AcousticRanges,
+    AcousticArrayPose,
     Gnss,
     NavSolution,
     AidDiagnostics,
@@ -410,6 +411,7 @@ impl MessageKind {
             s if s == SoundVelocityV1::SCHEMA_NAME => MessageKind::SoundVelocity,
             s if s == AttitudeV1::SCHEMA_NAME => MessageKind::Attitude,
             s if s == AcousticRangesV1::SCHEMA_NAME => MessageKind::AcousticRanges,
+            s if s == AcousticArrayPoseV1::SCHEMA_NAME => MessageKind::AcousticArrayPose,
             s if s == GnssFixV1::SCHEMA_NAME => MessageKind::Gnss,
             s if s == NavSolutionV1::SCHEMA_NAME => MessageKind::NavSolution,
             s if s == AidDiagnosticsV1::SCHEMA_NAME => MessageKind::AidDiagnostics,
@@ -452,6 +454,7 @@ fn decode_bytes(kind: MessageKind, topic: &str, data: &[u8]) -> Result<LogMessag
         MessageKind::SoundVelocity => LogMessage::SoundVelocity(decode_pod(topic, data)?),
         MessageKind::Attitude => LogMessage::Attitude(decode_pod(topic, data)?),
         MessageKind::AcousticRanges => LogMessage::AcousticRanges(decode_pod(topic, data)?),
+        MessageKind::AcousticArrayPose => LogMessage::AcousticArrayPose(decode_pod(topic, data)?),
         MessageKind::Gnss => LogMessage::Gnss(decode_pod(topic, data)?),
         MessageKind::NavSolution => LogMessage::NavSolution(decode_pod(topic, data)?),
         MessageKind::AidDiagnostics => LogMessage::AidDiagnostics(decode_pod(topic, data)?),
@@ -476,6 +479,8 @@ pub enum LogMessage {
     /// Heading, pitch and roll from a compass or an AHRS.
     Attitude(AttitudeV1),
     AcousticRanges(AcousticRangesV1),
+    /// Where a moving acoustic array is (its boat's GNSS and heading).
+    AcousticArrayPose(AcousticArrayPoseV1),
     Gnss(GnssFixV1),
     NavSolution(NavSolutionV1),
     AidDiagnostics(AidDiagnosticsV1),
@@ -501,6 +506,8 @@ impl LogMessage {
             LogMessage::Usbl(x) => S::Usbl(*x),
             LogMessage::Magnetometer(x) => S::Magnetometer(*x),
             LogMessage::SoundVelocity(x) => S::SoundVelocity(*x),
+            LogMessage::AcousticRanges(x) => S::AcousticRanges(*x),
+            LogMessage::AcousticArrayPose(x) => S::AcousticArrayPose(*x),
             _ => return None,
         })
     }

@@ -204,6 +204,7 @@ fn push_raw(tables: &mut BTreeMap<String, Builder>, out: &mut Tables, raw: &RawL
         M::SoundVelocity(x) => b.push(&x),
         M::Attitude(x) => b.push(&x),
         M::AcousticRanges(x) => b.push(&x),
+        M::AcousticArrayPose(x) => b.push(&x),
         M::Gnss(x) => b.push(&x),
         M::NavSolution(x) => b.push(&x),
         M::AidDiagnostics(x) => b.push(&x),

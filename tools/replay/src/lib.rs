@@ -112,6 +112,9 @@ pub struct ReplayCounts {
     pub magnetometer: u64,
     /// Sound-velocity readings (a CTD; used with `dvl_sound_speed_source = "topic"`).
     pub sound_velocity: u64,
+    /// Acoustic range messages (fused with `[navigation.ranges]`) and a moving array's poses.
+    pub acoustic_ranges: u64,
+    pub acoustic_array_poses: u64,
     pub truth: u64,
     /// Sensor messages before the initial state was known (skipped).
     pub before_start: u64,
@@ -435,6 +438,8 @@ impl Replay {
             SensorMessage::Usbl(_) => &mut self.counts.usbl,
             SensorMessage::Magnetometer(_) => &mut self.counts.magnetometer,
             SensorMessage::SoundVelocity(_) => &mut self.counts.sound_velocity,
+            SensorMessage::AcousticRanges(_) => &mut self.counts.acoustic_ranges,
+            SensorMessage::AcousticArrayPose(_) => &mut self.counts.acoustic_array_poses,
         } += 1;
         if let SensorMessage::Imu(m) = x {
             self.restarts

@@ -18,6 +18,8 @@ pub mod depth;
 pub mod dvl;
 pub mod gnss;
 pub mod magnetometer;
+pub mod pose_history;
+pub mod ranges;
 pub mod usbl;
 pub mod zero_velocity;
 

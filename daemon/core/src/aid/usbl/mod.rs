@@ -16,13 +16,12 @@ pub use crate::ekf::unscented::{
     MeasurementUpdate, UnscentedParams, jacobian, linearized_update, unscented_update,
 };
 
+use super::pose_history::PoseHistory;
 use super::{AidUpdate, NavCore};
-use crate::earth::Geodetic;
 use crate::ekf::{self, ErrorFilter, StateVector};
 use crate::strapdown::NavState;
 use auvnav_shm_schema::{AidDiagnosticsV1, AidSource, UsblFixV1};
-use nalgebra::{DMatrix, DVector, UnitQuaternion, Vector3};
-use std::collections::VecDeque;
+use nalgebra::{DMatrix, DVector, Vector3};
 
 /// Counts of what became of the USBL fixes.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -57,33 +56,9 @@ pub struct UsblFusion {
     /// Started at the first usable fix (the loose noise depends on its geometry).
     noise: Option<AdaptiveNoise>,
     last_fused_s: Option<f64>,
-    /// The vehicle's recent poses (time, position, attitude), for fixes whose time of validity
-    /// lies in the past; `max_latency_s` of them.
-    poses: VecDeque<(f64, Geodetic, UnitQuaternion<f64>)>,
-}
-
-impl UsblFusion {
-    /// The vehicle's pose at `t` (linear between the recorded poses; the oldest or newest one
-    /// outside them).
-    fn pose_at(&self, t: f64) -> Option<(Geodetic, UnitQuaternion<f64>)> {
-        let after = self.poses.partition_point(|p| p.0 < t);
-        match (
-            after.checked_sub(1).and_then(|i| self.poses.get(i)),
-            self.poses.get(after),
-        ) {
-            (Some(a), Some(b)) if b.0 > a.0 => {
-                let w = (t - a.0) / (b.0 - a.0);
-                let position = Geodetic {
-                    latitude_rad: a.1.latitude_rad + w * (b.1.latitude_rad - a.1.latitude_rad),
-                    longitude_rad: a.1.longitude_rad + w * (b.1.longitude_rad - a.1.longitude_rad),
-                    height_m: a.1.height_m + w * (b.1.height_m - a.1.height_m),
-                };
-                Some((position, a.2.slerp(&b.2, w)))
-            }
-            (_, Some(p)) | (Some(p), None) => Some((p.1, p.2)),
-            (None, None) => None,
-        }
-    }
+    /// The vehicle's recent poses, for fixes whose time of validity lies in the past;
+    /// `max_latency_s` of them.
+    poses: PoseHistory,
 }
 
 impl UsblAid {
@@ -106,7 +81,7 @@ impl UsblAid {
                 lever_arm_b: Vector3::from(u.responder_lever_arm_m),
                 noise: None,
                 last_fused_s: None,
-                poses: VecDeque::new(),
+                poses: PoseHistory::new(u.max_latency_s + 0.1),
                 cfg: u.clone(),
             }
         });
@@ -119,14 +94,7 @@ impl UsblAid {
     /// Keeps the vehicle's pose for fixes whose time of validity lies in the past.
     pub fn after_imu(&mut self, s: &NavState) {
         if let Some(u) = self.fusion.as_mut() {
-            u.poses.push_back((s.time_s, s.position, s.q_body_to_ned));
-            while u
-                .poses
-                .front()
-                .is_some_and(|p| s.time_s - p.0 > u.cfg.max_latency_s + 0.1)
-            {
-                u.poses.pop_front();
-            }
+            u.poses.push(s.time_s, s.position, s.q_body_to_ned);
         }
     }
 
@@ -184,7 +152,9 @@ impl UsblAid {
         // The geometry at the fix's time of validity; the errors are those of now.
         let s = core.state();
         let (position, attitude) = if t_valid < s.time_s {
-            u.pose_at(t_valid).unwrap_or((s.position, s.q_body_to_ned))
+            u.poses
+                .at(t_valid)
+                .map_or((s.position, s.q_body_to_ned), |p| (p.position, p.attitude))
         } else {
             (s.position, s.q_body_to_ned)
         };

@@ -1,0 +1,396 @@
+//! Range aid: each range of an acoustic system to a transponder whose position is known at the
+//! time of the ping — surveyed LBL beacons, a docking station's array, the receivers of an
+//! underwater GPS hung from a boat, a single transducer on a ship — fused alone as a slant range
+//! from the vehicle's transducer (lever arm) to that receiver, gated alone (χ², 1 dof).
+//!
+//! * **Where each end was.** A range's time is the arrival of the sound that closed it. The
+//!   vehicle's transducer is taken where it was when it replied (one travel time before, for a
+//!   ping from the array) or where it pinged and heard the reply (LBL); the receiver where it was
+//!   when it sent and when it heard (a moving array: from the `acoustic_array_pose` topic,
+//!   interpolated). A two-way range is half of the two legs.
+//! * **Sound speed.** The device turned travel times into ranges with its own sound speed; the
+//!   ranges are scaled to the water's (configured, or from the `sound_velocity` topic), and a
+//!   Gauss–Markov scale state takes what is left.
+//! * **Errors.** A common Gauss–Markov range bias (timing, turnaround: S-USBL's δR) shared by the
+//!   receivers. The pair occupies the acoustic error slots the tight USBL uses, so the two are not
+//!   configured together; a bias per receiver would need a slot per receiver of the 28-state
+//!   filter, and a receiver's position error is found offline (`auvnav discover`), not tracked.
+//! * **A moving array's own errors** (its GNSS position and heading) are added to each range's
+//!   noise, projected on the line of sight.
+
+pub mod config;
+
+pub use config::{ArrayKind, Interrogator, RangesConfig};
+
+use super::pose_history::PoseHistory;
+use super::{AidUpdate, NavCore};
+use crate::earth::{Geodetic, ned_offset, offset_position};
+use crate::ekf::{self, ErrorFilter, skew};
+use crate::strapdown::NavState;
+use auvnav_shm_schema::{AcousticArrayPoseV1, AcousticRangesV1, AidSource, SoundVelocityV1};
+use nalgebra::{Matrix3, Rotation3, SMatrix, SVector, UnitQuaternion, Vector3};
+
+/// Counts of what became of the ranges (one per receiver's range) and the array poses.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RangeCounters {
+    pub fused: u64,
+    /// Rejected by the innovation gate (or a failed update).
+    pub rejected: u64,
+    /// Out of range, not finite, or from a receiver the configuration does not place.
+    pub invalid: u64,
+    /// Range messages received without a `[navigation.ranges]` configuration.
+    pub unconfigured: u64,
+    /// Ranges of a moving array without its pose at the time (no pose, or a gap between poses
+    /// longer than `array_pose_max_gap_s`).
+    pub no_array_pose: u64,
+    /// Range messages older than `max_latency_s`.
+    pub late: u64,
+    /// Array poses taken, and refused (invalid or out of range).
+    pub array_poses: u64,
+    pub array_poses_invalid: u64,
+}
+
+/// The range aid: the fusion state when configured, and its counters.
+#[derive(Debug, Clone)]
+pub struct RangeAid {
+    fusion: Option<RangeFusion>,
+    pub counters: RangeCounters,
+}
+
+#[derive(Debug, Clone)]
+struct RangeFusion {
+    cfg: RangesConfig,
+    receivers: Vec<Vector3<f64>>,
+    lever_arm_b: Vector3<f64>,
+    /// Fixed array: its origin and frame (array → NED).
+    origin: Geodetic,
+    c_array_to_ned: Matrix3<f64>,
+    vehicle: PoseHistory,
+    array: PoseHistory,
+    /// The moving array's position (m) and heading (rad) one-sigma.
+    array_std: (f64, f64),
+    /// The water's sound speed in use (m/s).
+    sound_speed_m_s: f64,
+    bias_on: bool,
+    scale_on: bool,
+    last_fused_s: Option<f64>,
+}
+
+/// One leg of the sound's path: the vehicle's time and the receiver's time.
+#[derive(Debug, Clone, Copy)]
+struct Leg {
+    vehicle_s: f64,
+    receiver_s: f64,
+}
+
+/// What one range predicts: the geometric range (mean of the legs, m), its gradient with
+/// respect to the transducer's position (NED), the lever arm in NED (for the attitude), and the
+/// line of sight's projection of the array's own errors (m², added to the noise).
+#[derive(Debug, Clone, Copy)]
+pub struct RangePrediction {
+    pub range_m: f64,
+    pub line_of_sight: Vector3<f64>,
+    pub lever_ned: Vector3<f64>,
+    pub array_variance_m2: f64,
+}
+
+impl RangeAid {
+    /// The aid for `cfg` (none: range messages are counted as unconfigured); switches on the
+    /// bias and scale states in `kf`.
+    pub fn new(cfg: Option<&RangesConfig>, kf: &mut ErrorFilter) -> RangeAid {
+        let fusion = cfg.map(|c| {
+            let bias_on = c.bias_std_m > 0.0;
+            let scale_on = c.scale_std > 0.0;
+            if bias_on {
+                kf.set_gauss_markov(ekf::USBL, c.bias_correlation_s, c.bias_std_m);
+            }
+            if scale_on {
+                kf.set_gauss_markov(ekf::USBL + 1, c.scale_correlation_s, c.scale_std);
+            }
+            // Poses are kept for the longest acoustic path (two travel times at the longest
+            // range) behind the oldest range accepted.
+            let keep_s = c.max_latency_s + 2.0 * c.max_range_m / c.device_sound_speed_m_s + 1.0;
+            RangeFusion {
+                receivers: c.receivers_m.iter().map(|r| Vector3::from(*r)).collect(),
+                lever_arm_b: Vector3::from(c.transducer_lever_arm_m),
+                origin: Geodetic {
+                    latitude_rad: c.origin_latitude_deg.to_radians(),
+                    longitude_rad: c.origin_longitude_deg.to_radians(),
+                    height_m: c.origin_height_m,
+                },
+                c_array_to_ned: *Rotation3::from_euler_angles(
+                    0.0,
+                    0.0,
+                    c.origin_yaw_deg.to_radians(),
+                )
+                .matrix(),
+                vehicle: PoseHistory::new(keep_s),
+                array: PoseHistory::new(keep_s + c.array_pose_max_gap_s),
+                array_std: (c.array_position_std_m, c.array_heading_std_deg.to_radians()),
+                sound_speed_m_s: c.sound_speed_m_s,
+                bias_on,
+                scale_on,
+                last_fused_s: None,
+                cfg: c.clone(),
+            }
+        });
+        RangeAid {
+            fusion,
+            counters: RangeCounters::default(),
+        }
+    }
+
+    /// Keeps the vehicle's pose for ranges whose sound left or arrived in the past.
+    pub fn after_imu(&mut self, s: &NavState) {
+        if let Some(f) = self.fusion.as_mut() {
+            f.vehicle.push(s.time_s, s.position, s.q_body_to_ned);
+        }
+    }
+
+    /// Time of the last fused range (s).
+    pub fn last_fused_s(&self) -> Option<f64> {
+        self.fusion.as_ref().and_then(|f| f.last_fused_s)
+    }
+
+    /// The estimated common range bias (m) and sound-speed scale error, when configured.
+    pub fn estimates(&self, core: &NavCore) -> Option<(f64, f64)> {
+        self.fusion.as_ref()?;
+        let i = ekf::USBL - ekf::CORE;
+        Some((core.markov_means[i], core.markov_means[i + 1]))
+    }
+
+    /// Takes a moving array's pose (its boat's GNSS and heading); counted and ignored when
+    /// invalid, or when the array is fixed.
+    pub fn on_array_pose(&mut self, m: &AcousticArrayPoseV1) {
+        let Some(f) = self.fusion.as_mut() else {
+            return;
+        };
+        let need = AcousticArrayPoseV1::VALID_POSITION | AcousticArrayPoseV1::VALID_HEADING;
+        let e = m.euler_rad;
+        let ok = m.validity & need == need
+            && m.latitude_rad.abs() <= std::f64::consts::FRAC_PI_2
+            && m.longitude_rad.abs() <= std::f64::consts::PI
+            && e.iter()
+                .all(|x| x.is_finite() && x.abs() <= 2.0 * std::f64::consts::PI)
+            && (m.validity & AcousticArrayPoseV1::VALID_HEIGHT == 0
+                || (-1000.0..=10000.0).contains(&m.height_m))
+            && (m.validity & AcousticArrayPoseV1::VALID_STD == 0
+                || ((0.0..=1000.0).contains(&m.horizontal_std_m)
+                    && (0.0..=std::f32::consts::PI).contains(&m.heading_std_rad)));
+        if f.cfg.array != ArrayKind::Moving || !ok {
+            self.counters.array_poses_invalid += 1;
+            return;
+        }
+        let height = if m.validity & AcousticArrayPoseV1::VALID_HEIGHT != 0 {
+            m.height_m
+        } else {
+            0.0
+        };
+        let (roll, pitch) = if m.validity & AcousticArrayPoseV1::VALID_TILT != 0 {
+            (e[0], e[1])
+        } else {
+            (0.0, 0.0)
+        };
+        if m.validity & AcousticArrayPoseV1::VALID_STD != 0 {
+            f.array_std = (
+                f64::from(m.horizontal_std_m).max(f.cfg.array_position_std_m),
+                f64::from(m.heading_std_rad).max(f.cfg.array_heading_std_deg.to_radians()),
+            );
+        }
+        f.array.push(
+            m.host_time_ns as f64 * 1e-9,
+            Geodetic {
+                latitude_rad: m.latitude_rad,
+                longitude_rad: m.longitude_rad,
+                height_m: height,
+            },
+            UnitQuaternion::from_euler_angles(roll, pitch, e[2]),
+        );
+        self.counters.array_poses += 1;
+    }
+
+    /// Takes the water's sound speed from a CTD, with `sound_speed_from_topic`.
+    pub fn on_sound_velocity(&mut self, m: &SoundVelocityV1) {
+        if let Some(f) = self
+            .fusion
+            .as_mut()
+            .filter(|f| f.cfg.sound_speed_from_topic)
+            && m.validity & SoundVelocityV1::VALID_SOUND_SPEED != 0
+            && (1375.0..=1650.0).contains(&m.sound_speed_m_s)
+        {
+            f.sound_speed_m_s = m.sound_speed_m_s;
+        }
+    }
+
+    /// Whether a range message is to be fused at all (configured, not too old); counted when
+    /// not.
+    pub fn accepts(&mut self, core: &NavCore, m: &AcousticRangesV1) -> bool {
+        let Some(f) = self.fusion.as_ref() else {
+            self.counters.unconfigured += 1;
+            return false;
+        };
+        let t = m.host_time_ns as f64 * 1e-9;
+        if core.state().time_s - t > f.cfg.max_latency_s {
+            self.counters.late += 1;
+            return false;
+        }
+        true
+    }
+
+    /// Fuses receiver `k`'s range of `m` (none when that receiver has no valid range).
+    pub fn fuse_one(
+        &mut self,
+        core: &mut NavCore,
+        m: &AcousticRangesV1,
+        k: usize,
+    ) -> Option<AidUpdate> {
+        let f = self.fusion.as_ref()?;
+        if !m.range_valid(k) {
+            return None;
+        }
+        let t_ns = m.host_time_ns;
+        let mut d = core.diagnostics(t_ns, AidSource::AcousticRange);
+        d.dimension = 1;
+        let z = m.range_m[k];
+        d.observation = [z, k as f64, 0.0];
+        if !(z.is_finite() && z > 0.0 && z <= f.cfg.max_range_m) || k >= f.receivers.len() {
+            self.counters.invalid += 1;
+            return Some(AidUpdate::rejected(d));
+        }
+        let Some(p) = f.predict(core.state(), k, t_ns as f64 * 1e-9, z) else {
+            self.counters.no_array_pose += 1;
+            return Some(AidUpdate::rejected(d));
+        };
+        core.propagate_covariance();
+        let markov = ekf::USBL - ekf::CORE;
+        let (bias, scale) = (core.markov_means[markov], core.markov_means[markov + 1]);
+        let ratio = f.cfg.device_sound_speed_m_s / f.sound_speed_m_s;
+        let predicted = p.range_m * ratio * (1.0 + scale) + bias;
+        let mut h = SMatrix::<f64, 1, { ekf::N }>::zeros();
+        let u = p.line_of_sight.transpose();
+        h.fixed_view_mut::<1, 3>(0, ekf::POS).copy_from(&u);
+        h.fixed_view_mut::<1, 3>(0, ekf::ATT)
+            .copy_from(&(u * skew(&p.lever_ned)));
+        if f.bias_on {
+            h[(0, ekf::USBL)] = 1.0;
+        }
+        if f.scale_on {
+            h[(0, ekf::USBL + 1)] = p.range_m * ratio;
+        }
+        let r = f.cfg.range_std_m.powi(2) + p.array_variance_m2;
+        d.observation_variance[0] = r;
+        let gate = f.cfg.gate_chi2;
+        let result = core.kf.update(
+            &SVector::<f64, 1>::new(predicted - z),
+            &h,
+            &SMatrix::<f64, 1, 1>::new(r),
+            gate,
+        );
+        let correction = NavCore::report(result, &mut d);
+        if correction.is_some() {
+            self.counters.fused += 1;
+            if let Some(f) = self.fusion.as_mut() {
+                f.last_fused_s = Some(t_ns as f64 * 1e-9);
+            }
+        } else {
+            self.counters.rejected += 1;
+        }
+        Some(AidUpdate {
+            diagnostics: d,
+            correction,
+        })
+    }
+}
+
+impl RangeFusion {
+    /// The legs of a range closed at `t` of measured length `z` (m).
+    fn legs(&self, t: f64, z: f64) -> ([Leg; 2], usize) {
+        let tau = z / self.cfg.device_sound_speed_m_s;
+        let back = t - 2.0 * tau - self.cfg.turnaround_s;
+        let leg = |vehicle_s, receiver_s| Leg {
+            vehicle_s,
+            receiver_s,
+        };
+        match (self.cfg.two_way, self.cfg.interrogator) {
+            (false, _) => ([leg(t - tau, t), leg(t - tau, t)], 1),
+            (true, Interrogator::Array) => ([leg(t - tau, t), leg(t - tau, back)], 2),
+            (true, Interrogator::Vehicle) => ([leg(t, t - tau), leg(back, t - tau)], 2),
+        }
+    }
+
+    /// Receiver `k`'s position at `t`, with the array's frame (array → NED) then; `None` for a
+    /// moving array without a pose around `t`.
+    fn receiver_at(&self, k: usize, t: f64) -> Option<(Geodetic, Matrix3<f64>)> {
+        let (origin, c) = match self.cfg.array {
+            ArrayKind::Fixed => (self.origin, self.c_array_to_ned),
+            ArrayKind::Moving => {
+                let gap = self.array.gap_around(t);
+                let p = self.array.at(t)?;
+                let held = p.outside_s <= 0.5 * self.cfg.array_pose_max_gap_s;
+                if !(gap <= self.cfg.array_pose_max_gap_s || held) {
+                    return None;
+                }
+                (p.position, *p.attitude.to_rotation_matrix().matrix())
+            }
+        };
+        Some((offset_position(&origin, &(c * self.receivers[k])), c))
+    }
+
+    /// What receiver `k`'s range closed at `t` (measured `z`) predicts for the vehicle's state
+    /// `s` (its past poses from the history, else the state's own).
+    fn predict(&self, s: &NavState, k: usize, t: f64, z: f64) -> Option<RangePrediction> {
+        let (legs, n) = self.legs(t, z);
+        let mut range = 0.0;
+        let mut los = Vector3::zeros();
+        let mut lever = Vector3::zeros();
+        let mut array_var = 0.0;
+        for leg in &legs[..n] {
+            let (position, attitude) = match self.vehicle.at(leg.vehicle_s) {
+                Some(p) => (p.position, p.attitude),
+                None => (s.position, s.q_body_to_ned),
+            };
+            let lever_ned = attitude * self.lever_arm_b;
+            let transducer = offset_position(&position, &lever_ned);
+            let (receiver, c) = self.receiver_at(k, leg.receiver_s)?;
+            let d = ned_offset(&receiver, &transducer);
+            let norm = d.norm().max(1e-3);
+            let u = d / norm;
+            range += norm;
+            los += u;
+            lever += lever_ned;
+            if self.cfg.array == ArrayKind::Moving {
+                // The array's horizontal position error and its heading error (which swings
+                // the receiver about the origin) along the line of sight.
+                let (sp, sh) = self.array_std;
+                let swing = Vector3::z().cross(&(c * self.receivers[k]));
+                array_var += sp * sp * (u.x * u.x + u.y * u.y) + (sh * u.dot(&swing)).powi(2);
+            }
+        }
+        let w = 1.0 / n as f64;
+        Some(RangePrediction {
+            range_m: range * w,
+            line_of_sight: los * w,
+            lever_ned: lever * w,
+            array_variance_m2: array_var * w,
+        })
+    }
+}
+
+/// The range from receiver `receiver` to the transducer at lever arm `lever_arm_b` of a vehicle
+/// at `vehicle` with attitude `c_body_to_ned` (m): the geometry the aid predicts with, for the
+/// simulator and the studies.
+pub fn slant_range(
+    receiver: &Geodetic,
+    vehicle: &Geodetic,
+    c_body_to_ned: &Matrix3<f64>,
+    lever_arm_b: &Vector3<f64>,
+) -> f64 {
+    ned_offset(
+        receiver,
+        &offset_position(vehicle, &(c_body_to_ned * lever_arm_b)),
+    )
+    .norm()
+}
+
+#[cfg(test)]
+mod tests;

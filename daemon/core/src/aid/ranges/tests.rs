@@ -1,0 +1,225 @@
+use super::*;
+use crate::ekf::StateVector;
+use crate::navigator::{NavConfig, Navigator};
+use crate::strapdown::initial_state;
+
+const LAT: f64 = 31.0;
+const LON: f64 = 120.0;
+
+fn origin() -> Geodetic {
+    Geodetic {
+        latitude_rad: LAT.to_radians(),
+        longitude_rad: LON.to_radians(),
+        height_m: -50.0,
+    }
+}
+
+fn beacon_config() -> RangesConfig {
+    RangesConfig {
+        origin_latitude_deg: LAT,
+        origin_longitude_deg: LON,
+        origin_height_m: -50.0,
+        receivers_m: vec![[0.0; 3], [0.0, 200.0, 0.0]],
+        interrogator: Interrogator::Vehicle,
+        ..Default::default()
+    }
+}
+
+fn ranges(t_s: f64, r: &[(usize, f64)]) -> AcousticRangesV1 {
+    let mut m = AcousticRangesV1 {
+        host_time_ns: (t_s * 1e9) as u64,
+        ..Default::default()
+    };
+    for &(k, x) in r {
+        m.range_m[k] = x;
+        m.validity |= AcousticRangesV1::VALID_RANGE << k;
+    }
+    m
+}
+
+/// A beacon's range pulls the position along the line of sight only: a vehicle believed 3 m
+/// north of where a range from a beacon due south puts it moves north-south, not east-west.
+#[test]
+fn a_beacons_range_corrects_along_its_line_of_sight() {
+    let cfg = NavConfig {
+        ranges: Some(RangesConfig {
+            bias_std_m: 0.0,
+            scale_std: 0.0,
+            ..beacon_config()
+        }),
+        initial_position_std_m: 10.0,
+        ..Default::default()
+    };
+    let believed = offset_position(&origin(), &Vector3::new(103.0, 0.0, 0.0));
+    let mut nav = Navigator::new(cfg, initial_state(10.0, believed, [0.0; 3], [0.0; 3]));
+    let d = nav.on_acoustic_ranges(&ranges(10.0, &[(0, 100.0)]));
+    let d0 = d[0].expect("receiver 0's diagnostics");
+    assert!(d[1].is_none() && d[2].is_none());
+    assert_eq!(d0.source, AidSource::AcousticRange as u32);
+    assert!(d0.flags & auvnav_shm_schema::AidDiagnosticsV1::FLAG_FUSED != 0);
+    assert!(
+        (d0.innovation[0] + 3.0).abs() < 1e-4,
+        "{}",
+        d0.innovation[0]
+    );
+    let now = ned_offset(&origin(), &nav.state().position);
+    assert!(now.x < 100.5 && now.x > 99.5, "north {}", now.x);
+    assert!(now.y.abs() < 1e-6, "east {}", now.y);
+    assert_eq!(nav.counters().ranges_fused, 1);
+    // An outlier is gated alone: receiver 1's absurd range is refused, receiver 0's taken.
+    let d = nav.on_acoustic_ranges(&ranges(10.0, &[(0, 100.0), (1, 400.0)]));
+    assert!(d[0].is_some_and(|d| d.flags & auvnav_shm_schema::AidDiagnosticsV1::FLAG_FUSED != 0));
+    assert!(d[1].is_some_and(|d| d.test_ratio > 1.0));
+    let c = nav.counters();
+    assert_eq!((c.ranges_fused, c.ranges_rejected), (2, 1));
+    // A receiver the configuration does not place, and a range beyond the longest: invalid.
+    nav.on_acoustic_ranges(&ranges(10.0, &[(3, 100.0), (0, 9000.0)]));
+    assert_eq!(nav.counters().ranges_invalid, 2);
+}
+
+/// The range of a vehicle moving during the ping is the two legs' mean, each where the ends were
+/// when the sound left and arrived, for either interrogator, and the water's sound speed scales
+/// the device's ranges.
+#[test]
+fn the_ping_is_evaluated_where_each_end_was() {
+    let speed = Vector3::new(0.0, 3.0, 0.0); // east, m/s
+    let start = offset_position(&origin(), &Vector3::new(-750.0, 0.0, 0.0));
+    let at = |t: f64| offset_position(&start, &(speed * t));
+    for interrogator in [Interrogator::Vehicle, Interrogator::Array] {
+        let cfg = RangesConfig {
+            interrogator,
+            turnaround_s: 0.05,
+            device_sound_speed_m_s: 1500.0,
+            sound_speed_m_s: 1500.0,
+            ..beacon_config()
+        };
+        let mut kf = ErrorFilter::new(&StateVector::zeros());
+        let mut aid = RangeAid::new(Some(&cfg), &mut kf);
+        for i in 0..=300 {
+            let t = i as f64 * 0.01;
+            aid.after_imu(&initial_state(t, at(t), speed.into(), [0.0; 3]));
+        }
+        let f = aid.fusion.as_ref().expect("configured");
+        // The exact two-way path for a range closed at t = 2.5 s, by fixed-point iteration on
+        // the travel time.
+        let beacon = origin();
+        let t = 2.5;
+        let dist = |a: &Geodetic| ned_offset(&beacon, a).norm();
+        let mut z: f64 = 750.0;
+        for _ in 0..20 {
+            let tau = z / 1500.0;
+            z = match interrogator {
+                Interrogator::Vehicle => 0.5 * (dist(&at(t)) + dist(&at(t - 2.0 * tau - 0.05))),
+                Interrogator::Array => dist(&at(t - tau)),
+            };
+        }
+        let p = f
+            .predict(&initial_state(t, at(t), [0.0; 3], [0.0; 3]), 0, t, z)
+            .expect("prediction");
+        assert!(
+            (p.range_m - z).abs() < 2e-4,
+            "{interrogator:?}: predicted {} against {z}",
+            p.range_m
+        );
+        // Where the vehicle is at the range's time is not where the sound met it: evaluated
+        // there, the range is off by centimetres.
+        let naive = dist(&at(t));
+        assert!(
+            (naive - z).abs() > 5e-3,
+            "{interrogator:?}: {naive} against {z}"
+        );
+    }
+    // A device that assumed 1500 m/s in water of 1530 m/s reports 1500/1530 of the range.
+    let cfg = NavConfig {
+        ranges: Some(RangesConfig {
+            sound_speed_m_s: 1530.0,
+            bias_std_m: 0.0,
+            scale_std: 0.0,
+            ..beacon_config()
+        }),
+        ..Default::default()
+    };
+    let here = offset_position(&origin(), &Vector3::new(300.0, 0.0, 0.0));
+    let mut nav = Navigator::new(cfg, initial_state(1.0, here, [0.0; 3], [0.0; 3]));
+    let d = nav.on_acoustic_ranges(&ranges(1.0, &[(0, 300.0 * 1500.0 / 1530.0)]))[0]
+        .expect("diagnostics");
+    assert!(d.innovation[0].abs() < 1e-3, "{}", d.innovation[0]);
+}
+
+/// A moving array's ranges need its pose at the time: without one they are counted, with one
+/// the receiver is placed from the boat's position and heading.
+#[test]
+fn a_moving_arrays_receivers_are_placed_from_its_pose() {
+    let cfg = NavConfig {
+        ranges: Some(RangesConfig {
+            array: ArrayKind::Moving,
+            // A receiver 2 m to starboard of the antenna, 10 m down.
+            receivers_m: vec![[0.0, 2.0, 10.0]],
+            two_way: false,
+            bias_std_m: 0.0,
+            scale_std: 0.0,
+            array_position_std_m: 0.0,
+            array_heading_std_deg: 0.0,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    let boat = Geodetic {
+        latitude_rad: LAT.to_radians(),
+        longitude_rad: LON.to_radians(),
+        height_m: 0.0,
+    };
+    // The vehicle 40 m below the antenna.
+    let vehicle = offset_position(&boat, &Vector3::new(0.0, 0.0, 40.0));
+    let mut nav = Navigator::new(cfg, initial_state(5.0, vehicle, [0.0; 3], [0.0; 3]));
+    nav.on_acoustic_ranges(&ranges(5.0, &[(0, 30.0)]));
+    assert_eq!(nav.counters().ranges_without_array_pose, 1);
+    let pose = |t: f64, heading_deg: f64| AcousticArrayPoseV1 {
+        host_time_ns: (t * 1e9) as u64,
+        latitude_rad: boat.latitude_rad,
+        longitude_rad: boat.longitude_rad,
+        euler_rad: [0.0, 0.0, heading_deg.to_radians()],
+        validity: AcousticArrayPoseV1::VALID_POSITION | AcousticArrayPoseV1::VALID_HEADING,
+        ..Default::default()
+    };
+    // Heading east: the receiver is 2 m south of the antenna, 10 m down.
+    nav.on_acoustic_array_pose(&pose(4.0, 90.0));
+    nav.on_acoustic_array_pose(&pose(5.5, 90.0));
+    nav.on_acoustic_array_pose(&AcousticArrayPoseV1 {
+        validity: 0,
+        ..pose(5.6, 0.0)
+    });
+    let expected = (2.0f64 * 2.0 + 30.0 * 30.0).sqrt();
+    let d = nav.on_acoustic_ranges(&ranges(5.0, &[(0, expected)]))[0].expect("diagnostics");
+    assert!(d.innovation[0].abs() < 1e-3, "{}", d.innovation[0]);
+    let c = nav.counters();
+    assert_eq!(
+        (c.array_poses, c.array_poses_invalid, c.ranges_fused),
+        (2, 1, 1)
+    );
+}
+
+#[test]
+fn configurations_that_make_no_sense_are_named() {
+    assert!(RangesConfig::default().problems().is_empty());
+    let bad = RangesConfig {
+        receivers_m: vec![],
+        range_std_m: 0.0,
+        ..Default::default()
+    };
+    let p = bad.problems();
+    assert!(
+        p.iter().any(|x| x.starts_with("ranges.receivers_m")),
+        "{p:?}"
+    );
+    assert!(
+        p.iter().any(|x| x.starts_with("ranges.range_std_m")),
+        "{p:?}"
+    );
+    let both = NavConfig {
+        ranges: Some(RangesConfig::default()),
+        usbl: Some(crate::aid::usbl::UsblConfig::default()),
+        ..Default::default()
+    };
+    assert!(both.problems().iter().any(|x| x.contains("tight")));
+}
