@@ -108,6 +108,8 @@ pub struct NavCounters {
     /// its `max_latency_s`.
     pub ranges_unconfigured: u64,
     pub ranges_late: u64,
+    /// Times the range aid reopened the position after a run of rejections.
+    pub ranges_reopened: u64,
     /// Ranges of a moving array without its pose at the time.
     pub ranges_without_array_pose: u64,
     /// Array poses taken, and refused (invalid, or the array is configured fixed).
@@ -138,7 +140,7 @@ pub struct Navigator {
     gnss: GnssAid,
     zero_velocity: ZeroVelocityAid,
     usbl: UsblAid,
-    ranges: RangeAid,
+    pub(crate) ranges: RangeAid,
     magnetometer: Option<MagnetometerAid>,
     magnetometer_unconfigured: u64,
     dvl_timeout_s: f64,
@@ -293,6 +295,7 @@ impl Navigator {
         if let Some(dx) = &u.correction {
             self.core.correct(dx);
             self.dvl.correct(dx);
+            self.ranges.correct(dx);
         }
         u.diagnostics
     }
@@ -664,6 +667,7 @@ impl Navigator {
             ranges_invalid: self.ranges.counters.invalid,
             ranges_unconfigured: self.ranges.counters.unconfigured,
             ranges_late: self.ranges.counters.late,
+            ranges_reopened: self.ranges.counters.reopened,
             ranges_without_array_pose: self.ranges.counters.no_array_pose,
             array_poses: self.ranges.counters.array_poses,
             array_poses_invalid: self.ranges.counters.array_poses_invalid,

@@ -21,6 +21,7 @@ pub mod percentiles;
 pub mod phases;
 pub mod process;
 pub use auvnav_studies::progress;
+pub mod ranges;
 pub mod replay;
 pub mod sitl_sensors;
 pub mod smooth;

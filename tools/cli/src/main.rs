@@ -100,6 +100,10 @@ enum MonteCarloWhat {
     /// Smoother consistency and gain: runs with matched sensor errors, a start and an end fix,
     /// smoothed; per-axis NEES of the forward and the smoothed position, and their errors.
     Smoother(auvnav_tools::smooth::montecarlo::SmootherMonteCarloOptions),
+    /// Tight acoustic ranges against the device's fixes fused loosely: a boat's four-receiver
+    /// array, three LBL beacons, a single transducer on a ship; 20-minute surveys with IMU, DVL
+    /// and depth, with multipath outliers
+    Ranges(auvnav_tools::ranges::RangesOptions),
 }
 
 #[derive(Subcommand)]
@@ -801,6 +805,11 @@ fn main() -> std::process::ExitCode {
         Command::Montecarlo { what } => match what {
             MonteCarloWhat::Nees(a) => auvnav_tools::montecarlo::run_nees(&a),
             MonteCarloWhat::Smoother(a) => auvnav_tools::smooth::montecarlo::run(&a),
+            MonteCarloWhat::Ranges(a) => print_report(
+                auvnav_tools::ranges::run(&a),
+                a.json,
+                |r: &Vec<auvnav_tools::ranges::RangesReport>| auvnav_tools::ranges::print(r),
+            ),
         },
         Command::Calibrate { what } => match what {
             CalibrateWhat::Dvl(a) => run_calibrate_dvl(&a),

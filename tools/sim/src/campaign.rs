@@ -181,6 +181,7 @@ pub fn campaign(
             },
             legs: legs(kind, length_m, &mut rng),
             station: None,
+            acoustic: None,
             seabed_depth_m: 100.0,
             effects: effects_table.clone(),
         };

@@ -260,6 +260,11 @@ effects! {
     usbl_sound_speed: f64 = "usbl.sound_speed", unit "m/s", range 1375.0..=1650.0, default [1500.0];
     /// Maximum slant range at which the USBL delivers fixes.
     usbl_max_range: f64 = "usbl.max_range", unit "m", range 1.0..=10000.0, default [2000.0];
+    /// Fraction of per-receiver ranges an acoustic system drops (no detection on that receiver).
+    usbl_dropout: f64 = "usbl.dropout", unit "1", range 0.0..=0.95, default [0.0];
+    /// Noise of a moving array's pose as its boat reports it: GNSS position (m, per horizontal
+    /// axis) and heading (deg), white per pose.
+    usbl_array_pose_noise: [f64; 2] = "usbl.array_pose_noise", unit "m, deg", range 0.0..=100.0, default [0.0, 0.0];
 
     /// White noise on depth.
     depth_noise: f64 = "depth.noise", unit "m", range 0.0..=10.0, default [0.0];

@@ -5,6 +5,7 @@
 //! the same log bytes.
 #![forbid(unsafe_code)]
 
+pub mod acoustic;
 pub mod campaign;
 pub mod effects;
 pub mod error;
@@ -169,6 +170,11 @@ pub struct SimSummary {
     pub dvl_water_track: u64,
     pub usbl: u64,
     pub usbl_outliers: u64,
+    /// Pings of the acoustic system of `[acoustic]` (one range message each), ranges hit by an
+    /// outlier, and its boat's pose messages.
+    pub acoustic_pings: u64,
+    pub acoustic_outliers: u64,
+    pub acoustic_array_poses: u64,
     pub depth: u64,
     pub magnetometer: u64,
     pub gnss: u64,
@@ -261,6 +267,14 @@ where
         (Some(st), Some(geo)) => Some(UsblModel::new(e, cfg.seed, st, &geo.position)),
         _ => None,
     };
+    let mut acoustic = s
+        .acoustic
+        .as_ref()
+        .map(|a| acoustic::AcousticModel::new(a, e, cfg.seed, &traj.start));
+    let pose_div = s
+        .acoustic
+        .as_ref()
+        .map_or(0, |a| divider(rates.imu_hz, a.pose_hz));
     let mut depth = DepthModel::new(e, cfg.seed);
     let mut mag = MagnetometerModel::new(e, cfg.seed);
     let mut gnss = GnssModel::new(e, cfg.seed);
@@ -351,6 +365,22 @@ where
                 }
             }
         }
+        if let Some(a) = acoustic.as_mut() {
+            a.step(dt, &now);
+            if pose_div > 0
+                && k % pose_div == 0
+                && let Some(p) = a.pose_message(t)
+            {
+                summary.acoustic_array_poses += 1;
+                sink(&LogMessage::AcousticArrayPose(p))?;
+            }
+            if usbl_div > 0 && k % usbl_div == 0 {
+                let m = a.ping(t, -now.position.height_m);
+                summary.acoustic_pings += 1;
+                summary.acoustic_outliers = a.outliers;
+                sink(&LogMessage::AcousticRanges(m))?;
+            }
+        }
         if depth_div > 0 && k % depth_div == 0 {
             summary.depth += 1;
             sink(&LogMessage::Depth(depth.sample(t, &now)))?;
@@ -434,6 +464,8 @@ pub fn simulate_to_log(cfg: &SimConfig, out: &Path) -> Result<SimSummary, SimErr
                 LogMessage::Gnss(x) => w.write(topic::GNSS, x)?,
                 LogMessage::SoundVelocity(x) => w.write(topic::SOUND_VELOCITY, x)?,
                 LogMessage::Attitude(x) => w.write(topic::ATTITUDE, x)?,
+                LogMessage::AcousticRanges(x) => w.write(topic::ACOUSTIC_RANGES, x)?,
+                LogMessage::AcousticArrayPose(x) => w.write(topic::ACOUSTIC_ARRAY_POSE, x)?,
                 LogMessage::Truth(x) => w.write(topic::TRUTH, x)?,
                 _ => {}
             }

@@ -22,6 +22,10 @@ pub struct Scenario {
     /// The USBL docking station (no USBL data without it).
     #[serde(default)]
     pub station: Option<Station>,
+    /// An acoustic positioning system ranged per receiver: LBL beacons, a boat's array, or a
+    /// single transducer on a ship (`crate::acoustic`; no range data without it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub acoustic: Option<crate::acoustic::AcousticSetup>,
     /// Sea floor depth below the surface (m, positive), for DVL altitude and bottom lock.
     #[serde(default = "default_seabed_depth")]
     pub seabed_depth_m: f64,
@@ -181,6 +185,12 @@ pub const BUILTIN: &[(&str, &str)] = &[
     ("dive", include_str!("scenarios/dive.toml")),
     ("moored", include_str!("scenarios/moored.toml")),
     ("survey", include_str!("scenarios/survey.toml")),
+    ("ranges_array", include_str!("scenarios/ranges_array.toml")),
+    ("ranges_lbl", include_str!("scenarios/ranges_lbl.toml")),
+    (
+        "ranges_single",
+        include_str!("scenarios/ranges_single.toml"),
+    ),
     ("align_moored", include_str!("scenarios/align_moored.toml")),
     (
         "align_straight",
@@ -303,6 +313,11 @@ impl Scenario {
                     self.range_check(&k("target_m_s"), *target_m_s, 0.0, 10.0)?;
                     self.range_check(&k("accel_m_s2"), *accel_m_s2, 0.001, 5.0)?;
                 }
+            }
+        }
+        if let Some(a) = &self.acoustic {
+            for (key, v, lo, hi) in a.checks() {
+                self.range_check(&key, v, lo, hi)?;
             }
         }
         if let Some(st) = &self.station {

@@ -53,6 +53,36 @@ where
     })
 }
 
+/// `base` with `settings` (`key=value`, TOML values) applied, each key one of `base`'s own
+/// (`what` names the table in messages).
+pub fn apply_settings<T>(base: &T, settings: &[String], what: &str) -> Result<T, crate::StudyError>
+where
+    T: serde::Serialize + serde::de::DeserializeOwned,
+{
+    use crate::error::usage;
+    let mut table = match toml::Table::try_from(base) {
+        Ok(t) => t,
+        Err(e) => usage!("the {what} configuration as a table: {e}"),
+    };
+    for s in settings {
+        let Some((k, v)) = s.split_once('=') else {
+            usage!("--set {s:?}: expected KEY=VALUE")
+        };
+        let Ok(value) = toml::from_str::<toml::Table>(&format!("x = {}", v.trim())) else {
+            usage!("--set {s:?}: the value is not a TOML value")
+        };
+        let k = k.trim();
+        if !table.contains_key(k) {
+            usage!("--set {s:?}: no {what} setting {k:?}");
+        }
+        table.insert(k.to_owned(), value["x"].clone());
+    }
+    match table.try_into() {
+        Ok(c) => Ok(c),
+        Err(e) => usage!("--set: {e}"),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -4,6 +4,8 @@
 //! - [`nees`]: filter consistency (`auvnav montecarlo nees`), and the sensor errors drawn from
 //!   the filter's own model that the smoother's study shares;
 //! - [`usbl`]: loose against tight USBL coupling on the docking scenario (S-USBL);
+//! - [`ranges`]: tight acoustic ranges against the device's fixes, for a moving array, LBL and a
+//!   single beacon;
 //! - [`align`]: the fine-alignment error models of S-ALIGN, simulated and on the Snapir segments;
 //! - [`perturbed_start`]: how a run's navigation starts (the truth perturbed by a draw of the initial
 //!   covariance), [`parallel`]: the one runner (each run depends only on its seed, so results do
@@ -20,6 +22,7 @@ pub mod nees;
 pub mod parallel;
 pub mod perturbed_start;
 pub mod progress;
+pub mod ranges;
 pub mod runs;
 pub mod usbl;
 

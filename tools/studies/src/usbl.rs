@@ -178,27 +178,7 @@ struct PendingFix {
 
 /// The USBL configuration with `settings` (`key=value`, TOML values) applied.
 pub fn apply_settings(base: &UsblConfig, settings: &[String]) -> Result<UsblConfig, StudyError> {
-    let mut table = match toml::Table::try_from(base) {
-        Ok(t) => t,
-        Err(e) => usage!("the USBL configuration as a table: {e}"),
-    };
-    for s in settings {
-        let Some((k, v)) = s.split_once('=') else {
-            usage!("--set {s:?}: expected KEY=VALUE")
-        };
-        let Ok(value) = toml::from_str::<toml::Table>(&format!("x = {}", v.trim())) else {
-            usage!("--set {s:?}: the value is not a TOML value")
-        };
-        let k = k.trim();
-        if !table.contains_key(k) {
-            usage!("--set {s:?}: no USBL setting {k:?}");
-        }
-        table.insert(k.to_owned(), value["x"].clone());
-    }
-    let cfg: UsblConfig = match table.try_into() {
-        Ok(c) => c,
-        Err(e) => usage!("--set: {e}"),
-    };
+    let cfg: UsblConfig = crate::args::apply_settings(base, settings, "USBL")?;
     let problems = cfg.problems();
     if !problems.is_empty() {
         usage!("{}", problems.join("; "));

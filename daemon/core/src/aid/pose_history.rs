@@ -45,6 +45,19 @@ impl PoseHistory {
         }
     }
 
+    /// Applies a navigation correction to every pose kept: the position moved by `-dp` (NED, m;
+    /// the error estimate, estimate minus truth) and the attitude turned by `phi` (the attitude
+    /// error estimate), as the filter corrects the current state. The errors change little over
+    /// the seconds kept, so the whole recent track takes the correction: a range evaluated on the
+    /// track just after another range corrected the state sees that correction.
+    pub fn correct(&mut self, dp: &nalgebra::Vector3<f64>, phi: &nalgebra::Vector3<f64>) {
+        let turn = UnitQuaternion::from_scaled_axis(*phi);
+        for p in self.poses.iter_mut() {
+            p.1 = crate::earth::offset_position(&p.1, &(-dp));
+            p.2 = turn * p.2;
+        }
+    }
+
     /// The newest pose's time.
     pub fn newest_s(&self) -> Option<f64> {
         self.poses.back().map(|p| p.0)

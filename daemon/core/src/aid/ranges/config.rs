@@ -101,6 +101,11 @@ pub struct RangesConfig {
     pub array_pose_max_gap_s: f64,
     /// Gate on each range's squared normalised innovation (chi-square, 1 dof). Default 10.83.
     pub gate_chi2: f64,
+    /// Consecutive rejected ranges of one receiver after which the position's covariance is
+    /// reopened by the last innovation: that receiver's ranges agree with one another, not with
+    /// the state (an outlier, or a linearisation from metres off, taken while the position was
+    /// still uncertain left it where the other receivers' ranges hold it). Default 10.
+    pub reopen_after: u32,
     /// Longest range accepted (m). Default 5000.
     pub max_range_m: f64,
     /// Oldest range accepted, by its time against the navigation state (s). Default 3.
@@ -132,6 +137,7 @@ impl Default for RangesConfig {
             array_heading_std_deg: 1.0,
             array_pose_max_gap_s: 2.0,
             gate_chi2: 10.83,
+            reopen_after: 10,
             max_range_m: 5000.0,
             max_latency_s: 3.0,
         }
@@ -198,6 +204,9 @@ impl RangesConfig {
         range("gate_chi2", self.gate_chi2, 0.1, 1e6);
         range("max_range_m", self.max_range_m, 1.0, 100_000.0);
         range("max_latency_s", self.max_latency_s, 0.0, 30.0);
+        if self.reopen_after == 0 {
+            out.push("ranges.reopen_after = 0: expected 1 or more".into());
+        }
         if !(1..=4).contains(&self.receivers_m.len()) {
             out.push(format!(
                 "ranges.receivers_m: {} receivers; expected 1 to 4 (the ranges message carries four)",

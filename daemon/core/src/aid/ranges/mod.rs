@@ -25,9 +25,11 @@ pub use config::{ArrayKind, Interrogator, RangesConfig};
 use super::pose_history::PoseHistory;
 use super::{AidUpdate, NavCore};
 use crate::earth::{Geodetic, ned_offset, offset_position};
-use crate::ekf::{self, ErrorFilter, skew};
+use crate::ekf::{self, ErrorFilter, StateVector, skew};
 use crate::strapdown::NavState;
-use auvnav_shm_schema::{AcousticArrayPoseV1, AcousticRangesV1, AidSource, SoundVelocityV1};
+use auvnav_shm_schema::{
+    AcousticArrayPoseV1, AcousticRangesV1, AidDiagnosticsV1, AidSource, SoundVelocityV1,
+};
 use nalgebra::{Matrix3, Rotation3, SMatrix, SVector, UnitQuaternion, Vector3};
 
 /// Counts of what became of the ranges (one per receiver's range) and the array poses.
@@ -45,6 +47,8 @@ pub struct RangeCounters {
     pub no_array_pose: u64,
     /// Range messages older than `max_latency_s`.
     pub late: u64,
+    /// Times the position's covariance was reopened after `reopen_after` rejections in a row.
+    pub reopened: u64,
     /// Array poses taken, and refused (invalid or out of range).
     pub array_poses: u64,
     pub array_poses_invalid: u64,
@@ -74,6 +78,8 @@ struct RangeFusion {
     bias_on: bool,
     scale_on: bool,
     last_fused_s: Option<f64>,
+    /// Ranges rejected in a row, per receiver.
+    rejected_in_a_row: [u32; 4],
 }
 
 /// One leg of the sound's path: the vehicle's time and the receiver's time.
@@ -83,15 +89,47 @@ struct Leg {
     receiver_s: f64,
 }
 
-/// What one range predicts: the geometric range (mean of the legs, m), its gradient with
-/// respect to the transducer's position (NED), the lever arm in NED (for the attitude), and the
-/// line of sight's projection of the array's own errors (m², added to the noise).
+/// What one range predicts: each leg's vector from the receiver to the vehicle's transducer
+/// (NED, m) and the lever arm in NED then, and the line of sight's projection of the array's own
+/// errors (m², added to the noise).
 #[derive(Debug, Clone, Copy)]
 pub struct RangePrediction {
+    legs: [(Vector3<f64>, Vector3<f64>); 2],
+    n: usize,
+    pub array_variance_m2: f64,
+}
+
+/// A range predicted at one state: the geometric range (mean of the legs, m), its gradient with
+/// respect to the transducer's position (NED) and the lever arm in NED (for the attitude).
+#[derive(Debug, Clone, Copy)]
+pub struct RangeAt {
     pub range_m: f64,
     pub line_of_sight: Vector3<f64>,
     pub lever_ned: Vector3<f64>,
-    pub array_variance_m2: f64,
+}
+
+impl RangePrediction {
+    /// The range with the transducer moved by `-e` (NED, m: the transducer's position error a
+    /// candidate correction removes).
+    pub fn at(&self, e: &Vector3<f64>) -> RangeAt {
+        let mut r = RangeAt {
+            range_m: 0.0,
+            line_of_sight: Vector3::zeros(),
+            lever_ned: Vector3::zeros(),
+        };
+        for (d, lever) in &self.legs[..self.n] {
+            let d = d - e;
+            let norm = d.norm().max(1e-3);
+            r.range_m += norm;
+            r.line_of_sight += d / norm;
+            r.lever_ned += lever;
+        }
+        let w = 1.0 / self.n as f64;
+        r.range_m *= w;
+        r.line_of_sight *= w;
+        r.lever_ned *= w;
+        r
+    }
 }
 
 impl RangeAid {
@@ -131,6 +169,7 @@ impl RangeAid {
                 bias_on,
                 scale_on,
                 last_fused_s: None,
+                rejected_in_a_row: [0; 4],
                 cfg: c.clone(),
             }
         });
@@ -144,6 +183,15 @@ impl RangeAid {
     pub fn after_imu(&mut self, s: &NavState) {
         if let Some(f) = self.fusion.as_mut() {
             f.vehicle.push(s.time_s, s.position, s.q_body_to_ned);
+        }
+    }
+
+    /// Moves the vehicle's recent track by a correction the filter applied to the state (any
+    /// aid's), so that the next range is evaluated on the corrected track.
+    pub fn correct(&mut self, dx: &crate::ekf::StateVector) {
+        if let Some(f) = self.fusion.as_mut() {
+            let v = |i: usize| Vector3::new(dx[i], dx[i + 1], dx[i + 2]);
+            f.vehicle.correct(&v(ekf::POS), &v(ekf::ATT));
         }
     }
 
@@ -191,12 +239,15 @@ impl RangeAid {
         } else {
             (0.0, 0.0)
         };
-        if m.validity & AcousticArrayPoseV1::VALID_STD != 0 {
-            f.array_std = (
-                f64::from(m.horizontal_std_m).max(f.cfg.array_position_std_m),
-                f64::from(m.heading_std_rad).max(f.cfg.array_heading_std_deg.to_radians()),
-            );
-        }
+        // The pose's own one-sigma when it gives one, else the configured.
+        f.array_std = if m.validity & AcousticArrayPoseV1::VALID_STD != 0 {
+            (f64::from(m.horizontal_std_m), f64::from(m.heading_std_rad))
+        } else {
+            (
+                f.cfg.array_position_std_m,
+                f.cfg.array_heading_std_deg.to_radians(),
+            )
+        };
         f.array.push(
             m.host_time_ns as f64 * 1e-9,
             Geodetic {
@@ -220,6 +271,25 @@ impl RangeAid {
         {
             f.sound_speed_m_s = m.sound_speed_m_s;
         }
+    }
+
+    /// The range receiver `k` of `m` should have measured (m, at the device's sound speed, with
+    /// the estimated bias and scale `errors`) for a vehicle whose recent track is the one kept
+    /// and whose state now is `s`: the aid's measurement model, for checks against data.
+    pub fn predicted_range(
+        &self,
+        s: &NavState,
+        m: &AcousticRangesV1,
+        k: usize,
+        errors: (f64, f64),
+    ) -> Option<f64> {
+        let f = self.fusion.as_ref()?;
+        if k >= f.receivers.len() || !m.range_valid(k) {
+            return None;
+        }
+        let p = f.predict(s, k, m.host_time_ns as f64 * 1e-9, m.range_m[k])?;
+        let ratio = f.cfg.device_sound_speed_m_s / f.sound_speed_m_s;
+        Some(p.at(&Vector3::zeros()).range_m * ratio * (1.0 + errors.1) + errors.0)
     }
 
     /// Whether a range message is to be fused at all (configured, not too old); counted when
@@ -265,28 +335,54 @@ impl RangeAid {
         let markov = ekf::USBL - ekf::CORE;
         let (bias, scale) = (core.markov_means[markov], core.markov_means[markov + 1]);
         let ratio = f.cfg.device_sound_speed_m_s / f.sound_speed_m_s;
-        let predicted = p.range_m * ratio * (1.0 + scale) + bias;
-        let mut h = SMatrix::<f64, 1, { ekf::N }>::zeros();
-        let u = p.line_of_sight.transpose();
-        h.fixed_view_mut::<1, 3>(0, ekf::POS).copy_from(&u);
-        h.fixed_view_mut::<1, 3>(0, ekf::ATT)
-            .copy_from(&(u * skew(&p.lever_ned)));
-        if f.bias_on {
-            h[(0, ekf::USBL)] = 1.0;
-        }
-        if f.scale_on {
-            h[(0, ekf::USBL + 1)] = p.range_m * ratio;
-        }
+        let (bias_on, scale_on) = (f.bias_on, f.scale_on);
+        // The prediction and its Jacobian at the state a correction `dx` would leave (an
+        // iterated update, linearised again there, was tried: no gain on the range studies).
+        let lever0 = p.at(&Vector3::zeros()).lever_ned;
+        let model = |dx: &StateVector| -> (f64, SMatrix<f64, 1, { ekf::N }>) {
+            let v = |i: usize| Vector3::new(dx[i], dx[i + 1], dx[i + 2]);
+            let e = v(ekf::POS) + skew(&lever0) * v(ekf::ATT);
+            let a = p.at(&e);
+            let (b, sc) = (bias - dx[ekf::USBL], scale - dx[ekf::USBL + 1]);
+            let mut h = SMatrix::<f64, 1, { ekf::N }>::zeros();
+            let u = a.line_of_sight.transpose();
+            h.fixed_view_mut::<1, 3>(0, ekf::POS).copy_from(&u);
+            h.fixed_view_mut::<1, 3>(0, ekf::ATT)
+                .copy_from(&(u * skew(&a.lever_ned)));
+            if bias_on {
+                h[(0, ekf::USBL)] = 1.0;
+            }
+            if scale_on {
+                h[(0, ekf::USBL + 1)] = a.range_m * ratio;
+            }
+            (a.range_m * ratio * (1.0 + sc) + b, h)
+        };
         let r = f.cfg.range_std_m.powi(2) + p.array_variance_m2;
         d.observation_variance[0] = r;
-        let gate = f.cfg.gate_chi2;
-        let result = core.kf.update(
-            &SVector::<f64, 1>::new(predicted - z),
-            &h,
-            &SMatrix::<f64, 1, 1>::new(r),
-            gate,
-        );
+        let (gate, reopen_after, max_range) =
+            (f.cfg.gate_chi2, f.cfg.reopen_after, f.cfg.max_range_m);
+        let (pred, h) = model(&StateVector::zeros());
+        let y = SVector::<f64, 1>::new(pred - z);
+        let r = SMatrix::<f64, 1, 1>::new(r);
+        let mut result = core.kf.update(&y, &h, &r, gate);
+        let gated = matches!(&result, Ok((_, rep)) if !rep.fused);
+        let f = self.fusion.as_mut()?;
+        let in_a_row = &mut f.rejected_in_a_row[k];
+        *in_a_row = if gated { *in_a_row + 1 } else { 0 };
+        if gated && *in_a_row >= reopen_after {
+            // The ranges agree with one another, not with the state: the position is what is
+            // wrong. Its covariance is reopened by this innovation (bounded by the longest
+            // range) and the range fused again.
+            *in_a_row = 0;
+            self.counters.reopened += 1;
+            d.flags |= AidDiagnosticsV1::FLAG_RESET;
+            let by = y[0].abs().min(max_range);
+            core.reopen(ekf::POS, [by * by; 3]);
+            result = core.kf.update(&y, &h, &r, gate);
+        }
+        let reset = d.flags & AidDiagnosticsV1::FLAG_RESET;
         let correction = NavCore::report(result, &mut d);
+        d.flags |= reset;
         if correction.is_some() {
             self.counters.fused += 1;
             if let Some(f) = self.fusion.as_mut() {
@@ -340,11 +436,12 @@ impl RangeFusion {
     /// `s` (its past poses from the history, else the state's own).
     fn predict(&self, s: &NavState, k: usize, t: f64, z: f64) -> Option<RangePrediction> {
         let (legs, n) = self.legs(t, z);
-        let mut range = 0.0;
-        let mut los = Vector3::zeros();
-        let mut lever = Vector3::zeros();
-        let mut array_var = 0.0;
-        for leg in &legs[..n] {
+        let mut out = RangePrediction {
+            legs: [(Vector3::zeros(), Vector3::zeros()); 2],
+            n,
+            array_variance_m2: 0.0,
+        };
+        for (i, leg) in legs[..n].iter().enumerate() {
             let (position, attitude) = match self.vehicle.at(leg.vehicle_s) {
                 Some(p) => (p.position, p.attitude),
                 None => (s.position, s.q_body_to_ned),
@@ -353,43 +450,19 @@ impl RangeFusion {
             let transducer = offset_position(&position, &lever_ned);
             let (receiver, c) = self.receiver_at(k, leg.receiver_s)?;
             let d = ned_offset(&receiver, &transducer);
-            let norm = d.norm().max(1e-3);
-            let u = d / norm;
-            range += norm;
-            los += u;
-            lever += lever_ned;
+            out.legs[i] = (d, lever_ned);
             if self.cfg.array == ArrayKind::Moving {
                 // The array's horizontal position error and its heading error (which swings
                 // the receiver about the origin) along the line of sight.
+                let u = d / d.norm().max(1e-3);
                 let (sp, sh) = self.array_std;
                 let swing = Vector3::z().cross(&(c * self.receivers[k]));
-                array_var += sp * sp * (u.x * u.x + u.y * u.y) + (sh * u.dot(&swing)).powi(2);
+                out.array_variance_m2 +=
+                    (sp * sp * (u.x * u.x + u.y * u.y) + (sh * u.dot(&swing)).powi(2)) / n as f64;
             }
         }
-        let w = 1.0 / n as f64;
-        Some(RangePrediction {
-            range_m: range * w,
-            line_of_sight: los * w,
-            lever_ned: lever * w,
-            array_variance_m2: array_var * w,
-        })
+        Some(out)
     }
-}
-
-/// The range from receiver `receiver` to the transducer at lever arm `lever_arm_b` of a vehicle
-/// at `vehicle` with attitude `c_body_to_ned` (m): the geometry the aid predicts with, for the
-/// simulator and the studies.
-pub fn slant_range(
-    receiver: &Geodetic,
-    vehicle: &Geodetic,
-    c_body_to_ned: &Matrix3<f64>,
-    lever_arm_b: &Vector3<f64>,
-) -> f64 {
-    ned_offset(
-        receiver,
-        &offset_position(vehicle, &(c_body_to_ned * lever_arm_b)),
-    )
-    .norm()
 }
 
 #[cfg(test)]
