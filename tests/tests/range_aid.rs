@@ -139,3 +139,43 @@ fn tight_lbl_ranges_take_a_sound_speed_error_the_devices_fixes_carry() {
     );
     assert!(r.tight.rejected > 0, "the outliers are refused");
 }
+
+/// The measured G2 dive: the range aid's model, with the receivers at the places discovery finds
+/// and the array placed from the topside's GNSS and heading, predicts every receiver's range
+/// from the device's own fix to within a decimetre RMS, with the multipath outliers counted.
+/// (The fixes come from the same ranges: this checks the model and the receivers' places
+/// against the device's solution, not the vehicle's position.)
+#[test]
+fn the_measured_dives_ranges_agree_with_the_model_at_the_devices_fixes() {
+    use auvnav_core::aid::ranges::{ArrayKind, RangesConfig};
+    let Some(dir) = auvnav_tests::measured_data("ugps-g2", "2024-12-05_22-12-34_g2_acoustic.csv")
+    else {
+        return;
+    };
+    let (messages, s) = auvnav_tools::import::ugps_messages(&dir).expect("import");
+    assert!(s.array_poses > 2000, "{s:?}");
+    let messages: Vec<LogMessage> = messages.into_iter().map(|(_, m)| m).collect();
+    use auvnav_tools::discover::command::{discover_messages, values_of};
+    let r = discover_messages(messages.iter());
+    let h = r
+        .effects
+        .iter()
+        .find(|e| e.name == "usbl.hydrophone_offset")
+        .and_then(|e| values_of(&e.value))
+        .expect("the receivers' places are found");
+    let cfg = RangesConfig {
+        array: ArrayKind::Moving,
+        receivers_m: (0..4)
+            .map(|k| [h[3 * k], h[3 * k + 1], h[3 * k + 2]])
+            .collect(),
+        ..Default::default()
+    };
+    let m = auvnav_tools::ranges::measured_residuals(&messages, &cfg);
+    println!("{}", serde_json::to_string_pretty(&m).expect("json"));
+    assert!(m.fixes > 1500 && m.without_pose < m.fixes / 20, "{m:?}");
+    for r in &m.receivers {
+        assert!(r.ranges > 1200, "{r:?}");
+        assert!(r.rms_m < 0.1, "{r:?}");
+        assert!(r.outliers * 20 < r.ranges, "{r:?}");
+    }
+}

@@ -19,6 +19,8 @@ pub mod ekf;
 pub mod feed;
 pub mod nav_core;
 pub mod navigator;
+#[cfg(test)]
+mod range_aid_tests;
 pub mod session;
 pub mod smoother;
 pub mod strapdown;

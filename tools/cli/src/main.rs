@@ -717,6 +717,15 @@ fn run_import_ugps(a: &auvnav_tools::import::UgpsOptions) -> anyhow::Result<()> 
             s.repeated,
             s.malformed
         );
+        match &s.position_file {
+            Some(f) => eprintln!(
+                "  the array's pose (the topside's GNSS and heading) from {f}: {} poses; {} repeated rows and {} unusable left out",
+                s.array_poses, s.array_poses_repeated, s.array_poses_left_out
+            ),
+            None => eprintln!(
+                "  no *_g2_position.csv beside it: no array pose (the fixes stay relative to the topside)"
+            ),
+        }
     }
     Ok(())
 }

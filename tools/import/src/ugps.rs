@@ -37,6 +37,16 @@ pub struct UgpsSummary {
     pub duration_s: f64,
     /// Unix time of the first row (s).
     pub start_unix_s: f64,
+    /// The topside's position log beside the acoustic one (`*_g2_position.csv`), when there.
+    pub position_file: Option<String>,
+    /// The array's poses written (the topside's GNSS position and heading), and rows left out
+    /// (missing or unparsable fields, no fix, time going backwards, before the first acoustic
+    /// row).
+    pub array_poses: usize,
+    pub array_poses_left_out: usize,
+    /// Position rows repeating the previous pose (the file is written at 5 Hz whatever the GNSS
+    /// rate): left out, so that a held value does not stop the boat between fixes.
+    pub array_poses_repeated: usize,
 }
 
 /// The acoustic CSV of `input` (the file itself, or the one `*_g2_acoustic.csv` in a folder).
@@ -207,7 +217,104 @@ pub fn ugps_messages(input: &Path) -> Result<(Vec<(&'static str, LogMessage)>, U
             s.malformed
         );
     }
+    if let Some(position) = ugps_position_file(&file) {
+        s.position_file = Some(position.display().to_string());
+        let poses = ugps_array_poses(&position, s.start_unix_s, &mut s)?;
+        out.extend(poses);
+        // One time line: the poses between the acoustic updates (stable: an update and a pose
+        // of the same instant keep the file order, acoustic first).
+        out.sort_by_key(|(_, m)| match m {
+            LogMessage::AcousticRanges(x) => x.host_time_ns,
+            LogMessage::AcousticArrayPose(x) => x.host_time_ns,
+            _ => 0,
+        });
+    }
     Ok((out, s))
+}
+
+/// The topside's position log beside an acoustic log: `<prefix>_g2_position.csv`.
+fn ugps_position_file(acoustic: &Path) -> Option<PathBuf> {
+    let name = acoustic.file_name()?.to_str()?;
+    let prefix = name.strip_suffix("_g2_acoustic.csv")?;
+    let p = acoustic.with_file_name(format!("{prefix}_g2_position.csv"));
+    p.is_file().then_some(p)
+}
+
+/// The array's poses from the topside's position log (`timestamp, lat, lon, orientation,
+/// fix_quality, …`): its GNSS position and heading, on the acoustic log's time base (`t0`, Unix
+/// s). The log gives no one-sigma (the navigator's configured one applies).
+fn ugps_array_poses(
+    file: &Path,
+    t0: f64,
+    s: &mut UgpsSummary,
+) -> Result<Vec<(&'static str, LogMessage)>> {
+    use auvnav_shm_schema::AcousticArrayPoseV1 as P;
+    let mut reader = csv_reader(file)?;
+    let names = reader
+        .headers()
+        .read_context(|| format!("reading the header of {}", file.display()))?
+        .clone();
+    let col = |n: &str| -> Result<usize> {
+        names.iter().position(|x| x == n).ok_or_else(|| {
+            crate::ImportError::Malformed(format!("{}: no column {n:?}", file.display()))
+        })
+    };
+    let cols = [
+        col("timestamp")?,
+        col("lat")?,
+        col("lon")?,
+        col("orientation")?,
+        col("fix_quality")?,
+    ];
+    let mut out = Vec::new();
+    let mut last_t = f64::NEG_INFINITY;
+    let mut last_pose: Option<[u64; 3]> = None;
+    let mut f = csv::StringRecord::new();
+    while let Some(read) = next_record(&mut reader, &mut f, file)? {
+        if read.is_ok() && f.iter().all(str::is_empty) {
+            continue;
+        }
+        let v = cols.map(|k| f.get(k).and_then(|x| x.parse::<f64>().ok()));
+        let [Some(t), Some(lat), Some(lon), Some(heading), Some(quality)] = v else {
+            s.array_poses_left_out += 1;
+            continue;
+        };
+        let usable = read.is_ok()
+            && t.is_finite()
+            && t > last_t
+            && t >= t0
+            && quality > 0.0
+            && lat.abs() <= 90.0
+            && lon.abs() <= 180.0
+            && (0.0..=360.0).contains(&heading);
+        if !usable {
+            s.array_poses_left_out += 1;
+            continue;
+        }
+        last_t = t;
+        let pose = [lat.to_bits(), lon.to_bits(), heading.to_bits()];
+        if last_pose == Some(pose) {
+            s.array_poses_repeated += 1;
+            continue;
+        }
+        last_pose = Some(pose);
+        s.array_poses += 1;
+        let host = ns_of(t - t0);
+        out.push((
+            topic::ACOUSTIC_ARRAY_POSE,
+            LogMessage::AcousticArrayPose(P {
+                host_time_ns: host,
+                device_time_ns: host,
+                sequence: s.array_poses as u64,
+                latitude_rad: lat.to_radians(),
+                longitude_rad: lon.to_radians(),
+                euler_rad: [0.0, 0.0, heading.to_radians()],
+                validity: P::VALID_POSITION | P::VALID_HEADING | P::VALID_DEVICE_TIME,
+                ..Default::default()
+            }),
+        ));
+    }
+    Ok(out)
 }
 
 /// Imports a UGPS G2 acoustic log into a log at `out` (written atomically).
@@ -233,9 +340,20 @@ pub fn ugps(a: &UgpsOptions) -> Result<UgpsSummary> {
                 "distance_r0..r3 (valid_r*), x/y/z and std of the locator fix, nsd_r* and rssi_r*; receiver positions not in the log",
             )]),
         )?;
+        if summary.position_file.is_some() {
+            w.declare::<auvnav_shm_schema::AcousticArrayPoseV1>(
+                topic::ACOUSTIC_ARRAY_POSE,
+                &note(&[(
+                    "source",
+                    "lat, lon and orientation (the topside's heading) of *_g2_position.csv: the array frame the fixes x, y, z are in; no one-sigma in the log",
+                )]),
+            )?;
+        }
         for (t, m) in &messages {
-            if let LogMessage::AcousticRanges(x) = m {
-                w.write(t, x)?;
+            match m {
+                LogMessage::AcousticRanges(x) => w.write(t, x)?,
+                LogMessage::AcousticArrayPose(x) => w.write(t, x)?,
+                _ => {}
             }
         }
         Ok(())

@@ -3,6 +3,9 @@
 //! a user's scenario file has the same format. Unknown keys are errors.
 
 use super::effects::{EffectError, Effects};
+use auvnav_core::aid::ranges::{ArrayKind, Interrogator, RangesConfig};
+use auvnav_core::earth::Geodetic;
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -25,7 +28,7 @@ pub struct Scenario {
     /// An acoustic positioning system ranged per receiver: LBL beacons, a boat's array, or a
     /// single transducer on a ship (`crate::acoustic`; no range data without it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub acoustic: Option<crate::acoustic::AcousticSetup>,
+    pub acoustic: Option<AcousticSetup>,
     /// Sea floor depth below the surface (m, positive), for DVL altitude and bottom lock.
     #[serde(default = "default_seabed_depth")]
     pub seabed_depth_m: f64,
@@ -360,6 +363,154 @@ pub fn listing() -> String {
         s.push_str(&format!("{name:<16} {desc}\n"));
     }
     s
+}
+
+/// The geometry of an acoustic positioning system (`[acoustic]`; simulated in `crate::acoustic`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AcousticKind {
+    /// Beacons on the seabed at surveyed places; the vehicle pings.
+    Lbl,
+    /// A boat's array of receivers; the array pings.
+    Array,
+    /// One transducer on a ship; the ship pings.
+    Single,
+}
+
+/// The scenario's `[acoustic]` table.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AcousticSetup {
+    pub kind: AcousticKind,
+    /// LBL: each beacon's place (north and east of the start point, depth; m).
+    #[serde(default)]
+    pub beacons_m: Vec<[f64; 3]>,
+    /// Array and single: each receiver's place in the boat's frame (x forward, y starboard, z
+    /// down from its GNSS antenna; m).
+    #[serde(default)]
+    pub receivers_m: Vec<[f64; 3]>,
+    /// The boat follows the vehicle: it closes on the vehicle's horizontal position with this
+    /// time constant (s).
+    #[serde(default = "default_follow")]
+    pub boat_follow_s: f64,
+    /// …kept this far (north, east; m) from it…
+    #[serde(default)]
+    pub boat_offset_m: [f64; 2],
+    /// …and circling on this radius (m; 0: no circle) with this period (s).
+    #[serde(default)]
+    pub boat_circle_radius_m: f64,
+    #[serde(default = "default_circle_period")]
+    pub boat_circle_period_s: f64,
+    /// Rate of the boat's pose messages (Hz).
+    #[serde(default = "default_pose_hz")]
+    pub pose_hz: u32,
+    /// The vehicle's transducer in its body frame (m).
+    #[serde(default)]
+    pub transducer_lever_arm_m: [f64; 3],
+}
+
+fn default_follow() -> f64 {
+    60.0
+}
+fn default_circle_period() -> f64 {
+    600.0
+}
+fn default_pose_hz() -> u32 {
+    5
+}
+
+impl AcousticSetup {
+    /// The receivers in the array frame as configured (LBL: the beacons' offsets from the start
+    /// point at the surface, which is the array frame's origin).
+    pub fn receivers(&self) -> Vec<Vector3<f64>> {
+        match self.kind {
+            AcousticKind::Lbl => &self.beacons_m,
+            AcousticKind::Array | AcousticKind::Single => &self.receivers_m,
+        }
+        .iter()
+        .map(|r| Vector3::from(*r))
+        .collect()
+    }
+
+    /// Values to range-check: (key, value, low, high).
+    pub fn checks(&self) -> Vec<(String, f64, f64, f64)> {
+        let mut out = vec![
+            (
+                "acoustic.boat_follow_s".into(),
+                self.boat_follow_s,
+                1.0,
+                1e5,
+            ),
+            (
+                "acoustic.boat_circle_radius_m".into(),
+                self.boat_circle_radius_m,
+                0.0,
+                1e4,
+            ),
+            (
+                "acoustic.boat_circle_period_s".into(),
+                self.boat_circle_period_s,
+                10.0,
+                1e5,
+            ),
+            (
+                "acoustic.pose_hz".into(),
+                f64::from(self.pose_hz),
+                1.0,
+                100.0,
+            ),
+            (
+                "acoustic.receivers (count)".into(),
+                self.receivers().len() as f64,
+                1.0,
+                4.0,
+            ),
+        ];
+        for (k, r) in self.receivers().iter().enumerate() {
+            for i in 0..3 {
+                out.push((format!("acoustic.receiver[{k}][{i}]"), r[i], -2e4, 2e4));
+            }
+        }
+        for i in 0..2 {
+            out.push((
+                format!("acoustic.boat_offset_m[{i}]"),
+                self.boat_offset_m[i],
+                -1e4,
+                1e4,
+            ));
+        }
+        for i in 0..3 {
+            out.push((
+                format!("acoustic.transducer_lever_arm_m[{i}]"),
+                self.transducer_lever_arm_m[i],
+                -50.0,
+                50.0,
+            ));
+        }
+        out
+    }
+
+    /// The navigator's `[navigation.ranges]` for this system as configured (`start`: the
+    /// scenario's start point at the surface).
+    pub fn ranges_config(&self, start: &Geodetic) -> RangesConfig {
+        RangesConfig {
+            array: match self.kind {
+                AcousticKind::Lbl => ArrayKind::Fixed,
+                _ => ArrayKind::Moving,
+            },
+            origin_latitude_deg: start.latitude_rad.to_degrees(),
+            origin_longitude_deg: start.longitude_rad.to_degrees(),
+            origin_height_m: 0.0,
+            receivers_m: self.receivers().iter().map(|r| [r.x, r.y, r.z]).collect(),
+            transducer_lever_arm_m: self.transducer_lever_arm_m,
+            two_way: true,
+            interrogator: match self.kind {
+                AcousticKind::Lbl => Interrogator::Vehicle,
+                _ => Interrogator::Array,
+            },
+            ..Default::default()
+        }
+    }
 }
 
 #[cfg(test)]

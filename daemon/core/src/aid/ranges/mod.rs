@@ -466,4 +466,4 @@ impl RangeFusion {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -1,12 +1,14 @@
+//! The range aid's own model (the navigator's use of it: `crate::range_aid_tests`), and the
+//! helpers both share.
+
 use super::*;
 use crate::ekf::StateVector;
-use crate::navigator::{NavConfig, Navigator};
 use crate::strapdown::initial_state;
 
-const LAT: f64 = 31.0;
-const LON: f64 = 120.0;
+pub(crate) const LAT: f64 = 31.0;
+pub(crate) const LON: f64 = 120.0;
 
-fn origin() -> Geodetic {
+pub(crate) fn origin() -> Geodetic {
     Geodetic {
         latitude_rad: LAT.to_radians(),
         longitude_rad: LON.to_radians(),
@@ -14,7 +16,7 @@ fn origin() -> Geodetic {
     }
 }
 
-fn beacon_config() -> RangesConfig {
+pub(crate) fn beacon_config() -> RangesConfig {
     RangesConfig {
         origin_latitude_deg: LAT,
         origin_longitude_deg: LON,
@@ -25,7 +27,7 @@ fn beacon_config() -> RangesConfig {
     }
 }
 
-fn ranges(t_s: f64, r: &[(usize, f64)]) -> AcousticRangesV1 {
+pub(crate) fn ranges(t_s: f64, r: &[(usize, f64)]) -> AcousticRangesV1 {
     let mut m = AcousticRangesV1 {
         host_time_ns: (t_s * 1e9) as u64,
         ..Default::default()
@@ -37,49 +39,8 @@ fn ranges(t_s: f64, r: &[(usize, f64)]) -> AcousticRangesV1 {
     m
 }
 
-/// A beacon's range pulls the position along the line of sight only: a vehicle believed 3 m
-/// north of where a range from a beacon due south puts it moves north-south, not east-west.
-#[test]
-fn a_beacons_range_corrects_along_its_line_of_sight() {
-    let cfg = NavConfig {
-        ranges: Some(RangesConfig {
-            bias_std_m: 0.0,
-            scale_std: 0.0,
-            ..beacon_config()
-        }),
-        initial_position_std_m: 10.0,
-        ..Default::default()
-    };
-    let believed = offset_position(&origin(), &Vector3::new(103.0, 0.0, 0.0));
-    let mut nav = Navigator::new(cfg, initial_state(10.0, believed, [0.0; 3], [0.0; 3]));
-    let d = nav.on_acoustic_ranges(&ranges(10.0, &[(0, 100.0)]));
-    let d0 = d[0].expect("receiver 0's diagnostics");
-    assert!(d[1].is_none() && d[2].is_none());
-    assert_eq!(d0.source, AidSource::AcousticRange as u32);
-    assert!(d0.flags & auvnav_shm_schema::AidDiagnosticsV1::FLAG_FUSED != 0);
-    assert!(
-        (d0.innovation[0] + 3.0).abs() < 1e-4,
-        "{}",
-        d0.innovation[0]
-    );
-    let now = ned_offset(&origin(), &nav.state().position);
-    assert!(now.x < 100.5 && now.x > 99.5, "north {}", now.x);
-    assert!(now.y.abs() < 1e-6, "east {}", now.y);
-    assert_eq!(nav.counters().ranges_fused, 1);
-    // An outlier is gated alone: receiver 1's absurd range is refused, receiver 0's taken.
-    let d = nav.on_acoustic_ranges(&ranges(10.0, &[(0, 100.0), (1, 400.0)]));
-    assert!(d[0].is_some_and(|d| d.flags & auvnav_shm_schema::AidDiagnosticsV1::FLAG_FUSED != 0));
-    assert!(d[1].is_some_and(|d| d.test_ratio > 1.0));
-    let c = nav.counters();
-    assert_eq!((c.ranges_fused, c.ranges_rejected), (2, 1));
-    // A receiver the configuration does not place, and a range beyond the longest: invalid.
-    nav.on_acoustic_ranges(&ranges(10.0, &[(3, 100.0), (0, 9000.0)]));
-    assert_eq!(nav.counters().ranges_invalid, 2);
-}
-
 /// The range of a vehicle moving during the ping is the two legs' mean, each where the ends were
-/// when the sound left and arrived, for either interrogator, and the water's sound speed scales
-/// the device's ranges.
+/// when the sound left and arrived, for either interrogator.
 #[test]
 fn the_ping_is_evaluated_where_each_end_was() {
     let speed = Vector3::new(0.0, 3.0, 0.0); // east, m/s
@@ -130,144 +91,4 @@ fn the_ping_is_evaluated_where_each_end_was() {
             "{interrogator:?}: {naive} against {z}"
         );
     }
-    // A device that assumed 1500 m/s in water of 1530 m/s reports 1500/1530 of the range.
-    let cfg = NavConfig {
-        ranges: Some(RangesConfig {
-            sound_speed_m_s: 1530.0,
-            bias_std_m: 0.0,
-            scale_std: 0.0,
-            ..beacon_config()
-        }),
-        ..Default::default()
-    };
-    let here = offset_position(&origin(), &Vector3::new(300.0, 0.0, 0.0));
-    let mut nav = Navigator::new(cfg, initial_state(1.0, here, [0.0; 3], [0.0; 3]));
-    let d = nav.on_acoustic_ranges(&ranges(1.0, &[(0, 300.0 * 1500.0 / 1530.0)]))[0]
-        .expect("diagnostics");
-    assert!(d.innovation[0].abs() < 1e-3, "{}", d.innovation[0]);
-}
-
-/// A moving array's ranges need its pose at the time: without one they are counted, with one
-/// the receiver is placed from the boat's position and heading.
-#[test]
-fn a_moving_arrays_receivers_are_placed_from_its_pose() {
-    let cfg = NavConfig {
-        ranges: Some(RangesConfig {
-            array: ArrayKind::Moving,
-            // A receiver 2 m to starboard of the antenna, 10 m down.
-            receivers_m: vec![[0.0, 2.0, 10.0]],
-            two_way: false,
-            bias_std_m: 0.0,
-            scale_std: 0.0,
-            array_position_std_m: 0.0,
-            array_heading_std_deg: 0.0,
-            ..Default::default()
-        }),
-        ..Default::default()
-    };
-    let boat = Geodetic {
-        latitude_rad: LAT.to_radians(),
-        longitude_rad: LON.to_radians(),
-        height_m: 0.0,
-    };
-    // The vehicle 40 m below the antenna.
-    let vehicle = offset_position(&boat, &Vector3::new(0.0, 0.0, 40.0));
-    let mut nav = Navigator::new(cfg, initial_state(5.0, vehicle, [0.0; 3], [0.0; 3]));
-    nav.on_acoustic_ranges(&ranges(5.0, &[(0, 30.0)]));
-    assert_eq!(nav.counters().ranges_without_array_pose, 1);
-    let pose = |t: f64, heading_deg: f64| AcousticArrayPoseV1 {
-        host_time_ns: (t * 1e9) as u64,
-        latitude_rad: boat.latitude_rad,
-        longitude_rad: boat.longitude_rad,
-        euler_rad: [0.0, 0.0, heading_deg.to_radians()],
-        validity: AcousticArrayPoseV1::VALID_POSITION | AcousticArrayPoseV1::VALID_HEADING,
-        ..Default::default()
-    };
-    // Heading east: the receiver is 2 m south of the antenna, 10 m down.
-    nav.on_acoustic_array_pose(&pose(4.0, 90.0));
-    nav.on_acoustic_array_pose(&pose(5.5, 90.0));
-    nav.on_acoustic_array_pose(&AcousticArrayPoseV1 {
-        validity: 0,
-        ..pose(5.6, 0.0)
-    });
-    let expected = (2.0f64 * 2.0 + 30.0 * 30.0).sqrt();
-    let d = nav.on_acoustic_ranges(&ranges(5.0, &[(0, expected)]))[0].expect("diagnostics");
-    assert!(d.innovation[0].abs() < 1e-3, "{}", d.innovation[0]);
-    let c = nav.counters();
-    assert_eq!(
-        (c.array_poses, c.array_poses_invalid, c.ranges_fused),
-        (2, 1, 1)
-    );
-}
-
-#[test]
-fn configurations_that_make_no_sense_are_named() {
-    assert!(RangesConfig::default().problems().is_empty());
-    let bad = RangesConfig {
-        receivers_m: vec![],
-        range_std_m: 0.0,
-        ..Default::default()
-    };
-    let p = bad.problems();
-    assert!(
-        p.iter().any(|x| x.starts_with("ranges.receivers_m")),
-        "{p:?}"
-    );
-    assert!(
-        p.iter().any(|x| x.starts_with("ranges.range_std_m")),
-        "{p:?}"
-    );
-    let both = NavConfig {
-        ranges: Some(RangesConfig::default()),
-        usbl: Some(crate::aid::usbl::UsblConfig::default()),
-        ..Default::default()
-    };
-    assert!(both.problems().iter().any(|x| x.contains("tight")));
-}
-
-/// The ranges of one ping are fused one after the other, each on the track the previous one
-/// corrected: a vehicle believed 8 m off, ranged by three beacons at once with the ping's legs in
-/// the past, ends 0.75 m from the truth (a linearised range taken from 8 m off at 42 m leaves
-/// its sphere by decimetres when the next range moves the state along it); evaluated on the
-/// uncorrected track, the later ranges undid the first one's correction and left it 5.3 m off.
-#[test]
-fn each_range_of_a_ping_sees_the_correction_of_the_one_before() {
-    let cfg = NavConfig {
-        ranges: Some(RangesConfig {
-            receivers_m: vec![[-30.0, -30.0, 0.0], [180.0, -30.0, 0.0], [75.0, 150.0, 0.0]],
-            bias_std_m: 0.0,
-            scale_std: 0.0,
-            range_std_m: 0.05,
-            ..beacon_config()
-        }),
-        initial_position_std_m: 3.0,
-        ..Default::default()
-    };
-    let truth = origin();
-    let believed = offset_position(&truth, &Vector3::new(-0.4, -8.3, 0.0));
-    let mut nav = Navigator::new(
-        cfg.clone(),
-        initial_state(0.0, believed, [0.0; 3], [0.0; 3]),
-    );
-    // A still vehicle's recent track (the legs of a 180 m range reach 0.24 s back).
-    let mut track = initial_state(0.0, believed, [0.0; 3], [0.0; 3]);
-    for i in 0..=100 {
-        track.time_s = i as f64 * 0.01;
-        nav.ranges.after_imu(&track);
-    }
-    let beacons = cfg.ranges.as_ref().expect("ranges").receivers_m.clone();
-    let truth_ranges: Vec<(usize, f64)> = beacons
-        .iter()
-        .enumerate()
-        .map(|(k, b)| {
-            let at = offset_position(&origin(), &Vector3::from(*b));
-            (k, ned_offset(&at, &truth).norm())
-        })
-        .collect();
-    nav.on_acoustic_ranges(&ranges(1.0, &truth_ranges));
-    let err = ned_offset(&truth, &nav.state().position);
-    assert!(
-        err.xy().norm() < 1.0,
-        "horizontal error after one ping {err}"
-    );
 }
