@@ -171,6 +171,24 @@ pub fn print_report(r: &ReplayReport) {
             n.usbl_fused, n.usbl_rejected, n.usbl_reopened, n.usbl_invalid, n.aid_late
         );
     }
+    if n.ranges_unconfigured > 0 {
+        println!(
+            "  {} acoustic range messages not used (no [navigation.ranges]: docs/ranges.md)",
+            n.ranges_unconfigured
+        );
+    } else if r.counts.acoustic_ranges > 0 {
+        println!(
+            "  acoustic ranges: {} fused, {} rejected by the gate ({} reopenings), {} invalid, {} without the array's pose, {} late; {} array poses ({} refused)",
+            n.ranges_fused,
+            n.ranges_rejected,
+            n.ranges_reopened,
+            n.ranges_invalid,
+            n.ranges_without_array_pose,
+            n.ranges_late,
+            n.array_poses,
+            n.array_poses_invalid
+        );
+    }
     if n.magnetometer_unconfigured > 0 {
         println!(
             "  {} magnetometer readings not used (no [navigation.magnetometer])",

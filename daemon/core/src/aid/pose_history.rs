@@ -2,18 +2,30 @@
 //! acoustic array — so that an acoustic measurement can be evaluated where each end was when the
 //! sound left or arrived.
 
-use crate::earth::Geodetic;
-use nalgebra::UnitQuaternion;
+use crate::earth::{Geodetic, offset_position};
+use nalgebra::{UnitQuaternion, Vector3};
 use std::collections::VecDeque;
 
-/// A pose: time (s), position, attitude (body or array frame → NED).
-pub type Pose = (f64, Geodetic, UnitQuaternion<f64>);
+/// A pose as recorded, with the corrections applied to the history up to then (so that a later
+/// correction applies to it without touching every pose kept).
+#[derive(Debug, Clone, Copy)]
+struct Pose {
+    t: f64,
+    position: Geodetic,
+    attitude: UnitQuaternion<f64>,
+    shift_at_push: Vector3<f64>,
+    turn_at_push: UnitQuaternion<f64>,
+}
 
 /// Poses in time order, kept for `keep_s` behind the newest.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct PoseHistory {
     poses: VecDeque<Pose>,
     keep_s: f64,
+    /// The corrections applied so far: the sum of the position moves (NED, m) and the product
+    /// of the attitude turns.
+    shift: Vector3<f64>,
+    turn: UnitQuaternion<f64>,
 }
 
 /// A pose looked up at a time, and how far that time lies outside the recorded span (s; 0
@@ -31,16 +43,24 @@ impl PoseHistory {
         PoseHistory {
             poses: VecDeque::new(),
             keep_s,
+            shift: Vector3::zeros(),
+            turn: UnitQuaternion::identity(),
         }
     }
 
     /// Adds the newest pose (one older than the newest is ignored) and drops the expired ones.
     pub fn push(&mut self, t: f64, position: Geodetic, attitude: UnitQuaternion<f64>) {
-        if self.poses.back().is_some_and(|p| p.0 >= t) {
+        if self.poses.back().is_some_and(|p| p.t >= t) {
             return;
         }
-        self.poses.push_back((t, position, attitude));
-        while self.poses.front().is_some_and(|p| t - p.0 > self.keep_s) {
+        self.poses.push_back(Pose {
+            t,
+            position,
+            attitude,
+            shift_at_push: self.shift,
+            turn_at_push: self.turn,
+        });
+        while self.poses.front().is_some_and(|p| t - p.t > self.keep_s) {
             self.poses.pop_front();
         }
     }
@@ -49,61 +69,74 @@ impl PoseHistory {
     /// the error estimate, estimate minus truth) and the attitude turned by `phi` (the attitude
     /// error estimate), as the filter corrects the current state. The errors change little over
     /// the seconds kept, so the whole recent track takes the correction: a range evaluated on the
-    /// track just after another range corrected the state sees that correction.
-    pub fn correct(&mut self, dp: &nalgebra::Vector3<f64>, phi: &nalgebra::Vector3<f64>) {
-        let turn = UnitQuaternion::from_scaled_axis(*phi);
-        for p in self.poses.iter_mut() {
-            p.1 = crate::earth::offset_position(&p.1, &(-dp));
-            p.2 = turn * p.2;
-        }
+    /// track just after another range corrected the state sees that correction. Constant time:
+    /// the corrections are summed and applied to a pose when it is looked up.
+    pub fn correct(&mut self, dp: &Vector3<f64>, phi: &Vector3<f64>) {
+        self.shift -= dp;
+        self.turn = UnitQuaternion::from_scaled_axis(*phi) * self.turn;
+    }
+
+    /// A kept pose with the corrections applied since it was recorded.
+    fn corrected(&self, p: &Pose) -> (Geodetic, UnitQuaternion<f64>) {
+        let moved = self.shift - p.shift_at_push;
+        let position = if moved == Vector3::zeros() {
+            p.position
+        } else {
+            offset_position(&p.position, &moved)
+        };
+        (position, self.turn * p.turn_at_push.inverse() * p.attitude)
     }
 
     /// The newest pose's time.
     pub fn newest_s(&self) -> Option<f64> {
-        self.poses.back().map(|p| p.0)
+        self.poses.back().map(|p| p.t)
     }
 
     /// The pose at `t`: linear between the recorded poses (position) and spherical (attitude);
     /// the oldest or newest one outside them, with how far outside.
     pub fn at(&self, t: f64) -> Option<PoseAt> {
-        let after = self.poses.partition_point(|p| p.0 < t);
-        let pose = |p: &Pose, outside_s: f64| PoseAt {
-            position: p.1,
-            attitude: p.2,
-            outside_s,
+        let after = self.poses.partition_point(|p| p.t < t);
+        let pose = |p: &Pose, outside_s: f64| {
+            let (position, attitude) = self.corrected(p);
+            PoseAt {
+                position,
+                attitude,
+                outside_s,
+            }
         };
         match (
             after.checked_sub(1).and_then(|i| self.poses.get(i)),
             self.poses.get(after),
         ) {
-            (Some(a), Some(b)) if b.0 > a.0 => {
-                let w = (t - a.0) / (b.0 - a.0);
+            (Some(a), Some(b)) if b.t > a.t => {
+                let w = (t - a.t) / (b.t - a.t);
+                let (pa, qa) = self.corrected(a);
+                let (pb, qb) = self.corrected(b);
                 Some(PoseAt {
                     position: Geodetic {
-                        latitude_rad: a.1.latitude_rad + w * (b.1.latitude_rad - a.1.latitude_rad),
-                        longitude_rad: a.1.longitude_rad
-                            + w * (b.1.longitude_rad - a.1.longitude_rad),
-                        height_m: a.1.height_m + w * (b.1.height_m - a.1.height_m),
+                        latitude_rad: pa.latitude_rad + w * (pb.latitude_rad - pa.latitude_rad),
+                        longitude_rad: pa.longitude_rad + w * (pb.longitude_rad - pa.longitude_rad),
+                        height_m: pa.height_m + w * (pb.height_m - pa.height_m),
                     },
-                    attitude: a.2.slerp(&b.2, w),
+                    attitude: qa.slerp(&qb, w),
                     outside_s: 0.0,
                 })
             }
-            (_, Some(p)) => Some(pose(p, (p.0 - t).max(0.0))),
-            (Some(p), None) => Some(pose(p, (t - p.0).max(0.0))),
+            (_, Some(p)) => Some(pose(p, (p.t - t).max(0.0))),
+            (Some(p), None) => Some(pose(p, (t - p.t).max(0.0))),
             (None, None) => None,
         }
     }
 
     /// The gap (s) between the recorded poses around `t` (∞ outside them).
     pub fn gap_around(&self, t: f64) -> f64 {
-        let after = self.poses.partition_point(|p| p.0 < t);
+        let after = self.poses.partition_point(|p| p.t < t);
         match (
             after.checked_sub(1).and_then(|i| self.poses.get(i)),
             self.poses.get(after),
         ) {
-            (Some(a), Some(b)) => b.0 - a.0,
-            (None, Some(b)) if b.0 == t => 0.0,
+            (Some(a), Some(b)) => b.t - a.t,
+            (None, Some(b)) if b.t == t => 0.0,
             _ => f64::INFINITY,
         }
     }
