@@ -7,9 +7,9 @@ pub use auvnav_studies::ranges::*;
 pub fn print(reports: &[RangesReport]) {
     println!(
         "| geometry | runs | outliers | tight RMS (m) | loose RMS (m) | none RMS (m) | tight/loose | \
-         tight max (m) | divergent (tight/loose/none) |"
+         tight max (m) | divergent (tight/loose/none) | bias (m) | scale (ppm) |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for r in reports {
         let loose = r.loose.as_ref().map_or("no fix".to_string(), |l| {
             format!("{:.2}", l.horizontal_error_rms_m)
@@ -18,7 +18,7 @@ pub fn print(reports: &[RangesReport]) {
             .tight_over_loose
             .map_or("—".to_string(), |x| format!("{x:.2}"));
         println!(
-            "| {} | {} | {:.0} % | {:.2} | {} | {:.2} | {} | {:.2} | {}/{}/{} |",
+            "| {} | {} | {:.0} % | {:.2} | {} | {:.2} | {} | {:.2} | {}/{}/{} | {:.2} ± {:.2} | {:.0} ± {:.0} |",
             r.geometry,
             r.runs,
             100.0 * r.outlier_fraction,
@@ -30,6 +30,10 @@ pub fn print(reports: &[RangesReport]) {
             r.tight.divergent_runs,
             r.loose.as_ref().map_or(0, |l| l.divergent_runs),
             r.none.divergent_runs,
+            r.tight.range_bias_mean_m,
+            r.tight.range_bias_std_m,
+            1e6 * r.tight.range_scale_mean,
+            1e6 * r.tight.range_scale_std,
         );
     }
 }

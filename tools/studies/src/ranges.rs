@@ -82,6 +82,10 @@ pub struct ModeResult {
     /// Acoustic measurements fused and refused (tight: ranges; loose: fixes).
     pub fused: u64,
     pub rejected: u64,
+    /// Tight: the range aid's common bias (m) and sound-speed scale error at the end of the run
+    /// (0 where their states are off).
+    pub range_bias_m: f64,
+    pub range_scale: f64,
 }
 
 /// One run: the three ways.
@@ -108,6 +112,11 @@ pub struct ModeSummary {
     pub divergent_runs: usize,
     pub fused: u64,
     pub rejected: u64,
+    /// Mean and spread over the runs of the final bias (m) and scale estimates.
+    pub range_bias_mean_m: f64,
+    pub range_bias_std_m: f64,
+    pub range_scale_mean: f64,
+    pub range_scale_std: f64,
 }
 
 /// One geometry's Monte Carlo.
@@ -325,6 +334,9 @@ impl RangesStudy {
         } else {
             (c.ranges_fused, c.ranges_rejected + c.ranges_invalid)
         };
+        if let Some((bias, scale)) = nv.range_estimates() {
+            (r.range_bias_m, r.range_scale) = (bias, scale);
+        }
         r.horizontal_error_rms_m = (sum / n.max(1) as f64).sqrt();
         Ok(r)
     }
@@ -396,8 +408,20 @@ impl RangesStudy {
                 .count(),
             fused: per_run.iter().map(|r| f(r).fused).sum(),
             rejected: per_run.iter().map(|r| f(r).rejected).sum(),
+            range_bias_mean_m: mean_std(per_run.iter().map(|r| f(r).range_bias_m)).0,
+            range_bias_std_m: mean_std(per_run.iter().map(|r| f(r).range_bias_m)).1,
+            range_scale_mean: mean_std(per_run.iter().map(|r| f(r).range_scale)).0,
+            range_scale_std: mean_std(per_run.iter().map(|r| f(r).range_scale)).1,
         }
     }
+}
+
+/// Mean and standard deviation of `v` (0, 0 when empty).
+fn mean_std(v: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
+    let n = v.clone().count().max(1) as f64;
+    let mean = v.clone().sum::<f64>() / n;
+    let var = v.map(|x| (x - mean).powi(2)).sum::<f64>() / n;
+    (mean, var.sqrt())
 }
 
 impl crate::runs::RunStudy for RangesStudy {
