@@ -81,6 +81,54 @@ pub fn run(a: &ReplayArgs) -> anyhow::Result<ReplayReport> {
     Ok(replay(&a.options())?)
 }
 
+/// What became of the USBL fixes, the acoustic ranges and the magnetometer readings, when the log
+/// has them.
+fn print_aid_counts(n: &auvnav_core::navigator::NavCounters, counts: &auvnav_replay::ReplayCounts) {
+    if n.usbl_unconfigured > 0 {
+        println!(
+            "  {} USBL fixes not used (no [navigation.usbl]; --usbl tight uses a simulated log's station)",
+            n.usbl_unconfigured
+        );
+    } else if counts.usbl > 0 {
+        println!(
+            "  USBL: {} fused, {} rejected by the gate ({} reopenings), {} invalid, {} late",
+            n.usbl_fused, n.usbl_rejected, n.usbl_reopened, n.usbl_invalid, n.aid_late
+        );
+    }
+    if n.ranges_unconfigured > 0 {
+        println!(
+            "  {} acoustic range messages not used (no [navigation.ranges]: docs/ranges.md)",
+            n.ranges_unconfigured
+        );
+    } else if counts.acoustic_ranges > 0 {
+        println!(
+            "  acoustic ranges: {} fused, {} rejected by the gate ({} reopenings), {} invalid, {} without the array's pose, {} late; {} array poses ({} refused)",
+            n.ranges_fused,
+            n.ranges_rejected,
+            n.ranges_reopened,
+            n.ranges_invalid,
+            n.ranges_without_array_pose,
+            n.ranges_late,
+            n.array_poses,
+            n.array_poses_invalid
+        );
+    }
+    if n.magnetometer_unconfigured > 0 {
+        println!(
+            "  {} magnetometer readings not used (no [navigation.magnetometer])",
+            n.magnetometer_unconfigured
+        );
+    } else if counts.magnetometer > 0 {
+        println!(
+            "  magnetometer heading: {} fused, {} rejected by the gate, {} disturbed, {} invalid",
+            n.magnetometer_fused,
+            n.magnetometer_rejected,
+            n.magnetometer_disturbed,
+            n.magnetometer_invalid
+        );
+    }
+}
+
 /// Prints a replay report for people.
 pub fn print_report(r: &ReplayReport) {
     println!("auvnav replay: {}", r.log);
@@ -160,49 +208,7 @@ pub fn print_report(r: &ReplayReport) {
         n.gnss_fused,
         n.gnss_rejected
     );
-    if n.usbl_unconfigured > 0 {
-        println!(
-            "  {} USBL fixes not used (no [navigation.usbl]; --usbl tight uses a simulated log's station)",
-            n.usbl_unconfigured
-        );
-    } else if r.counts.usbl > 0 {
-        println!(
-            "  USBL: {} fused, {} rejected by the gate ({} reopenings), {} invalid, {} late",
-            n.usbl_fused, n.usbl_rejected, n.usbl_reopened, n.usbl_invalid, n.aid_late
-        );
-    }
-    if n.ranges_unconfigured > 0 {
-        println!(
-            "  {} acoustic range messages not used (no [navigation.ranges]: docs/ranges.md)",
-            n.ranges_unconfigured
-        );
-    } else if r.counts.acoustic_ranges > 0 {
-        println!(
-            "  acoustic ranges: {} fused, {} rejected by the gate ({} reopenings), {} invalid, {} without the array's pose, {} late; {} array poses ({} refused)",
-            n.ranges_fused,
-            n.ranges_rejected,
-            n.ranges_reopened,
-            n.ranges_invalid,
-            n.ranges_without_array_pose,
-            n.ranges_late,
-            n.array_poses,
-            n.array_poses_invalid
-        );
-    }
-    if n.magnetometer_unconfigured > 0 {
-        println!(
-            "  {} magnetometer readings not used (no [navigation.magnetometer])",
-            n.magnetometer_unconfigured
-        );
-    } else if r.counts.magnetometer > 0 {
-        println!(
-            "  magnetometer heading: {} fused, {} rejected by the gate, {} disturbed, {} invalid",
-            n.magnetometer_fused,
-            n.magnetometer_rejected,
-            n.magnetometer_disturbed,
-            n.magnetometer_invalid
-        );
-    }
+    print_aid_counts(n, &r.counts);
     let skipped = n.imu_out_of_order + n.imu_invalid + n.aid_late + r.counts.before_start;
     if skipped > 0 || n.imu_gaps > 0 {
         println!(

@@ -217,19 +217,30 @@ pub fn ugps_messages(input: &Path) -> Result<(Vec<(&'static str, LogMessage)>, U
             s.malformed
         );
     }
-    if let Some(position) = ugps_position_file(&file) {
-        s.position_file = Some(position.display().to_string());
-        let poses = ugps_array_poses(&position, s.start_unix_s, &mut s)?;
-        out.extend(poses);
-        // One time line: the poses between the acoustic updates (stable: an update and a pose
-        // of the same instant keep the file order, acoustic first).
-        out.sort_by_key(|(_, m)| match m {
-            LogMessage::AcousticRanges(x) => x.host_time_ns,
-            LogMessage::AcousticArrayPose(x) => x.host_time_ns,
-            _ => 0,
-        });
-    }
+    add_array_poses(&file, &mut out, &mut s)?;
     Ok((out, s))
+}
+
+/// The topside's poses beside the acoustic log `file` (when there), merged into `out` on one time
+/// line: the poses between the acoustic updates (stable: an update and a pose of the same instant
+/// keep the file order, acoustic first).
+fn add_array_poses(
+    file: &Path,
+    out: &mut Vec<(&'static str, LogMessage)>,
+    s: &mut UgpsSummary,
+) -> Result<()> {
+    let Some(position) = ugps_position_file(file) else {
+        return Ok(());
+    };
+    s.position_file = Some(position.display().to_string());
+    let poses = ugps_array_poses(&position, s.start_unix_s, s)?;
+    out.extend(poses);
+    out.sort_by_key(|(_, m)| match m {
+        LogMessage::AcousticRanges(x) => x.host_time_ns,
+        LogMessage::AcousticArrayPose(x) => x.host_time_ns,
+        _ => 0,
+    });
+    Ok(())
 }
 
 /// The topside's position log beside an acoustic log: `<prefix>_g2_position.csv`.
