@@ -213,7 +213,8 @@ impl AcousticModel {
                 continue;
             };
             if z > e.usbl_max_range || self.rng.uniform() < e.usbl_dropout {
-                // Drawn either way, so that the streams do not shift with the geometry.
+                // The outlier test's and the noise's draws are taken all the same (an outlier's
+                // magnitude draw is not: the stream is not aligned range by range).
                 self.rng.uniform();
                 self.rng.gauss(1.0);
                 continue;

@@ -109,7 +109,7 @@ pub struct ModeSummary {
     /// Horizontal error RMS pooled over every epoch of every run (m).
     pub horizontal_error_rms_m: f64,
     /// The worst run's RMS and the largest error of any run at any time (m).
-    pub worst_run_rms_m: f64,
+    pub worst_run_horizontal_error_rms_m: f64,
     pub horizontal_error_max_m: f64,
     /// Runs whose error exceeded `divergence_m`.
     pub divergent_runs: usize,
@@ -394,7 +394,7 @@ impl RangesStudy {
                 .sum::<f64>()
                 / n)
                 .sqrt(),
-            worst_run_rms_m: per_run
+            worst_run_horizontal_error_rms_m: per_run
                 .iter()
                 .map(|r| f(r).horizontal_error_rms_m)
                 .fold(0.0, f64::max),
