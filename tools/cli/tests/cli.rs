@@ -242,6 +242,18 @@ fn every_scenario_log_is_decoded_by_the_python_mcap_reader() {
                 "docking: no usbl: {report}"
             );
         }
+        if name.starts_with("ranges_") {
+            assert!(
+                v["messages"]["acoustic_ranges"].as_u64().unwrap_or(0) > 0,
+                "{name}: no acoustic_ranges: {report}"
+            );
+        }
+        if name == "ranges_array" || name == "ranges_single" {
+            assert!(
+                v["messages"]["acoustic_array_pose"].as_u64().unwrap_or(0) > 0,
+                "{name}: no acoustic_array_pose: {report}"
+            );
+        }
         assert_eq!(v["header"]["producer"], "auvnav sim");
         // Decoded by the third party with the field names of our schema.
         assert!(v["first"]["imu"]["angular"].is_array(), "{report}");
