@@ -25,7 +25,7 @@ pub use config::{ArrayKind, Interrogator, RangesConfig};
 use super::pose_history::PoseHistory;
 use super::{AidUpdate, NavCore};
 use crate::earth::{Geodetic, ned_offset, offset_position};
-use crate::ekf::{self, ErrorFilter, StateVector, skew};
+use crate::ekf::{self, ErrorFilter, skew};
 use crate::strapdown::NavState;
 use auvnav_shm_schema::{
     AcousticArrayPoseV1, AcousticRangesV1, AidDiagnosticsV1, AidSource, SoundVelocityV1,
@@ -335,33 +335,25 @@ impl RangeAid {
         let markov = ekf::USBL - ekf::CORE;
         let (bias, scale) = (core.markov_means[markov], core.markov_means[markov + 1]);
         let ratio = f.cfg.device_sound_speed_m_s / f.sound_speed_m_s;
-        let (bias_on, scale_on) = (f.bias_on, f.scale_on);
-        // The prediction and its Jacobian at the state a correction `dx` would leave (an
-        // iterated update, linearised again there, was tried: no gain on the range studies).
-        let lever0 = p.at(&Vector3::zeros()).lever_ned;
-        let model = |dx: &StateVector| -> (f64, SMatrix<f64, 1, { ekf::N }>) {
-            let v = |i: usize| Vector3::new(dx[i], dx[i + 1], dx[i + 2]);
-            let e = v(ekf::POS) + skew(&lever0) * v(ekf::ATT);
-            let a = p.at(&e);
-            let (b, sc) = (bias - dx[ekf::USBL], scale - dx[ekf::USBL + 1]);
-            let mut h = SMatrix::<f64, 1, { ekf::N }>::zeros();
-            let u = a.line_of_sight.transpose();
-            h.fixed_view_mut::<1, 3>(0, ekf::POS).copy_from(&u);
-            h.fixed_view_mut::<1, 3>(0, ekf::ATT)
-                .copy_from(&(u * skew(&a.lever_ned)));
-            if bias_on {
-                h[(0, ekf::USBL)] = 1.0;
-            }
-            if scale_on {
-                h[(0, ekf::USBL + 1)] = a.range_m * ratio;
-            }
-            (a.range_m * ratio * (1.0 + sc) + b, h)
-        };
+        // The prediction and its Jacobian at the state (an iterated update, linearised again
+        // where the correction leaves the state, was tried: no gain on the range studies).
+        let a = p.at(&Vector3::zeros());
+        let mut h = SMatrix::<f64, 1, { ekf::N }>::zeros();
+        let u = a.line_of_sight.transpose();
+        h.fixed_view_mut::<1, 3>(0, ekf::POS).copy_from(&u);
+        h.fixed_view_mut::<1, 3>(0, ekf::ATT)
+            .copy_from(&(u * skew(&a.lever_ned)));
+        if f.bias_on {
+            h[(0, ekf::USBL)] = 1.0;
+        }
+        if f.scale_on {
+            h[(0, ekf::USBL + 1)] = a.range_m * ratio;
+        }
+        let pred = a.range_m * ratio * (1.0 + scale) + bias;
         let r = f.cfg.range_std_m.powi(2) + p.array_variance_m2;
         d.observation_variance[0] = r;
         let (gate, reopen_after, max_range) =
             (f.cfg.gate_chi2, f.cfg.reopen_after, f.cfg.max_range_m);
-        let (pred, h) = model(&StateVector::zeros());
         let y = SVector::<f64, 1>::new(pred - z);
         let r = SMatrix::<f64, 1, 1>::new(r);
         let mut result = core.kf.update(&y, &h, &r, gate);
