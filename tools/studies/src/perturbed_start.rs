@@ -1,6 +1,7 @@
-//! What the Monte Carlo studies (`auvnav montecarlo nees`, `auvnav usbl`) share besides the
-//! parallel runner (`crate::parallel`): how a run's navigation starts. The runs themselves feed
-//! the navigation session (`auvnav_core::feed`), as the daemon does.
+//! What the Monte Carlo studies (`auvnav montecarlo nees`, `auvnav usbl`, `auvnav montecarlo
+//! ranges`) share besides the parallel runner (`crate::parallel`): how a run's navigation starts
+//! and the run's own sensor errors. The runs themselves feed the navigation session
+//! (`auvnav_core::feed`), as the daemon does.
 
 use auvnav_core::earth;
 use auvnav_core::navigator::{NavConfig, initial_state};
@@ -42,4 +43,19 @@ pub fn perturbed_start(
     );
     s.q_body_to_ned = UnitQuaternion::from_scaled_axis(-phi) * s.q_body_to_ned;
     s
+}
+
+/// A run's own sensor errors, drawn from `cfg`'s initial uncertainty into `effects`: a gyro and an
+/// accelerometer bias per axis and a DVL scale-factor error (0.5 %), in that order from `rng`.
+pub fn draw_sensor_errors(
+    effects: &mut auvnav_sim::effects::Effects,
+    cfg: &NavConfig,
+    rng: &mut Rng,
+) -> Result<(), auvnav_sim::effects::EffectError> {
+    let mut draw3 = |s: f64| [rng.gauss(s), rng.gauss(s), rng.gauss(s)];
+    let gyro = draw3(cfg.initial_gyro_bias_std_deg_h);
+    let accel = draw3(cfg.initial_accel_bias_std_ug);
+    effects.set("imu.gyro_bias", &gyro)?;
+    effects.set("imu.accel_bias", &accel)?;
+    effects.set("dvl.scale_factor", &[1.0 + rng.gauss(0.005)])
 }

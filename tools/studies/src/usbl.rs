@@ -197,16 +197,7 @@ fn run_one(
 ) -> anyhow::Result<RunResult> {
     let mut rng = Rng::new(seed, "montecarlo.usbl");
     let mut effects = scenario.effects()?;
-    let draw3 = |rng: &mut Rng, s: f64| [rng.gauss(s), rng.gauss(s), rng.gauss(s)];
-    effects.set(
-        "imu.gyro_bias",
-        &draw3(&mut rng, cfg.initial_gyro_bias_std_deg_h),
-    )?;
-    effects.set(
-        "imu.accel_bias",
-        &draw3(&mut rng, cfg.initial_accel_bias_std_ug),
-    )?;
-    effects.set("dvl.scale_factor", &[1.0 + rng.gauss(0.005)])?;
+    crate::perturbed_start::draw_sensor_errors(&mut effects, cfg, &mut rng)?;
     effects.set("usbl.outlier_fraction", &[a.outliers])?;
     effects.set("usbl.array_yaw", &[a.array_yaw_error])?;
     effects.set("usbl.latency", &[a.latency])?;

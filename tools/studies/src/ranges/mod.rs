@@ -348,16 +348,7 @@ impl RangesStudy {
         let base = navigation_config();
         let mut rng = Rng::new(seed, "montecarlo.ranges");
         let mut effects = self.effects.clone();
-        let draw3 = |rng: &mut Rng, s: f64| [rng.gauss(s), rng.gauss(s), rng.gauss(s)];
-        effects.set(
-            "imu.gyro_bias",
-            &draw3(&mut rng, base.initial_gyro_bias_std_deg_h),
-        )?;
-        effects.set(
-            "imu.accel_bias",
-            &draw3(&mut rng, base.initial_accel_bias_std_ug),
-        )?;
-        effects.set("dvl.scale_factor", &[1.0 + rng.gauss(0.005)])?;
+        crate::perturbed_start::draw_sensor_errors(&mut effects, &base, &mut rng)?;
         effects.set("usbl.outlier_fraction", &[self.args.outliers])?;
         let (messages, summary) = sim::simulate_to_vec(&SimConfig {
             scenario: self.scenario.clone(),
