@@ -38,7 +38,7 @@ fail() { echo "FAIL: $*"; failures=$((failures + 1)); }
 step() { echo "== $*"; }
 
 for b in auvnav auvnavd auvnav-imu auvnav-dvl auvnav-usbl auvnav-gnss auvnav-can auvnav-mavlink \
-  auvnav-bridge auvnav-live; do
+  auvnav-bridge auvnav-live auvnav-ugps; do
   [ -x "target/release/$b" ] || { echo "target/release/$b is missing: cargo build --release --bins" >&2; exit 2; }
 done
 

@@ -4,10 +4,12 @@
 
 pub use auvnav_protocols::{
     device, framing, gnss, kvh, line_time, nmea, nortek, pd0, seatrac, to_device, to_schema, ubx,
-    wldvl, wldvl_json, xsens,
+    ugps, wldvl, wldvl_json, xsens,
 };
 
 pub mod can;
 pub mod can_driver;
 pub mod clock;
+pub mod http;
 pub mod serial_driver;
+pub mod ugps_driver;

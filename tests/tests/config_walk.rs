@@ -147,6 +147,16 @@ fn programs(dir: &Path) -> Vec<Program> {
             base: serial("nmea", "gnss"),
         },
         Program {
+            name: "auvnav-ugps",
+            bin: "auvnav-ugps",
+            check: check_flag,
+            base: std::fs::read_to_string(
+                Path::new(env!("CARGO_MANIFEST_DIR")).join("../drivers/config/ugps.toml"),
+            )
+            .expect("ugps.toml")
+                + "[timing]\nsilence_timeout_s = 5.0\n",
+        },
+        Program {
             name: "auvnav-can",
             bin: "auvnav-can",
             check: check_flag,

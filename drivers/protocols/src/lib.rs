@@ -24,6 +24,7 @@ pub mod seatrac;
 pub mod to_device;
 pub mod to_schema;
 pub mod ubx;
+pub mod ugps;
 pub mod wldvl;
 /// The Water Linked DVL's JSON reports (its TCP service), [`wldvl::json`].
 pub use wldvl::json as wldvl_json;

@@ -8,6 +8,7 @@ pub use crate::kvh::to_schema::*;
 pub use crate::nortek::to_schema::*;
 pub use crate::pd0::to_schema::*;
 pub use crate::seatrac::to_schema::*;
+pub use crate::ugps::to_schema::*;
 pub use crate::wldvl::to_schema::*;
 pub use crate::xsens::to_schema::*;
 
