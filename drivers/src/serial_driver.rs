@@ -18,8 +18,8 @@ use crate::device::{DeviceClass, DeviceDecoder, Output, Protocol, ProtocolSettin
 use auvnav_shm_schema::bus::{Bus, BusError, BusPublisher};
 use auvnav_shm_schema::stage_times::StageTimes;
 use auvnav_shm_schema::{
-    DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, ProcessHealthV1, ProcessState,
-    RAW_CHUNK, RawBytesV1, UsblFixV1, qos, topic,
+    AcousticRangesV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1,
+    ProcessHealthV1, ProcessState, RAW_CHUNK, RawBytesV1, UsblFixV1, qos, topic,
 };
 use serde::{Deserialize, Serialize};
 use std::io::Read;
@@ -371,6 +371,20 @@ impl SerialDriverConfig {
                 "0 < x <= 10000 Hz".into(),
             ));
         }
+        if let Some(p) = st.seatrac.range_beacons.problem() {
+            return Err(range(
+                "settings.seatrac.range_beacons",
+                format!("{:?}", st.seatrac.range_beacons.ids()),
+                p,
+            ));
+        }
+        if !st.seatrac.range_beacons.ids().is_empty() && self.protocol != Protocol::Seatrac {
+            return Err(range(
+                "settings.seatrac.range_beacons",
+                format!("{:?}", st.seatrac.range_beacons.ids()),
+                "for protocol seatrac only".into(),
+            ));
+        }
         let m = &self.mounting;
         for (key, v, lim) in [
             ("mounting.rotation_rpy_deg", m.rotation_rpy_deg, 360.0),
@@ -513,6 +527,8 @@ pub fn open_port(
 struct DataPublisher {
     class: ClassPublisher,
     magnetometer: Option<BusPublisher<MagnetometerV1>>,
+    /// A SeaTrac's ranges to the beacons it ranges as transponders.
+    ranges: Option<BusPublisher<AcousticRangesV1>>,
 }
 
 enum ClassPublisher {
@@ -523,7 +539,7 @@ enum ClassPublisher {
 }
 
 impl DataPublisher {
-    fn new(bus: &Bus, protocol: Protocol) -> Result<Self, BusError> {
+    fn new(bus: &Bus, protocol: Protocol, settings: &ProtocolSettings) -> Result<Self, BusError> {
         let class = match protocol.class() {
             DeviceClass::Imu => ClassPublisher::Imu(bus.publisher(topic::IMU, qos::SENSOR)?),
             DeviceClass::Dvl => ClassPublisher::Dvl(bus.publisher(topic::DVL, qos::SENSOR)?),
@@ -535,14 +551,27 @@ impl DataPublisher {
         } else {
             None
         };
+        let ranges =
+            if protocol == Protocol::Seatrac && !settings.seatrac.range_beacons.ids().is_empty() {
+                Some(bus.publisher(topic::ACOUSTIC_RANGES, qos::SENSOR)?)
+            } else {
+                None
+            };
         Ok(DataPublisher {
             class,
             magnetometer,
+            ranges,
         })
     }
 
     /// Publishes `out`; false when the driver has no publisher for it (never, by construction).
     fn publish(&mut self, out: Output) -> Result<bool, BusError> {
+        if let Output::AcousticRanges(m) = out {
+            return match self.ranges.as_mut() {
+                Some(p) => p.publish(m).map(|_| true),
+                None => Ok(false),
+            };
+        }
         match (&mut self.class, &mut self.magnetometer, out) {
             (ClassPublisher::Imu(p), _, Output::Imu(m)) => p.publish(m).map(|_| true),
             (ClassPublisher::Dvl(p), _, Output::Dvl(m)) => p.publish(m).map(|_| true),
@@ -648,7 +677,7 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
     let name = cfg.process_name();
     let class = cfg.protocol.class();
     let bus = Bus::new(&name, &cfg.prefix)?;
-    let mut data = DataPublisher::new(&bus, cfg.protocol)?;
+    let mut data = DataPublisher::new(&bus, cfg.protocol, &cfg.settings)?;
     let mut surface_gate = if class == DeviceClass::Gnss && cfg.settings.gnss.surface_only {
         Some(SurfaceGate::new(&bus, &cfg.settings.gnss)?)
     } else {
@@ -702,6 +731,13 @@ pub fn run(cfg: &SerialDriverConfig) -> Result<(), DriverError> {
         class.name(),
         if cfg.protocol.carries_magnetic_field() {
             format!(" and {}/{}", cfg.prefix, topic::MAGNETOMETER)
+        } else if data.ranges.is_some() {
+            format!(
+                " and {}/{} (beacons {:?} ranged as receivers 0..)",
+                cfg.prefix,
+                topic::ACOUSTIC_RANGES,
+                cfg.settings.seatrac.range_beacons.ids()
+            )
         } else {
             String::new()
         },

@@ -80,6 +80,36 @@ fn bad_configurations_name_the_key() {
         assert_eq!(code, Some(2), "case {i}: {err}");
         assert!(err.contains(key), "case {i}: {err:?} does not name {key}");
     }
+    // The beacons a SeaTrac ranges: IDs 1..15, distinct, at most 4, for SeaTrac only.
+    let seatrac = "protocol = \"seatrac\"\n[serial]\nport = \"/dev/null\"\n[settings.seatrac]\n";
+    for (i, (beacons, says)) in [
+        ("[1, 0]", "settings.seatrac.range_beacons"),
+        ("[1, 2, 1]", "settings.seatrac.range_beacons"),
+        ("[1, 2, 3, 4, 5]", "range_beacons"),
+    ]
+    .iter()
+    .enumerate()
+    {
+        let path = dir.join(format!("beacons{i}.toml"));
+        std::fs::write(&path, format!("{seatrac}range_beacons = {beacons}\n")).expect("write");
+        let (code, _, err) = run(
+            env!("CARGO_BIN_EXE_auvnav-usbl"),
+            &["--config", path.to_str().expect("utf-8"), "--check-config"],
+        );
+        assert_eq!(code, Some(2), "{beacons}: {err}");
+        assert!(
+            err.contains(says),
+            "{beacons}: {err:?} does not name {says}"
+        );
+    }
+    let path = dir.join("beacons-ok.toml");
+    std::fs::write(&path, format!("{seatrac}range_beacons = [3, 1, 2]\n")).expect("write");
+    let (code, out, err) = run(
+        env!("CARGO_BIN_EXE_auvnav-usbl"),
+        &["--config", path.to_str().expect("utf-8"), "--check-config"],
+    );
+    assert_eq!(code, Some(0), "{err}");
+    assert!(out.contains("range_beacons = [\n    3,"), "{out}");
     let (code, _, err) = run(
         env!("CARGO_BIN_EXE_auvnav-imu"),
         &["--config", "/nonexistent/imu.toml"],

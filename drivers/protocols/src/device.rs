@@ -17,7 +17,9 @@ use crate::ubx::{UbxDecoder, UbxFrame};
 use crate::wldvl::json::{JsonDecoder, JsonFrame};
 use crate::wldvl::{WlDecoder, WlFrame};
 use crate::xsens::{XbusDecoder, XbusMessage};
-use auvnav_shm_schema::{DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, UsblFixV1};
+use auvnav_shm_schema::{
+    AcousticRangesV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, MagnetometerV1, UsblFixV1,
+};
 use serde::{Deserialize, Serialize};
 
 /// A serial protocol the drivers speak.
@@ -154,6 +156,75 @@ pub struct ProtocolSettings {
     pub kvh: KvhConfig,
     /// GNSS receiver settings (uncertainty without GST, leap seconds, the surface gate).
     pub gnss: GnssSettings,
+    /// SeaTrac: the beacons ranged as LBL transponders.
+    pub seatrac: SeatracSettings,
+}
+
+/// SeaTrac settings (`[settings.seatrac]`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SeatracSettings {
+    /// Beacon IDs (1..15, at most 4, distinct) whose fixes are published as ranges on
+    /// `acoustic_ranges`, beacon `range_beacons[k]` as receiver k of the range aid; the fixes of
+    /// other beacons stay USBL fixes on `usbl`. Default none.
+    pub range_beacons: BeaconList,
+}
+
+/// Up to four beacon IDs, in order (a TOML array).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(try_from = "Vec<u8>", into = "Vec<u8>")]
+pub struct BeaconList {
+    ids: [u8; 4],
+    len: u8,
+}
+
+impl BeaconList {
+    pub fn ids(&self) -> &[u8] {
+        &self.ids[..usize::from(self.len)]
+    }
+
+    /// Beacon `id`'s slot.
+    pub fn slot(&self, id: u8) -> Option<usize> {
+        self.ids().iter().position(|&b| b == id)
+    }
+
+    /// Why the list cannot be used: IDs outside 1..15 or repeated.
+    pub fn problem(&self) -> Option<String> {
+        let ids = self.ids();
+        if let Some(b) = ids.iter().find(|&&b| !(1..=15).contains(&b)) {
+            return Some(format!("beacon ID {b} outside 1..=15"));
+        }
+        for (i, b) in ids.iter().enumerate() {
+            if ids[..i].contains(b) {
+                return Some(format!("beacon ID {b} given twice"));
+            }
+        }
+        None
+    }
+}
+
+impl TryFrom<Vec<u8>> for BeaconList {
+    type Error = String;
+    fn try_from(v: Vec<u8>) -> Result<Self, String> {
+        if v.len() > 4 {
+            return Err(format!(
+                "range_beacons: {} beacons; at most 4 (the range aid's receivers)",
+                v.len()
+            ));
+        }
+        let mut ids = [0; 4];
+        ids[..v.len()].copy_from_slice(&v);
+        Ok(BeaconList {
+            ids,
+            len: v.len() as u8,
+        })
+    }
+}
+
+impl From<BeaconList> for Vec<u8> {
+    fn from(b: BeaconList) -> Self {
+        b.ids().to_vec()
+    }
 }
 
 /// Default of [`ProtocolSettings::xsens_field_unit_ut`] (µT).
@@ -172,6 +243,7 @@ impl Default for ProtocolSettings {
                 temperature_centi: false,
             },
             gnss: GnssSettings::default(),
+            seatrac: SeatracSettings::default(),
         }
     }
 }
@@ -184,6 +256,8 @@ pub enum Output {
     Usbl(UsblFixV1),
     Magnetometer(MagnetometerV1),
     Gnss(GnssFixV1),
+    /// A SeaTrac fix from a beacon ranged as a transponder.
+    AcousticRanges(AcousticRangesV1),
 }
 
 impl Output {
@@ -195,6 +269,7 @@ impl Output {
             Output::Usbl(m) => m.host_time_ns,
             Output::Magnetometer(m) => m.host_time_ns,
             Output::Gnss(m) => m.host_time_ns,
+            Output::AcousticRanges(m) => m.host_time_ns,
         }
     }
 }
@@ -522,6 +597,15 @@ impl DeviceDecoder {
                     Ok(f) => match f.message {
                         SeatracMessage::Fix { fix, .. } if f.from_beacon => {
                             let t = frame_time(&mut self.arrival, d.frame_start(), host_time_ns);
+                            if let Some(k) = s.seatrac.range_beacons.slot(fix.source_id) {
+                                match to_schema::seatrac_range(&fix, k, t, s.latency_s) {
+                                    Some(m) => return Some(Output::AcousticRanges(m)),
+                                    None => {
+                                        self.counters.out_of_range += 1;
+                                        continue;
+                                    }
+                                }
+                            }
                             return Some(Output::Usbl(to_schema::seatrac_fix(
                                 &fix,
                                 t,

@@ -1,7 +1,7 @@
 //! Blueprint Subsea SeaTrac: its frames as the schema messages the driver publishes.
 
 use crate::seatrac::AcoFix;
-use auvnav_shm_schema::UsblFixV1;
+use auvnav_shm_schema::{AcousticRangesV1, UsblFixV1};
 
 /// A SeaTrac `ACOFIX_T` as a USBL message.
 ///
@@ -63,4 +63,29 @@ pub fn seatrac_fix(f: &AcoFix, host_time_ns: u64, latency_s: f64, sequence: u64)
         m.validity |= UsblFixV1::VALID_POSITION;
     }
     m
+}
+
+/// A SeaTrac fix's range as one range of an acoustic ranges message: receiver slot `slot`
+/// (the beacon's place in the driver's `range_beacons`), for ranging LBL beacons one after the
+/// other. `host_time_ns` is the time the reply arrived at the vehicle: the frame's time less
+/// `latency_s` (the range aid takes a message's host time as the reception). `None` when the fix
+/// has no range, or one outside 0..10 km.
+pub fn seatrac_range(
+    f: &AcoFix,
+    slot: usize,
+    host_time_ns: u64,
+    latency_s: f64,
+) -> Option<AcousticRangesV1> {
+    let r = f.range.as_ref()?;
+    if slot >= 4 || !(r.distance_m > 0.0 && r.distance_m <= 10_000.0) {
+        return None;
+    }
+    let latency_ns = (latency_s.max(0.0) * 1e9) as u64;
+    let mut m = AcousticRangesV1 {
+        host_time_ns: host_time_ns.saturating_sub(latency_ns),
+        validity: AcousticRangesV1::VALID_RANGE << slot,
+        ..Default::default()
+    };
+    m.range_m[slot] = r.distance_m;
+    Some(m)
 }
