@@ -178,4 +178,14 @@ fn the_measured_dives_ranges_agree_with_the_model_at_the_devices_fixes() {
         assert!(r.rms_m < 0.1, "{r:?}");
         assert!(r.outliers * 20 < r.ranges, "{r:?}");
     }
+    // The device's own fix is not a per-ping solution: it scatters far less across the line of
+    // sight than per-ping fixes from its ranges, and follows them smoothed by a filter of a few
+    // seconds (docs/ranges.md, "The device's fix").
+    let f = &m.device_fix;
+    assert!(f.ping_fixes > 1200, "{f:?}");
+    assert!(
+        f.scatter_tangential_m < 0.5 * f.ping_scatter_tangential_m,
+        "{f:?}"
+    );
+    assert!((1.0..=4.0).contains(&f.best_time_constant_s), "{f:?}");
 }

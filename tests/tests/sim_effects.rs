@@ -263,3 +263,57 @@ fn dvl_bed_velocity_drifts_bottom_track_dead_reckoning_against_the_bed() {
     assert!(!a.is_empty());
     assert_eq!(a, b);
 }
+
+/// `usbl.fix_time_constant`: the device's reported fix is its per-ping fix smoothed
+/// exponentially (the same seed gives the same per-ping fixes), the ranges untouched.
+#[test]
+fn usbl_fix_time_constant_smooths_the_devices_fixes_and_nothing_else() {
+    use auvnav_shm_schema::AcousticRangesV1;
+    let fixes = |tau: f64| -> Vec<AcousticRangesV1> {
+        run(
+            "ranges_array",
+            &[("usbl.fix_time_constant", &[tau])],
+            Some(120.0),
+        )
+        .into_iter()
+        .filter_map(|m| match m {
+            LogMessage::AcousticRanges(r) => Some(r),
+            _ => None,
+        })
+        .collect()
+    };
+    let (raw, smoothed) = (fixes(0.0), fixes(2.0));
+    assert_eq!(raw.len(), smoothed.len());
+    assert!(raw.len() > 100);
+    let mut state: Option<(f64, [f64; 3])> = None;
+    let mut moved = 0.0f64;
+    for (a, b) in raw.iter().zip(&smoothed) {
+        assert_eq!(
+            a.range_m, b.range_m,
+            "the ranges are the device's, unsmoothed"
+        );
+        assert_eq!(a.validity, b.validity);
+        if a.validity & AcousticRangesV1::VALID_POSITION == 0 {
+            continue;
+        }
+        let t = a.host_time_ns as f64 * 1e-9;
+        let p = a.position_array_m;
+        let want = match state {
+            Some((t0, s)) if t - t0 < 10.0 => {
+                let k = 1.0 - (-(t - t0) / 2.0).exp();
+                [0, 1, 2].map(|i| s[i] + k * (p[i] - s[i]))
+            }
+            _ => p,
+        };
+        state = Some((t, want));
+        for i in 0..3 {
+            assert!(
+                (b.position_array_m[i] - want[i]).abs() < 1e-9,
+                "{b:?} {want:?}"
+            );
+            moved = moved.max((b.position_array_m[i] - p[i]).abs());
+        }
+        assert_eq!(a.position_std_m, b.position_std_m);
+    }
+    assert!(moved > 0.1, "the smoothing changed the fixes ({moved} m)");
+}

@@ -47,6 +47,8 @@ pub struct AcousticModel {
     array: auvnav_core::aid::pose_history::PoseHistory,
     rng: Rng,
     pose_rng: Rng,
+    /// The device's smoothed fix and its time (`usbl.fix_time_constant`).
+    smoothed_fix: Option<(f64, Vector3<f64>)>,
     /// Pings and how many of the ranges were outliers.
     pub pings: u64,
     pub outliers: u64,
@@ -80,6 +82,7 @@ impl AcousticModel {
             array: auvnav_core::aid::pose_history::PoseHistory::new(30.0),
             rng: Rng::new(seed, "acoustic"),
             pose_rng: Rng::new(seed, "acoustic pose"),
+            smoothed_fix: None,
             pings: 0,
             outliers: 0,
             poses: 0,
@@ -230,11 +233,27 @@ impl AcousticModel {
             m.validity |= AcousticRangesV1::VALID_RANGE << k;
         }
         if let Some((fix, std)) = self.device_fix(&m, depth_m, t) {
+            let fix = self.smooth_fix(t, fix);
             m.position_array_m = fix.into();
             m.position_std_m = std as f32;
             m.validity |= AcousticRangesV1::VALID_POSITION | AcousticRangesV1::VALID_POSITION_STD;
         }
         m
+    }
+
+    /// The device's tracking filter on its own fixes: exponential smoothing with time constant
+    /// `usbl.fix_time_constant` in the array frame (the per-ping fix when it is 0, or after a
+    /// gap of five time constants).
+    fn smooth_fix(&mut self, t: f64, fix: Vector3<f64>) -> Vector3<f64> {
+        let tau = self.e.usbl_fix_time_constant;
+        let out = match self.smoothed_fix {
+            Some((t0, s)) if tau > 0.0 && t - t0 < 5.0 * tau => {
+                s + (fix - s) * (1.0 - (-(t - t0) / tau).exp())
+            }
+            _ => fix,
+        };
+        self.smoothed_fix = Some((t, out));
+        out
     }
 
     /// The device's fix in the array frame: the horizontal position that fits the ranges best

@@ -265,6 +265,11 @@ effects! {
     /// Noise of a moving array's pose as its boat reports it: GNSS position (m, per horizontal
     /// axis) and heading (deg), white per pose.
     usbl_array_pose_noise: [f64; 2] = "usbl.array_pose_noise", unit "m, deg", range 0.0..=100.0, default [0.0, 0.0];
+    /// Time constant of the tracking filter an acoustic system runs on its own fixes: the fix it
+    /// reports is its per-ping solution smoothed exponentially in its array frame (0: per ping),
+    /// its reported one-sigma the per-ping one. The measured Water Linked G2 follows per-ping
+    /// fixes from its own ranges smoothed with about 2 s.
+    usbl_fix_time_constant: f64 = "usbl.fix_time_constant", unit "s", range 0.0..=60.0, default [0.0];
 
     /// White noise on depth.
     depth_noise: f64 = "depth.noise", unit "m", range 0.0..=10.0, default [0.0];

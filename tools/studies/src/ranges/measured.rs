@@ -30,6 +30,9 @@ pub struct MeasuredResiduals {
     /// Updates with a fix, and of them those without the array's pose around their time.
     pub fixes: usize,
     pub without_pose: usize,
+    /// The device's fixes against the one-sigma it reports and against per-ping fixes from its
+    /// own ranges at the configured receivers ([`crate::ranges::device_fix_model`]).
+    pub device_fix: crate::ranges::DeviceFixModel,
 }
 
 /// Checks the range aid's measurement model (`cfg`: the receivers, the timing) against every
@@ -123,5 +126,6 @@ pub fn measured_residuals(messages: &[LogMessage], cfg: &RangesConfig) -> Measur
         receivers,
         fixes,
         without_pose,
+        device_fix: crate::ranges::device_fix_model(messages, &cfg.receivers_m),
     }
 }

@@ -29,7 +29,9 @@ use auvnav_sim::rng::Rng;
 use auvnav_sim::{self as sim, SimConfig, acoustic, scenario::Scenario};
 use serde::{Deserialize, Serialize};
 
+mod fix_model;
 mod measured;
+pub use fix_model::*;
 pub use measured::*;
 
 /// The geometries, by the name of their scenario.
