@@ -103,6 +103,52 @@ fn a_moving_arrays_receivers_are_placed_from_its_pose() {
     );
 }
 
+/// With `receivers_from_device`, the receivers are where the ranges messages say: none is
+/// fused before a message places them, then each range is predicted from the message's places.
+#[test]
+fn the_device_can_place_the_receivers() {
+    let cfg = NavConfig {
+        ranges: Some(RangesConfig {
+            array: ArrayKind::Moving,
+            receivers_from_device: true,
+            two_way: false,
+            bias_std_m: 0.0,
+            scale_std: 0.0,
+            array_position_std_m: 0.0,
+            array_heading_std_deg: 0.0,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    let boat = Geodetic {
+        latitude_rad: LAT.to_radians(),
+        longitude_rad: LON.to_radians(),
+        height_m: 0.0,
+    };
+    let vehicle = offset_position(&boat, &Vector3::new(0.0, 0.0, 40.0));
+    let mut nav = Navigator::new(cfg, initial_state(5.0, vehicle, [0.0; 3], [0.0; 3]));
+    for t in [4.0, 5.5] {
+        nav.on_acoustic_array_pose(&AcousticArrayPoseV1 {
+            host_time_ns: (t * 1e9) as u64,
+            latitude_rad: boat.latitude_rad,
+            longitude_rad: boat.longitude_rad,
+            euler_rad: [0.0, 0.0, 0.0],
+            validity: AcousticArrayPoseV1::VALID_POSITION | AcousticArrayPoseV1::VALID_HEADING,
+            ..Default::default()
+        });
+    }
+    // Receiver 1 is 3 m forward of the antenna and 10 m down, receiver 0 at the antenna.
+    let expected = (3.0f64 * 3.0 + 30.0 * 30.0).sqrt();
+    nav.on_acoustic_ranges(&ranges(5.0, &[(1, expected)]));
+    assert_eq!(nav.counters().ranges_invalid, 1, "no receiver placed yet");
+    let mut m = ranges(5.0, &[(1, expected)]);
+    m.receiver_position_m[3..6].copy_from_slice(&[3.0, 0.0, 10.0]);
+    m.validity |= auvnav_shm_schema::AcousticRangesV1::VALID_RECEIVER_POSITIONS;
+    let d = nav.on_acoustic_ranges(&m)[1].expect("diagnostics");
+    assert!(d.innovation[0].abs() < 1e-3, "{}", d.innovation[0]);
+    assert_eq!(nav.counters().ranges_fused, 1);
+}
+
 #[test]
 fn configurations_that_make_no_sense_are_named() {
     assert!(RangesConfig::default().problems().is_empty());

@@ -61,6 +61,12 @@ pub struct RangesConfig {
     /// device numbers them: a beacon's offset from the origin, or a receiver's offset from the
     /// boat's GNSS antenna (x forward, y starboard). At least one.
     pub receivers_m: Vec<[f64; 3]>,
+    /// Place the receivers where the device says they are: each ranges message that carries
+    /// the receivers' positions (`receiver_position_m`, as a Water Linked Underwater GPS
+    /// topside's `auvnav-ugps` driver publishes them) replaces them, in the same array frame;
+    /// no range is fused before the first such message, and `receivers_m` is not used. Default
+    /// false.
+    pub receivers_from_device: bool,
     /// The vehicle's transducer in its body frame (m). Default 0.
     pub transducer_lever_arm_m: [f64; 3],
     /// Two-way travel (a ping and a reply; the range is half the path) or one-way (the vehicle's
@@ -121,6 +127,7 @@ impl Default for RangesConfig {
             origin_height_m: 0.0,
             origin_yaw_deg: 0.0,
             receivers_m: vec![[0.0; 3]],
+            receivers_from_device: false,
             transducer_lever_arm_m: [0.0; 3],
             two_way: true,
             interrogator: Interrogator::Array,

@@ -149,7 +149,11 @@ impl RangeAid {
             // range) behind the oldest range accepted.
             let keep_s = c.max_latency_s + 2.0 * c.max_range_m / c.device_sound_speed_m_s + 1.0;
             RangeFusion {
-                receivers: c.receivers_m.iter().map(|r| Vector3::from(*r)).collect(),
+                receivers: if c.receivers_from_device {
+                    Vec::new()
+                } else {
+                    c.receivers_m.iter().map(|r| Vector3::from(*r)).collect()
+                },
                 lever_arm_b: Vector3::from(c.transducer_lever_arm_m),
                 origin: Geodetic {
                     latitude_rad: c.origin_latitude_deg.to_radians(),
@@ -295,10 +299,25 @@ impl RangeAid {
     /// Whether a range message is to be fused at all (configured, not too old); counted when
     /// not.
     pub fn accepts(&mut self, core: &NavCore, m: &AcousticRangesV1) -> bool {
-        let Some(f) = self.fusion.as_ref() else {
+        let Some(f) = self.fusion.as_mut() else {
             self.counters.unconfigured += 1;
             return false;
         };
+        if f.cfg.receivers_from_device
+            && m.validity & AcousticRangesV1::VALID_RECEIVER_POSITIONS != 0
+        {
+            let given: Vec<Vector3<f64>> = m
+                .receiver_position_m
+                .chunks_exact(3)
+                .map(Vector3::from_column_slice)
+                .collect();
+            if given
+                .iter()
+                .all(|r| r.iter().all(|x| x.is_finite() && x.abs() <= 20_000.0))
+            {
+                f.receivers = given;
+            }
+        }
         let t = m.host_time_ns as f64 * 1e-9;
         if core.state().time_s - t > f.cfg.max_latency_s {
             self.counters.late += 1;
