@@ -398,17 +398,10 @@ impl SerialDriverConfig {
                 ));
             }
         }
-        if self.prefix.is_empty()
-            || !self
-                .prefix
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || "_-./".contains(c))
+        if let Some((key, value, expected)) =
+            prefix_and_name_problem(&self.prefix, self.name.as_deref())
         {
-            return Err(range(
-                "prefix",
-                format!("{:?}", self.prefix),
-                "ASCII letters, digits, '_', '-', '.', '/'".into(),
-            ));
+            return Err(range(key, value, expected));
         }
         if let Some(p) = auvnav_shm_schema::stage_times::output_path_problem(&self.stage_times_csv)
         {
@@ -416,17 +409,6 @@ impl SerialDriverConfig {
                 "stage_times_csv",
                 format!("{:?}", self.stage_times_csv),
                 p,
-            ));
-        }
-        if self
-            .name
-            .as_ref()
-            .is_some_and(|n| n.is_empty() || n.len() > 32)
-        {
-            return Err(range(
-                "name",
-                format!("{:?}", self.name),
-                "1..=32 bytes".into(),
             ));
         }
         Ok(())
@@ -447,6 +429,29 @@ impl SerialDriverConfig {
             .clone()
             .unwrap_or_else(|| self.protocol.class().name().to_string())
     }
+}
+
+/// What is wrong with a driver's service-name `prefix` (ASCII letters, digits, `_-./`) or its
+/// process `name` (1..=32 bytes), as (key, value, expected).
+pub(crate) fn prefix_and_name_problem(
+    prefix: &str,
+    name: Option<&str>,
+) -> Option<(&'static str, String, String)> {
+    if prefix.is_empty()
+        || !prefix
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || "_-./".contains(c))
+    {
+        return Some((
+            "prefix",
+            format!("{prefix:?}"),
+            "ASCII letters, digits, '_', '-', '.', '/'".into(),
+        ));
+    }
+    if name.is_some_and(|n| n.is_empty() || n.len() > 32) {
+        return Some(("name", format!("{name:?}"), "1..=32 bytes".into()));
+    }
+    None
 }
 
 /// Where a driver reads its bytes: a serial line or a TCP connection.

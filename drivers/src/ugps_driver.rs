@@ -144,23 +144,10 @@ impl UgpsDriverConfig {
                 return Err(format!("{key} = {v}: {lo}..={hi}"));
             }
         }
-        if self.prefix.is_empty()
-            || !self
-                .prefix
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || "_-./".contains(c))
+        if let Some((key, value, expected)) =
+            crate::serial_driver::prefix_and_name_problem(&self.prefix, self.name.as_deref())
         {
-            return Err(format!(
-                "prefix = {:?}: ASCII letters, digits, '_', '-', '.', '/'",
-                self.prefix
-            ));
-        }
-        if self
-            .name
-            .as_ref()
-            .is_some_and(|n| n.is_empty() || n.len() > 32)
-        {
-            return Err(format!("name = {:?}: 1..=32 bytes", self.name));
+            return Err(format!("{key} = {value}: {expected}"));
         }
         Ok(())
     }

@@ -50,42 +50,59 @@ fn a_beacons_range_corrects_along_its_line_of_sight() {
     assert_eq!(nav.counters().ranges_invalid, 2);
 }
 
-/// A moving array's ranges need its pose at the time: without one they are counted, with one
-/// the receiver is placed from the boat's position and heading.
-#[test]
-fn a_moving_arrays_receivers_are_placed_from_its_pose() {
-    let cfg = NavConfig {
-        ranges: Some(RangesConfig {
-            array: ArrayKind::Moving,
-            // A receiver 2 m to starboard of the antenna, 10 m down.
-            receivers_m: vec![[0.0, 2.0, 10.0]],
-            two_way: false,
-            bias_std_m: 0.0,
-            scale_std: 0.0,
-            array_position_std_m: 0.0,
-            array_heading_std_deg: 0.0,
-            ..Default::default()
-        }),
+/// A moving array's one-way ranges without bias, scale or pose errors.
+fn moving_array() -> RangesConfig {
+    RangesConfig {
+        array: ArrayKind::Moving,
+        two_way: false,
+        bias_std_m: 0.0,
+        scale_std: 0.0,
+        array_position_std_m: 0.0,
+        array_heading_std_deg: 0.0,
         ..Default::default()
-    };
+    }
+}
+
+/// A navigator with `ranges` at t = 5 s, 40 m below a boat's antenna (returned).
+fn under_a_boat(ranges: RangesConfig) -> (Navigator, Geodetic) {
     let boat = Geodetic {
         latitude_rad: LAT.to_radians(),
         longitude_rad: LON.to_radians(),
         height_m: 0.0,
     };
-    // The vehicle 40 m below the antenna.
     let vehicle = offset_position(&boat, &Vector3::new(0.0, 0.0, 40.0));
-    let mut nav = Navigator::new(cfg, initial_state(5.0, vehicle, [0.0; 3], [0.0; 3]));
-    nav.on_acoustic_ranges(&ranges(5.0, &[(0, 30.0)]));
-    assert_eq!(nav.counters().ranges_without_array_pose, 1);
-    let pose = |t: f64, heading_deg: f64| AcousticArrayPoseV1 {
+    let cfg = NavConfig {
+        ranges: Some(ranges),
+        ..Default::default()
+    };
+    let nav = Navigator::new(cfg, initial_state(5.0, vehicle, [0.0; 3], [0.0; 3]));
+    (nav, boat)
+}
+
+/// The boat's pose at `t` with its heading.
+fn boat_pose(boat: &Geodetic, t: f64, heading_deg: f64) -> AcousticArrayPoseV1 {
+    AcousticArrayPoseV1 {
         host_time_ns: (t * 1e9) as u64,
         latitude_rad: boat.latitude_rad,
         longitude_rad: boat.longitude_rad,
         euler_rad: [0.0, 0.0, heading_deg.to_radians()],
         validity: AcousticArrayPoseV1::VALID_POSITION | AcousticArrayPoseV1::VALID_HEADING,
         ..Default::default()
-    };
+    }
+}
+
+/// A moving array's ranges need its pose at the time: without one they are counted, with one
+/// the receiver is placed from the boat's position and heading.
+#[test]
+fn a_moving_arrays_receivers_are_placed_from_its_pose() {
+    // A receiver 2 m to starboard of the antenna, 10 m down.
+    let (mut nav, boat) = under_a_boat(RangesConfig {
+        receivers_m: vec![[0.0, 2.0, 10.0]],
+        ..moving_array()
+    });
+    nav.on_acoustic_ranges(&ranges(5.0, &[(0, 30.0)]));
+    assert_eq!(nav.counters().ranges_without_array_pose, 1);
+    let pose = |t: f64, heading_deg: f64| boat_pose(&boat, t, heading_deg);
     // Heading east: the receiver is 2 m south of the antenna, 10 m down.
     nav.on_acoustic_array_pose(&pose(4.0, 90.0));
     nav.on_acoustic_array_pose(&pose(5.5, 90.0));
@@ -107,35 +124,12 @@ fn a_moving_arrays_receivers_are_placed_from_its_pose() {
 /// fused before a message places them, then each range is predicted from the message's places.
 #[test]
 fn the_device_can_place_the_receivers() {
-    let cfg = NavConfig {
-        ranges: Some(RangesConfig {
-            array: ArrayKind::Moving,
-            receivers_from_device: true,
-            two_way: false,
-            bias_std_m: 0.0,
-            scale_std: 0.0,
-            array_position_std_m: 0.0,
-            array_heading_std_deg: 0.0,
-            ..Default::default()
-        }),
-        ..Default::default()
-    };
-    let boat = Geodetic {
-        latitude_rad: LAT.to_radians(),
-        longitude_rad: LON.to_radians(),
-        height_m: 0.0,
-    };
-    let vehicle = offset_position(&boat, &Vector3::new(0.0, 0.0, 40.0));
-    let mut nav = Navigator::new(cfg, initial_state(5.0, vehicle, [0.0; 3], [0.0; 3]));
+    let (mut nav, boat) = under_a_boat(RangesConfig {
+        receivers_from_device: true,
+        ..moving_array()
+    });
     for t in [4.0, 5.5] {
-        nav.on_acoustic_array_pose(&AcousticArrayPoseV1 {
-            host_time_ns: (t * 1e9) as u64,
-            latitude_rad: boat.latitude_rad,
-            longitude_rad: boat.longitude_rad,
-            euler_rad: [0.0, 0.0, 0.0],
-            validity: AcousticArrayPoseV1::VALID_POSITION | AcousticArrayPoseV1::VALID_HEADING,
-            ..Default::default()
-        });
+        nav.on_acoustic_array_pose(&boat_pose(&boat, t, 0.0));
     }
     // Receiver 1 is 3 m forward of the antenna and 10 m down, receiver 0 at the antenna.
     let expected = (3.0f64 * 3.0 + 30.0 * 30.0).sqrt();
