@@ -9,6 +9,7 @@
 //! range, USBL (per-channel RSSI, azimuth, elevation, fit error) and position blocks its flags
 //! announce. Other CIDs are returned with their raw payload.
 
+pub mod settings;
 pub mod to_device;
 pub mod to_schema;
 
