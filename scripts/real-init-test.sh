@@ -6,7 +6,7 @@
 #   every unit of auvnav.target active, solutions published, no sandbox denial in the journal,
 #   bus segments not world-accessible, kill -9 of the daemon -> restarted from its checkpoint,
 #   a stopped driver -> the daemon degraded and recovering, a SIGSTOPped daemon -> killed and
-#   restarted by the watchdog, `systemctl stop` of every unit clean (no SIGKILL) on N tries,
+#   restarted by the watchdog, the Underwater GPS driver's unit waiting for its topside, `systemctl stop` of every unit clean (no SIGKILL) on N tries,
 #   and no bus segment left behind by a killed process.
 #
 # Usage: scripts/real-init-test.sh [--stops N] [--load-minutes M] [--keep]
@@ -146,7 +146,7 @@ for u in $core; do
   a=$(IN systemctl is-active "$u" || true)
   [ "$a" = active ] && pass "$u active" || fail "$u is $a"
 done
-for u in auvnav-usbl auvnav-gnss auvnav-can; do
+for u in auvnav-usbl auvnav-ugps auvnav-gnss auvnav-can; do
   a=$(IN systemctl is-active "$u" || true)
   [ "$a" = inactive ] && pass "optional $u not started" || fail "optional $u is $a"
 done
@@ -191,6 +191,18 @@ IN journalctl -u auvnavd --since "-14s" -o cat | grep -qi "watchdog timeout" \
   && pass "watchdog timeout in the journal" || fail "no watchdog timeout"
 [ "$after" -gt "$before" ] && [ "$(IN systemctl is-active auvnavd)" = active ] \
   && pass "restarted by the watchdog ($before -> $after)" || fail "not restarted ($before -> $after)"
+
+step "auvnav-ugps under its unit (its topside not on the network)"
+IN sh -c 'printf "url = \"http://127.0.0.1:9\"\n" >/etc/auvnav/ugps.toml && chgrp auvnav /etc/auvnav/ugps.toml && chmod 0640 /etc/auvnav/ugps.toml'
+IN systemctl start auvnav-ugps
+sleep 3
+a=$(IN systemctl is-active auvnav-ugps || true)
+[ "$a" = active ] && pass "auvnav-ugps active while its topside does not answer" || fail "auvnav-ugps is $a"
+IN journalctl -u auvnav-ugps -o cat | grep -q "does not answer" \
+  && pass "auvnav-ugps says its topside does not answer, and retries" || fail "no retry line from auvnav-ugps"
+IN systemctl stop auvnav-ugps
+r=$(IN systemctl show -p Result --value auvnav-ugps)
+[ "$r" = success ] && pass "auvnav-ugps stopped cleanly" || fail "auvnav-ugps stop: $r"
 
 step "systemctl stop, $STOPS times"
 clean=0
