@@ -126,3 +126,118 @@ fn ranged_beacons_are_published_as_ranges_and_others_as_usbl_fixes() {
     assert_eq!(h.invalid, 1, "the range of zero: {h:?}");
     assert!(log.contains("acoustic_ranges (beacons [3, 1, 2]"), "{log}");
 }
+
+/// A simulated LBL survey (`auvnav sim --scenario ranges_lbl`) played through an emulated SeaTrac
+/// (`auvnav emulate --usbl seatrac --lbl-beacons 1,2,3`) into the real driver: every range of
+/// the log comes out on `acoustic_ranges` in its receiver's slot, in order, to the wire's 0.1 m.
+#[test]
+fn an_emulated_lbl_survey_reaches_the_bus_range_by_range() {
+    use auvnav_log::{LogMessage, LogReader};
+    let tmp = TempDir::new("seatrac-emulated");
+    let log = tmp.path().join("lbl.mcap");
+    let sim = Command::new(binary("auvnav"))
+        .args([
+            "sim",
+            "--scenario",
+            "ranges_lbl",
+            "--duration",
+            "30",
+            "--out",
+        ])
+        .arg(&log)
+        .output()
+        .expect("auvnav sim");
+    assert!(
+        sim.status.success(),
+        "{}",
+        String::from_utf8_lossy(&sim.stderr)
+    );
+    let mut want: Vec<(usize, f64)> = Vec::new();
+    let mut reader = LogReader::open(&log).expect("log");
+    while let Some(raw) = reader.next_message().expect("read") {
+        if let LogMessage::AcousticRanges(r) = raw.decode_any().expect("decode") {
+            for k in 0..4 {
+                if r.range_valid(k) {
+                    want.push((k, r.range_m[k]));
+                }
+            }
+        }
+    }
+    assert!(want.len() > 60, "{} ranges", want.len());
+
+    let prefix = unique("lblemu");
+    let links = tmp.path().join("links");
+    let cfg = tmp.path().join("usbl.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "prefix = \"{prefix}\"\nprotocol = \"seatrac\"\n[serial]\nport = \"{}\"\n\
+             [settings.seatrac]\nrange_beacons = [1, 2, 3]\n\
+             [timing]\nread_timeout_s = 0.01\nreconnect_initial_s = 0.02\nreconnect_max_s = 0.1\n",
+            links.join("usbl").display()
+        ),
+    )
+    .expect("config");
+    let bus = Bus::new(&unique("lblemutest"), &prefix).expect("bus");
+    let mut ranges = bus
+        .subscriber::<AcousticRangesV1>(topic::ACOUSTIC_RANGES, qos::SENSOR)
+        .expect("ranges");
+    let mut driver = Proc::spawn(
+        "usbl",
+        Command::new(binary("auvnav-usbl"))
+            .arg("--config")
+            .arg(&cfg)
+            .stderr(std::fs::File::create(tmp.path().join("usbl.err")).expect("stderr")),
+    )
+    .expect("spawn");
+    let mut emulator = Proc::spawn(
+        "emulate",
+        Command::new(binary("auvnav"))
+            .arg("emulate")
+            .arg(&log)
+            .args([
+                "--usbl",
+                "seatrac",
+                "--lbl-beacons",
+                "1,2,3",
+                "--speed",
+                "5",
+            ])
+            .args(["--start-delay", "1.0", "--link-dir"])
+            .arg(&links)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::fs::File::create(tmp.path().join("emulate.err")).expect("stderr")),
+    )
+    .expect("spawn");
+    let mut got = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let mut finished = None;
+    loop {
+        while let Some(m) = ranges.receive().expect("receive") {
+            got.push(m);
+        }
+        if finished.is_none()
+            && let Ok(Some(status)) = emulator.child.try_wait()
+        {
+            assert!(status.success(), "the emulator failed");
+            finished = Some(Instant::now());
+        }
+        if finished.is_some_and(|t| t.elapsed() > Duration::from_millis(500)) {
+            break;
+        }
+        assert!(Instant::now() < deadline, "the run did not finish in 60 s");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let status = driver.terminate(Duration::from_secs(10));
+    assert!(status.is_some_and(|s| s.success()), "{status:?}");
+    let err = std::fs::read_to_string(tmp.path().join("usbl.err")).unwrap_or_default();
+    assert_eq!(got.len(), want.len(), "{err}");
+    for (m, (k, d)) in got.iter().zip(&want) {
+        assert_eq!(m.validity, AcousticRangesV1::VALID_RANGE << k, "{m:?}");
+        assert!(
+            (m.range_m[*k] - d).abs() <= 0.05 + 1e-9,
+            "{} against {d}",
+            m.range_m[*k]
+        );
+    }
+}

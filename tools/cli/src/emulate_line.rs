@@ -48,7 +48,7 @@ impl Ord for Piece {
 #[derive(Debug, Clone)]
 pub struct SendRecord {
     pub device: &'static str,
-    /// The log message it carries: imu, mag, dvl, usbl or gnss.
+    /// The log message it carries: imu, mag, dvl, usbl, ranges (SeaTrac LBL ping responses) or gnss.
     pub kind: &'static str,
     /// Its number among the device's frames of that kind (from 0).
     pub index: u64,

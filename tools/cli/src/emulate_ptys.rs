@@ -64,6 +64,12 @@ pub struct EmulateArgs {
     /// Emulate the USBL in this protocol (seatrac).
     #[arg(long, value_parser = ["seatrac"])]
     pub usbl: Option<String>,
+    /// Also play the log's acoustic ranges (an LBL survey, `auvnav sim --scenario ranges_lbl`)
+    /// through the emulated SeaTrac, as ping responses from these beacon IDs: receiver k's range
+    /// from beacon k of the list (comma-separated; with `--usbl seatrac`; the driver's
+    /// `[settings.seatrac] range_beacons`).
+    #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(u8).range(1..=15))]
+    pub lbl_beacons: Vec<u8>,
     /// Emulate the GNSS receiver in this protocol (nmea or ubx): the log's fixes, stamped with
     /// the UTC at which they are written, as a live receiver's.
     #[arg(long, value_parser = ["nmea", "ubx"])]
@@ -222,6 +228,8 @@ struct Device {
     /// The latest attitude in the log (roll, pitch, yaw, rad): truth, else the navigation
     /// solution's, for a PD0 DVL in earth coordinates.
     attitude: Option<[f64; 3]>,
+    /// A SeaTrac's LBL beacons: receiver k's range is sent from beacon k.
+    lbl_beacons: Vec<u8>,
     summary: DeviceSummary,
 }
 
@@ -271,6 +279,13 @@ impl Device {
                 enc::xsens_from_magnetometer(m, XSENS_FIELD_UNIT_UT, (self.counter % 65_536) as u16)
             }
             (Protocol::Seatrac, LogMessage::Usbl(u)) => enc::seatrac_from_usbl(u, 1),
+            (Protocol::Seatrac, LogMessage::AcousticRanges(r)) => {
+                let b = enc::seatrac_pings_from_ranges(r, &self.lbl_beacons, 1);
+                if b.is_empty() {
+                    return None;
+                }
+                b
+            }
             (Protocol::Nmea, LogMessage::Gnss(f)) => enc::nmea_from_gnss(f, utc_now_ns()),
             (Protocol::Ubx, LogMessage::Gnss(f)) => enc::ubx_from_gnss(f, utc_now_ns()),
             _ => return None,
@@ -412,6 +427,7 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
                 },
                 pd0_coordinates: a.pd0_coordinates,
                 attitude: None,
+                lbl_beacons: a.lbl_beacons.clone(),
                 summary: DeviceSummary {
                     device: class.name().to_string(),
                     protocol: protocol.name().to_string(),
@@ -422,6 +438,12 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
     }
     if devices.is_empty() {
         bail!("nothing to emulate: give at least one of --dvl, --imu, --usbl, --gnss");
+    }
+    if !a.lbl_beacons.is_empty() && a.usbl.as_deref() != Some("seatrac") {
+        bail!("--lbl-beacons needs --usbl seatrac");
+    }
+    if a.lbl_beacons.len() > 4 {
+        bail!("--lbl-beacons: {} beacons; at most 4", a.lbl_beacons.len());
     }
     for (specs, option) in [(&a.pause, "pause"), (&a.unplug, "unplug")] {
         for spec in specs {
@@ -494,6 +516,9 @@ pub fn run(a: &EmulateArgs) -> anyhow::Result<Vec<DeviceSummary>> {
             LogMessage::Imu(s) => (DeviceClass::Imu, "imu", s.host_time_ns),
             LogMessage::Dvl(s) => (DeviceClass::Dvl, "dvl", s.host_time_ns),
             LogMessage::Usbl(s) => (DeviceClass::Usbl, "usbl", s.host_time_ns),
+            LogMessage::AcousticRanges(s) if !a.lbl_beacons.is_empty() => {
+                (DeviceClass::Usbl, "ranges", s.host_time_ns)
+            }
             LogMessage::Gnss(s) => (DeviceClass::Gnss, "gnss", s.host_time_ns),
             // An IMU that carries the magnetic field (Xsens) sends it in its own packets.
             LogMessage::Magnetometer(s) => (DeviceClass::Imu, "mag", s.host_time_ns),
@@ -696,6 +721,7 @@ mod tests {
             },
             pd0_coordinates: Pd0Coordinates::Instrument,
             attitude: None,
+            lbl_beacons: Vec::new(),
             summary: DeviceSummary::default(),
         };
         let bottom = DvlVelocityV1 {
