@@ -120,6 +120,55 @@ fn live_daemon_fuses_usbl_fixes_from_a_seatrac_on_a_pseudo_terminal() {
     assert_eq!(r["navigator"]["usbl_invalid"], 0, "{r}");
 }
 
+/// An LBL survey as real processes: the emulated SeaTrac ranges the scenario's three seabed
+/// beacons (`auvnav emulate --lbl-beacons`), `auvnav-usbl` publishes each ping response as a
+/// range (`range_beacons`), the daemon fuses them one by one (`[navigation.ranges]`), the recorder
+/// keeps them, and the replay of the recording fuses the same ranges to the same solution.
+#[test]
+fn live_daemon_fuses_lbl_ranges_from_a_seatrac_ranging_seabed_beacons() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = TempDir::new("livelbl");
+    let out = dir.path().join("run");
+    let args = [
+        "--scenario",
+        "ranges_lbl",
+        "--start",
+        "known",
+        "--seconds",
+        "30",
+        // In real time: the daemon's clock is the host's, and sound takes its physical time.
+        "--speed",
+        "1",
+    ];
+    let v = demo(&args, &out);
+    assert_eq!(v["replay_identical"], true, "{v}");
+    assert_eq!(v["clean_stop"], true, "{v}");
+    let o = Command::new(binary("auvnav"))
+        .arg("replay")
+        .arg(out.join("record.mcap"))
+        .arg("--json")
+        .output()
+        .expect("replay");
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    // One ping a second to three beacons: a range message per beacon and ping (the first pings
+    // may precede the daemon's first IMU sample), 5 % of them multipath outliers the gate takes
+    // out.
+    let recorded = r["counts"]["acoustic_ranges"]
+        .as_u64()
+        .expect("ranges counted");
+    assert!(recorded >= 84, "{r}");
+    let n = &r["navigator"];
+    let fused = n["ranges_fused"].as_u64().expect("fused");
+    assert!(fused >= 78, "{r}");
+    assert_eq!(n["ranges_reopened"], 0, "{r}");
+    assert_eq!(n["ranges_invalid"], 0, "{r}");
+    let acc = &v["accuracy"];
+    assert!(
+        acc["horizontal_error_final_m"].as_f64().expect("error") < 0.5,
+        "{v}"
+    );
+}
+
 /// `auvnav demo --gnss`: a u-blox receiver emulated on a pseudo-terminal, `auvnav-gnss` gating
 /// its fixes on the depth from `auvnav-can`; the surface fixes reach the daemon and the
 /// recording, the replay reproduces the live solution, and `auvnav calibrate dvl` runs on the

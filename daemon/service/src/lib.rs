@@ -15,3 +15,4 @@ pub mod bus_io;
 pub mod checkpoint;
 mod csv_out;
 pub mod service;
+mod stop_summary;

@@ -11,6 +11,7 @@
 
 use crate::checkpoint;
 use crate::csv_out::Csv;
+use crate::stop_summary::{imu_summary, magnetometer_summary, ranges_summary, usbl_summary};
 use auvnav_core::config::DaemonConfig;
 use auvnav_core::csv;
 use auvnav_core::feed::SensorMessage;
@@ -520,7 +521,7 @@ pub fn run<I: Inputs, O: Outputs>(
     let _ = sink.out.health(&h);
     let s = sink.summary;
     tracing::info!(
-        "auvnavd: stopping; {} solutions ({} published), {} late aid messages, {} lost on the bus, {} missed deadlines, {} filter reinitialisations, {} checkpoint write errors; IMU: {}; USBL fixes: {}; magnetometer: {}",
+        "auvnavd: stopping; {} solutions ({} published), {} late aid messages, {} lost on the bus, {} missed deadlines, {} filter reinitialisations, {} checkpoint write errors; IMU: {}; USBL fixes: {}; magnetometer: {}; acoustic ranges: {}",
         s.solutions,
         s.published,
         session.late_aids,
@@ -530,57 +531,10 @@ pub fn run<I: Inputs, O: Outputs>(
         s.checkpoint_errors,
         imu_summary(&session),
         usbl_summary(&session),
-        magnetometer_summary(&session)
+        magnetometer_summary(&session),
+        ranges_summary(&session)
     );
     result?;
     flushed.map_err(|x| format!("flushing the CSV output: {x}"))?;
     Ok(s)
-}
-
-/// What became of the IMU samples, for the stop message.
-fn imu_summary(session: &Session) -> String {
-    let Some(c) = session.navigator().map(|n| n.counters()) else {
-        return "no navigation yet".into();
-    };
-    format!(
-        "{} integrated, {} invalid or implausible, {} out of order, {} gaps bridged, {} device clock jumps",
-        c.imu_samples, c.imu_invalid, c.imu_out_of_order, c.imu_gaps, c.imu_clock_jumps
-    )
-}
-
-/// What became of the USBL fixes, for the stop message.
-fn usbl_summary(session: &Session) -> String {
-    let Some(c) = session.navigator().map(|n| n.counters()) else {
-        return "no navigation yet".into();
-    };
-    if c.usbl_unconfigured > 0 {
-        return format!(
-            "{} received, not used (no [navigation.usbl] in the configuration)",
-            c.usbl_unconfigured
-        );
-    }
-    format!(
-        "{} fused, {} rejected by the gate ({} gate reopenings), {} invalid, {} failed",
-        c.usbl_fused, c.usbl_rejected, c.usbl_reopened, c.usbl_invalid, c.usbl_failed
-    )
-}
-
-/// What became of the magnetometer readings, for the stop message.
-fn magnetometer_summary(session: &Session) -> String {
-    let Some(c) = session.navigator().map(|n| n.counters()) else {
-        return "no navigation yet".into();
-    };
-    if c.magnetometer_unconfigured > 0 {
-        return format!(
-            "{} received, not used (no [navigation.magnetometer] in the configuration)",
-            c.magnetometer_unconfigured
-        );
-    }
-    format!(
-        "{} fused, {} rejected by the gate, {} disturbed (magnitude far from the field model), {} invalid",
-        c.magnetometer_fused,
-        c.magnetometer_rejected,
-        c.magnetometer_disturbed,
-        c.magnetometer_invalid
-    )
 }

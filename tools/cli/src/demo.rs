@@ -218,6 +218,7 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
     }
     let session = session_config(&cfg, a.start, true, &first_truth(&cfg)?);
     let has_usbl = session.navigation.usbl.is_some();
+    let has_ranges = session.navigation.ranges.is_some();
     let mut recorder = PhaseRecorder::new();
     let (simulated, accuracy, counters) = run_session_voyage(
         &cfg,
@@ -250,11 +251,13 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
             "  INS + DVL + depth{} through the navigation core:",
             if has_usbl {
                 " + USBL (tight, adaptive unscented)"
+            } else if has_ranges {
+                " + LBL ranges (tight)"
             } else {
                 ""
             }
         );
-        print_phases(&result.phases);
+        print_phases(&result.phases, has_ranges);
         println!(
             "  over the whole run (alignment included): horizontal error final {:.2} m, max {:.2} m, CEP50 {:.2} m; heading error RMS {:.4} deg",
             acc.horizontal_error_final_m,
@@ -270,6 +273,13 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
             result.counters.depth_rejected,
             result.wall_s
         );
+        if has_ranges {
+            let c = &result.counters;
+            println!(
+                "  acoustic ranges: {} fused, {} rejected by the gate, {} invalid",
+                c.ranges_fused, c.ranges_rejected, c.ranges_invalid
+            );
+        }
         if result.simulated.magnetometer > 0 {
             let c = &result.counters;
             println!(
@@ -288,8 +298,8 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The phase lines of the summary.
-pub fn print_phases(p: &PhaseFigures) {
+/// The phase lines of the summary (`ranges`: the navigator fuses LBL ranges).
+pub fn print_phases(p: &PhaseFigures, ranges: bool) {
     if let Some(al) = &p.alignment {
         println!(
             "  alignment: started with no heading (first estimate {:+.1} deg off); coarse {:.0} s, then DVL-aided fine alignment",
@@ -307,9 +317,10 @@ pub fn print_phases(p: &PhaseFigures) {
     }
     if let Some(e) = &p.before_usbl {
         println!(
-            "  navigation {:.0}-{:.0} s (INS + DVL + depth): horizontal error RMS {:.2} m, max {:.2} m, at the end {:.2} m",
+            "  navigation {:.0}-{:.0} s (INS + DVL + depth{}): horizontal error RMS {:.2} m, max {:.2} m, at the end {:.2} m",
             e.from_s,
             e.to_s,
+            if ranges { " + LBL ranges" } else { "" },
             e.horizontal_error_rms_m,
             e.horizontal_error_max_m,
             e.horizontal_error_final_m
@@ -391,7 +402,22 @@ fn run_processes(a: &DemoArgs) -> anyhow::Result<()> {
                 .unwrap_or_default()
         );
         println!("  scheduling: {}", r.scheduling);
-        print_phases(&r.phases);
+        let ranges = auvnav_sim::scenario::Scenario::load(&r.scenario)
+            .ok()
+            .and_then(|s| s.acoustic)
+            .is_some_and(|a| a.kind == auvnav_sim::scenario::AcousticKind::Lbl);
+        if ranges {
+            println!(
+                "  LBL: the SeaTrac emulated as ranging the scenario's seabed beacons (auvnav-usbl's range_beacons), their ranges fused tight"
+            );
+            if r.speed != 1.0 {
+                println!(
+                    "  NOTE: played at {}x, the daemon's clock runs {}x the voyage's while sound keeps its travel time: the ranges' motion compensation spans {}x the true interval (--speed 1 gives the on-board figure)",
+                    r.speed, r.speed, r.speed
+                );
+            }
+        }
+        print_phases(&r.phases, ranges);
         if r.gnss.is_some() {
             println!(
                 "  GNSS: {} surface fixes simulated, {} recorded (the driver passes fixes while the depth on the bus is at most 0.5 m)",

@@ -398,7 +398,25 @@ pub fn run_live(
         ),
     };
     let imu_cfg = driver_cfg("imu", imu.name(), &imu_settings)?;
-    let usbl_cfg = driver_cfg("usbl", "seatrac", "")?;
+    // An LBL survey: the SeaTrac ranges the scenario's beacons, IDs 1, 2, … as receivers 0, 1, ….
+    let lbl_beacons: Vec<String> = match &cfg.scenario.acoustic {
+        Some(a) if a.kind == sim::scenario::AcousticKind::Lbl => (1..=a.beacons_m.len().min(4))
+            .map(|k| k.to_string())
+            .collect(),
+        _ => Vec::new(),
+    };
+    let usbl_cfg = driver_cfg(
+        "usbl",
+        "seatrac",
+        &if lbl_beacons.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "[settings.seatrac]\nrange_beacons = [{}]\n",
+                lbl_beacons.join(", ")
+            )
+        },
+    )?;
     // A vehicle's receiver: fixes only while the depth on the bus says it is at the surface.
     let gnss_cfg = match gnss {
         Some(p) => Some(driver_cfg(
@@ -503,6 +521,10 @@ pub fn run_live(
     ];
     if let Some(p) = gnss {
         emulated.extend(["--gnss", p.name()]);
+    }
+    let lbl_list = lbl_beacons.join(",");
+    if !lbl_beacons.is_empty() {
+        emulated.extend(["--lbl-beacons", lbl_list.as_str()]);
     }
     let mut emulator = ChildProcess::spawn_logged(
         "emulate",

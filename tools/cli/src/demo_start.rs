@@ -27,6 +27,25 @@ pub const ALIGNED_HEADING_STD_DEG: f64 = 0.2;
 /// of this motion, and the fine stage takes it from there.
 pub const COARSE_ALIGNMENT_S: f64 = 60.0;
 
+/// The range aid for a scenario with seabed LBL beacons (`ranges_lbl`): the beacons where the
+/// scenario surveyed them, the range noise its device has. `None` for other scenarios (a moving
+/// array's pose has no emulated device).
+pub fn lbl_ranges_config(cfg: &SimConfig) -> Option<auvnav_core::aid::ranges::RangesConfig> {
+    let setup = cfg.scenario.acoustic.as_ref()?;
+    if setup.kind != sim::scenario::AcousticKind::Lbl {
+        return None;
+    }
+    let start = auvnav_core::earth::Geodetic {
+        latitude_rad: cfg.scenario.start.latitude_deg.to_radians(),
+        longitude_rad: cfg.scenario.start.longitude_deg.to_radians(),
+        height_m: 0.0,
+    };
+    Some(auvnav_core::aid::ranges::RangesConfig {
+        range_std_m: cfg.effects.usbl_range_noise.max(0.05),
+        ..setup.ranges_config(&start)
+    })
+}
+
 /// The navigation part of the demo's configuration: the scenario's USBL station (tight, AUKF)
 /// and magnetometer when there are any, and the start. `first_truth` is the voyage's first truth
 /// record (the `[initial]` state of `DemoStart::Known`, the launch position of `Align`).
@@ -38,6 +57,7 @@ pub fn session_config(
 ) -> ReplayConfig {
     let navigation = NavConfig {
         usbl: sim::StationGeometry::from_scenario(&cfg.scenario).map(|st| st.usbl_config()),
+        ranges: lbl_ranges_config(cfg),
         magnetometer: (magnetometer && cfg.scenario.rates.magnetometer_hz > 0)
             .then(|| sim::sensors::MagnetometerModel::navigator_config(&cfg.effects)),
         ..NavConfig::default()

@@ -13,9 +13,9 @@ use anyhow::{Context, bail};
 use auvnav_log::{Corruption, LogError, LogHeader, LogReader, LogWriter, write_log_atomically};
 use auvnav_shm_schema::bus::{Bus, BusSubscriber, Sequenced};
 use auvnav_shm_schema::{
-    AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1, ImuSampleV1, LateAidV1, MagnetometerV1,
-    Message, NavSolutionV1, ProcessHealthV1, RawBytesV1, SessionEventV1, SoundVelocityV1,
-    TruthStateV1, UsblFixV1, qos, topic,
+    AcousticArrayPoseV1, AcousticRangesV1, AidDiagnosticsV1, DepthV1, DvlVelocityV1, GnssFixV1,
+    ImuSampleV1, LateAidV1, MagnetometerV1, Message, NavSolutionV1, ProcessHealthV1, RawBytesV1,
+    SessionEventV1, SoundVelocityV1, TruthStateV1, UsblFixV1, qos, topic,
 };
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -162,6 +162,28 @@ fn channel<T: Message + Sequenced + 'static>(
     }))
 }
 
+/// The channels of every topic the recorder keeps but raw bytes: the sensors' (aid topics before
+/// the IMU, as the daemon takes them), the daemon's outputs, health and truth.
+fn channels(bus: &Bus) -> anyhow::Result<Vec<Box<dyn Drain>>> {
+    Ok(vec![
+        channel::<DvlVelocityV1>(bus, topic::DVL, qos::SENSOR)?,
+        channel::<UsblFixV1>(bus, topic::USBL, qos::SENSOR)?,
+        channel::<DepthV1>(bus, topic::DEPTH, qos::SENSOR)?,
+        channel::<MagnetometerV1>(bus, topic::MAGNETOMETER, qos::SENSOR)?,
+        channel::<GnssFixV1>(bus, topic::GNSS, qos::SENSOR)?,
+        channel::<SoundVelocityV1>(bus, topic::SOUND_VELOCITY, qos::SENSOR)?,
+        channel::<AcousticRangesV1>(bus, topic::ACOUSTIC_RANGES, qos::SENSOR)?,
+        channel::<AcousticArrayPoseV1>(bus, topic::ACOUSTIC_ARRAY_POSE, qos::SENSOR)?,
+        channel::<ImuSampleV1>(bus, topic::IMU, qos::SENSOR)?,
+        channel::<NavSolutionV1>(bus, topic::NAV_SOLUTION, qos::NAVIGATION)?,
+        channel::<AidDiagnosticsV1>(bus, topic::NAV_AID_DIAGNOSTICS, qos::NAVIGATION)?,
+        channel::<LateAidV1>(bus, topic::NAV_LATE_AIDS, qos::NAVIGATION)?,
+        channel::<SessionEventV1>(bus, topic::NAV_SESSION_EVENTS, qos::NAVIGATION)?,
+        channel::<ProcessHealthV1>(bus, topic::HEALTH, qos::HEALTH)?,
+        channel::<TruthStateV1>(bus, topic::TRUTH, qos::SENSOR)?,
+    ])
+}
+
 /// An error with its causes ("writing x: MCAP I/O error: File too large (os error 27)").
 fn with_causes(e: &dyn std::error::Error) -> String {
     let mut s = e.to_string();
@@ -259,21 +281,7 @@ pub fn run(a: &RecordArgs) -> anyhow::Result<RecordSummary> {
     // Aid topics are drained before the IMU in every pass, as the daemon takes them, so the log
     // is close to time order; replay puts messages in their time-stamp order anyway (within a
     // window) and applies aids the daemon took late where its `nav/late_aids` records say.
-    let mut channels: Vec<Box<dyn Drain>> = vec![
-        channel::<DvlVelocityV1>(&bus, topic::DVL, qos::SENSOR)?,
-        channel::<UsblFixV1>(&bus, topic::USBL, qos::SENSOR)?,
-        channel::<DepthV1>(&bus, topic::DEPTH, qos::SENSOR)?,
-        channel::<MagnetometerV1>(&bus, topic::MAGNETOMETER, qos::SENSOR)?,
-        channel::<GnssFixV1>(&bus, topic::GNSS, qos::SENSOR)?,
-        channel::<SoundVelocityV1>(&bus, topic::SOUND_VELOCITY, qos::SENSOR)?,
-        channel::<ImuSampleV1>(&bus, topic::IMU, qos::SENSOR)?,
-        channel::<NavSolutionV1>(&bus, topic::NAV_SOLUTION, qos::NAVIGATION)?,
-        channel::<AidDiagnosticsV1>(&bus, topic::NAV_AID_DIAGNOSTICS, qos::NAVIGATION)?,
-        channel::<LateAidV1>(&bus, topic::NAV_LATE_AIDS, qos::NAVIGATION)?,
-        channel::<SessionEventV1>(&bus, topic::NAV_SESSION_EVENTS, qos::NAVIGATION)?,
-        channel::<ProcessHealthV1>(&bus, topic::HEALTH, qos::HEALTH)?,
-        channel::<TruthStateV1>(&bus, topic::TRUTH, qos::SENSOR)?,
-    ];
+    let mut channels = channels(&bus)?;
     for r in &a.raw {
         channels.push(channel::<RawBytesV1>(&bus, &topic::raw(r), qos::RAW)?);
     }
@@ -458,6 +466,21 @@ mod tests {
             .parse()
             .expect("integer");
         assert!(half >= 1 && half <= after - before);
+    }
+
+    /// Every topic that carries sensor data into the daemon is recorded, so that a replay
+    /// fuses what the daemon fused.
+    #[test]
+    fn every_sensor_topic_is_recorded() {
+        let bus = Bus::new(&format!("rectest{}", std::process::id()), "recordertest").expect("bus");
+        let recorded: Vec<String> = channels(&bus)
+            .expect("channels")
+            .iter()
+            .map(|c| c.topic().to_string())
+            .collect();
+        for t in topic::SENSOR_TOPICS {
+            assert!(recorded.iter().any(|r| r == t), "{t} is not recorded");
+        }
     }
 
     #[test]
