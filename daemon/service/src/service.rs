@@ -11,7 +11,7 @@
 
 use crate::checkpoint;
 use crate::csv_out::Csv;
-use crate::stop_summary::{imu_summary, magnetometer_summary, ranges_summary, usbl_summary};
+use crate::stop_summary::sensors_summary;
 use auvnav_core::config::DaemonConfig;
 use auvnav_core::csv;
 use auvnav_core::feed::SensorMessage;
@@ -521,7 +521,7 @@ pub fn run<I: Inputs, O: Outputs>(
     let _ = sink.out.health(&h);
     let s = sink.summary;
     tracing::info!(
-        "auvnavd: stopping; {} solutions ({} published), {} late aid messages, {} lost on the bus, {} missed deadlines, {} filter reinitialisations, {} checkpoint write errors; IMU: {}; USBL fixes: {}; magnetometer: {}; acoustic ranges: {}",
+        "auvnavd: stopping; {} solutions ({} published), {} late aid messages, {} lost on the bus, {} missed deadlines, {} filter reinitialisations, {} checkpoint write errors; {}",
         s.solutions,
         s.published,
         session.late_aids,
@@ -529,10 +529,7 @@ pub fn run<I: Inputs, O: Outputs>(
         s.missed_deadlines,
         session.reinitialisations,
         s.checkpoint_errors,
-        imu_summary(&session),
-        usbl_summary(&session),
-        magnetometer_summary(&session),
-        ranges_summary(&session)
+        sensors_summary(&session)
     );
     result?;
     flushed.map_err(|x| format!("flushing the CSV output: {x}"))?;

@@ -1,12 +1,25 @@
 //! The daemon's stop message: what became of each sensor's messages.
 
+use auvnav_core::navigator::NavCounters;
 use auvnav_core::session::Session;
 
-/// What became of the IMU samples, for the stop message.
-pub fn imu_summary(session: &Session) -> String {
+/// What became of every sensor's messages: `IMU: …; USBL fixes: …; magnetometer: …; acoustic
+/// ranges: …`, or that the daemon never navigated.
+pub fn sensors_summary(session: &Session) -> String {
     let Some(c) = session.navigator().map(|n| n.counters()) else {
         return "no navigation yet".into();
     };
+    format!(
+        "IMU: {}; USBL fixes: {}; magnetometer: {}; acoustic ranges: {}",
+        imu_summary(&c),
+        usbl_summary(&c),
+        magnetometer_summary(&c),
+        ranges_summary(&c)
+    )
+}
+
+/// What became of the IMU samples, for the stop message.
+fn imu_summary(c: &NavCounters) -> String {
     format!(
         "{} integrated, {} invalid or implausible, {} out of order, {} gaps bridged, {} device clock jumps",
         c.imu_samples, c.imu_invalid, c.imu_out_of_order, c.imu_gaps, c.imu_clock_jumps
@@ -14,10 +27,7 @@ pub fn imu_summary(session: &Session) -> String {
 }
 
 /// What became of the USBL fixes, for the stop message.
-pub fn usbl_summary(session: &Session) -> String {
-    let Some(c) = session.navigator().map(|n| n.counters()) else {
-        return "no navigation yet".into();
-    };
+fn usbl_summary(c: &NavCounters) -> String {
     if c.usbl_unconfigured > 0 {
         return format!(
             "{} received, not used (no [navigation.usbl] in the configuration)",
@@ -31,10 +41,7 @@ pub fn usbl_summary(session: &Session) -> String {
 }
 
 /// What became of the magnetometer readings, for the stop message.
-pub fn magnetometer_summary(session: &Session) -> String {
-    let Some(c) = session.navigator().map(|n| n.counters()) else {
-        return "no navigation yet".into();
-    };
+fn magnetometer_summary(c: &NavCounters) -> String {
     if c.magnetometer_unconfigured > 0 {
         return format!(
             "{} received, not used (no [navigation.magnetometer] in the configuration)",
@@ -51,10 +58,7 @@ pub fn magnetometer_summary(session: &Session) -> String {
 }
 
 /// What became of the acoustic ranges, for the stop message.
-pub fn ranges_summary(session: &Session) -> String {
-    let Some(c) = session.navigator().map(|n| n.counters()) else {
-        return "no navigation yet".into();
-    };
+fn ranges_summary(c: &NavCounters) -> String {
     if c.ranges_unconfigured > 0 {
         return format!(
             "{} received, not used (no [navigation.ranges] in the configuration)",
