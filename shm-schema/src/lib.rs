@@ -767,6 +767,9 @@ pub enum AidSource {
     Magnetometer = 7,
     /// One range of an acoustic system (LBL beacon, a receiver of a moving array, a single beacon).
     AcousticRange = 8,
+    /// One range difference between two receivers of an acoustic array (a docking station's
+    /// hydrophones, fused by the range aid).
+    AcousticRangeDifference = 9,
 }
 
 impl TryFrom<u32> for AidSource {
@@ -781,6 +784,7 @@ impl TryFrom<u32> for AidSource {
             6 => AidSource::ZeroVelocity,
             7 => AidSource::Magnetometer,
             8 => AidSource::AcousticRange,
+            9 => AidSource::AcousticRangeDifference,
             other => return Err(other),
         })
     }

@@ -317,3 +317,39 @@ fn usbl_fix_time_constant_smooths_the_devices_fixes_and_nothing_else() {
     }
     assert!(moved > 0.1, "the smoothing changed the fixes ({moved} m)");
 }
+
+/// `usbl.receiver_range_bias`: each receiver's range is longer by its own bias (the same seed
+/// gives the same noise and outliers), which receivers range is unchanged.
+#[test]
+fn usbl_receiver_range_bias_adds_each_receivers_own_error() {
+    use auvnav_shm_schema::AcousticRangesV1;
+    let bias = [0.7, -0.4, 0.0, 1.3];
+    let pings = |b: &[f64]| -> Vec<AcousticRangesV1> {
+        run(
+            "ranges_array",
+            &[("usbl.receiver_range_bias", b)],
+            Some(60.0),
+        )
+        .into_iter()
+        .filter_map(|m| match m {
+            LogMessage::AcousticRanges(r) => Some(r),
+            _ => None,
+        })
+        .collect()
+    };
+    let (plain, biased) = (pings(&[0.0; 4]), pings(&bias));
+    assert_eq!(plain.len(), biased.len());
+    assert!(plain.len() > 50);
+    let mut seen = [0usize; 4];
+    for (a, b) in plain.iter().zip(&biased) {
+        assert_eq!(a.validity, b.validity);
+        for (k, n) in seen.iter_mut().enumerate() {
+            if a.range_valid(k) {
+                let d = b.range_m[k] - a.range_m[k];
+                assert!((d - bias[k]).abs() < 1e-9, "receiver {k}: {d} m");
+                *n += 1;
+            }
+        }
+    }
+    assert!(seen.iter().all(|&n| n > 40), "{seen:?}");
+}

@@ -924,7 +924,13 @@ impl NavConfig {
         }
         if let Some(r) = &self.ranges {
             out.extend(r.problems().into_iter().map(|p| format!("navigation.{p}")));
-            if self
+            if r.usbl_fixes && self.usbl.is_some() {
+                out.push(
+                    "navigation.ranges.usbl_fixes: not with navigation.usbl (both would fuse the \
+                     station's fixes); configure one of them"
+                        .into(),
+                );
+            } else if self
                 .usbl
                 .as_ref()
                 .is_some_and(|u| u.coupling == crate::aid::usbl::Coupling::Tight)

@@ -21,6 +21,8 @@ pub mod nav_core;
 pub mod navigator;
 #[cfg(test)]
 mod range_aid_tests;
+#[cfg(test)]
+mod range_station_tests;
 pub mod session;
 pub mod smoother;
 pub mod strapdown;

@@ -167,6 +167,34 @@ pub fn sound_speed_correction(cfg: &NavConfig) -> Option<SoundSpeed> {
     }
 }
 
+/// The covariance of a checkpoint: this build's states, or the 28 of the builds that had three
+/// acoustic error slots (written before this build: its two water-current states move after the
+/// two new slots, which start switched off); `None` for any other size.
+fn checkpoint_covariance(v: &[f64]) -> Option<ekf::Covariance> {
+    const OLD_N: usize = 28;
+    const OLD_CURRENT: usize = 26;
+    if v.len() == ekf::N * ekf::N {
+        return Some(ekf::Covariance::from_iterator(v.iter().copied()));
+    }
+    if v.len() != OLD_N * OLD_N {
+        return None;
+    }
+    let to_new = |i: usize| {
+        if i < OLD_CURRENT {
+            i
+        } else {
+            i + ekf::CURRENT - OLD_CURRENT
+        }
+    };
+    let mut p = ekf::Covariance::zeros();
+    for j in 0..OLD_N {
+        for i in 0..OLD_N {
+            p[(to_new(i), to_new(j))] = v[i + OLD_N * j];
+        }
+    }
+    Some(p)
+}
+
 impl Navigator {
     /// The variances of the core states (position, velocity, attitude, IMU biases) that `cfg`
     /// starts with; parameter states are zero (off) until an aid switches them on.
@@ -449,9 +477,7 @@ impl Navigator {
     /// A navigator continuing from `cp` under `cfg` (the checkpoint's covariance, biases and DVL
     /// installation; its time is the checkpoint's). `None` when the checkpoint is not sound.
     pub fn from_checkpoint(cfg: NavConfig, cp: &Checkpoint) -> Option<Navigator> {
-        if cp.covariance.len() != ekf::N * ekf::N {
-            return None;
-        }
+        let p = checkpoint_covariance(&cp.covariance)?;
         let q = nalgebra::Quaternion::new(
             cp.quaternion_body_to_ned[0],
             cp.quaternion_body_to_ned[1],
@@ -480,7 +506,7 @@ impl Navigator {
         d.beam_angle_error_deg = configured.beam_angle_error_deg;
         cfg.set_dvl_installation(d);
         let mut nav = Navigator::new(cfg, state);
-        nav.core.kf.p = ekf::Covariance::from_iterator(cp.covariance.iter().copied());
+        nav.core.kf.p = p;
         nav.set_imu_biases(
             Vector3::from(cp.gyro_bias_rad_s),
             Vector3::from(cp.accel_bias_m_s2),
@@ -532,6 +558,26 @@ impl Navigator {
         self.apply(u)
     }
 
+    /// Fuses a docking station's fix through the range aid, when it is configured to take them
+    /// (`[navigation.ranges] usbl_fixes`): the diagnostics of its slant range and of each range
+    /// difference; `None` when the range aid does not take fixes (they go to
+    /// [`Navigator::on_usbl`]).
+    pub fn on_usbl_as_ranges(&mut self, m: &UsblFixV1) -> Option<[Option<AidDiagnosticsV1>; 3]> {
+        if !self.ranges.takes_usbl_fixes() {
+            return None;
+        }
+        let mut out = [None; 3];
+        if !self.ranges.accepts_usbl_fix(&self.core, m) {
+            return Some(out);
+        }
+        for (part, slot) in out.iter_mut().enumerate() {
+            if let Some(u) = self.ranges.fuse_usbl_part(&mut self.core, m, part) {
+                *slot = Some(self.apply(u));
+            }
+        }
+        Some(out)
+    }
+
     /// Fuses each receiver's range of an acoustic system alone (`crate::aid::ranges`): the
     /// diagnostics of each range (receiver k's in slot k), none when the message is not used
     /// (counted: unconfigured, late).
@@ -553,7 +599,14 @@ impl Navigator {
         self.ranges.on_array_pose(m);
     }
 
-    /// The range aid's common bias (m) and sound-speed scale error, when configured.
+    /// Each receiver's estimated range bias (m; the shared one repeated), when the range aid is
+    /// configured.
+    pub fn receiver_biases(&self) -> Option<Vec<f64>> {
+        self.ranges.receiver_biases(&self.core)
+    }
+
+    /// The range aid's range bias (m; receiver 0's when each has its own) and sound-speed scale
+    /// error, when configured.
     pub fn range_estimates(&self) -> Option<(f64, f64)> {
         self.ranges.estimates(&self.core)
     }

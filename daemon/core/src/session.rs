@@ -885,7 +885,16 @@ impl Session {
             SensorMessage::Dvl(m) => nav.on_dvl(&m),
             SensorMessage::Depth(m) => nav.on_depth(&m),
             SensorMessage::Gnss(m) => nav.on_gnss(&m),
-            SensorMessage::Usbl(m) => nav.on_usbl(&m),
+            SensorMessage::Usbl(m) => match nav.on_usbl_as_ranges(&m) {
+                // The range aid configured as the docking station: one diagnostics per part.
+                Some(parts) => {
+                    for d in parts.iter().flatten() {
+                        out(SessionOutput::Diagnostics(d))?;
+                    }
+                    return Ok(());
+                }
+                None => nav.on_usbl(&m),
+            },
             SensorMessage::Magnetometer(m) => match nav.on_magnetometer(&m) {
                 Some(d) => d,
                 // Without [navigation.magnetometer] the readings are counted, not reported.

@@ -36,4 +36,19 @@ pub fn print(reports: &[RangesReport]) {
             1e6 * r.tight.range_scale_std,
         );
     }
+    for r in reports.iter().filter(|r| r.ranges.bias_per_receiver) {
+        let each: Vec<String> = (0..r.ranges.receivers_m.len().min(4))
+            .map(|k| {
+                format!(
+                    "{k}: {:.2} ± {:.2}",
+                    r.tight.receiver_bias_mean_m[k], r.tight.receiver_bias_std_m[k]
+                )
+            })
+            .collect();
+        println!(
+            "\n{}: each receiver's range bias at the end (m, mean ± spread over the runs): {}",
+            r.geometry,
+            each.join(", ")
+        );
+    }
 }

@@ -4,6 +4,15 @@
 pub use auvnav_studies::usbl::*;
 use serde::Serialize;
 
+/// The filter's column: the USBL aid's filter, or the range aid.
+fn filter_name(r: &UsblReport) -> String {
+    if r.range_aid {
+        "range aid".to_owned()
+    } else {
+        name(&r.filter)
+    }
+}
+
 fn name<T: Serialize>(x: &T) -> String {
     serde_json::to_value(x)
         .ok()
@@ -29,7 +38,7 @@ pub fn print_table(reports: &[UsblReport]) {
         println!(
             "| {case} | {} | {} | {:.3} | {:.2} | {:.3} | {:.3} | {:.4} | {}/{} | {}/{} | {} | {:.0} |",
             name(&r.coupling),
-            name(&r.filter),
+            filter_name(r),
             r.horizontal_error_rms_m,
             r.horizontal_error_max_m,
             r.worst_run_horizontal_error_rms_m,
@@ -50,7 +59,7 @@ pub fn print(r: &UsblReport) {
     println!(
         "{} {} on {} ({} runs of {:.0} s, seed {}; outliers {:.0} %, array yaw error {}°):",
         name(&r.coupling),
-        name(&r.filter),
+        filter_name(r),
         r.scenario,
         r.runs,
         r.wall_s_per_run,

@@ -4,7 +4,8 @@
 //! on a ship (the same, one receiver). Each ping gives one range per receiver, measured over the
 //! true acoustic path (each end where it was when the sound left and arrived) at the true sound
 //! speed and reported at the device's 1500 m/s, with the `usbl.*` effects: range noise,
-//! multipath outliers, dropouts, receivers displaced from their configured places
+//! multipath outliers, dropouts, a constant range error per receiver (`usbl.receiver_range_bias`),
+//! receivers displaced from their configured places
 //! (`usbl.hydrophone_offset`), the array turned and displaced from where its boat says it is
 //! (`usbl.array_yaw`, `usbl.array_offset`), and the boat's reported pose noise
 //! (`usbl.array_pose_noise`).
@@ -229,7 +230,8 @@ impl AcousticModel {
             } else {
                 0.0
             };
-            m.range_m[k] = z * scale + outlier + self.rng.gauss(e.usbl_range_noise);
+            let bias = e.usbl_receiver_range_bias.get(k).copied().unwrap_or(0.0);
+            m.range_m[k] = z * scale + bias + outlier + self.rng.gauss(e.usbl_range_noise);
             m.validity |= AcousticRangesV1::VALID_RANGE << k;
         }
         if let Some((fix, std)) = self.device_fix(&m, depth_m, t) {

@@ -254,6 +254,9 @@ effects! {
     /// (x, y, z down per hydrophone, row by row): an array whose geometry differs from its
     /// configuration, seen in the range differences and in per-receiver ranges.
     usbl_hydrophone_offset: [f64; 12] = "usbl.hydrophone_offset", unit "m", range -100.0..=100.0, default [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    /// Constant error of each receiver's range (receiver 0..3 of an acoustic system's ranges):
+    /// its own detection delay, cable or electronics, in metres of range.
+    usbl_receiver_range_bias: [f64; 4] = "usbl.receiver_range_bias", unit "m", range -100.0..=100.0, default [0.0, 0.0, 0.0, 0.0];
     /// USBL latency: a fix is delivered (and stamped) this long after its time of validity.
     usbl_latency: f64 = "usbl.latency", unit "s", range 0.0..=5.0, default [0.0];
     /// True sound speed for the acoustic ranging; the USBL assumes 1500 m/s.

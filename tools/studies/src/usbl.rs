@@ -12,6 +12,7 @@
 use crate::StudyError;
 use crate::error::usage;
 use anyhow::Context;
+use auvnav_core::aid::ranges::RangesConfig;
 use auvnav_core::aid::usbl::{Coupling, UsblConfig, UsblFilter};
 use auvnav_core::earth::{ned_offset, offset_position};
 use auvnav_core::feed::SensorMessage;
@@ -68,6 +69,12 @@ pub struct UsblOptions {
     /// A run whose horizontal error exceeds this after the settling time has diverged (m).
     #[cfg_attr(feature = "clap", arg(long, default_value_t = 5.0))]
     pub divergence_m: f64,
+    /// Fuse the station's fixes through the range aid configured as the station
+    /// (`RangesConfig::docking_station`): the slant range and each range difference gated and
+    /// fused alone by the linearised update, with the same geometry, noise and error processes
+    /// (tight coupling; `--filter` does not apply).
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub range_aid: bool,
     /// Override a `[navigation.usbl]` setting, e.g. `--set range_difference_error_std_m=0.005`
     /// (repeatable; TOML values).
     #[cfg_attr(feature = "clap", arg(long = "set", value_name = "KEY=VALUE", value_parser = crate::args::key_value))]
@@ -109,6 +116,8 @@ pub struct UsblReport {
     pub scenario: String,
     pub coupling: Coupling,
     pub filter: UsblFilter,
+    /// Fused by the range aid configured as the station (`--range-aid`).
+    pub range_aid: bool,
     pub outlier_fraction: f64,
     pub array_yaw_error_deg: f64,
     pub runs: usize,
@@ -235,6 +244,8 @@ fn run_one(
         rejected_clean: 0,
     };
     let (mut sh, mut sv, mut svel, mut n) = (0.0, 0.0, 0.0, 0usize);
+    // Slant ranges fused and refused by the range aid (`--range-aid`).
+    let (mut slant_fused, mut slant_refused) = (0u64, 0u64);
     sim::simulate(&sim_cfg, |m| -> anyhow::Result<()> {
         match m {
             LogMessage::Truth(t) => {
@@ -312,12 +323,22 @@ fn run_one(
                     session.feed(&x, &mut |o| {
                         // A USBL fix's outcome, when the session applies it (in order of
                         // delivery: the oldest fix still undecided).
+                        // Through the range aid: the slant range's outcome.
                         if let SessionOutput::Diagnostics(d) = o
                             && (d.source == AidSource::UsblSlantRange as u32
-                                || d.source == AidSource::UsblPosition as u32)
+                                || d.source == AidSource::UsblPosition as u32
+                                || d.source == AidSource::AcousticRange as u32)
                             && let Some(f) = pending.iter_mut().find(|f| f.fused.is_none())
                         {
-                            f.fused = Some(d.flags & AidDiagnosticsV1::FLAG_FUSED != 0);
+                            let fused = d.flags & AidDiagnosticsV1::FLAG_FUSED != 0;
+                            f.fused = Some(fused);
+                            if d.source == AidSource::AcousticRange as u32 {
+                                *if fused {
+                                    &mut slant_fused
+                                } else {
+                                    &mut slant_refused
+                                } += 1;
+                            }
                         }
                         Ok::<(), anyhow::Error>(())
                     })?;
@@ -331,9 +352,13 @@ fn run_one(
         .navigator()
         .context("the simulation produced no truth")?;
     let c = nv.counters();
-    r.fused = c.usbl_fused;
-    r.rejected = c.usbl_rejected + c.usbl_invalid + c.usbl_failed;
-    r.reopened = c.usbl_reopened;
+    if cfg.ranges.is_some() {
+        (r.fused, r.rejected, r.reopened) = (slant_fused, slant_refused, c.ranges_reopened);
+    } else {
+        r.fused = c.usbl_fused;
+        r.rejected = c.usbl_rejected + c.usbl_invalid + c.usbl_failed;
+        r.reopened = c.usbl_reopened;
+    }
     let nf = n.max(1) as f64;
     r.horizontal_error_rms_m = (sh / nf).sqrt();
     r.vertical_rms_m = (sv / nf).sqrt();
@@ -387,6 +412,15 @@ impl UsblStudy {
         let mut navigation = navigation_config(&station, a.coupling, a.filter);
         if let Some(u) = navigation.usbl.as_mut() {
             *u = apply_settings(u, &a.settings)?;
+        }
+        if a.range_aid {
+            if a.coupling != Coupling::Tight {
+                usage!("--range-aid fuses the station's ranges: it needs --coupling tight");
+            }
+            navigation.ranges = navigation
+                .usbl
+                .take()
+                .map(|u| RangesConfig::docking_station(&u));
         }
         Ok(UsblStudy {
             args: a.clone(),
@@ -443,6 +477,7 @@ impl crate::runs::RunStudy for UsblStudy {
             scenario: self.scenario.name.clone(),
             coupling: a.coupling,
             filter: a.filter,
+            range_aid: a.range_aid,
             outlier_fraction: a.outliers,
             array_yaw_error_deg: a.array_yaw_error,
             runs: a.runs,
@@ -480,22 +515,28 @@ pub fn run(a: &UsblOptions) -> Result<UsblReport, StudyError> {
     crate::runs::run_local(&study, threads, &bar)
 }
 
-/// The comparison table: {loose, tight} × {ukf, akf, aukf} × {clean, 5 % outliers, 1° array
-/// yaw error}.
+/// The comparison table: {loose, tight} × {ukf, akf, aukf} and tight through the range aid, ×
+/// {clean, 5 % outliers, 1° array yaw error}.
 pub fn run_table(a: &UsblOptions) -> Result<Vec<UsblReport>, StudyError> {
     let mut out = Vec::new();
     for (outliers, yaw) in [(0.0, 0.0), (0.05, 0.0), (0.0, 1.0)] {
+        let mut ways: Vec<(Coupling, UsblFilter, bool)> = Vec::new();
         for coupling in [Coupling::Loose, Coupling::Tight] {
             for filter in [UsblFilter::Ukf, UsblFilter::Akf, UsblFilter::Aukf] {
-                out.push(run(&UsblOptions {
-                    coupling,
-                    filter,
-                    outliers,
-                    array_yaw_error: yaw,
-                    table: false,
-                    ..a.clone()
-                })?);
+                ways.push((coupling, filter, false));
             }
+        }
+        ways.push((Coupling::Tight, a.filter, true));
+        for (coupling, filter, range_aid) in ways {
+            out.push(run(&UsblOptions {
+                coupling,
+                filter,
+                range_aid,
+                outliers,
+                array_yaw_error: yaw,
+                table: false,
+                ..a.clone()
+            })?);
         }
     }
     Ok(out)

@@ -15,20 +15,21 @@
 //!
 //! Parameter states follow the 15 core states: DVL mounting (small rotation, 3), DVL scale factor
 //! (1), DVL lever arm (3) and DVL time offset (1), all "estimate minus truth" and constant in time,
-//! then the USBL measurement errors (slant range, two range differences: 3), first-order Gauss–
-//! Markov processes `b' = -b / tau + w` (S-USBL), then the horizontal water current (north,
+//! then the acoustic measurement errors (5 slots: the USBL's slant range and two range differences,
+//! or the range aid's range biases and sound-speed scale), first-order Gauss–Markov processes
+//! `b' = -b / tau + w` (S-USBL), then the horizontal water current (north,
 //! east: 2), Gauss–Markov too, seen only through DVL water-track velocities. Parameter states appear only in measurement
 //! models, never in `F`, so the covariance propagation handles them as a block with diagonal
 //! transition `A = diag(a_i)`, `a_i = exp(-dt / tau_i)` (1 for constants):
 //! `P_cc <- Phi P_cc Phi^T + Q`, `P_cp <- Phi P_cp A`, `P_pp <- A P_pp A + diag(s_i^2 (1 - a_i^2))`
 //! with `s_i` the stationary standard deviation. A parameter state that is switched off has zero
 //! variance and zero correlation, so no update can move it; switching one on costs nothing in the
-//! propagation beyond the 15 x 11 cross block.
+//! propagation beyond the 15 x 15 cross block.
 
 use nalgebra::{SMatrix, SVector, Vector3};
 
 /// Number of error states.
-pub const N: usize = 28;
+pub const N: usize = 30;
 /// Number of core states (navigation errors and IMU biases) that have dynamics.
 pub const CORE: usize = 15;
 /// Index of the first component of each block.
@@ -45,10 +46,14 @@ pub const DVL_SCALE: usize = 18;
 pub const DVL_LEVER: usize = 19;
 /// DVL time-offset error (s).
 pub const DVL_TIME: usize = 22;
-/// USBL measurement errors: slant range, range differences 1-3 and 2-4 (m), estimate minus truth.
+/// Acoustic measurement errors, estimate minus truth: the USBL's slant range and range
+/// differences 1-3 and 2-4 (m) in the first three, or the range aid's biases and scale
+/// (`crate::aid::ranges`) in as many as it is configured with.
 pub const USBL: usize = 23;
+/// Number of acoustic error slots.
+pub const ACOUSTIC_SLOTS: usize = 5;
 /// Water-current error, north and east (m/s, estimate minus truth).
-pub const CURRENT: usize = 26;
+pub const CURRENT: usize = USBL + ACOUSTIC_SLOTS;
 /// Number of parameter states.
 pub const PARAMS: usize = N - CORE;
 const _: () = assert!(BA + 3 == CORE, "core layout must fill CORE");

@@ -91,6 +91,10 @@ pub struct ModeResult {
     /// (0 where their states are off).
     pub range_bias_m: f64,
     pub range_scale: f64,
+    /// Tight: each receiver's range bias at the end of the run (m; the shared one repeated, 0
+    /// where off or beyond the receivers).
+    #[serde(default)]
+    pub receiver_biases_m: [f64; 4],
 }
 
 /// One run: the three ways.
@@ -122,6 +126,9 @@ pub struct ModeSummary {
     pub range_bias_std_m: f64,
     pub range_scale_mean: f64,
     pub range_scale_std: f64,
+    /// Mean and spread over the runs of each receiver's final bias (m).
+    pub receiver_bias_mean_m: [f64; 4],
+    pub receiver_bias_std_m: [f64; 4],
 }
 
 /// One geometry's Monte Carlo.
@@ -342,6 +349,15 @@ impl RangesStudy {
         if let Some((bias, scale)) = nv.range_estimates() {
             (r.range_bias_m, r.range_scale) = (bias, scale);
         }
+        for (k, b) in nv
+            .receiver_biases()
+            .unwrap_or_default()
+            .iter()
+            .take(4)
+            .enumerate()
+        {
+            r.receiver_biases_m[k] = *b;
+        }
         r.horizontal_error_rms_m = (sum / n.max(1) as f64).sqrt();
         Ok(r)
     }
@@ -408,6 +424,12 @@ impl RangesStudy {
             range_bias_std_m: mean_std(per_run.iter().map(|r| f(r).range_bias_m)).1,
             range_scale_mean: mean_std(per_run.iter().map(|r| f(r).range_scale)).0,
             range_scale_std: mean_std(per_run.iter().map(|r| f(r).range_scale)).1,
+            receiver_bias_mean_m: std::array::from_fn(|k| {
+                mean_std(per_run.iter().map(|r| f(r).receiver_biases_m[k])).0
+            }),
+            receiver_bias_std_m: std::array::from_fn(|k| {
+                mean_std(per_run.iter().map(|r| f(r).receiver_biases_m[k])).1
+            }),
         }
     }
 }

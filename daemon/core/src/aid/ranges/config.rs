@@ -1,6 +1,8 @@
 //! The `[navigation.ranges]` configuration: where the acoustic receivers are, how a range was
 //! measured, and its noise and error processes.
 
+use crate::aid::usbl::UsblConfig;
+use crate::ekf;
 use serde::{Deserialize, Serialize};
 
 /// Where the receivers' frame is.
@@ -87,9 +89,13 @@ pub struct RangesConfig {
     pub sound_speed_from_topic: bool,
     /// One range's noise (m). Default 0.3.
     pub range_std_m: f64,
-    /// The common range bias (timing, turnaround): a Gauss–Markov state shared by the receivers,
-    /// as S-USBL's δR; stationary one-sigma (m, 0 = off). Default 0.5.
+    /// The range bias (timing, turnaround): a Gauss–Markov state, as S-USBL's δR, shared by the
+    /// receivers or one per receiver (`bias_per_receiver`); stationary one-sigma (m, 0 = off).
+    /// Default 0.5.
     pub bias_std_m: f64,
+    /// A bias state per receiver (its own detection delay, cable or electronics) instead of one
+    /// shared by all. Default false.
+    pub bias_per_receiver: bool,
     /// Its correlation time (s). Default 600.
     pub bias_correlation_s: f64,
     /// The sound-speed error as a range scale factor: a Gauss–Markov state; stationary
@@ -114,6 +120,21 @@ pub struct RangesConfig {
     pub reopen_after: u32,
     /// Longest range accepted (m). Default 5000.
     pub max_range_m: f64,
+    /// Take a docking station's fixes (the `usbl` topic) as ranges: the slant range as receiver
+    /// 0's two-way range (the station's transducer) and the range differences ΔR13 and ΔR24 as
+    /// one-way differences between receivers 1 and 3, and 2 and 4 (its hydrophones), each gated
+    /// alone, at the fix's time of validity. `receivers_m` then lists five receivers, the array
+    /// is fixed, and `[navigation.usbl]` is not configured ([`RangesConfig::docking_station`]
+    /// builds this configuration from it). Default false.
+    pub usbl_fixes: bool,
+    /// A range difference's noise (m). Default 0.002.
+    pub difference_std_m: f64,
+    /// The error of each range difference (the array's orientation, phase calibration): a
+    /// Gauss–Markov state per difference, as S-USBL's δΔR; stationary one-sigma (m, 0 = off).
+    /// Default 0.01.
+    pub difference_bias_std_m: f64,
+    /// Its correlation time (s). Default 3600.
+    pub difference_bias_correlation_s: f64,
     /// Oldest range accepted, by its time against the navigation state (s). Default 3.
     pub max_latency_s: f64,
 }
@@ -137,6 +158,7 @@ impl Default for RangesConfig {
             sound_speed_from_topic: false,
             range_std_m: 0.3,
             bias_std_m: 0.5,
+            bias_per_receiver: false,
             bias_correlation_s: 600.0,
             scale_std: 0.003,
             scale_correlation_s: 3600.0,
@@ -147,6 +169,10 @@ impl Default for RangesConfig {
             reopen_after: 10,
             max_range_m: 5000.0,
             max_latency_s: 3.0,
+            usbl_fixes: false,
+            difference_std_m: 0.002,
+            difference_bias_std_m: 0.01,
+            difference_bias_correlation_s: 3600.0,
         }
     }
 }
@@ -211,15 +237,126 @@ impl RangesConfig {
         range("gate_chi2", self.gate_chi2, 0.1, 1e6);
         range("max_range_m", self.max_range_m, 1.0, 100_000.0);
         range("max_latency_s", self.max_latency_s, 0.0, 30.0);
+        range("difference_std_m", self.difference_std_m, 1e-5, 100.0);
+        range(
+            "difference_bias_std_m",
+            self.difference_bias_std_m,
+            0.0,
+            100.0,
+        );
+        range(
+            "difference_bias_correlation_s",
+            self.difference_bias_correlation_s,
+            1.0,
+            1e6,
+        );
         if self.reopen_after == 0 {
             out.push("ranges.reopen_after = 0: expected 1 or more".into());
         }
-        if !(1..=4).contains(&self.receivers_m.len()) {
+        let n = self.receivers_m.len();
+        if self.usbl_fixes {
+            if n != 5 {
+                out.push(format!(
+                    "ranges.receivers_m: {n} receivers; usbl_fixes needs five (the station's \
+                     transducer, then hydrophones 1 to 4)"
+                ));
+            }
+            if self.array != ArrayKind::Fixed || self.receivers_from_device {
+                out.push(
+                    "ranges.usbl_fixes: a docking station's array is fixed and configured \
+                     (array = \"fixed\", receivers_from_device = false)"
+                        .into(),
+                );
+            }
+        } else if !(1..=4).contains(&n) {
             out.push(format!(
-                "ranges.receivers_m: {} receivers; expected 1 to 4 (the ranges message carries four)",
-                self.receivers_m.len()
+                "ranges.receivers_m: {n} receivers; expected 1 to 4 (the ranges message carries four)"
+            ));
+        }
+        let states = ErrorStates::of(self);
+        if states.count > ekf::ACOUSTIC_SLOTS {
+            out.push(format!(
+                "ranges: {} error states (biases, differences' errors, scale); the filter has {} \
+                 acoustic slots: share the bias (bias_per_receiver = false), or switch off the \
+                 scale (scale_std = 0) or the differences' errors (difference_bias_std_m = 0)",
+                states.count,
+                ekf::ACOUSTIC_SLOTS
             ));
         }
         out
+    }
+
+    /// The range aid configured as a docking station's tight USBL (`[navigation.usbl]`,
+    /// S-USBL): its slant range and range differences fused one by one through the same
+    /// geometry and error processes (the station's array, hydrophone offsets, the responder's
+    /// lever arm, the noise and the Gauss–Markov errors δR, δΔR13, δΔR24), by the range aid's
+    /// linearised update with its gate instead of the adaptive unscented one.
+    pub fn docking_station(u: &UsblConfig) -> RangesConfig {
+        let a = u.array();
+        let mut receivers = vec![[0.0; 3]];
+        receivers.extend(a.hydrophones.iter().map(|h| [h.x, h.y, h.z]));
+        RangesConfig {
+            array: ArrayKind::Fixed,
+            origin_latitude_deg: u.array_latitude_deg,
+            origin_longitude_deg: u.array_longitude_deg,
+            origin_height_m: u.array_height_m,
+            origin_yaw_deg: u.array_yaw_deg,
+            receivers_m: receivers,
+            transducer_lever_arm_m: u.responder_lever_arm_m,
+            range_std_m: u.range_std_m,
+            bias_std_m: u.range_error_std_m,
+            bias_correlation_s: u.range_error_correlation_s,
+            scale_std: 0.0,
+            difference_std_m: u.range_difference_std_m,
+            difference_bias_std_m: u.range_difference_error_std_m,
+            difference_bias_correlation_s: u.range_difference_error_correlation_s,
+            gate_chi2: u.gate_chi2,
+            reopen_after: u.reopen_after,
+            max_range_m: u.max_range_m,
+            max_latency_s: u.max_latency_s,
+            usbl_fixes: true,
+            ..RangesConfig::default()
+        }
+    }
+}
+
+/// Which acoustic error slot (0..[`ekf::ACOUSTIC_SLOTS`], from [`ekf::USBL`]) each error state
+/// of a configuration takes: the range bias (shared: every receiver the same), each range
+/// difference's error, the scale. The shared bias and the scale keep the first two.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ErrorStates {
+    pub bias: [Option<usize>; 5],
+    pub difference: [Option<usize>; 2],
+    pub scale: Option<usize>,
+    /// Slots asked for (more than the filter has when the configuration is refused).
+    pub count: usize,
+}
+
+impl ErrorStates {
+    pub fn of(c: &RangesConfig) -> ErrorStates {
+        fn next(s: &mut ErrorStates) -> Option<usize> {
+            s.count += 1;
+            (s.count <= ekf::ACOUSTIC_SLOTS).then_some(s.count - 1)
+        }
+        let mut s = ErrorStates::default();
+        if c.bias_std_m > 0.0 {
+            if c.bias_per_receiver {
+                for k in 0..c.receivers_m.len().min(5) {
+                    s.bias[k] = next(&mut s);
+                }
+            } else {
+                let slot = next(&mut s);
+                s.bias = [slot; 5];
+            }
+        }
+        let scale = (c.scale_std > 0.0).then(|| next(&mut s)).flatten();
+        // The shared bias and the scale stay in the slots they always had (0 and 1).
+        if c.usbl_fixes && c.difference_bias_std_m > 0.0 {
+            let first = next(&mut s);
+            let second = next(&mut s);
+            s.difference = [first, second];
+        }
+        s.scale = scale;
+        s
     }
 }

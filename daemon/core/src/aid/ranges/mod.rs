@@ -11,16 +11,20 @@
 //! * **Sound speed.** The device turned travel times into ranges with its own sound speed; the
 //!   ranges are scaled to the water's (configured, or from the `sound_velocity` topic), and a
 //!   Gauss–Markov scale state takes what is left.
-//! * **Errors.** A common Gauss–Markov range bias (timing, turnaround: S-USBL's δR) shared by the
-//!   receivers. The pair occupies the acoustic error slots the tight USBL uses, so the two are not
-//!   configured together; a bias per receiver would need a slot per receiver of the 28-state
-//!   filter, and a receiver's position error is found offline (`auvnav discover`), not tracked.
+//! * **Errors.** A Gauss–Markov range bias (timing, turnaround: S-USBL's δR), shared by the
+//!   receivers or one per receiver, and with a docking station's fixes one per range difference
+//!   (S-USBL's δΔR): they take the filter's acoustic error slots ([`config::ErrorStates`]), which
+//!   the tight USBL uses too, so the two are not configured together. A receiver's position
+//!   error is found offline (`auvnav discover`), not tracked.
+//! * **A docking station** ([`RangesConfig::docking_station`], `usbl_fixes`): its fixes' slant
+//!   range and range differences, each fused alone through the station's geometry ([`station`]).
 //! * **A moving array's own errors** (its GNSS position and heading) are added to each range's
 //!   noise, projected on the line of sight.
 
 pub mod config;
+mod station;
 
-pub use config::{ArrayKind, Interrogator, RangesConfig};
+pub use config::{ArrayKind, ErrorStates, Interrogator, RangesConfig};
 
 use super::pose_history::PoseHistory;
 use super::{AidUpdate, NavCore};
@@ -75,11 +79,10 @@ struct RangeFusion {
     array_std: (f64, f64),
     /// The water's sound speed in use (m/s).
     sound_speed_m_s: f64,
-    bias_on: bool,
-    scale_on: bool,
+    states: ErrorStates,
     last_fused_s: Option<f64>,
-    /// Ranges rejected in a row, per receiver.
-    rejected_in_a_row: [u32; 4],
+    /// Measurements rejected in a row: each receiver's ranges, then each range difference's.
+    rejected_in_a_row: [u32; 7],
 }
 
 /// One leg of the sound's path: the vehicle's time and the receiver's time.
@@ -137,13 +140,21 @@ impl RangeAid {
     /// bias and scale states in `kf`.
     pub fn new(cfg: Option<&RangesConfig>, kf: &mut ErrorFilter) -> RangeAid {
         let fusion = cfg.map(|c| {
-            let bias_on = c.bias_std_m > 0.0;
-            let scale_on = c.scale_std > 0.0;
-            if bias_on {
-                kf.set_gauss_markov(ekf::USBL, c.bias_correlation_s, c.bias_std_m);
+            let states = ErrorStates::of(c);
+            let mut bias_slots: Vec<usize> = states.bias.iter().flatten().copied().collect();
+            bias_slots.dedup();
+            for slot in bias_slots {
+                kf.set_gauss_markov(ekf::USBL + slot, c.bias_correlation_s, c.bias_std_m);
             }
-            if scale_on {
-                kf.set_gauss_markov(ekf::USBL + 1, c.scale_correlation_s, c.scale_std);
+            for slot in states.difference.iter().flatten() {
+                kf.set_gauss_markov(
+                    ekf::USBL + slot,
+                    c.difference_bias_correlation_s,
+                    c.difference_bias_std_m,
+                );
+            }
+            if let Some(slot) = states.scale {
+                kf.set_gauss_markov(ekf::USBL + slot, c.scale_correlation_s, c.scale_std);
             }
             // Poses are kept for the longest acoustic path (two travel times at the longest
             // range) behind the oldest range accepted.
@@ -170,10 +181,9 @@ impl RangeAid {
                 array: PoseHistory::new(keep_s + c.array_pose_max_gap_s),
                 array_std: (c.array_position_std_m, c.array_heading_std_deg.to_radians()),
                 sound_speed_m_s: c.sound_speed_m_s,
-                bias_on,
-                scale_on,
+                states,
                 last_fused_s: None,
-                rejected_in_a_row: [0; 4],
+                rejected_in_a_row: [0; 7],
                 cfg: c.clone(),
             }
         });
@@ -204,11 +214,25 @@ impl RangeAid {
         self.fusion.as_ref().and_then(|f| f.last_fused_s)
     }
 
-    /// The estimated common range bias (m) and sound-speed scale error, when configured.
+    /// The estimated range bias (m; receiver 0's when each has its own) and sound-speed scale
+    /// error, when configured (0 for a state switched off).
     pub fn estimates(&self, core: &NavCore) -> Option<(f64, f64)> {
-        self.fusion.as_ref()?;
-        let i = ekf::USBL - ekf::CORE;
-        Some((core.markov_means[i], core.markov_means[i + 1]))
+        let f = self.fusion.as_ref()?;
+        Some((
+            error_mean(core, f.states.bias[0]),
+            error_mean(core, f.states.scale),
+        ))
+    }
+
+    /// Each receiver's estimated range bias (m; the shared one repeated, 0 where off), when
+    /// configured.
+    pub fn receiver_biases(&self, core: &NavCore) -> Option<Vec<f64>> {
+        let f = self.fusion.as_ref()?;
+        Some(
+            (0..f.receivers.len().min(5))
+                .map(|k| error_mean(core, f.states.bias[k]))
+                .collect(),
+        )
     }
 
     /// Takes a moving array's pose (its boat's GNSS and heading); counted and ignored when
@@ -351,65 +375,111 @@ impl RangeAid {
             return Some(AidUpdate::rejected(d));
         };
         core.propagate_covariance();
-        let markov = ekf::USBL - ekf::CORE;
-        let (bias, scale) = (core.markov_means[markov], core.markov_means[markov + 1]);
-        let ratio = f.cfg.device_sound_speed_m_s / f.sound_speed_m_s;
         // The prediction and its Jacobian at the state (an iterated update, linearised again
         // where the correction leaves the state, was tried: no gain on the range studies).
         let a = p.at(&Vector3::zeros());
-        let mut h = SMatrix::<f64, 1, { ekf::N }>::zeros();
-        let u = a.line_of_sight.transpose();
-        h.fixed_view_mut::<1, 3>(0, ekf::POS).copy_from(&u);
-        h.fixed_view_mut::<1, 3>(0, ekf::ATT)
-            .copy_from(&(u * skew(&a.lever_ned)));
-        if f.bias_on {
-            h[(0, ekf::USBL)] = 1.0;
-        }
-        if f.scale_on {
-            h[(0, ekf::USBL + 1)] = a.range_m * ratio;
-        }
-        let pred = a.range_m * ratio * (1.0 + scale) + bias;
-        let r = f.cfg.range_std_m.powi(2) + p.array_variance_m2;
-        d.observation_variance[0] = r;
+        let scalar = f.range_measurement(core, &a, k, z, p.array_variance_m2);
+        Some(self.update(core, d, scalar, k))
+    }
+
+    /// Gates and fuses one scalar measurement (a range, or a range difference: `channel` counts
+    /// its rejections in a row, ranges 0..5, differences 5 and 6), reopening the position after
+    /// `reopen_after` of them; counted.
+    fn update(
+        &mut self,
+        core: &mut NavCore,
+        mut d: AidDiagnosticsV1,
+        s: Scalar,
+        channel: usize,
+    ) -> AidUpdate {
+        let Some(f) = self.fusion.as_mut() else {
+            return AidUpdate::rejected(d);
+        };
+        d.observation_variance[0] = s.variance;
         let (gate, reopen_after, max_range) =
             (f.cfg.gate_chi2, f.cfg.reopen_after, f.cfg.max_range_m);
-        let y = SVector::<f64, 1>::new(pred - z);
-        let r = SMatrix::<f64, 1, 1>::new(r);
-        let mut result = core.kf.update(&y, &h, &r, gate);
+        let y = SVector::<f64, 1>::new(s.predicted - s.measured);
+        let r = SMatrix::<f64, 1, 1>::new(s.variance);
+        let mut result = core.kf.update(&y, &s.h, &r, gate);
         let gated = matches!(&result, Ok((_, rep)) if !rep.fused);
-        let f = self.fusion.as_mut()?;
-        let in_a_row = &mut f.rejected_in_a_row[k];
+        let in_a_row = &mut f.rejected_in_a_row[channel];
         *in_a_row = if gated { *in_a_row + 1 } else { 0 };
         if gated && *in_a_row >= reopen_after {
             // The ranges agree with one another, not with the state: the position is what is
             // wrong. Its covariance is reopened by this innovation (bounded by the longest
-            // range) and the range fused again.
+            // range) and the measurement fused again.
             *in_a_row = 0;
             self.counters.reopened += 1;
             d.flags |= AidDiagnosticsV1::FLAG_RESET;
             let by = y[0].abs().min(max_range);
             core.reopen(ekf::POS, [by * by; 3]);
-            result = core.kf.update(&y, &h, &r, gate);
+            result = core.kf.update(&y, &s.h, &r, gate);
         }
         let reset = d.flags & AidDiagnosticsV1::FLAG_RESET;
         let correction = NavCore::report(result, &mut d);
         d.flags |= reset;
         if correction.is_some() {
             self.counters.fused += 1;
-            if let Some(f) = self.fusion.as_mut() {
-                f.last_fused_s = Some(t_ns as f64 * 1e-9);
-            }
+            f.last_fused_s = Some(d.host_time_ns as f64 * 1e-9);
         } else {
             self.counters.rejected += 1;
         }
-        Some(AidUpdate {
+        AidUpdate {
             diagnostics: d,
             correction,
-        })
+        }
     }
 }
 
+/// One scalar acoustic measurement ready for the update: measured and predicted (m), its
+/// Jacobian and noise variance (m²).
+struct Scalar {
+    measured: f64,
+    predicted: f64,
+    h: SMatrix<f64, 1, { ekf::N }>,
+    variance: f64,
+}
+
+/// The mean of acoustic error slot `slot` (0 when the state is off).
+fn error_mean(core: &NavCore, slot: Option<usize>) -> f64 {
+    slot.map_or(0.0, |i| core.markov_means[ekf::USBL - ekf::CORE + i])
+}
+
 impl RangeFusion {
+    /// Receiver `k`'s range `z` as a scalar measurement, its geometry `a` from the state: the
+    /// range at the water's sound speed, the scale and receiver `k`'s bias.
+    fn range_measurement(
+        &self,
+        core: &NavCore,
+        a: &RangeAt,
+        k: usize,
+        z: f64,
+        extra_variance_m2: f64,
+    ) -> Scalar {
+        let ratio = self.cfg.device_sound_speed_m_s / self.sound_speed_m_s;
+        let (bias, scale) = (
+            error_mean(core, self.states.bias[k]),
+            error_mean(core, self.states.scale),
+        );
+        let mut h = SMatrix::<f64, 1, { ekf::N }>::zeros();
+        let u = a.line_of_sight.transpose();
+        h.fixed_view_mut::<1, 3>(0, ekf::POS).copy_from(&u);
+        h.fixed_view_mut::<1, 3>(0, ekf::ATT)
+            .copy_from(&(u * skew(&a.lever_ned)));
+        if let Some(slot) = self.states.bias[k] {
+            h[(0, ekf::USBL + slot)] = 1.0;
+        }
+        if let Some(slot) = self.states.scale {
+            h[(0, ekf::USBL + slot)] = a.range_m * ratio;
+        }
+        Scalar {
+            measured: z,
+            predicted: a.range_m * ratio * (1.0 + scale) + bias,
+            h,
+            variance: self.cfg.range_std_m.powi(2) + extra_variance_m2,
+        }
+    }
+
     /// The legs of a range closed at `t` of measured length `z` (m).
     fn legs(&self, t: f64, z: f64) -> ([Leg; 2], usize) {
         let tau = z / self.cfg.device_sound_speed_m_s;
@@ -447,12 +517,18 @@ impl RangeFusion {
     /// `s` (its past poses from the history, else the state's own).
     fn predict(&self, s: &NavState, k: usize, t: f64, z: f64) -> Option<RangePrediction> {
         let (legs, n) = self.legs(t, z);
+        self.predict_legs(s, k, &legs[..n])
+    }
+
+    /// What receiver `k`'s range along `legs` (one or two) predicts for the vehicle's state `s`.
+    fn predict_legs(&self, s: &NavState, k: usize, legs: &[Leg]) -> Option<RangePrediction> {
+        let n = legs.len();
         let mut out = RangePrediction {
             legs: [(Vector3::zeros(), Vector3::zeros()); 2],
             n,
             array_variance_m2: 0.0,
         };
-        for (i, leg) in legs[..n].iter().enumerate() {
+        for (i, leg) in legs.iter().enumerate() {
             let (position, attitude) = match self.vehicle.at(leg.vehicle_s) {
                 Some(p) => (p.position, p.attitude),
                 None => (s.position, s.q_body_to_ned),
