@@ -314,6 +314,20 @@ impl NavCore {
     /// like one: non-negative variances and correlations within ±1 (every 2×2 principal minor
     /// non-negative, with a relative margin for rounding).
     pub fn is_sound(&self) -> bool {
+        self.state_is_finite() && covariance_is_sound(&self.kf.p)
+    }
+
+    /// True when the state and the biases are finite and every variance is finite and
+    /// non-negative: [`NavCore::is_sound`] without the correlations (O(N) instead of O(N²)).
+    pub fn variances_are_sound(&self) -> bool {
+        self.state_is_finite()
+            && (0..ekf::N).all(|i| {
+                let v = self.kf.p[(i, i)];
+                v.is_finite() && v >= 0.0
+            })
+    }
+
+    fn state_is_finite(&self) -> bool {
         let s = &self.sd.state;
         let position = [
             s.time_s,
@@ -321,15 +335,14 @@ impl NavCore {
             s.position.longitude_rad,
             s.position.height_m,
         ];
-        let finite = auvnav_shm_schema::all_finite(&[
+        auvnav_shm_schema::all_finite(&[
             &position,
             s.velocity_ned.as_slice(),
             s.q_body_to_ned.coords.as_slice(),
             self.gyro_bias.as_slice(),
             self.accel_bias.as_slice(),
             self.markov_means.as_slice(),
-        ]);
-        finite && covariance_is_sound(&self.kf.p)
+        ])
     }
 
     /// Propagates the covariance over the pending interval (no-op when none is pending); the

@@ -150,8 +150,13 @@ pub struct Navigator {
     sound_velocity_ignored: u64,
     position_unknown_std_m: f64,
     solution_sequence: u64,
-    /// The covariance changed (propagated or updated) since the last soundness check.
+    /// The covariance was updated (an aid, a reopening, a coast, a restore) since the last
+    /// soundness check: the whole matrix is examined.
     covariance_changed: bool,
+    /// The covariance was propagated since the last check: its variances are examined (a
+    /// propagation turns a sound covariance into a sound one; the correlations are examined
+    /// at the next update, before its correction is used).
+    covariance_propagated: bool,
 }
 
 /// The DVL sound-speed correction a configuration asks for (`dvl_sound_speed_source`), or
@@ -313,6 +318,7 @@ impl Navigator {
             position_unknown_std_m: cfg.position_unknown_std_m,
             solution_sequence: 0,
             covariance_changed: true,
+            covariance_propagated: false,
         }
     }
 
@@ -368,14 +374,22 @@ impl Navigator {
     }
 
     /// False when `sol` (this navigator's latest solution) holds a value that is not finite, or
-    /// the state or covariance is not sound; the whole covariance is examined only when it changed
-    /// since the last call (at the propagation interval or after an aid), the solution always.
+    /// the state or covariance is not sound; the solution is examined always, the whole
+    /// covariance when an aid (or a reopening, a coast) changed it since the last call, and the
+    /// state and the variances when it was only propagated (at the propagation interval).
     pub fn still_sound(&mut self, sol: &NavSolutionV1) -> bool {
         let finite = sol.all_finite();
         if !finite {
             return false;
         }
-        !std::mem::take(&mut self.covariance_changed) || self.core.is_sound()
+        let propagated = std::mem::take(&mut self.covariance_propagated);
+        if std::mem::take(&mut self.covariance_changed) {
+            self.core.is_sound()
+        } else if propagated {
+            self.core.variances_are_sound()
+        } else {
+            true
+        }
     }
 
     /// Moves the navigator over `dt_s` seconds that it did not see (the time since the state it
@@ -523,7 +537,7 @@ impl Navigator {
         self.ranges.after_imu(&self.core.sd.state);
         if self.core.pending_dt >= self.core.covariance_interval_s {
             self.core.propagate_covariance();
-            self.covariance_changed = true;
+            self.covariance_propagated = true;
         }
         Some(self.solution(m.host_time_ns))
     }
