@@ -13,7 +13,7 @@
 #   --load-minutes M: also keep every core busy for M minutes and check that the watchdog
 #   restarts no healthy unit meanwhile (the issue's check: 5).
 #   Needs root, Debian's debootstrap and systemd-container (installed with apt when missing) and
-#   a release build (`cargo build --release --bins`). The container root is cached in
+#   a release build (`cargo build --release --workspace --bins`). The container root is cached in
 #   $AUVNAV_NSPAWN_ROOT (default /var/tmp/auvnav-root). Exit status 0 when every check passed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -39,7 +39,7 @@ step() { echo "== $*"; }
 
 for b in auvnav auvnavd auvnav-imu auvnav-dvl auvnav-usbl auvnav-gnss auvnav-can auvnav-mavlink \
   auvnav-bridge auvnav-live auvnav-ugps; do
-  [ -x "target/release/$b" ] || { echo "target/release/$b is missing: cargo build --release --bins" >&2; exit 2; }
+  [ -x "target/release/$b" ] || { echo "target/release/$b is missing: cargo build --release --workspace --bins" >&2; exit 2; }
 done
 
 step "tools: debootstrap, systemd-nspawn"

@@ -29,6 +29,7 @@ use auvnav_shm_schema::{
 use serde::{Deserialize, Serialize};
 
 pub mod gate;
+#[cfg(feature = "live")]
 pub mod live;
 pub mod live_client;
 pub mod ros2;

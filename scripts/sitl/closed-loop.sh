@@ -27,7 +27,7 @@ venv=$(dirname "$sitl")/venv
 
 profile=${AUVNAV_PROFILE:-release}
 bins=$root/target/$([[ "$profile" == dev ]] && echo debug || echo "$profile")
-(cd "$root" && cargo build --profile "$profile" --bin auvnav --bin auvnavd --bin auvnav-imu \
+(cd "$root" && cargo build --workspace --profile "$profile" --bin auvnav --bin auvnavd --bin auvnav-imu \
     --bin auvnav-dvl --bin auvnav-mavlink >&2)
 
 exec "$venv/bin/python" "$here/closed_loop.py" \

@@ -118,9 +118,16 @@ pub fn sibling(name: &str) -> anyhow::Result<PathBuf> {
     let exe = std::env::current_exe()?;
     let path = exe.parent().context("executable directory")?.join(name);
     if !path.exists() {
+        // The bridge, the live view and the MAVLink output are not default members of the
+        // workspace (`cargo build --release` leaves them out).
+        let build = match name {
+            "auvnav-bridge" | "auvnav-live" => "cargo build --release -p auvnav-bridge",
+            "auvnav-mavlink" => "cargo build --release -p auvnav-mavlink",
+            _ => "cargo build --release",
+        };
         bail!(
-            "{} not found: this command runs the drivers and the daemon as processes; build \
-             them with `cargo build --release` (all binaries)",
+            "{} not found: this command runs it as a process; build it with `{build}` (every \
+             program: `cargo build --release --workspace --bins`)",
             path.display()
         );
     }
