@@ -123,6 +123,14 @@ fn error_states_take_the_acoustic_slots_in_order() {
     });
     assert_eq!(each.bias[..4], [Some(0), Some(1), Some(2), Some(3)]);
     assert_eq!((each.scale, each.count), (Some(4), 5));
+    // Placed by the device: a slot for each of the four receivers a message can carry.
+    let placed = ErrorStates::of(&RangesConfig {
+        bias_per_receiver: true,
+        receivers_from_device: true,
+        scale_std: 0.0,
+        ..RangesConfig::default()
+    });
+    assert_eq!(placed.bias[..4], [Some(0), Some(1), Some(2), Some(3)]);
     let docking = RangesConfig::docking_station(&station());
     let s = ErrorStates::of(&docking);
     assert_eq!(

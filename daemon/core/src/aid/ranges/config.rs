@@ -93,11 +93,11 @@ pub struct RangesConfig {
     /// receivers or one per receiver (`bias_per_receiver`); stationary one-sigma (m, 0 = off).
     /// Default 0.5.
     pub bias_std_m: f64,
+    /// Its correlation time (s). Default 600.
+    pub bias_correlation_s: f64,
     /// A bias state per receiver (its own detection delay, cable or electronics) instead of one
     /// shared by all. Default false.
     pub bias_per_receiver: bool,
-    /// Its correlation time (s). Default 600.
-    pub bias_correlation_s: f64,
     /// The sound-speed error as a range scale factor: a Gauss–Markov state; stationary
     /// one-sigma (dimensionless, 0 = off). Default 0.003 (4.5 m/s).
     pub scale_std: f64,
@@ -341,7 +341,13 @@ impl ErrorStates {
         let mut s = ErrorStates::default();
         if c.bias_std_m > 0.0 {
             if c.bias_per_receiver {
-                for k in 0..c.receivers_m.len().min(5) {
+                // Receivers the device places: as many as a ranges message carries.
+                let n = if c.receivers_from_device {
+                    4
+                } else {
+                    c.receivers_m.len().min(5)
+                };
+                for k in 0..n {
                     s.bias[k] = next(&mut s);
                 }
             } else {
