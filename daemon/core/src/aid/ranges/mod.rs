@@ -342,8 +342,16 @@ impl RangeAid {
                 f.receivers = given;
             }
         }
-        let t = m.host_time_ns as f64 * 1e-9;
-        if core.state().time_s - t > f.cfg.max_latency_s {
+        self.in_time(core, m.host_time_ns)
+    }
+
+    /// Whether a measurement of time `t_ns` is recent enough against the state
+    /// (`max_latency_s`); counted as late when not.
+    fn in_time(&mut self, core: &NavCore, t_ns: u64) -> bool {
+        let Some(f) = self.fusion.as_ref() else {
+            return false;
+        };
+        if core.state().time_s - t_ns as f64 * 1e-9 > f.cfg.max_latency_s {
             self.counters.late += 1;
             return false;
         }
@@ -440,6 +448,14 @@ struct Scalar {
     variance: f64,
 }
 
+/// An acoustic length predicted at the state (m): its gradient with respect to the
+/// transducer's position (NED) and the lever arm in NED.
+struct Geometric {
+    length_m: f64,
+    line_of_sight: Vector3<f64>,
+    lever_ned: Vector3<f64>,
+}
+
 /// The mean of acoustic error slot `slot` (0 when the state is off).
 fn error_mean(core: &NavCore, slot: Option<usize>) -> f64 {
     slot.map_or(0.0, |i| core.markov_means[ekf::USBL - ekf::CORE + i])
@@ -456,27 +472,52 @@ impl RangeFusion {
         z: f64,
         extra_variance_m2: f64,
     ) -> Scalar {
+        self.scalar(
+            core,
+            Geometric {
+                length_m: a.range_m,
+                line_of_sight: a.line_of_sight,
+                lever_ned: a.lever_ned,
+            },
+            self.states.bias[k],
+            z,
+            self.cfg.range_std_m.powi(2) + extra_variance_m2,
+        )
+    }
+
+    /// An acoustic length (a range, or a difference of two) measured as `z`, its geometric
+    /// value and gradient `g` from the state: scaled to the water's sound speed and by the scale
+    /// state, plus the error state in `bias_slot`; the Jacobian over position, attitude (through
+    /// the lever arm), that error and the scale.
+    fn scalar(
+        &self,
+        core: &NavCore,
+        g: Geometric,
+        bias_slot: Option<usize>,
+        z: f64,
+        variance: f64,
+    ) -> Scalar {
         let ratio = self.cfg.device_sound_speed_m_s / self.sound_speed_m_s;
         let (bias, scale) = (
-            error_mean(core, self.states.bias[k]),
+            error_mean(core, bias_slot),
             error_mean(core, self.states.scale),
         );
         let mut h = SMatrix::<f64, 1, { ekf::N }>::zeros();
-        let u = a.line_of_sight.transpose();
+        let u = g.line_of_sight.transpose();
         h.fixed_view_mut::<1, 3>(0, ekf::POS).copy_from(&u);
         h.fixed_view_mut::<1, 3>(0, ekf::ATT)
-            .copy_from(&(u * skew(&a.lever_ned)));
-        if let Some(slot) = self.states.bias[k] {
+            .copy_from(&(u * skew(&g.lever_ned)));
+        if let Some(slot) = bias_slot {
             h[(0, ekf::USBL + slot)] = 1.0;
         }
         if let Some(slot) = self.states.scale {
-            h[(0, ekf::USBL + slot)] = a.range_m * ratio;
+            h[(0, ekf::USBL + slot)] = g.length_m * ratio;
         }
         Scalar {
             measured: z,
-            predicted: a.range_m * ratio * (1.0 + scale) + bias,
+            predicted: g.length_m * ratio * (1.0 + scale) + bias,
             h,
-            variance: self.cfg.range_std_m.powi(2) + extra_variance_m2,
+            variance,
         }
     }
 

@@ -4,10 +4,9 @@
 //! the fix's time of validity (the device gives where the vehicle was then), with the range
 //! aid's errors: the range bias (S-USBL's δR) and one error per difference (δΔR13, δΔR24).
 
-use super::{AidUpdate, Leg, NavCore, RangeAid, Scalar, error_mean};
-use crate::ekf::{self, skew};
+use super::{AidUpdate, Geometric, Leg, NavCore, RangeAid};
 use auvnav_shm_schema::{AidSource, UsblFixV1};
-use nalgebra::{SMatrix, Vector3};
+use nalgebra::Vector3;
 
 /// The receivers of each range difference of a fix: ΔR13, ΔR24.
 const PAIRS: [(usize, usize); 2] = [(1, 3), (2, 4)];
@@ -20,14 +19,7 @@ impl RangeAid {
 
     /// Whether a fix is to be fused at all (not too old); counted as late when not.
     pub fn accepts_usbl_fix(&mut self, core: &NavCore, m: &UsblFixV1) -> bool {
-        let Some(f) = self.fusion.as_ref() else {
-            return false;
-        };
-        if core.state().time_s - m.validity_time_ns as f64 * 1e-9 > f.cfg.max_latency_s {
-            self.counters.late += 1;
-            return false;
-        }
-        true
+        self.in_time(core, m.validity_time_ns)
     }
 
     /// Fuses part `part` of a station's fix: 0 the slant range, 1 and 2 the range differences
@@ -89,27 +81,17 @@ impl RangeAid {
         };
         core.propagate_covariance();
         let (a, b) = (pi.at(&Vector3::zeros()), pj.at(&Vector3::zeros()));
-        let ratio = f.cfg.device_sound_speed_m_s / f.sound_speed_m_s;
-        let slot = f.states.difference[part - 1];
-        let (bias, scale) = (error_mean(core, slot), error_mean(core, f.states.scale));
-        let u = (a.line_of_sight - b.line_of_sight).transpose();
-        let mut h = SMatrix::<f64, 1, { ekf::N }>::zeros();
-        h.fixed_view_mut::<1, 3>(0, ekf::POS).copy_from(&u);
-        h.fixed_view_mut::<1, 3>(0, ekf::ATT)
-            .copy_from(&(u * skew(&a.lever_ned)));
-        let difference = a.range_m - b.range_m;
-        if let Some(slot) = slot {
-            h[(0, ekf::USBL + slot)] = 1.0;
-        }
-        if let Some(slot) = f.states.scale {
-            h[(0, ekf::USBL + slot)] = difference * ratio;
-        }
-        let scalar = Scalar {
-            measured: z,
-            predicted: difference * ratio * (1.0 + scale) + bias,
-            h,
-            variance: f.cfg.difference_std_m.powi(2),
-        };
+        let scalar = f.scalar(
+            core,
+            Geometric {
+                length_m: a.range_m - b.range_m,
+                line_of_sight: a.line_of_sight - b.line_of_sight,
+                lever_ned: a.lever_ned,
+            },
+            f.states.difference[part - 1],
+            z,
+            f.cfg.difference_std_m.powi(2),
+        );
         Some(self.update(core, d, scalar, 4 + part))
     }
 }
