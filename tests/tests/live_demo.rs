@@ -57,13 +57,7 @@ fn live_demo_reproduces_bit_for_bit_from_its_recording() {
     assert!(live.len() > 1000);
     assert_eq!(live, replayed);
     // The recording has the sensors, the daemon's outputs and its configuration.
-    let o = Command::new(binary("auvnav"))
-        .arg("replay")
-        .arg(out.join("record.mcap"))
-        .arg("--json")
-        .output()
-        .expect("replay");
-    let r: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let r = replay_json(&out.join("record.mcap"));
     assert!(
         r["configuration"]
             .as_str()
@@ -109,13 +103,7 @@ fn live_daemon_fuses_usbl_fixes_from_a_seatrac_on_a_pseudo_terminal() {
         .unwrap_or_else(|| panic!("no USBL count in {daemon:?}"));
     // One fix per second for 30 s (the first may precede the daemon's first IMU sample).
     assert!(fused >= 28, "{daemon}");
-    let o = Command::new(binary("auvnav"))
-        .arg("replay")
-        .arg(out.join("record.mcap"))
-        .arg("--json")
-        .output()
-        .expect("replay");
-    let r: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let r = replay_json(&out.join("record.mcap"));
     assert_eq!(r["navigator"]["usbl_fused"], fused, "{r}");
     assert_eq!(r["navigator"]["usbl_invalid"], 0, "{r}");
 }
@@ -143,13 +131,7 @@ fn live_daemon_fuses_lbl_ranges_from_a_seatrac_ranging_seabed_beacons() {
     let v = demo(&args, &out);
     assert_eq!(v["replay_identical"], true, "{v}");
     assert_eq!(v["clean_stop"], true, "{v}");
-    let o = Command::new(binary("auvnav"))
-        .arg("replay")
-        .arg(out.join("record.mcap"))
-        .arg("--json")
-        .output()
-        .expect("replay");
-    let r: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let r = replay_json(&out.join("record.mcap"));
     // One ping a second to three beacons: a range message per beacon and ping (the first pings
     // may precede the daemon's first IMU sample), 5 % of them multipath outliers the gate takes
     // out.
@@ -199,13 +181,7 @@ fn live_demo_with_a_gnss_receiver_records_the_surface_fixes_for_calibration() {
     // before the depth sensor's first reading, which the driver waits for.
     assert!(simulated >= 60, "{v}");
     assert!(recorded + 2 >= simulated && recorded <= simulated, "{v}");
-    let o = Command::new(binary("auvnav"))
-        .arg("replay")
-        .arg(out.join("record.mcap"))
-        .arg("--json")
-        .output()
-        .expect("replay");
-    let r: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let r = replay_json(&out.join("record.mcap"));
     let fused = r["navigator"]["gnss_fused"].as_u64().expect("gnss_fused");
     assert!(fused + 3 >= recorded, "{r}");
     let o = Command::new(binary("auvnav"))
@@ -374,4 +350,15 @@ fn a_restarted_daemon_continues_from_its_checkpoint_and_its_recording_replays_ac
     assert_eq!(c["unmatched_recorded"], 0, "{c}");
     // Both daemons' solutions: nearly the 8000 samples of 40 s at 200 Hz, less the restart's gap.
     assert!(c["compared"].as_u64().expect("compared") > 7000, "{c}");
+}
+
+/// `auvnav replay LOG --json`: the replay's report of a recording.
+fn replay_json(log: &std::path::Path) -> serde_json::Value {
+    let o = Command::new(binary("auvnav"))
+        .arg("replay")
+        .arg(log)
+        .arg("--json")
+        .output()
+        .expect("replay");
+    serde_json::from_slice(&o.stdout).expect("json")
 }
