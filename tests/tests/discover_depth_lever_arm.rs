@@ -23,10 +23,7 @@ fn a_hidden_depth_sensor_lever_arm_is_named() {
     std::fs::create_dir_all(&d).expect("temp dir");
     let d = Dir(d);
     for (seed, x) in [(9621, 1.2), (9622, -0.6)] {
-        let h = Hidden {
-            name: "depth.lever_arm".into(),
-            value: vec![x, 0.0, 0.0],
-        };
+        let h = Hidden::new("depth.lever_arm", vec![x, 0.0, 0.0]);
         let (t, r) = trial(seed, Some(h), &d.0).expect("trial");
         println!(
             "seed {seed}: hidden x {x}; found {:?}, estimate {:?}, relative error {:?}",

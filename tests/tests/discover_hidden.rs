@@ -56,10 +56,7 @@ fn null_data_gives_no_effect() {
 #[test]
 fn an_effect_the_motion_does_not_excite_is_reported_not_fitted() {
     let d = dir("discover-roll");
-    let h = Hidden {
-        name: "dvl.mount_roll".into(),
-        value: vec![2.0],
-    };
+    let h = Hidden::new("dvl.mount_roll", vec![2.0]);
     let (t, r) = trial(9201, Some(h), &d.0).expect("trial");
     assert!(
         !t.found.iter().any(|n| n == "dvl.mount_roll"),
@@ -119,10 +116,7 @@ fn a_moving_bed_under_bottom_track_is_named() {
 #[test]
 fn the_extended_model_reproduces_the_residuals_and_leaves_nothing_to_find() {
     let d = dir("discover-extend");
-    let hidden = Hidden {
-        name: "dvl.lever_arm".into(),
-        value: vec![-0.8, 0.2, 0.4],
-    };
+    let hidden = Hidden::new("dvl.lever_arm", vec![-0.8, 0.2, 0.4]);
     let (t, first) = trial(9301, Some(hidden), &d.0).expect("trial");
     assert!(t.correct, "{:#?}", first.effects);
     let text = effect_set_toml(&first);
@@ -402,18 +396,18 @@ fn imu_errors_are_found_against_the_reference_motion() {
             if rng.uniform() < 0.5 { -m } else { m }
         };
         let hidden = [
-            Hidden {
-                name: "imu.gyro_bias".into(),
-                value: vec![draw(0.5, 5.0), draw(0.5, 5.0), draw(0.5, 5.0)],
-            },
-            Hidden {
-                name: "imu.gyro_scale_factor".into(),
-                value: vec![0.0, 0.0, draw(1000.0, 5000.0)],
-            },
-            Hidden {
-                name: "imu.accel_bias".into(),
-                value: vec![draw(100.0, 1000.0), draw(100.0, 1000.0), 0.0],
-            },
+            Hidden::new(
+                "imu.gyro_bias",
+                vec![draw(0.5, 5.0), draw(0.5, 5.0), draw(0.5, 5.0)],
+            ),
+            Hidden::new(
+                "imu.gyro_scale_factor",
+                vec![0.0, 0.0, draw(1000.0, 5000.0)],
+            ),
+            Hidden::new(
+                "imu.accel_bias",
+                vec![draw(100.0, 1000.0), draw(100.0, 1000.0), 0.0],
+            ),
         ];
         let (t, r) = trial_set(seed, &hidden, &d.0).expect("trial");
         println!(
@@ -511,10 +505,10 @@ fn an_implausible_imu_estimate_is_reported_not_named() {
     let d = dir("discover-implausible");
     let (t, r) = trial_set(
         9571,
-        &[Hidden {
-            name: "imu.gyro_scale_factor".into(),
-            value: vec![0.0, 0.0, 20_000.0],
-        }],
+        &[Hidden::new(
+            "imu.gyro_scale_factor",
+            vec![0.0, 0.0, 20_000.0],
+        )],
         &d.0,
     )
     .expect("trial");
@@ -534,10 +528,10 @@ fn an_implausible_imu_estimate_is_reported_not_named() {
     );
     let (t, _) = trial_set(
         9572,
-        &[Hidden {
-            name: "imu.gyro_scale_factor".into(),
-            value: vec![0.0, 0.0, 4_000.0],
-        }],
+        &[Hidden::new(
+            "imu.gyro_scale_factor",
+            vec![0.0, 0.0, 4_000.0],
+        )],
         &d.0,
     )
     .expect("trial");

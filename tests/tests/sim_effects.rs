@@ -353,3 +353,47 @@ fn usbl_receiver_range_bias_adds_each_receivers_own_error() {
     }
     assert!(seen.iter().all(|&n| n > 40), "{seen:?}");
 }
+
+/// A periodic DVL velocity error: each bottom-track velocity differs from the run without it by
+/// the amplitude on each DVL axis times sin(2π t / period + phase) at its stamp, to 1e-9 m/s
+/// (same seed, so the same noise); every other message is the same.
+#[test]
+fn dvl_periodic_velocity_error_adds_a_sine_at_each_stamp() {
+    let amplitude = [0.03, -0.01, 0.005];
+    let (period, phase_deg) = (23.0, 65.0);
+    let base = run("turns", &[], Some(120.0));
+    let periodic = run(
+        "turns",
+        &[
+            ("dvl.periodic_velocity_error", &amplitude),
+            ("dvl.periodic_velocity_error_period", &[period]),
+            ("dvl.periodic_velocity_error_phase", &[phase_deg]),
+        ],
+        Some(120.0),
+    );
+    assert_eq!(base.len(), periodic.len());
+    let mut compared = 0;
+    for (a, b) in base.iter().zip(&periodic) {
+        match (a, b) {
+            (LogMessage::Dvl(a), LogMessage::Dvl(b)) if !a.is_water_track() => {
+                assert_eq!(a.validity, b.validity);
+                if a.validity & DvlVelocityV1::VALID_VELOCITY == 0 {
+                    continue;
+                }
+                let t = b.validity_time_ns as f64 * 1e-9;
+                let s = (std::f64::consts::TAU * t / period + phase_deg.to_radians()).sin();
+                for (k, amp) in amplitude.iter().enumerate() {
+                    let got = b.velocity_dvl_m_s[k] - a.velocity_dvl_m_s[k];
+                    assert!(
+                        (got - amp * s).abs() < 1e-9,
+                        "t {t}: axis {k}: {got} against {}",
+                        amp * s
+                    );
+                }
+                compared += 1;
+            }
+            (a, b) => assert_eq!(format!("{a:?}"), format!("{b:?}")),
+        }
+    }
+    assert!(compared > 100, "{compared} velocities compared");
+}

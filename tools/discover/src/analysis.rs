@@ -296,6 +296,21 @@ fn record_floors(
             sigmas: sel.min_sigma,
         });
     }
+    // No line stands out of the residual's spectrum: the periodic error is not a candidate, and
+    // its floor is the amplitude that would have made its line stand out.
+    if let Some(line) = p.channel.periodic_line.filter(|l| !l.stands_out()) {
+        floors.push(DetectionFloor {
+            name: crate::periodic::EFFECT.into(),
+            channel: kind,
+            floor: line
+                .floor_m_s
+                .iter()
+                .map(|f| f.is_finite().then_some(*f))
+                .collect(),
+            unit: "m/s".into(),
+            sigmas: sel.min_sigma,
+        });
+    }
 }
 
 /// The effects selected on `ch` (`steps`, fitted as `f` into the model `full`) into the report,
@@ -399,6 +414,19 @@ fn record_effects(
         } else {
             None
         };
+        let line = ch.periodic_line.filter(|_| name == crate::periodic::EFFECT);
+        if let Some(l) = &line {
+            evidence.push_str(&format!(
+                "; at the residual's strongest line: period {:.2} ± {:.2} s, phase {:.1} ± {:.1}° \
+                 ({:.0} cycles, {:.0} times the spectrum around it)",
+                l.period_s,
+                l.period_std_s,
+                l.phase_deg,
+                l.phase_std_deg,
+                l.cycles,
+                l.line_to_background
+            ));
+        }
         r.effects.push(FoundEffect {
             name: name.into(),
             value: json_of(&f.theta[off..off + len]),
@@ -409,6 +437,7 @@ fn record_effects(
             evidence,
             gain,
             equivalent,
+            line,
         });
     }
 }
@@ -682,6 +711,9 @@ pub fn discover(
         let ch = if kind.partial() {
             screened = screen_outliers(ch, reference, nominal, &mut r);
             &screened
+        } else if let Some(lined) = crate::periodic::with_line(ch, reference, nominal) {
+            screened = lined;
+            &screened
         } else {
             ch
         };
@@ -787,6 +819,7 @@ pub fn discover(
             nominal: nominal_desc,
             selected: selected_desc,
             allan,
+            line: ch.periodic_line,
         });
     }
     r.wall_s = start.elapsed().as_secs_f64();

@@ -30,6 +30,10 @@ pub struct FoundEffect {
     /// engineer can (`dvl.scale_factor` and `dvl.sound_speed`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub equivalent: Option<Equivalent>,
+    /// `dvl.periodic_velocity_error`: the period and phase its amplitudes were fitted at (the
+    /// residual's strongest line), with their deviations.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub line: Option<crate::periodic::PeriodicLine>,
 }
 
 /// An exact alias of a found effect.
@@ -151,6 +155,10 @@ pub struct ChannelReport {
     /// cluster time (empty for the other channels).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub allan: Vec<AllanPoint>,
+    /// The DVL channel: the strongest line of its residual with every other candidate fitted,
+    /// standing out or not (`dvl.periodic_velocity_error` is a candidate only where it does).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub line: Option<crate::periodic::PeriodicLine>,
 }
 
 /// One cluster time of an Allan deviation: per component, in the channel's unit.

@@ -44,6 +44,12 @@ pub const DRIFT_KNOT_S: f64 = 90.0;
 
 impl<'a> Problem<'a> {
     pub fn new(channel: &'a Channel, reference: &'a Reference, nominal: Effects) -> Problem<'a> {
+        let mut nominal = nominal;
+        if let Some(line) = channel.periodic_line.filter(|l| l.stands_out()) {
+            // The line's period and phase: the candidate's amplitudes are fitted at them.
+            nominal.dvl_periodic_velocity_error_period = line.period_s;
+            nominal.dvl_periodic_velocity_error_phase = line.phase_deg;
+        }
         let d = channel.kind.dims();
         let epochs = (0..channel.len())
             .filter(|&i| {
@@ -175,6 +181,10 @@ impl<'a> Problem<'a> {
         (0..CANDIDATES.len())
             .filter(|&i| CANDIDATES[i].channel == self.channel.kind)
             .filter(|&i| CANDIDATES[i].name != "dvl.bed_velocity" || self.channel.moving_bed)
+            .filter(|&i| {
+                CANDIDATES[i].name != "dvl.periodic_velocity_error"
+                    || self.channel.periodic_line.is_some_and(|l| l.stands_out())
+            })
             .collect()
     }
 

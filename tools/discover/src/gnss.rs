@@ -379,6 +379,7 @@ fn name(
         evidence: format!("{}: {evidence}", p.name),
         gain,
         equivalent: None,
+        line: None,
     });
 }
 

@@ -99,13 +99,33 @@ pub const HIDDEN: &[(&str, f64, f64)] = &[
     ("imu.accel_scale_factor", 500.0, 5000.0),
     ("imu.gyro_misalignment", 0.5, 3.0),
     ("imu.accel_misalignment", 0.5, 3.0),
+    ("dvl.periodic_velocity_error", 0.005, 0.02),
 ];
+
+/// Period range (s) of a hidden `dvl.periodic_velocity_error`: at least four cycles on the
+/// shortest trial voyage (about 290 s), and well above its DVL's rate.
+pub const PERIODIC_PERIOD_S: (f64, f64) = (6.0, 60.0);
 
 /// One hidden effect.
 #[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct Hidden {
     pub name: String,
     pub value: Vec<f64>,
+    /// Settings the effect needs beside its value that are not estimated as effects of their own:
+    /// the periodic DVL error's period and phase.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub with: Vec<(String, Vec<f64>)>,
+}
+
+impl Hidden {
+    /// An effect hidden at `value`, with nothing beside it.
+    pub fn new(name: &str, value: Vec<f64>) -> Hidden {
+        Hidden {
+            name: name.into(),
+            value,
+            with: Vec::new(),
+        }
+    }
 }
 
 /// Draws an effect and its magnitude for trial `seed`.
@@ -130,9 +150,21 @@ fn magnitude(rng: &mut Rng, k: usize) -> Hidden {
             if rng.uniform() < 0.5 { x - m } else { x + m }
         })
         .collect();
+    let with = if name == "dvl.periodic_velocity_error" {
+        let (lo, hi) = PERIODIC_PERIOD_S;
+        let period = lo + rng.uniform() * (hi - lo);
+        let phase = -180.0 + 360.0 * rng.uniform();
+        vec![
+            ("dvl.periodic_velocity_error_period".into(), vec![period]),
+            ("dvl.periodic_velocity_error_phase".into(), vec![phase]),
+        ]
+    } else {
+        Vec::new()
+    };
     Hidden {
         name: name.into(),
         value,
+        with,
     }
 }
 
@@ -160,6 +192,7 @@ pub fn scaled(h: &Hidden, fraction: f64) -> Hidden {
             .zip(&nominal)
             .map(|(v, n)| n + (v - n) * fraction)
             .collect(),
+        with: h.with.clone(),
     }
 }
 
@@ -339,7 +372,10 @@ pub fn trial_set_with(
     dir: &Path,
 ) -> anyhow::Result<(SetTrial, DiscoverReport)> {
     let mut settings: Vec<(String, Vec<f64>)> = noise.to_vec();
-    settings.extend(hidden.iter().map(|h| (h.name.clone(), h.value.clone())));
+    for h in hidden {
+        settings.push((h.name.clone(), h.value.clone()));
+        settings.extend(h.with.iter().cloned());
+    }
     let log = simulate(seed, &settings, dir)?;
     let read = read_logs(std::slice::from_ref(&log));
     let _ = std::fs::remove_file(&log);
@@ -442,7 +478,7 @@ pub fn trial_voyages(
 ) -> anyhow::Result<SetTrial> {
     let settings: Vec<(String, Vec<f64>)> = hidden
         .iter()
-        .map(|h| (h.name.clone(), h.value.clone()))
+        .flat_map(|h| std::iter::once((h.name.clone(), h.value.clone())).chain(h.with.clone()))
         .collect();
     let mut data = Vec::with_capacity(voyages);
     let mut realised = Vec::new();

@@ -27,6 +27,7 @@ pub mod imu;
 pub mod navigation;
 pub mod noise;
 pub mod outputs;
+pub mod periodic;
 pub mod report;
 pub mod residuals;
 pub mod smoothed;
@@ -301,7 +302,8 @@ impl ChannelKind {
         match self {
             ChannelKind::Dvl => {
                 let r = reference.at(t_s - e.dvl_time_offset)?;
-                let v = DvlInstallation::from_effects(e).bottom_track_velocity(
+                let v = DvlInstallation::from_effects(e).bottom_track_reading(
+                    t_s,
                     &r.c_body_to_ned,
                     &r.velocity_ned,
                     &r.omega_eb_body,
@@ -354,6 +356,9 @@ pub struct Channel {
     /// The DVL's bottom track may see a moving bed (a river, soft sediment): `dvl.bed_velocity`
     /// is a candidate of this channel ([`Collector::with_moving_bed`]).
     pub moving_bed: bool,
+    /// The residual's strongest line ([`periodic::with_line`]): the period and phase at which
+    /// `dvl.periodic_velocity_error` is a candidate of this channel (none: not a candidate).
+    pub periodic_line: Option<periodic::PeriodicLine>,
 }
 
 impl Channel {
@@ -366,6 +371,7 @@ impl Channel {
             receivers: [0.0; 12],
             skipped: 0,
             moving_bed: false,
+            periodic_line: None,
         }
     }
 
@@ -442,7 +448,8 @@ impl Channel {
         }
         if self.kind == ChannelKind::DvlBeams {
             let r = reference.at(self.times[i] - e.dvl_time_offset)?;
-            let v = DvlInstallation::from_effects(e).bottom_track_velocity(
+            let v = DvlInstallation::from_effects(e).bottom_track_reading(
+                self.times[i],
                 &r.c_body_to_ned,
                 &r.velocity_ned,
                 &r.omega_eb_body,
@@ -527,7 +534,8 @@ pub struct Candidate {
 /// `auvnav calibrate mag`. `dvl.bed_velocity` (a moving bed under bottom track) is a candidate
 /// only where the caller says the bed may move (`--moving-bed`): on long straight legs it is
 /// hard to tell from the DVL's yaw and scale, and a per-voyage effect that can absorb them would
-/// weaken the evidence for the installation. Without a reference attitude (the magnetic-field channel)
+/// weaken the evidence for the installation. `dvl.periodic_velocity_error` is a candidate at the
+/// period and phase of the residual's strongest line ([`periodic`]), its amplitudes fitted. Without a reference attitude (the magnetic-field channel)
 /// `mag.declination` does not act on the reading at all. On the beams (`dvl_beams`) a scale
 /// common to the four beams is `dvl.scale_factor`; `dvl.beam_scale_factor` is each beam's own.
 pub const CANDIDATES: &[Candidate] = &[
@@ -563,6 +571,11 @@ pub const CANDIDATES: &[Candidate] = &[
     },
     Candidate {
         name: "dvl.bed_velocity",
+        channel: ChannelKind::Dvl,
+        step: 0.001,
+    },
+    Candidate {
+        name: "dvl.periodic_velocity_error",
         channel: ChannelKind::Dvl,
         step: 0.001,
     },

@@ -37,6 +37,7 @@ pub fn per_voyage(name: &str) -> bool {
             | "depth.density"
             | "dvl.sound_speed"
             | "dvl.bed_velocity"
+            | "dvl.periodic_velocity_error"
             | "usbl.sound_speed"
             | "mag.declination"
             | "mag.inclination"
@@ -439,7 +440,7 @@ pub fn discover_voyages(
                 let ch = if kind.partial() {
                     screen_outliers(ch, &data[i].reference, nominal, &mut scratch)
                 } else {
-                    ch.clone()
+                    crate::periodic::lined(ch, &data[i].reference, nominal)
                 };
                 Some((i, ch))
             })
@@ -997,6 +998,7 @@ fn record_shared(
             ),
             gain: gains[n],
             equivalent: None,
+            line: None,
         });
         v.shared.push(s);
     }

@@ -225,6 +225,12 @@ effects! {
     dvl_velocity_error_correlation_time: f64 = "dvl.velocity_error_correlation_time", unit "s", range 0.1..=1.0e5, default [60.0];
     /// Velocity of the bed under bottom track, north and east: a moving bed (sediment the current carries) or a bottom track locked on something that moves. The DVL measures the vehicle's velocity relative to it, so the error is fixed on the Earth and turns with the heading in the DVL's frame; water track is not affected.
     dvl_bed_velocity: [f64; 2] = "dvl.bed_velocity", unit "m/s", range -3.0..=3.0, default [0.0, 0.0];
+    /// A periodic DVL velocity error: its amplitude on each DVL-frame axis, the error at stamp t being this × sin(2π t / dvl.periodic_velocity_error_period + dvl.periodic_velocity_error_phase) (t in seconds of the recording's clock), as a platform's oscillation (a porpoising vehicle, a swell, a flapping mount) seen through an unmodelled lever arm or flow gives; the axes share one phase, a negative amplitude is an axis in antiphase.
+    dvl_periodic_velocity_error: [f64; 3] = "dvl.periodic_velocity_error", unit "m/s", range -1.0..=1.0, default [0.0, 0.0, 0.0];
+    /// Period of dvl.periodic_velocity_error.
+    dvl_periodic_velocity_error_period: f64 = "dvl.periodic_velocity_error_period", unit "s", range 0.5..=1.0e5, default [60.0];
+    /// Phase of dvl.periodic_velocity_error at t = 0.
+    dvl_periodic_velocity_error_phase: f64 = "dvl.periodic_velocity_error_phase", unit "deg", range -360.0..=360.0, default [0.0];
 
     /// A compass's heading-dependent deviation, the classical card: the compass (the attitude channel, `rates.compass_hz`) shows ψc where ψc − δ(ψc) is the true heading, δ(ψc) = A + B sin ψc + C cos ψc + D sin 2ψc + E cos 2ψc with the coefficients A, B, C, D, E: A a constant offset (a misaligned lubber line, an uncorrected declination), B and C the one-cycle part (permanent magnetism of the vehicle), D and E the two-cycle part (induced magnetism of soft iron).
     heading_deviation: [f64; 5] = "heading.deviation", unit "deg", range -45.0..=45.0, default [0.0, 0.0, 0.0, 0.0, 0.0];

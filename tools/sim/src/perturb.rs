@@ -5,8 +5,9 @@
 //! contains, treating the recorded value as the ideal sensor's:
 //!
 //! - DVL (`dvl.scale_factor`, `dvl.mount_roll|pitch|yaw`, `dvl.lever_arm`, `dvl.time_offset`,
-//!   `dvl.noise`): `z'(t) = s C_b^d (z(t - tau) + omega(t - tau) x l) + noise`, with the recorded
-//!   velocity `z` and the IMU angular rate interpolated linearly at `t - tau`. A message whose
+//!   `dvl.periodic_velocity_error` with its period and phase, `dvl.noise`):
+//!   `z'(t) = s C_b^d (z(t - tau) + omega(t - tau) x l) + a sin(2 pi t / P + phi) + noise`, with
+//!   the recorded velocity `z` and the IMU angular rate interpolated linearly at `t - tau`. A message whose
 //!   `t - tau` has no valid recorded neighbour within three DVL intervals is marked invalid and
 //!   counted. The noise is added per velocity axis (the simulator adds it per beam). Recorded beam
 //!   velocities no longer match the perturbed velocity and are marked invalid.
@@ -40,6 +41,9 @@ pub const APPLICABLE: &[&str] = &[
     "dvl.lever_arm",
     "dvl.time_offset",
     "dvl.noise",
+    "dvl.periodic_velocity_error",
+    "dvl.periodic_velocity_error_period",
+    "dvl.periodic_velocity_error_phase",
     "imu.gyro_bias",
     "imu.accel_bias",
     "depth.bias",
@@ -199,6 +203,7 @@ pub fn perturb_log(
     .inverse()
     .into_inner();
     let lever = Vector3::from(e.dvl_lever_arm);
+    let periodic = crate::sensors::DvlInstallation::from_effects(e);
     let gyro_bias = Vector3::from(e.imu_gyro_bias).map(|b| (b / 3600.0).to_radians());
     let accel_bias = Vector3::from(e.imu_accel_bias) * 9.806_65e-6;
     let touches = |prefix: &str| p.settings.iter().any(|(n, _)| n.starts_with(prefix));
@@ -242,11 +247,12 @@ pub fn perturb_log(
                 LogMessage::Dvl(mut x)
                     if dvl_on && x.validity & DvlVelocityV1::VALID_VELOCITY != 0 =>
                 {
-                    let t = x.validity_time_ns as f64 * 1e-9 - e.dvl_time_offset;
-                    match at_time(&epochs, t, 3.0 * interval) {
+                    let stamp = x.validity_time_ns as f64 * 1e-9;
+                    match at_time(&epochs, stamp - e.dvl_time_offset, 3.0 * interval) {
                         Some((z, omega)) => {
                             let noise = Vector3::from_fn(|_, _| dvl_rng.gauss(e.dvl_noise));
                             let v = c_body_to_dvl * (z + omega.cross(&lever)) * e.dvl_scale_factor
+                                + periodic.periodic_error(stamp)
                                 + noise;
                             x.velocity_dvl_m_s = v.into();
                             counts.dvl_changed += 1;

@@ -210,6 +210,9 @@ pub struct DvlInstallation {
     pub scale: f64,
     /// The bed's velocity under bottom track (NED; `dvl.bed_velocity`, no vertical part).
     pub bed_velocity_ned: Vector3<f64>,
+    /// The periodic velocity error (`dvl.periodic_velocity_error`): amplitude per DVL axis
+    /// (m/s), angular frequency (rad/s) and phase (rad).
+    pub periodic: Option<(Vector3<f64>, f64, f64)>,
 }
 
 impl DvlInstallation {
@@ -224,6 +227,43 @@ impl DvlInstallation {
             lever_arm: Vector3::from(e.dvl_lever_arm),
             scale: e.dvl_scale_factor * ASSUMED_SOUND_SPEED / e.dvl_sound_speed,
             bed_velocity_ned: Vector3::new(e.dvl_bed_velocity[0], e.dvl_bed_velocity[1], 0.0),
+            periodic: e
+                .dvl_periodic_velocity_error
+                .iter()
+                .any(|a| *a != 0.0)
+                .then(|| {
+                    (
+                        Vector3::from(e.dvl_periodic_velocity_error),
+                        std::f64::consts::TAU / e.dvl_periodic_velocity_error_period,
+                        e.dvl_periodic_velocity_error_phase.to_radians(),
+                    )
+                }),
+        }
+    }
+
+    /// The periodic velocity error (`dvl.periodic_velocity_error`) in the DVL frame at stamp
+    /// `t_s` (zero when the effect is off).
+    pub fn periodic_error(&self, t_s: f64) -> Vector3<f64> {
+        match self.periodic {
+            Some((a, w, phase)) => a * (w * t_s + phase).sin(),
+            None => Vector3::zeros(),
+        }
+    }
+
+    /// [`DvlInstallation::bottom_track_velocity`] plus the periodic error at stamp `t_s`: what a
+    /// locked, noise-free DVL stamps at `t_s` (the motion given at its time of validity).
+    pub fn bottom_track_reading(
+        &self,
+        t_s: f64,
+        c_body_to_ned: &Matrix3<f64>,
+        velocity_ned: &Vector3<f64>,
+        omega_eb_body: &Vector3<f64>,
+    ) -> Vector3<f64> {
+        let v = self.bottom_track_velocity(c_body_to_ned, velocity_ned, omega_eb_body);
+        match self.periodic {
+            // Off: the velocity as it is (adding zeros would turn a −0.0 into 0.0).
+            None => v,
+            Some(_) => v + self.periodic_error(t_s),
         }
     }
 
@@ -420,7 +460,8 @@ impl DvlModel {
             return m;
         }
         let blocked = self.beam_blocked(t, interval);
-        let mut v_dvl = self.install.bottom_track_velocity(
+        let mut v_dvl = self.install.bottom_track_reading(
+            t,
             &truth.c_body_to_ned,
             &truth.velocity_ned,
             &truth.omega_eb_body,
