@@ -537,7 +537,16 @@ fn score(
         match report.effects.iter().find(|e| e.name == h.name) {
             Some(e) => {
                 // A component that is not a number makes the error NaN: not correct.
-                let est = values_of(&e.value).unwrap_or_else(|| vec![f64::NAN; h.value.len()]);
+                let mut est = values_of(&e.value).unwrap_or_else(|| vec![f64::NAN; h.value.len()]);
+                // A periodic error is compared at the hidden phase's sign (±a at φ, φ + 180°).
+                let hidden_phase = h
+                    .with
+                    .iter()
+                    .find(|(n, _)| n == "dvl.periodic_velocity_error_phase")
+                    .and_then(|(_, v)| v.first().copied());
+                if let (Some(line), Some(phase)) = (e.line, hidden_phase) {
+                    est = super::periodic::amplitudes_near_phase(&est, line.phase_deg, phase);
+                }
                 let nominal = Effects::default().get(&h.name).unwrap_or_default();
                 relative_errors.push(Some(norm(&est, &h.value) / norm(&h.value, &nominal)));
                 within_3_sigma.push(Some(covers(&est, &e.std, &h.value)));

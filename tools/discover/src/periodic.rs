@@ -195,6 +195,17 @@ fn threshold_for(d: usize, p: f64) -> f64 {
     hi
 }
 
+/// The amplitudes of a periodic error found at phase `phase_deg`, written at the phase nearer
+/// `wanted_phase_deg`: a sin(ωt + φ) and −a sin(ωt + φ + 180°) are the same error, and discovery
+/// writes the one whose largest amplitude is positive.
+pub fn amplitudes_near_phase(amplitude: &[f64], phase_deg: f64, wanted_phase_deg: f64) -> Vec<f64> {
+    if (phase_deg - wanted_phase_deg).to_radians().cos() < 0.0 {
+        amplitude.iter().map(|a| -a).collect()
+    } else {
+        amplitude.to_vec()
+    }
+}
+
 /// The median of a χ² variable with `k` degrees of freedom over its mean (Wilson–Hilferty).
 fn chi_square_median_over_mean(k: usize) -> f64 {
     let k = k.max(1) as f64;
@@ -420,6 +431,24 @@ mod tests {
         assert!((threshold_for(1, 0.01) - 0.01f64.ln().abs()).abs() < 1e-9);
         // χ²(6) exceeds 16.81 with probability 0.01.
         assert!((threshold_for(3, 0.01) * 6.0 - 16.812).abs() < 0.01);
+    }
+
+    #[test]
+    fn a_sign_of_the_amplitudes_is_a_half_turn_of_the_phase() {
+        let a = [0.01, -0.02, 0.0];
+        assert_eq!(amplitudes_near_phase(&a, 30.0, 60.0), a.to_vec());
+        assert_eq!(
+            amplitudes_near_phase(&a, 30.0, -140.0),
+            vec![-0.01, 0.02, -0.0]
+        );
+        // The same error at both: a sin(ωt + φ) = −a sin(ωt + φ + 180°).
+        let (w, t, phi) = (0.3f64, 7.0f64, 30f64.to_radians());
+        let b = amplitudes_near_phase(&a, 30.0, -150.0);
+        for k in 0..3 {
+            let x = a[k] * (w * t + phi).sin();
+            let y = b[k] * (w * t + phi + std::f64::consts::PI).sin();
+            assert!((x - y).abs() < 1e-15);
+        }
     }
 
     /// A line slower than the span holds MIN_CYCLES of is not searched for: what is found is
