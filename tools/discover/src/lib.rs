@@ -550,8 +550,9 @@ pub struct Candidate {
 /// `auvnav calibrate mag`. `dvl.bed_velocity` (a moving bed under bottom track) is a candidate
 /// only where the caller says the bed may move (`--moving-bed`): on long straight legs it is
 /// hard to tell from the DVL's yaw and scale, and a per-voyage effect that can absorb them would
-/// weaken the evidence for the installation. `dvl.periodic_velocity_error` is a candidate at the
-/// period and phase of the residual's strongest line ([`periodic`]), its amplitudes fitted. Without a reference attitude (the magnetic-field channel)
+/// weaken the evidence for the installation. `dvl.periodic_velocity_error` is a candidate only
+/// where the DVL residual has a line standing out, at its period and phase ([`periodic`]), its
+/// amplitudes fitted. Without a reference attitude (the magnetic-field channel)
 /// `mag.declination` does not act on the reading at all. On the beams (`dvl_beams`) a scale
 /// common to the four beams is `dvl.scale_factor`; `dvl.beam_scale_factor` is each beam's own.
 pub const CANDIDATES: &[Candidate] = &[

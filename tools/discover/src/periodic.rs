@@ -2,16 +2,19 @@
 //! residual's strongest spectral line, so that the fit estimates its amplitudes as it does every
 //! other candidate's (linearly, with the channel's noise model and the held-out selection).
 //!
-//! The line search fits, at each frequency of a grid from eight cycles over the channel's span
-//! to a quarter of its reading rate (and at most 0.25 Hz: the platform oscillations and swells
-//! this effect describes are slower), a sine and a cosine to each axis of the residual with every
-//! other candidate fitted, and sums the explained power over the axes, each axis scaled by its
-//! variance. The strongest frequency is refined by a parabola through its neighbours; the axes'
-//! common phase is the leading direction of their (sine, cosine) coefficients. The line's height
-//! is reported against the spectrum around it (the median within half its frequency or six
-//! periodogram resolutions of it, whichever is wider, the line's own main lobe left out), so that a coloured residual's slope does not read as a line: the same
-//! ratio gives the deviations of the period and the phase (the Cramér–Rao bounds of a sinusoid in
-//! noise at that level).
+//! The line search fits, at each frequency of a grid from four cycles over the channel's span
+//! ([`MIN_CYCLES`]) to a quarter of its reading rate (and at most 0.25 Hz: the platform
+//! oscillations and swells this effect describes are slower), a sine and a cosine to each axis of
+//! the residual with every other candidate fitted, and sums the explained power over the axes,
+//! each axis scaled by its variance. The strongest frequency is refined by a parabola through its
+//! neighbours; the axes' common phase is the leading direction of their (sine, cosine)
+//! coefficients. The line's height is read against the spectrum around it (the median within half
+//! its frequency or six periodogram resolutions of it, whichever is wider, the line's own main
+//! lobe left out), so that a coloured residual's slope does not read as a line. The line stands
+//! out when that height passes the level the strongest of the band's noise powers passes once in
+//! a hundred spectra ([`FALSE_ALARM`]); only then is the effect a candidate. The same height gives
+//! the deviations of the period and the phase (the Cramér–Rao bounds of a sinusoid in noise at
+//! that level) and, where no line stands out, the amplitude that would have made one.
 
 use super::fit::Problem;
 use super::{Channel, ChannelKind, Reference};
@@ -61,8 +64,9 @@ pub const MAX_FREQUENCY_HZ: f64 = 0.25;
 /// Grid points per 1/span (the periodogram's natural resolution).
 const OVERSAMPLING: f64 = 4.0;
 
-/// `ch` with its strongest line ([`Channel::periodic_line`]) when it is a DVL channel whose
-/// residual (every other candidate fitted) has one in the searched band; otherwise `ch` as it is.
+/// `ch` with the strongest line of its residual (every other candidate fitted;
+/// [`Channel::periodic_line`]), standing out or not; None when `ch` is not a DVL channel, already
+/// has its line, or its span or readings hold no band to search.
 pub fn with_line(ch: &Channel, reference: &Reference, nominal: &Effects) -> Option<Channel> {
     if ch.kind != ChannelKind::Dvl || ch.periodic_line.is_some() {
         return None;
