@@ -112,8 +112,9 @@ pub struct Hidden {
     pub name: String,
     pub value: Vec<f64>,
     /// Settings the effect needs beside its value that are not estimated as effects of their own:
-    /// the periodic DVL error's period and phase.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    /// the periodic DVL error's period and phase. Always written (a trial's result travels
+    /// between processes in postcard, which has no field names to skip by).
+    #[serde(default)]
     pub with: Vec<(String, Vec<f64>)>,
 }
 

@@ -123,3 +123,29 @@ impl auvnav_studies::runs::RunStudy for TrialsStudy {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::hidden_effects::{HIDDEN, Hidden, draw_of};
+
+    /// A trial's hidden effect travels between the study's processes as bytes, with and without
+    /// the settings beside its value.
+    #[test]
+    fn a_hidden_effect_survives_the_study_runners_bytes() {
+        use auvnav_studies::runs::{decode_run, encode_run};
+        let periodic = HIDDEN
+            .iter()
+            .position(|(n, _, _)| *n == "dvl.periodic_velocity_error")
+            .expect("drawn");
+        for h in [
+            Hidden::new("dvl.mount_yaw", vec![1.5]),
+            draw_of(3, periodic),
+        ] {
+            let back: Hidden = decode_run(&encode_run(&h).expect("encode")).expect("decode");
+            assert_eq!(
+                (back.name, back.value, back.with),
+                (h.name, h.value, h.with)
+            );
+        }
+    }
+}
