@@ -117,7 +117,8 @@ pub fn strongest_line(times: &[f64], res: &[f64], d: usize) -> Option<PeriodicLi
     let g_lo = (f_lo - reach(f_lo)).max(df);
     let count = ((f_hi + reach(f_hi) - g_lo) / df).ceil() as usize + 1;
     let freqs: Vec<f64> = (0..count).map(|j| g_lo + j as f64 * df).collect();
-    let power = periodogram(times, res, d, &freqs);
+    let moments = axis_moments(res, d);
+    let power = periodogram(times, res, &moments, &freqs);
     let searched = |j: usize| freqs[j] >= f_lo && freqs[j] <= f_hi;
     let peak = (1..count - 1)
         .filter(|&j| searched(j))
@@ -142,7 +143,7 @@ pub fn strongest_line(times: &[f64], res: &[f64], d: usize) -> Option<PeriodicLi
     // The median of a sum of d axes' two-degree-of-freedom powers, as its mean.
     let median_to_mean = chi_square_median_over_mean(2 * d);
     let background = band[band.len() / 2] / median_to_mean;
-    let line_power = single_power(times, res, d, f);
+    let line_power = single_power(times, res, &moments, f);
     let ratio = line_power.total / background.max(f64::MIN_POSITIVE);
     let excess = (ratio - 1.0).max(1e-9);
     // Cramér–Rao bounds at the background's level (see the module's documentation).
@@ -156,7 +157,6 @@ pub fn strongest_line(times: &[f64], res: &[f64], d: usize) -> Option<PeriodicLi
     let independent = ((f_hi - f_lo) * span * OVERSAMPLING).max(1.0);
     let threshold = threshold_for(d, FALSE_ALARM / independent);
     let m = times.len() as f64;
-    let moments = axis_moments(res, d);
     let floor_m_s = std::array::from_fn(|k| match moments.get(k) {
         Some(&(_, var)) => (2.0 * var * (threshold - 1.0) * background / m).sqrt(),
         None => f64::NAN,
@@ -216,7 +216,8 @@ fn chi_square_median_over_mean(k: usize) -> f64 {
     (1.0 - 2.0 / (9.0 * k)).powi(3)
 }
 
-/// Each axis's mean and variance, for the power's scaling.
+/// Each axis's mean and variance (`res` reading-major, `d` per reading), for the powers' scaling
+/// and the floor.
 fn axis_moments(res: &[f64], d: usize) -> Vec<(f64, f64)> {
     let m = (res.len() / d) as f64;
     (0..d)
@@ -237,8 +238,8 @@ fn axis_moments(res: &[f64], d: usize) -> Vec<(f64, f64)> {
 /// The power the sine and cosine of each frequency `freqs` explain, summed over the axes (each
 /// over its variance). The sines and cosines advance by rotation along the grid (uniform in
 /// frequency), so only two per reading are evaluated.
-fn periodogram(times: &[f64], res: &[f64], d: usize, freqs: &[f64]) -> Vec<f64> {
-    let moments = axis_moments(res, d);
+fn periodogram(times: &[f64], res: &[f64], moments: &[(f64, f64)], freqs: &[f64]) -> Vec<f64> {
+    let d = moments.len();
     let n = freqs.len();
     let df = if n > 1 { freqs[1] - freqs[0] } else { 0.0 };
     // Per frequency: Σcc, Σss, Σcs, then per axis Σrc, Σrs.
@@ -292,8 +293,8 @@ struct LinePower {
     phase_rad: f64,
 }
 
-fn single_power(times: &[f64], res: &[f64], d: usize, f: f64) -> LinePower {
-    let moments = axis_moments(res, d);
+fn single_power(times: &[f64], res: &[f64], moments: &[(f64, f64)], f: f64) -> LinePower {
+    let d = moments.len();
     let w = std::f64::consts::TAU * f;
     let width = 3 + 2 * d;
     let mut a = vec![0.0; width];

@@ -28,7 +28,7 @@ use crate::effects::{self, Effects};
 use crate::rng::Rng;
 use auvnav_log::{LogMessage, LogReader, RawLogMessage, write_log_atomically};
 use auvnav_shm_schema::{DepthV1, DvlVelocityV1, ImuSampleV1};
-use nalgebra::{Rotation3, Vector3};
+use nalgebra::Vector3;
 use serde::Serialize;
 use std::path::Path;
 
@@ -195,15 +195,10 @@ pub fn perturb_log(
     }
     epochs.sort_by(|a, b| a.t.total_cmp(&b.t));
     let interval = median_interval(&epochs).unwrap_or(1.0);
-    let c_body_to_dvl = Rotation3::from_euler_angles(
-        e.dvl_mount_roll.to_radians(),
-        e.dvl_mount_pitch.to_radians(),
-        e.dvl_mount_yaw.to_radians(),
-    )
-    .inverse()
-    .into_inner();
-    let lever = Vector3::from(e.dvl_lever_arm);
-    let periodic = crate::sensors::DvlInstallation::from_effects(e);
+    // The mounting, lever arm and periodic error as the simulator's DVL has them (its scale, which
+    // folds in `dvl.sound_speed`, is not used: perturb applies `dvl.scale_factor` alone).
+    let install = crate::sensors::DvlInstallation::from_effects(e);
+    let (c_body_to_dvl, lever) = (install.c_body_to_dvl, install.lever_arm);
     let gyro_bias = Vector3::from(e.imu_gyro_bias).map(|b| (b / 3600.0).to_radians());
     let accel_bias = Vector3::from(e.imu_accel_bias) * 9.806_65e-6;
     let touches = |prefix: &str| p.settings.iter().any(|(n, _)| n.starts_with(prefix));
@@ -252,7 +247,7 @@ pub fn perturb_log(
                         Some((z, omega)) => {
                             let noise = Vector3::from_fn(|_, _| dvl_rng.gauss(e.dvl_noise));
                             let v = c_body_to_dvl * (z + omega.cross(&lever)) * e.dvl_scale_factor
-                                + periodic.periodic_error(stamp)
+                                + install.periodic_error(stamp)
                                 + noise;
                             x.velocity_dvl_m_s = v.into();
                             counts.dvl_changed += 1;
