@@ -262,6 +262,12 @@ enum BenchWhat {
         /// false discoveries near 5 % needs fifty null trials to be told from 10 %).
         #[arg(long, default_value_t = 100)]
         coloured_voyages: usize,
+        /// Trials on surface runs (a boat with a compass, a DVL and GNSS, no IMU; discovered
+        /// with --moving-bed, the GNSS positions deciding): half with white noise, half with a
+        /// Gauss–Markov DVL error, each half null and one effect hidden (the compass deviation
+        /// and the moving bed among them).
+        #[arg(long, default_value_t = 200)]
+        surface: usize,
         /// Shift every trial's seed by this much (0 to 49 999; each kind keeps its block of
         /// seeds): the same benchmark on draws the defaults have not seen.
         #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..50_000))]
@@ -864,6 +870,7 @@ fn main() -> std::process::ExitCode {
                 floor,
                 coloured,
                 coloured_voyages,
+                surface,
                 seed_offset,
                 data,
                 json,
@@ -874,6 +881,7 @@ fn main() -> std::process::ExitCode {
                 floor: floor as usize,
                 coloured,
                 coloured_voyages,
+                surface,
                 seed_offset,
                 data,
                 json,

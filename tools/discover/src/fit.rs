@@ -37,6 +37,10 @@ pub struct Problem<'a> {
     /// knots this many seconds apart) is taken out of every residual as a nuisance, its
     /// constant part left to the bias candidate ([`remove_drift`]).
     pub drift_knot_s: Option<f64>,
+    /// The DVL channel's reference velocity noise from sample to sample, summed over its
+    /// components ((m/s)²; [`crate::reference_noise`]), which the time offset's fit gives back
+    /// what interpolation takes of; 0 elsewhere.
+    pub reference_noise: f64,
 }
 
 /// Knot spacing of the drifting IMU bias taken out as a nuisance (s).
@@ -70,7 +74,12 @@ impl<'a> Problem<'a> {
             noise_lags: 0,
             noise_model: vec![None; d],
             drift_knot_s: None,
+            reference_noise: 0.0,
         };
+        if channel.kind == ChannelKind::Dvl {
+            p.reference_noise =
+                super::reference_noise::velocity_noise(channel, reference, &p.nominal, &p.epochs);
+        }
         let all = p.candidates();
         if !all.is_empty() && p.epochs.len() >= 8 {
             p.fit_noise(&all);
@@ -290,6 +299,19 @@ impl<'a> Problem<'a> {
                 .map(|((t, t0), w)| w * (t - t0).powi(2))
                 .sum()
         };
+        // What interpolating a noisy reference takes from the residual at a time offset, given
+        // back ([`crate::reference_noise`]): its value, slope and curvature in the offset.
+        let tau_at = self.time_offset_index(set);
+        let loss = |theta: &[f64]| -> [f64; 3] {
+            match tau_at {
+                Some(k) => self.reference.interpolation_loss(
+                    epochs.iter().map(|&i| self.channel.times[i]),
+                    theta[k],
+                    self.reference_noise,
+                ),
+                None => [0.0; 3],
+            }
+        };
         let mut jac = DMatrix::zeros(n, theta.len());
         for _ in 0..8 {
             if theta.is_empty() {
@@ -304,6 +326,11 @@ impl<'a> Problem<'a> {
                 a[(i, i)] += w[i] + 1e-9 * jtj[(i, i)].max(1e-12) + 1e-12;
                 jtr[i] += w[i] * (theta[i] - theta0[i]);
             }
+            if let Some(k) = tau_at {
+                let l = loss(&theta);
+                a[(k, k)] = given_back(a[(k, k)], l[2]);
+                jtr[k] += 0.5 * l[1];
+            }
             let Some(step) = a.cholesky().map(|c| c.solve(&jtr)) else {
                 break;
             };
@@ -311,8 +338,10 @@ impl<'a> Problem<'a> {
             let trial: Vec<f64> = theta.iter().zip(step.iter()).map(|(t, s)| t - s).collect();
             let rt = self.residuals(&self.effects(set, &trial), epochs);
             let st: f64 = rt.iter().map(|x| x * x).sum();
-            let (objective, objective_trial) =
-                (sse + penalty(&theta, &w), st + penalty(&trial, &w));
+            let (objective, objective_trial) = (
+                sse + penalty(&theta, &w) + loss(&theta)[0],
+                st + penalty(&trial, &w) + loss(&trial)[0],
+            );
             if !(st.is_finite() && objective_trial <= objective) {
                 break;
             }
@@ -333,7 +362,10 @@ impl<'a> Problem<'a> {
         let (std, std_white, widening, lags, cov) = if theta.is_empty() {
             (Vec::new(), Vec::new(), 1.0, 0, DMatrix::zeros(0, 0))
         } else {
-            let jtj = jac.transpose() * &jac;
+            let mut jtj = jac.transpose() * &jac;
+            if let Some(k) = tau_at {
+                jtj[(k, k)] = given_back(jtj[(k, k)], loss(&theta)[2]);
+            }
             match jtj.clone().try_inverse() {
                 Some(inv) => {
                     let dof = n.saturating_sub(theta.len()).max(1) as f64;
@@ -455,6 +487,7 @@ impl<'a> Problem<'a> {
             let f = self.fit(set, &train);
             let r = self.residuals(&self.effects(set, &f.theta), test);
             sum += r.iter().map(|x| x * x).sum::<f64>();
+            sum += self.given_back(&self.effects(set, &f.theta), test);
             count += r.len();
         }
         sum / count.max(1) as f64
@@ -604,6 +637,42 @@ fn drift_basis(times: &[f64], knot: f64) -> DMatrix<f64> {
         b[(t, j + 1)] = w;
     }
     b
+}
+
+impl Problem<'_> {
+    /// The time offset's index among the parameters of `set`, where the channel is the DVL's
+    /// velocity and the reference velocity carries noise of its own (see
+    /// [`crate::reference_noise`]).
+    fn time_offset_index(&self, set: &[usize]) -> Option<usize> {
+        if self.reference_noise <= 0.0 {
+            return None;
+        }
+        let c = set
+            .iter()
+            .position(|&c| CANDIDATES[c].name == "dvl.time_offset")?;
+        Some(offset_of(set, set[c]).0)
+    }
+}
+
+impl Problem<'_> {
+    /// What interpolating the reference at the time offset of `e` takes from the squared
+    /// residuals of `epochs`, given back to a score (0 without reference noise).
+    pub fn given_back(&self, e: &Effects, epochs: &[usize]) -> f64 {
+        if self.reference_noise <= 0.0 || e.dvl_time_offset == 0.0 {
+            return 0.0;
+        }
+        let times = epochs.iter().map(|&i| self.channel.times[i]);
+        self.reference
+            .interpolation_loss(times, e.dvl_time_offset, self.reference_noise)[0]
+    }
+}
+
+/// The curvature `a` of the fit's objective in the time offset with half the interpolation
+/// loss's `second` derivative added (negative: the loss is concave in the offset, the noise the
+/// regressor carries makes `a` that much larger); never below a tenth of `a`, so that a reading
+/// dominated by the reference's noise cannot turn the step around.
+fn given_back(a: f64, second: f64) -> f64 {
+    (a + 0.5 * second).max(0.1 * a)
 }
 
 /// Number of time blocks of the held-out score.

@@ -518,7 +518,7 @@ pub fn trial_voyages(
 /// |hidden − nominal| (vector norms) where `report` names it, or what the report says of it
 /// where it does not; correct when every hidden effect is named within 10 % and nothing else is
 /// in `found` but the names in `realised` (what the trial's noise put into the data).
-fn score(
+pub(crate) fn score(
     seed: u64,
     hidden: &[Hidden],
     found: Vec<String>,

@@ -28,9 +28,11 @@ pub mod navigation;
 pub mod noise;
 pub mod outputs;
 pub mod periodic;
+mod reference_noise;
 pub mod report;
 pub mod residuals;
 pub mod smoothed;
+pub mod surface_trials;
 pub mod trials;
 pub mod voyages;
 

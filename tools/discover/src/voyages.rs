@@ -345,14 +345,16 @@ fn held_out(
             noise_lags: v.p.noise_lags,
             noise_model: v.p.noise_model.clone(),
             drift_knot_s: v.p.drift_knot_s,
+            reference_noise: v.p.reference_noise,
         };
-        let r = if v.own.is_empty() {
-            q.residuals(&q.nominal, &q.epochs)
+        let e = if v.own.is_empty() {
+            q.nominal.clone()
         } else {
             let f = q.fit(&v.own, &q.epochs);
-            q.residuals(&q.effects(&v.own, &f.theta), &q.epochs)
+            q.effects(&v.own, &f.theta)
         };
-        sse += r.iter().map(|x| x * x).sum::<f64>();
+        let r = q.residuals(&e, &q.epochs);
+        sse += r.iter().map(|x| x * x).sum::<f64>() + q.given_back(&e, &q.epochs);
         count += r.len();
         thetas.push(theta);
     }

@@ -44,6 +44,7 @@ pub type Result<T> = std::result::Result<T, ImportError>;
 
 mod error;
 pub mod fixes;
+pub mod gps_reference;
 pub mod mag;
 mod mag_csv;
 pub mod mat5;
@@ -54,6 +55,9 @@ mod tlog;
 mod ugps;
 use error::ReadContext;
 pub use error::{ImportError, Source};
+use gps_reference::{
+    GpsSample, interpolate_gps, north_east_of, surface_reference, velocity_from_positions,
+};
 pub use mag_csv::*;
 pub use pd0::*;
 pub use riversurveyor::*;

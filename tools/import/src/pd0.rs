@@ -71,96 +71,6 @@ pub struct Pd0Summary {
     pub fixes_unparsable_lines: u64,
 }
 
-/// A GPS sample on the ensemble clock: time (s), north and east (m from the first fix), or
-/// north and east velocity (m/s).
-pub(crate) type GpsSample = (f64, f64, f64);
-
-/// `(time, latitude deg, longitude deg)` as `(time, north m, east m)` on the plane tangent at
-/// the first.
-pub(crate) fn north_east_of(fixes: impl Iterator<Item = (f64, f64, f64)>) -> Vec<GpsSample> {
-    let mut fixes = fixes.peekable();
-    let Some(&(_, lat0, lon0)) = fixes.peek() else {
-        return Vec::new();
-    };
-    let (lat0, lon0) = (lat0.to_radians(), lon0.to_radians());
-    let (rm, rn) = (
-        auvnav_core::earth::meridian_radius(lat0),
-        auvnav_core::earth::prime_vertical_radius(lat0),
-    );
-    fixes
-        .map(|(t, lat, lon)| {
-            (
-                t,
-                (lat.to_radians() - lat0) * rm,
-                (lon.to_radians() - lon0) * rn * lat0.cos(),
-            )
-        })
-        .collect()
-}
-
-/// A surface vessel's GPS reference record: position (latitude, longitude deg) and height
-/// interpolated between fixes, velocity over ground (north, east; vertical 0), the attitude
-/// its own sensor gives (roll, pitch, heading rad), rates unknown (NaN).
-pub(crate) fn surface_reference(
-    host_time_ns: u64,
-    sequence: u64,
-    (latitude_deg, longitude_deg): (f64, f64),
-    height_m: f64,
-    (vn, ve): (f64, f64),
-    euler_rad: [f64; 3],
-) -> TruthStateV1 {
-    let q = UnitQuaternion::from_euler_angles(euler_rad[0], euler_rad[1], euler_rad[2]);
-    TruthStateV1 {
-        host_time_ns,
-        sequence,
-        latitude_rad: latitude_deg.to_radians(),
-        longitude_rad: longitude_deg.to_radians(),
-        height_m,
-        velocity_ned_m_s: [vn, ve, 0.0],
-        quaternion_body_to_ned: [q.w, q.i, q.j, q.k],
-        euler_rad,
-        angular_rate_rad_s: [f64::NAN; 3],
-        specific_force_m_s2: [f64::NAN; 3],
-    }
-}
-
-/// Linear interpolation of `s` at `t` between samples at most `max_gap` s apart.
-pub(crate) fn interpolate_gps(s: &[GpsSample], t: f64, max_gap: f64) -> Option<(f64, f64)> {
-    let i = s.partition_point(|x| x.0 <= t);
-    let (a, b) = (s.get(i.checked_sub(1)?)?, s.get(i)?);
-    if b.0 - a.0 > max_gap || b.0 <= a.0 {
-        return None;
-    }
-    let f = (t - a.0) / (b.0 - a.0);
-    Some((a.1 + (b.1 - a.1) * f, a.2 + (b.2 - a.2) * f))
-}
-
-/// Velocity from positions: least-squares line through the samples within ±`half` s of `t`
-/// (at least three, spanning at least `half`).
-pub(crate) fn velocity_from_positions(s: &[GpsSample], t: f64, half: f64) -> Option<(f64, f64)> {
-    let lo = s.partition_point(|x| x.0 < t - half);
-    let hi = s.partition_point(|x| x.0 <= t + half);
-    let w = &s[lo..hi];
-    if w.len() < 3 || w[w.len() - 1].0 - w[0].0 < half {
-        return None;
-    }
-    let n = w.len() as f64;
-    let mt = w.iter().map(|x| x.0).sum::<f64>() / n;
-    let stt: f64 = w.iter().map(|x| (x.0 - mt).powi(2)).sum();
-    let slope = |k: usize| {
-        let m = w
-            .iter()
-            .map(|x| if k == 1 { x.1 } else { x.2 })
-            .sum::<f64>()
-            / n;
-        w.iter()
-            .map(|x| (x.0 - mt) * (if k == 1 { x.1 } else { x.2 } - m))
-            .sum::<f64>()
-            / stt
-    };
-    Some((slope(1), slope(2)))
-}
-
 /// The messages of a PD0 file with GPS: the DVL channel (bottom track, as the DVL driver
 /// converts it) and a reference at each ensemble from the GPS (position, velocity over ground)
 /// with the DVL's own heading, pitch and roll as attitude.
@@ -469,24 +379,6 @@ pub fn pd0(a: &Pd0Options) -> Result<Pd0Summary> {
 #[cfg(test)]
 mod pd0_tests {
     use super::*;
-
-    #[test]
-    fn gps_velocity_from_positions_and_interpolation() {
-        // 1 m/s north, 0.5 m/s east, sampled at 5 Hz.
-        let s: Vec<GpsSample> = (0..20)
-            .map(|i| {
-                let t = i as f64 * 0.2;
-                (t, t, 0.5 * t)
-            })
-            .collect();
-        let (vn, ve) = velocity_from_positions(&s, 2.0, 1.0).expect("velocity");
-        assert!((vn - 1.0).abs() < 1e-12 && (ve - 0.5).abs() < 1e-12);
-        assert!(velocity_from_positions(&s, 10.0, 1.0).is_none());
-        let (n, e) = interpolate_gps(&s, 1.1, 1.5).expect("inside");
-        assert!((n - 1.1).abs() < 1e-12 && (e - 0.55).abs() < 1e-12);
-        assert!(interpolate_gps(&s, -0.1, 1.5).is_none());
-        assert!(interpolate_gps(&[(0.0, 0.0, 0.0), (3.0, 1.0, 1.0)], 1.0, 1.5).is_none());
-    }
 
     #[test]
     fn bytes_without_ensembles_give_nothing_and_no_panic() {

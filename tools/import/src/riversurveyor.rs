@@ -27,11 +27,11 @@
 
 #[allow(unused_imports)]
 use super::*;
-use crate::mat5::{MatFile, MatValue};
-use crate::pd0::{
-    GpsSample, GpsVelocity, interpolate_gps, north_east_of, surface_reference,
-    velocity_from_positions,
+use crate::gps_reference::{
+    GpsSample, interpolate_gps, north_east_of, surface_reference, velocity_from_positions,
 };
+use crate::mat5::{MatFile, MatValue};
+use crate::pd0::GpsVelocity;
 
 /// Command-line arguments of `auvnav import riversurveyor`.
 #[derive(Debug, Clone)]

@@ -4,10 +4,13 @@
 //! effects hidden at once; the detection floor (each effect at fractions of its smallest drawn
 //! magnitude); and the wall time of discovery on each measured data set.
 
+use super::discover_measured::{MeasuredTiming, measured_timings};
+use super::discover_misses::Misses;
+use super::discover_surface::SurfaceSummary;
 use crate::calibrate::Progress;
 use crate::discover::hidden_effects::{
-    HIDDEN, Miss, SetTrial, Trial, coloured, draw, draw_of, draw_pair, installation_effects,
-    scaled, trial_set, trial_set_with, trial_voyages,
+    HIDDEN, SetTrial, Trial, coloured, draw, draw_of, draw_pair, installation_effects, scaled,
+    trial_set, trial_set_with, trial_voyages,
 };
 use crate::parallel::{default_threads, map_runs};
 use serde::Serialize;
@@ -83,57 +86,12 @@ struct Summary {
     voyages: Vec<SetTrial>,
     /// Discovery on the measured data sets (import in memory and discovery, per item).
     measured: Vec<MeasuredTiming>,
+    /// Surface runs (compass, DVL, GNSS; no IMU), white and coloured, null and hidden.
+    surface: Option<SurfaceSummary>,
     wall_s: f64,
     threads: usize,
     trials: Vec<Trial>,
     pairs: Vec<SetTrial>,
-}
-
-/// Hidden effects not named, by what the report says of them at the hidden size.
-#[derive(Debug, Default, Serialize)]
-struct Misses {
-    not_excited: usize,
-    below_the_floor: usize,
-    /// Several voyages disagree on it (reported as inconsistent).
-    inconsistent: usize,
-    /// Above the floor, listed as pointed at but not determined.
-    undetermined: usize,
-    /// The report's floor says the hidden size would have been named: unaccounted for.
-    silent: usize,
-}
-
-impl Misses {
-    fn of<'a>(misses: impl Iterator<Item = &'a Miss>) -> Misses {
-        let mut m = Misses::default();
-        for x in misses {
-            match x {
-                Miss::NotExcited => m.not_excited += 1,
-                Miss::BelowTheFloor => m.below_the_floor += 1,
-                Miss::Inconsistent => m.inconsistent += 1,
-                Miss::Undetermined => m.undetermined += 1,
-                Miss::Silent => m.silent += 1,
-            }
-        }
-        m
-    }
-
-    /// Of `trials` hidden trials, those the report neither puts below its floor nor calls not
-    /// excited.
-    fn detectable(&self, trials: usize) -> usize {
-        trials.saturating_sub(self.below_the_floor + self.not_excited)
-    }
-
-    fn describe(&self) -> String {
-        format!(
-            "not named: {} reported not excited, {} below the floor, {} inconsistent across \
-             voyages, {} pointed at but not determined, {} silent",
-            self.not_excited,
-            self.below_the_floor,
-            self.inconsistent,
-            self.undetermined,
-            self.silent
-        )
-    }
 }
 
 #[derive(Debug, Serialize)]
@@ -146,17 +104,6 @@ struct FloorRow {
     trials: usize,
     named: usize,
     correct: usize,
-}
-
-#[derive(Debug, Serialize)]
-pub struct MeasuredTiming {
-    data_set: String,
-    items: usize,
-    median_wall_s: f64,
-    max_wall_s: f64,
-    total_wall_s: f64,
-    /// Effects found per item (names).
-    found: Vec<Vec<String>>,
 }
 
 /// Options of `auvnav bench discover`.
@@ -172,6 +119,8 @@ pub struct DiscoverBench {
     /// The same over three voyages discovered together (half null, half one installation
     /// effect hidden in all three).
     pub coloured_voyages: usize,
+    /// Surface trials (a boat without an IMU): half white, half coloured, each half null and hidden.
+    pub surface: usize,
     pub seed_offset: u64,
     /// `../shared/data` (or another copy): time discovery on the measured data sets in it.
     pub data: Option<std::path::PathBuf>,
@@ -180,61 +129,6 @@ pub struct DiscoverBench {
 
 /// Fractions of the drawn magnitudes the detection floor tries.
 pub const FLOOR_FRACTIONS: [f64; 4] = [1.0, 0.5, 0.25, 0.125];
-
-/// Times discovery on the Snapir segments and the RDI PD0 transect found under `data`.
-fn measured_timings(data: &std::path::Path) -> anyhow::Result<Vec<MeasuredTiming>> {
-    let run = |messages: &[(&str, auvnav_log::LogMessage)]| {
-        crate::discover::command::discover_messages(messages.iter().map(|(_, m)| m))
-            .effects
-            .into_iter()
-            .map(|e| e.name)
-            .collect::<Vec<_>>()
-    };
-    let timing = |name: &str, items: Vec<(f64, Vec<String>)>| {
-        let mut t: Vec<f64> = items.iter().map(|x| x.0).collect();
-        t.sort_by(f64::total_cmp);
-        MeasuredTiming {
-            data_set: name.into(),
-            items: t.len(),
-            median_wall_s: t.get(t.len() / 2).copied().unwrap_or(0.0),
-            max_wall_s: t.last().copied().unwrap_or(0.0),
-            total_wall_s: t.iter().sum(),
-            found: items.into_iter().map(|x| x.1).collect(),
-        }
-    };
-    let mut out = Vec::new();
-    let snapir = data.join("snapir-auv");
-    if snapir.join("imu_01.csv").exists() {
-        let mut items = Vec::new();
-        for segment in 1..=13 {
-            let t0 = std::time::Instant::now();
-            let (messages, _) = crate::import::snapir_messages(
-                &snapir,
-                segment,
-                crate::import::TimeBase::Nominal,
-                true,
-            )?;
-            let found = run(&messages);
-            items.push((t0.elapsed().as_secs_f64(), found));
-        }
-        out.push(timing("snapir-auv (13 segments of 400 s)", items));
-    }
-    let pd0 = data.join("rdi-pd0/raw/winriver02_transect.PD0");
-    if pd0.exists() {
-        let t0 = std::time::Instant::now();
-        let bytes = std::fs::read(&pd0)?;
-        let (messages, _) = crate::import::pd0_messages(&bytes, crate::import::GpsVelocity::Auto)?;
-        let found = run(&messages);
-        out.push(timing(
-            "rdi-pd0 winriver02_transect (463 s)",
-            vec![(t0.elapsed().as_secs_f64(), found)],
-        ));
-    }
-    if out.is_empty() {
-        anyhow::bail!("{}: no measured data set found", data.display());
-    }
-    Ok(out)
-}
 
 /// Runs `hidden` trials (seeds 1..=hidden), `null` trials (seeds 100 001..), `pairs` trials with
 /// two effects (seeds 200 001..), the detection floor (seeds 300 000 + 1000 × effect + 100 ×
@@ -357,6 +251,9 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
             });
         }
     }
+    let surface = (o.surface > 0)
+        .then(|| super::discover_surface::run(o.surface, off, threads, &dir, json))
+        .transpose()?;
     let measured = match &o.data {
         Some(d) => measured_timings(d)?,
         None => Vec::new(),
@@ -445,6 +342,7 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
         voyages_hidden_misses: v_misses,
         voyages: voyage_trials.to_vec(),
         measured,
+        surface,
         wall_s: start.elapsed().as_secs_f64(),
         threads,
         trials,
@@ -585,6 +483,9 @@ pub fn discover(o: &DiscoverBench) -> anyhow::Result<()> {
                 r.effect, r.fraction, r.magnitude[0], r.magnitude[1], r.trials, r.named, r.correct
             );
         }
+    }
+    if let Some(x) = &s.surface {
+        super::discover_surface::print(x);
     }
     for m in &s.measured {
         println!(
