@@ -83,6 +83,29 @@ pub struct DiscoverOptions {
     pub gnss_threshold: Option<f64>,
 }
 
+impl DiscoverOptions {
+    /// `auvnav discover LOG…` with the command line's defaults: against the logs' truth, from
+    /// the simulator's nominal model, nothing written, the navigation replayed.
+    pub fn new(logs: Vec<PathBuf>) -> DiscoverOptions {
+        DiscoverOptions {
+            logs,
+            reference: "truth".into(),
+            effects: Vec::new(),
+            nominal_from: None,
+            fit_fraction: 0.7,
+            json: false,
+            report: None,
+            write_effects: None,
+            write_config: None,
+            no_navigation: false,
+            dvl_beams: false,
+            one_voyage: false,
+            moving_bed: false,
+            gnss_threshold: None,
+        }
+    }
+}
+
 /// Sets the effects a discover JSON report found, or those of an effect set file (`.toml`).
 pub fn nominal_from_report(
     nominal: &mut Effects,

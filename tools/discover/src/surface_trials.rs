@@ -132,20 +132,10 @@ pub fn surface_trial(
     let log = dir.join(format!("surface-{seed}.mcap"));
     write_surface_run(&messages, &log)?;
     let options = DiscoverOptions {
-        logs: vec![log.clone()],
-        reference: "truth".into(),
-        effects: Vec::new(),
-        nominal_from: None,
-        fit_fraction: 0.7,
         json: true,
-        report: None,
-        write_effects: None,
-        write_config: None,
         no_navigation: true,
-        dvl_beams: false,
-        one_voyage: false,
         moving_bed: true,
-        gnss_threshold: None,
+        ..DiscoverOptions::new(vec![log.clone()])
     };
     let report = run(&options);
     let _ = std::fs::remove_file(&log);

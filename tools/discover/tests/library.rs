@@ -40,20 +40,9 @@ fn failures_are_typed_the_callers_apart_from_the_logs() {
     let dir = std::env::temp_dir().join(format!("auvnav-discover-errors-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("scratch folder");
     let options = |logs: Vec<std::path::PathBuf>| DiscoverOptions {
-        logs,
-        reference: "truth".into(),
-        effects: Vec::new(),
-        nominal_from: None,
-        fit_fraction: 0.7,
         json: true,
-        report: None,
-        write_effects: None,
-        write_config: None,
         no_navigation: true,
-        dvl_beams: false,
-        one_voyage: false,
-        moving_bed: false,
-        gnss_threshold: None,
+        ..DiscoverOptions::new(logs)
     };
     let missing = dir.join("missing.mcap");
 
