@@ -303,14 +303,7 @@ impl<'a> Problem<'a> {
         // back ([`crate::reference_noise`]): its value, slope and curvature in the offset.
         let tau_at = self.time_offset_index(set);
         let loss = |theta: &[f64]| -> [f64; 3] {
-            match tau_at {
-                Some(k) => self.reference.interpolation_loss(
-                    epochs.iter().map(|&i| self.channel.times[i]),
-                    theta[k],
-                    self.reference_noise,
-                ),
-                None => [0.0; 3],
-            }
+            tau_at.map_or([0.0; 3], |k| self.interpolation_loss(epochs, theta[k]))
         };
         let mut jac = DMatrix::zeros(n, theta.len());
         for _ in 0..8 {
@@ -328,7 +321,7 @@ impl<'a> Problem<'a> {
             }
             if let Some(k) = tau_at {
                 let l = loss(&theta);
-                a[(k, k)] = given_back(a[(k, k)], l[2]);
+                a[(k, k)] = curvature_given_back(a[(k, k)], l[2]);
                 jtr[k] += 0.5 * l[1];
             }
             let Some(step) = a.cholesky().map(|c| c.solve(&jtr)) else {
@@ -364,7 +357,7 @@ impl<'a> Problem<'a> {
         } else {
             let mut jtj = jac.transpose() * &jac;
             if let Some(k) = tau_at {
-                jtj[(k, k)] = given_back(jtj[(k, k)], loss(&theta)[2]);
+                jtj[(k, k)] = curvature_given_back(jtj[(k, k)], loss(&theta)[2]);
             }
             match jtj.clone().try_inverse() {
                 Some(inv) => {
@@ -485,9 +478,9 @@ impl<'a> Problem<'a> {
                 .flat_map(|(_, b)| b.iter().copied())
                 .collect();
             let f = self.fit(set, &train);
-            let r = self.residuals(&self.effects(set, &f.theta), test);
-            sum += r.iter().map(|x| x * x).sum::<f64>();
-            sum += self.given_back(&self.effects(set, &f.theta), test);
+            let e = self.effects(set, &f.theta);
+            let r = self.residuals(&e, test);
+            sum += r.iter().map(|x| x * x).sum::<f64>() + self.given_back(&e, test);
             count += r.len();
         }
         sum / count.max(1) as f64
@@ -652,18 +645,21 @@ impl Problem<'_> {
             .position(|&c| CANDIDATES[c].name == "dvl.time_offset")?;
         Some(offset_of(set, set[c]).0)
     }
-}
 
-impl Problem<'_> {
     /// What interpolating the reference at the time offset of `e` takes from the squared
     /// residuals of `epochs`, given back to a score (0 without reference noise).
     pub fn given_back(&self, e: &Effects, epochs: &[usize]) -> f64 {
         if self.reference_noise <= 0.0 || e.dvl_time_offset == 0.0 {
             return 0.0;
         }
+        self.interpolation_loss(epochs, e.dvl_time_offset)[0]
+    }
+
+    /// [`Reference::interpolation_loss`] over the readings `epochs` at offset `tau`.
+    fn interpolation_loss(&self, epochs: &[usize], tau: f64) -> [f64; 3] {
         let times = epochs.iter().map(|&i| self.channel.times[i]);
         self.reference
-            .interpolation_loss(times, e.dvl_time_offset, self.reference_noise)[0]
+            .interpolation_loss(times, tau, self.reference_noise)
     }
 }
 
@@ -671,7 +667,7 @@ impl Problem<'_> {
 /// loss's `second` derivative added (negative: the loss is concave in the offset, the noise the
 /// regressor carries makes `a` that much larger); never below a tenth of `a`, so that a reading
 /// dominated by the reference's noise cannot turn the step around.
-fn given_back(a: f64, second: f64) -> f64 {
+fn curvature_given_back(a: f64, second: f64) -> f64 {
     (a + 0.5 * second).max(0.1 * a)
 }
 
