@@ -42,6 +42,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 mod framing;
+mod mcap_writer;
+use mcap_writer::McapWriter;
 pub mod table;
 use framing::{Frame, Framer};
 
@@ -70,7 +72,7 @@ pub const CHUNK_SIZE: u64 = 1 << 20;
 /// as a whole (median pair ratio 1.189 over 5 alternating pairs, `auvnav bench guard --base`) for
 /// a 7 % larger output (65.0 against 60.8 MB for 15 minutes); the recorder on board spends less
 /// of the vehicle's processor for the same few percent of disk.
-pub const COMPRESSION_LEVEL: u32 = 1;
+pub const COMPRESSION_LEVEL: i32 = 1;
 
 #[derive(Debug, thiserror::Error)]
 pub enum LogError {
@@ -171,7 +173,7 @@ impl LogHeader {
 
 /// Writes an auvnav log. Channels are declared on first use (or explicitly, with notes).
 pub struct LogWriter<W: Write + Seek> {
-    writer: mcap::Writer<W>,
+    writer: McapWriter<W>,
     schemas: HashMap<&'static str, u16>,
     channels: HashMap<String, (u16, &'static str)>,
     sequences: HashMap<u16, u32>,
@@ -193,14 +195,14 @@ impl LogWriter<BufWriter<File>> {
 
 impl<W: Write + Seek> LogWriter<W> {
     pub fn new(w: W, header: &LogHeader) -> Result<Self, LogError> {
-        let mut writer = mcap::WriteOptions::new()
-            .profile(PROFILE)
-            .library(format!("auvnav {}", env!("CARGO_PKG_VERSION")))
-            .compression(Some(mcap::Compression::Zstd))
-            .chunk_size(Some(CHUNK_SIZE))
-            .compression_level(COMPRESSION_LEVEL)
-            .create(w)?;
-        writer.write_metadata(&header.to_metadata())?;
+        let library = format!("auvnav {}", env!("CARGO_PKG_VERSION"));
+        let mut writer =
+            McapWriter::new(w, PROFILE, &library, CHUNK_SIZE as usize, COMPRESSION_LEVEL)
+                .map_err(mcap::McapError::from)?;
+        let metadata = header.to_metadata();
+        writer
+            .write_metadata(&metadata.name, &metadata.metadata)
+            .map_err(mcap::McapError::from)?;
         Ok(LogWriter {
             writer,
             schemas: HashMap::new(),
@@ -234,16 +236,14 @@ impl<W: Write + Seek> LogWriter<W> {
                     T::SCHEMA_NAME,
                     "ros2msg",
                     T::ros2msg_definition().as_bytes(),
-                )?;
+                );
                 self.schemas.insert(T::SCHEMA_NAME, id);
                 id
             }
         };
         let mut metadata = notes.clone();
         metadata.insert("type_name".into(), T::TYPE_NAME.into());
-        let id = self
-            .writer
-            .add_channel(schema_id, topic, "cdr", &metadata)?;
+        let id = self.writer.add_channel(schema_id, topic, "cdr", &metadata);
         self.channels
             .insert(topic.to_string(), (id, T::SCHEMA_NAME));
         Ok(id)
@@ -261,15 +261,9 @@ impl<W: Write + Seek> LogWriter<W> {
         self.buf.extend_from_slice(&CDR_HEADER);
         self.buf.extend_from_slice(bytemuck::bytes_of(msg));
         let t = msg.host_time().0;
-        self.writer.write_to_known_channel(
-            &MessageHeader {
-                channel_id: id,
-                sequence: *seq,
-                log_time: t,
-                publish_time: t,
-            },
-            &self.buf,
-        )?;
+        self.writer
+            .write_message(id, *seq, t, t, &self.buf)
+            .map_err(mcap::McapError::from)?;
         self.messages += 1;
         Ok(())
     }
@@ -296,11 +290,9 @@ impl<W: Write + Seek> LogWriter<W> {
                 let schema_id = match self.schemas.get(schema_name) {
                     Some(&id) => id,
                     None => {
-                        let id = self.writer.add_schema(
-                            schema_name,
-                            "ros2msg",
-                            definition.as_bytes(),
-                        )?;
+                        let id =
+                            self.writer
+                                .add_schema(schema_name, "ros2msg", definition.as_bytes());
                         self.schemas.insert(schema_name, id);
                         id
                     }
@@ -308,22 +300,16 @@ impl<W: Write + Seek> LogWriter<W> {
                 let metadata = BTreeMap::from([("type_name".to_string(), type_name.to_string())]);
                 let id = self
                     .writer
-                    .add_channel(schema_id, &m.topic, "cdr", &metadata)?;
+                    .add_channel(schema_id, &m.topic, "cdr", &metadata);
                 self.channels.insert(m.topic.to_string(), (id, schema_name));
                 id
             }
         };
         let seq = self.sequences.entry(id).or_insert(0);
         *seq = seq.wrapping_add(1);
-        self.writer.write_to_known_channel(
-            &MessageHeader {
-                channel_id: id,
-                sequence: *seq,
-                log_time: m.log_time_ns,
-                publish_time: m.log_time_ns,
-            },
-            &m.data,
-        )?;
+        self.writer
+            .write_message(id, *seq, m.log_time_ns, m.log_time_ns, &m.data)
+            .map_err(mcap::McapError::from)?;
         self.messages += 1;
         Ok(())
     }
@@ -335,14 +321,13 @@ impl<W: Write + Seek> LogWriter<W> {
 
     /// Ends the current chunk and flushes it to the underlying writer.
     pub fn flush(&mut self) -> Result<(), LogError> {
-        self.writer.flush()?;
+        self.writer.flush().map_err(mcap::McapError::from)?;
         Ok(())
     }
 
     /// Writes the indexes and the summary and returns the underlying writer.
-    pub fn finish(mut self) -> Result<W, LogError> {
-        self.writer.finish()?;
-        Ok(self.writer.into_inner())
+    pub fn finish(self) -> Result<W, LogError> {
+        Ok(self.writer.into_inner().map_err(mcap::McapError::from)?)
     }
 }
 

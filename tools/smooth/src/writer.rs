@@ -1,13 +1,15 @@
-//! The second pass's outputs written on a thread of their own: the smoothed track's MCAP log
+//! The second pass's outputs written on threads of their own: the smoothed track's MCAP log
 //! (each solution as the filter had it and smoothed, the diagnostics, truth and late-aid records)
 //! and its CSV rows, in the order the pass produces them. The pass (the replay and the smoothed
-//! track) hands them over in batches; encoding, formatting and writing them, most of the second
-//! pass's work when every 200 Hz solution is written, then runs beside it on another core.
+//! track) hands them over in batches. A batch goes to the log's thread, then to the CSV's, then
+//! back to the pass to be filled again: encoding, compressing, formatting and writing, most of the
+//! second pass's work when every 200 Hz solution is written, run beside the pass, and the machine
+//! shares the three threads among its cores.
 
 use auvnav_log::LogWriter;
 use auvnav_shm_schema::{AidDiagnosticsV1, LateAidV1, NavSolutionV1, TruthStateV1, topic};
 use std::io::Write;
-use std::sync::mpsc::{SyncSender, sync_channel};
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 
 /// Items per batch: few enough to keep the writer busy early, many enough that the handing over
 /// costs nothing beside them.
@@ -32,6 +34,9 @@ pub(crate) enum Item {
 /// The pass's side: collects items and hands them over a batch at a time.
 pub(crate) struct Batches {
     tx: SyncSender<Vec<Item>>,
+    /// Batches the writer has emptied, to be filled again: a new one each time would be mapped
+    /// and unmapped by the allocator (600 kB), page faults and all.
+    emptied: Receiver<Vec<Item>>,
     batch: Vec<Item>,
 }
 
@@ -46,23 +51,26 @@ impl Batches {
     }
 
     fn hand_over(&mut self) -> anyhow::Result<()> {
-        let full = std::mem::replace(&mut self.batch, Vec::with_capacity(BATCH));
+        let next = self
+            .emptied
+            .try_recv()
+            .unwrap_or_else(|_| Vec::with_capacity(BATCH));
+        let full = std::mem::replace(&mut self.batch, next);
         self.tx
             .send(full)
             .map_err(|_| anyhow::anyhow!("the output writer stopped"))
     }
 }
 
-fn write_item(
+/// Writes one item's records into the log.
+fn log_item(
     log: &mut LogWriter<std::io::BufWriter<std::fs::File>>,
-    csv: &mut dyn Write,
     item: &Item,
 ) -> anyhow::Result<()> {
     match item {
         Item::Solution { filtered, smoothed } => {
             log.write(topic::NAV_SOLUTION, filtered)?;
             log.write(crate::NAV_SOLUTION_SMOOTHED, smoothed)?;
-            auvnav_core::csv::write_nav_row(csv, smoothed)?;
         }
         Item::Diagnostics(d) => log.write(topic::NAV_AID_DIAGNOSTICS, d)?,
         Item::Truth(t) => log.write(topic::TRUTH, t)?,
@@ -71,26 +79,46 @@ fn write_item(
     Ok(())
 }
 
-/// Runs `pass` with a [`Batches`] whose items a writer thread writes into `log` and `csv`, in
-/// order; returns the pass's result once everything it handed over is written. A writer error
-/// stops the pass at its next hand-over and is the error returned.
+/// Runs `pass` with a [`Batches`] whose items are written into `log` and `csv`, in order, by
+/// two threads; returns the pass's result once everything it handed over is written. A writer's
+/// error stops the pass at its next hand-over and is the error returned.
 pub(crate) fn write_beside<R>(
     log: &mut LogWriter<std::io::BufWriter<std::fs::File>>,
     csv: &mut (dyn Write + Send),
     pass: impl FnOnce(&mut Batches) -> anyhow::Result<R>,
 ) -> anyhow::Result<R> {
     std::thread::scope(|scope| {
-        let (tx, rx) = sync_channel::<Vec<Item>>(BATCHES_IN_FLIGHT);
-        let writer = scope.spawn(move || -> anyhow::Result<()> {
-            for batch in rx {
+        let (tx, to_log) = sync_channel::<Vec<Item>>(BATCHES_IN_FLIGHT);
+        let (log_done, to_csv) = sync_channel::<Vec<Item>>(BATCHES_IN_FLIGHT);
+        let (give_back, emptied) = sync_channel::<Vec<Item>>(2 * BATCHES_IN_FLIGHT + 2);
+        let log_writer = scope.spawn(move || -> anyhow::Result<()> {
+            for batch in to_log {
                 for item in &batch {
-                    write_item(log, csv, item)?;
+                    log_item(log, item)?;
                 }
+                if log_done.send(batch).is_err() {
+                    // The CSV's writer stopped: its error is the one to report.
+                    break;
+                }
+            }
+            Ok(())
+        });
+        let csv_writer = scope.spawn(move || -> anyhow::Result<()> {
+            for mut batch in to_csv {
+                for item in &batch {
+                    if let Item::Solution { smoothed, .. } = item {
+                        auvnav_core::csv::write_nav_row(csv, smoothed)?;
+                    }
+                }
+                batch.clear();
+                // The pass may have ended; a batch nobody takes is dropped.
+                let _ = give_back.try_send(batch);
             }
             Ok(())
         });
         let mut batches = Batches {
             tx,
+            emptied,
             batch: Vec::with_capacity(BATCH),
         };
         let result = pass(&mut batches).and_then(|r| {
@@ -98,10 +126,14 @@ pub(crate) fn write_beside<R>(
             Ok(r)
         });
         drop(batches);
-        let written = writer
+        let logged = log_writer
             .join()
-            .map_err(|_| anyhow::anyhow!("the output writer panicked"))?;
-        written?;
+            .map_err(|_| anyhow::anyhow!("the log writer panicked"))?;
+        let rows = csv_writer
+            .join()
+            .map_err(|_| anyhow::anyhow!("the CSV writer panicked"))?;
+        logged?;
+        rows?;
         result
     })
 }
