@@ -77,7 +77,11 @@ fn write_f64_debug(out: &mut [u8], v: f64) -> usize {
     let magnitude = v.abs();
     if (1e-4..1e16).contains(&magnitude) && shortest[shortest.len() - 1] != b'0' {
         out[..shortest.len()].copy_from_slice(shortest);
-        if let Some(dot) = shortest.iter().position(|&c| c == b'.') {
+        // Here the last digit is 10^q with q ≥ -20 (at most 17 digits from 1e-4), and a tie needs
+        // s = q (see `tie_rounded_down`): for nearly every value s is far below.
+        if lowest_bit_exponent(v).is_some_and(|s| s >= -21)
+            && let Some(dot) = shortest.iter().position(|&c| c == b'.')
+        {
             let q = dot as i32 + 1 - shortest.len() as i32;
             if tie_rounded_down(v, &shortest[shortest.len() - 1..], q) {
                 out[shortest.len() - 1] += 1;
@@ -185,6 +189,22 @@ fn write_f64_debug(out: &mut [u8], v: f64) -> usize {
 /// means 2|v| / 10^q is an odd integer N: s = q, and 5^q divides m where q > 0. N is then 2D ± 1
 /// and, since 5 ≡ 1 (mod 4), N ≡ m (mod 4), which says which.
 fn tie_rounded_down(v: f64, digits: &[u8], q: i32) -> bool {
+    if lowest_bit_exponent(v) != Some(q) {
+        return false;
+    }
+    let bits = v.to_bits();
+    let hidden = u64::from((bits >> 52) & 0x7ff != 0) << 52;
+    let mantissa = (bits & ((1 << 52) - 1)) | hidden;
+    let odd = mantissa >> mantissa.trailing_zeros();
+    if q > 0 && (q > 22 || !odd.is_multiple_of(5u64.pow(q as u32))) {
+        return false;
+    }
+    let last_odd = u64::from(digits[digits.len() - 1] - b'0') % 2;
+    odd % 4 == (2 * last_odd + 1) % 4
+}
+
+/// s with 2|v| = m·2^s, m odd (`None` for zero).
+fn lowest_bit_exponent(v: f64) -> Option<i32> {
     let bits = v.to_bits();
     let biased = ((bits >> 52) & 0x7ff) as i32;
     let fraction = bits & ((1 << 52) - 1);
@@ -193,20 +213,7 @@ fn tie_rounded_down(v: f64, digits: &[u8], q: i32) -> bool {
     } else {
         (fraction | (1 << 52), biased - 1075)
     };
-    if mantissa == 0 {
-        return false;
-    }
-    let zeros = mantissa.trailing_zeros();
-    let odd = mantissa >> zeros;
-    let s = e + zeros as i32 + 1;
-    if s != q {
-        return false;
-    }
-    if q > 0 && (q > 22 || odd % 5u64.pow(q as u32) != 0) {
-        return false;
-    }
-    let last_odd = u64::from(digits[digits.len() - 1] - b'0') % 2;
-    odd % 4 == (2 * last_odd + 1) % 4
+    (mantissa != 0).then(|| e + mantissa.trailing_zeros() as i32 + 1)
 }
 
 fn parse_exponent(text: &[u8]) -> i32 {

@@ -67,12 +67,15 @@ pub const RECORD_LENGTH_LIMIT: usize = 256 << 20;
 /// Uncompressed chunk size the writer aims for (bytes). Bounds the loss when a writer is killed.
 pub const CHUNK_SIZE: u64 = 1 << 20;
 
-/// The zstd level of the chunks. Chosen by measurement (2026-11-28, release, one core): against
-/// zstd's default (3), level 1 makes `auvnav smooth` writing every solution of an hour 16 % faster
-/// as a whole (median pair ratio 1.189 over 5 alternating pairs, `auvnav bench guard --base`) for
-/// a 7 % larger output (65.0 against 60.8 MB for 15 minutes); the recorder on board spends less
-/// of the vehicle's processor for the same few percent of disk.
-pub const COMPRESSION_LEVEL: i32 = 1;
+/// The zstd level of the chunks, chosen by measurement (2026-11-30, release, this 2-vCPU VM).
+/// Each whole chunk is compressed in one call (the log's own MCAP writer), which allows zstd's fast negative
+/// levels. On the chunks of a smoothing run's solutions (one core): level 1 720 MB/s for 0.557 of
+/// the size, -1 1 112 MB/s for 0.575, -3 1 546 MB/s for 0.604. On an hour of `auvnav smooth`
+/// writing every solution, -1 took 1.80–1.86 s and -3 1.77–1.80 s (two rounds of three runs
+/// each, alternating); on simulated logs -1 is 2.6 % larger than level 1 and -3 13.6 %. -1 buys
+/// most of the speed for little disk; the recorder on board spends less of the vehicle's
+/// processor with it too.
+pub const COMPRESSION_LEVEL: i32 = -1;
 
 #[derive(Debug, thiserror::Error)]
 pub enum LogError {
@@ -175,8 +178,11 @@ impl LogHeader {
 pub struct LogWriter<W: Write + Seek> {
     writer: McapWriter<W>,
     schemas: HashMap<&'static str, u16>,
-    channels: HashMap<String, (u16, &'static str)>,
-    sequences: HashMap<u16, u32>,
+    /// Topic, channel id and schema name of each channel declared, in order: a handful, looked
+    /// up by a scan (hashing the topic of every message cost more).
+    channels: Vec<(String, u16, &'static str)>,
+    /// The last sequence number written, by channel id.
+    sequences: Vec<u32>,
     buf: Vec<u8>,
     messages: u64,
 }
@@ -206,8 +212,8 @@ impl<W: Write + Seek> LogWriter<W> {
         Ok(LogWriter {
             writer,
             schemas: HashMap::new(),
-            channels: HashMap::new(),
-            sequences: HashMap::new(),
+            channels: Vec::new(),
+            sequences: Vec::new(),
             buf: Vec::with_capacity(512),
             messages: 0,
         })
@@ -220,7 +226,7 @@ impl<W: Write + Seek> LogWriter<W> {
         topic: &str,
         notes: &BTreeMap<String, String>,
     ) -> Result<u16, LogError> {
-        if let Some(&(id, schema)) = self.channels.get(topic) {
+        if let Some((id, schema)) = self.channel(topic) {
             if schema != T::SCHEMA_NAME {
                 return Err(LogError::BadMessage {
                     topic: topic.into(),
@@ -244,25 +250,23 @@ impl<W: Write + Seek> LogWriter<W> {
         let mut metadata = notes.clone();
         metadata.insert("type_name".into(), T::TYPE_NAME.into());
         let id = self.writer.add_channel(schema_id, topic, "cdr", &metadata);
-        self.channels
-            .insert(topic.to_string(), (id, T::SCHEMA_NAME));
+        self.channels.push((topic.to_string(), id, T::SCHEMA_NAME));
         Ok(id)
     }
 
     /// Appends one message on `topic`, stamped with its host time.
     pub fn write<T: Message>(&mut self, topic: &str, msg: &T) -> Result<(), LogError> {
-        let id = match self.channels.get(topic) {
-            Some(&(id, schema)) if schema == T::SCHEMA_NAME => id,
+        let id = match self.channel(topic) {
+            Some((id, schema)) if schema == T::SCHEMA_NAME => id,
             _ => self.declare::<T>(topic, &BTreeMap::new())?,
         };
-        let seq = self.sequences.entry(id).or_insert(0);
-        *seq = seq.wrapping_add(1);
+        let seq = self.next_sequence(id);
         self.buf.clear();
         self.buf.extend_from_slice(&CDR_HEADER);
         self.buf.extend_from_slice(bytemuck::bytes_of(msg));
         let t = msg.host_time().0;
         self.writer
-            .write_message(id, *seq, t, t, &self.buf)
+            .write_message(id, seq, t, t, &self.buf)
             .map_err(mcap::McapError::from)?;
         self.messages += 1;
         Ok(())
@@ -271,9 +275,9 @@ impl<W: Write + Seek> LogWriter<W> {
     /// Copies a message read from another log (its encoded bytes and log time) onto the same
     /// topic; the schema must be one of ours.
     pub fn write_raw(&mut self, m: &RawLogMessage) -> Result<(), LogError> {
-        let id = match self.channels.get(&*m.topic) {
-            Some(&(id, schema)) if schema == &*m.schema_name => id,
-            Some(&(_, schema)) => {
+        let id = match self.channel(&m.topic) {
+            Some((id, schema)) if schema == &*m.schema_name => id,
+            Some((_, schema)) => {
                 return Err(LogError::BadMessage {
                     topic: m.topic.to_string(),
                     reason: format!("declared as {schema}, copied as {}", m.schema_name),
@@ -301,17 +305,32 @@ impl<W: Write + Seek> LogWriter<W> {
                 let id = self
                     .writer
                     .add_channel(schema_id, &m.topic, "cdr", &metadata);
-                self.channels.insert(m.topic.to_string(), (id, schema_name));
+                self.channels.push((m.topic.to_string(), id, schema_name));
                 id
             }
         };
-        let seq = self.sequences.entry(id).or_insert(0);
-        *seq = seq.wrapping_add(1);
+        let seq = self.next_sequence(id);
         self.writer
-            .write_message(id, *seq, m.log_time_ns, m.log_time_ns, &m.data)
+            .write_message(id, seq, m.log_time_ns, m.log_time_ns, &m.data)
             .map_err(mcap::McapError::from)?;
         self.messages += 1;
         Ok(())
+    }
+
+    fn channel(&self, topic: &str) -> Option<(u16, &'static str)> {
+        self.channels
+            .iter()
+            .find(|(t, _, _)| t == topic)
+            .map(|&(_, id, schema)| (id, schema))
+    }
+
+    fn next_sequence(&mut self, id: u16) -> u32 {
+        let slot = usize::from(id);
+        if self.sequences.len() <= slot {
+            self.sequences.resize(slot + 1, 0);
+        }
+        self.sequences[slot] = self.sequences[slot].wrapping_add(1);
+        self.sequences[slot]
     }
 
     /// Messages written so far.

@@ -14,6 +14,7 @@
 //! epoch's corrections to the one before the second's: the solutions in between were
 //! propagated from the first and are those of the second just before its updates.
 
+mod cholesky;
 pub mod log;
 pub mod rts;
 

@@ -247,6 +247,24 @@ impl Backward {
     }
 }
 
+/// `(L Lᵀ)⁻¹ X` for a Cholesky factor `l`: nalgebra's `Cholesky::solve`, bit for bit, with all
+/// the columns at once ([`super::cholesky`]).
+fn solve_rows_of(l: &DMatrix<f64>, x: &DMatrix<f64>) -> DMatrix<f64> {
+    use super::cholesky::{MAX, solve_rows};
+    let (n, m) = x.shape();
+    let mut rows = [[0.0; MAX]; MAX];
+    if n > MAX || m > MAX {
+        return nalgebra::Cholesky::pack_dirty(l.clone()).solve(x);
+    }
+    for (i, row) in rows[..n].iter_mut().enumerate() {
+        for (c, v) in row[..m].iter_mut().enumerate() {
+            *v = x[(i, c)];
+        }
+    }
+    solve_rows(l, &mut rows[..n], m).expect("sizes checked above");
+    DMatrix::from_fn(n, m, |i, c| rows[i][c])
+}
+
 fn sub(m: &DMatrix<f64>, rows: &[usize], cols: &[usize]) -> DMatrix<f64> {
     DMatrix::from_fn(rows.len(), cols.len(), |i, j| m[(rows[i], cols[j])])
 }
@@ -291,7 +309,7 @@ pub fn rts_step(
     let scaled = DMatrix::from_fn(a.len(), a.len(), |i, j| pm_aa[(i, j)] * d[i] * d[j]);
     let x_scaled = DMatrix::from_fn(x_t.nrows(), x_t.ncols(), |i, j| x_t[(i, j)] * d[i]);
     let solved = match scaled.clone().cholesky() {
-        Some(ch) => ch.solve(&x_scaled),
+        Some(ch) => solve_rows_of(ch.l_dirty(), &x_scaled),
         None => {
             // Positive semi-definite only: the pseudo-inverse.
             let eig = scaled.symmetric_eigen();
