@@ -8,7 +8,7 @@
 //! on it as on a measured run, the GNSS positions deciding the installation.
 
 use super::command::{DiscoverOptions, run};
-use super::hidden_effects::{Hidden, SetTrial, score};
+use super::hidden_effects::{Hidden, SetTrial, coloured as coloured_noise, score};
 use anyhow::Context;
 use auvnav_log::{LogHeader, LogMessage, write_log_atomically};
 use auvnav_shm_schema::{AttitudeV1, GnssFixV1, topic};
@@ -114,11 +114,12 @@ pub fn surface_trial(
         ("gnss.noise".into(), vec![GNSS_NOISE_M]),
     ];
     if coloured {
-        let mut rng = Rng::new(seed, "discover.surface.coloured");
-        let instability = 0.005 + 0.01 * rng.uniform();
-        let tau = 30.0 + 90.0 * rng.uniform();
-        settings.push(("dvl.velocity_error_instability".into(), vec![instability]));
-        settings.push(("dvl.velocity_error_correlation_time".into(), vec![tau]));
+        // The underwater trials' coloured noise, its DVL part (a boat without an IMU).
+        settings.extend(
+            coloured_noise(seed)
+                .into_iter()
+                .filter(|(name, _)| name.starts_with("dvl.")),
+        );
     }
     settings.extend(hidden.iter().map(|h| (h.name.clone(), h.value.clone())));
     auvnav_sim::effects::set::apply(&mut effects, &settings)?;
