@@ -94,6 +94,32 @@ struct Channel {
     metadata: BTreeMap<String, String>,
 }
 
+impl Schema {
+    /// Its record, as written where it is declared and again in the summary.
+    fn write(&self, buf: &mut Vec<u8>) {
+        record(buf, op::SCHEMA, |b| {
+            b.extend_from_slice(&self.id.to_le_bytes());
+            put_str(b, &self.name);
+            put_str(b, &self.encoding);
+            b.extend_from_slice(&(self.data.len() as u32).to_le_bytes());
+            b.extend_from_slice(&self.data);
+        });
+    }
+}
+
+impl Channel {
+    /// Its record, as written where it is declared and again in the summary.
+    fn write(&self, buf: &mut Vec<u8>) {
+        record(buf, op::CHANNEL, |b| {
+            b.extend_from_slice(&self.id.to_le_bytes());
+            b.extend_from_slice(&self.schema_id.to_le_bytes());
+            put_str(b, &self.topic);
+            put_str(b, &self.message_encoding);
+            put_string_map(b, &self.metadata);
+        });
+    }
+}
+
 /// A chunked, zstd-compressed, indexed MCAP written to `W`.
 pub(crate) struct McapWriter<W: Write> {
     /// `None` once handed back by [`Self::into_inner`].
@@ -171,20 +197,15 @@ impl<W: Write> McapWriter<W> {
 
     /// Declares a schema (written into the open chunk, and into the summary); returns its id.
     pub(crate) fn add_schema(&mut self, name: &str, encoding: &str, data: &[u8]) -> u16 {
-        let id = self.schemas.len() as u16 + 1;
-        record(&mut self.chunk, op::SCHEMA, |b| {
-            b.extend_from_slice(&id.to_le_bytes());
-            put_str(b, name);
-            put_str(b, encoding);
-            b.extend_from_slice(&(data.len() as u32).to_le_bytes());
-            b.extend_from_slice(data);
-        });
-        self.schemas.push(Schema {
-            id,
+        let schema = Schema {
+            id: self.schemas.len() as u16 + 1,
             name: name.into(),
             encoding: encoding.into(),
             data: data.into(),
-        });
+        };
+        schema.write(&mut self.chunk);
+        let id = schema.id;
+        self.schemas.push(schema);
         id
     }
 
@@ -196,21 +217,16 @@ impl<W: Write> McapWriter<W> {
         message_encoding: &str,
         metadata: &BTreeMap<String, String>,
     ) -> u16 {
-        let id = self.channels.len() as u16 + 1;
-        record(&mut self.chunk, op::CHANNEL, |b| {
-            b.extend_from_slice(&id.to_le_bytes());
-            b.extend_from_slice(&schema_id.to_le_bytes());
-            put_str(b, topic);
-            put_str(b, message_encoding);
-            put_string_map(b, metadata);
-        });
-        self.channels.push(Channel {
-            id,
+        let channel = Channel {
+            id: self.channels.len() as u16 + 1,
             schema_id,
             topic: topic.into(),
             message_encoding: message_encoding.into(),
             metadata: metadata.clone(),
-        });
+        };
+        channel.write(&mut self.chunk);
+        let id = channel.id;
+        self.channels.push(channel);
         id
     }
 
@@ -376,26 +392,10 @@ impl<W: Write> McapWriter<W> {
             }
         };
         group(&mut s, op::SCHEMA, &|s| {
-            for x in &self.schemas {
-                record(s, op::SCHEMA, |b| {
-                    b.extend_from_slice(&x.id.to_le_bytes());
-                    put_str(b, &x.name);
-                    put_str(b, &x.encoding);
-                    b.extend_from_slice(&(x.data.len() as u32).to_le_bytes());
-                    b.extend_from_slice(&x.data);
-                });
-            }
+            self.schemas.iter().for_each(|x| x.write(s))
         });
         group(&mut s, op::CHANNEL, &|s| {
-            for c in &self.channels {
-                record(s, op::CHANNEL, |b| {
-                    b.extend_from_slice(&c.id.to_le_bytes());
-                    b.extend_from_slice(&c.schema_id.to_le_bytes());
-                    put_str(b, &c.topic);
-                    put_str(b, &c.message_encoding);
-                    put_string_map(b, &c.metadata);
-                });
-            }
+            self.channels.iter().for_each(|c| c.write(s))
         });
         group(&mut s, op::STATISTICS, &|s| self.statistics(s));
         group(&mut s, op::CHUNK_INDEX, &|s| {
