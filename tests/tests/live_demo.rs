@@ -263,7 +263,7 @@ fn the_readme_demo_aligns_in_motion_then_homes_on_usbl_and_reproduces() {
 #[test]
 fn every_pd0_coordinate_system_navigates_alike_through_the_daemon() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    const SECONDS: f64 = 180.0;
+    const SECONDS: f64 = 90.0;
     let dir = TempDir::new("livepd0");
     let runs: Vec<(&str, serde_json::Value)> = ["instrument", "beam", "earth"]
         .into_iter()
