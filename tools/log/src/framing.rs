@@ -1,13 +1,13 @@
 //! Top-level record framing of an MCAP file, for a reader that survives corruption.
 //!
-//! The MCAP parser ([`mcap::sans_io::linear_reader::LinearReader`]) stops at the first record it
-//! cannot use, so one flipped byte in the middle of a log would cost everything after it. The
-//! framer reads the file record by record (opcode, length, body) and hands whole records to the
-//! parser; when the parser refuses one (a chunk whose CRC fails, or that does not decompress), the
-//! log reader drops that record and goes on with the next. When the framing itself is lost (an
-//! opcode that does not exist, a length beyond the record limit), the framer scans forward for the
-//! next chunk record: opcode 0x06 followed by a length, a chunk header whose compression is one
-//! MCAP names and whose records length agrees with the record's length.
+//! A parser that stops at the first record it cannot use would lose everything after one
+//! flipped byte in the middle of a log. The framer reads the file record by record (opcode,
+//! length, body) and hands whole records to the log reader; when the reader refuses one (a chunk
+//! whose CRC fails, or that does not decompress), it drops that record and goes on with the next.
+//! When the framing itself is lost (an opcode that does not exist, a length beyond the record
+//! limit), the framer scans forward for the next chunk record: opcode 0x06 followed by a length,
+//! a chunk header whose compression is one MCAP names and whose records length agrees with the
+//! record's length.
 
 use std::io::Read;
 
@@ -154,12 +154,6 @@ impl<R: Read> Framer<R> {
             offset: self.offset,
             len: total,
         })
-    }
-
-    /// Drops the record at the front (`len` bytes, refused by the parser) and, when what follows
-    /// does not frame as a record, scans on to the next chunk.
-    pub fn skip_record(&mut self, len: usize) {
-        self.consume(len);
     }
 
     /// Scans from `from` bytes past the front for the next chunk record; consumes what it passes

@@ -34,17 +34,18 @@ use auvnav_shm_schema::{
     SessionEventV1, SoundVelocityV1, TruthStateV1, UsblFixV1,
 };
 use mcap::records::{MessageHeader, Metadata, Record, op};
-use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::io::{BufWriter, Read, Seek, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+mod chunk;
 mod framing;
 mod mcap_writer;
 use mcap_writer::McapWriter;
 pub mod table;
+use chunk::ChunkRecords;
 use framing::{Frame, Framer};
 
 /// Version of the log layout written by this program.
@@ -580,12 +581,11 @@ impl std::fmt::Display for Corruption {
 pub struct LogReader<R: Read> {
     framer: Framer<R>,
     started: bool,
-    /// The record being parsed: its length and whether it is a chunk.
-    current: Option<(usize, bool)>,
+    /// The records of the chunk being read.
+    chunk: ChunkRecords,
     corruption: Corruption,
     /// The file read, for error messages (`<log>` for other sources).
     path: PathBuf,
-    reader: LinearReader,
     schemas: HashMap<u16, Arc<str>>,
     /// The channels and their message kinds, by channel id.
     channels: Vec<Option<(ChannelInfo, MessageKind)>>,
@@ -611,6 +611,35 @@ impl LogReader<std::io::BufReader<File>> {
     }
 }
 
+/// What the file's next record gave the reader.
+enum TopLevel<T> {
+    /// A record taken in (a chunk loaded, a channel defined, damage passed over).
+    Read,
+    /// A message outside chunks, through the caller's function.
+    Message(T),
+    /// The header was read and the caller asked to stop there.
+    Header,
+    /// The end of a finished file.
+    End,
+}
+
+/// The channel of a message and the kind of its schema; `None` (counted) when the channel was
+/// defined in a chunk that was lost, an error when it was never defined in an undamaged file.
+fn channel_of<'c>(
+    channels: &'c [Option<(ChannelInfo, MessageKind)>],
+    corruption: &mut Corruption,
+    id: u16,
+) -> Result<Option<(&'c ChannelInfo, MessageKind)>, LogError> {
+    match channels.get(usize::from(id)) {
+        Some(Some((ch, kind))) => Ok(Some((ch, *kind))),
+        _ if corruption.any() => {
+            corruption.messages_on_lost_channels += 1;
+            Ok(None)
+        }
+        _ => Err(LogError::UnknownChannel(id)),
+    }
+}
+
 /// The fixed part of an MCAP message record: channel id (u16), sequence (u32), log time and
 /// publish time (u64 each), little-endian; the message bytes follow.
 const MESSAGE_HEADER_LEN: usize = 2 + 4 + 8 + 8;
@@ -630,24 +659,13 @@ fn message_in_place(body: &[u8]) -> (MessageHeader, &[u8]) {
 }
 
 impl<R: Read> LogReader<R> {
-    /// A parser that takes records one at a time (the framer checks the leading magic).
-    fn parser() -> LinearReader {
-        LinearReader::new_with_options(
-            LinearReaderOptions::default()
-                .with_record_length_limit(RECORD_LENGTH_LIMIT)
-                .with_prevalidate_chunk_crcs(true)
-                .with_skip_start_magic(true),
-        )
-    }
-
     pub fn new(source: R) -> Self {
         LogReader {
             framer: Framer::new(source, RECORD_LENGTH_LIMIT),
             started: false,
-            current: None,
+            chunk: ChunkRecords::default(),
             corruption: Corruption::default(),
             path: PathBuf::from("<log>"),
-            reader: Self::parser(),
             schemas: HashMap::new(),
             channels: Vec::new(),
             header: None,
@@ -659,58 +677,6 @@ impl<R: Read> LogReader<R> {
     /// What was passed over as damaged so far.
     pub fn corruption(&self) -> &Corruption {
         &self.corruption
-    }
-
-    /// The parser refused the record it was given: drop it (counted) and start a fresh parser
-    /// for the next one.
-    fn skip_current(&mut self) {
-        if let Some((len, chunk)) = self.current.take() {
-            if chunk {
-                self.corruption.chunks_skipped += 1;
-                if let Some(span) = self.framer.chunk_span() {
-                    self.corruption.spans_ns.push(span);
-                }
-            } else {
-                self.corruption.records_skipped += 1;
-            }
-            self.framer.skip_record(len);
-        }
-        self.reader = Self::parser();
-    }
-
-    /// Hands the next whole record to the parser; `Ok(false)` at the end of the file.
-    fn feed_parser(&mut self) -> Result<bool, LogError> {
-        let io = |path: &Path, source| LogError::Io {
-            op: "reading",
-            path: path.to_path_buf(),
-            source,
-        };
-        if let Some((len, _)) = self.current.take() {
-            self.framer.consume(len);
-        }
-        if !self.started {
-            self.started = true;
-            if !self.framer.start_magic().map_err(|e| io(&self.path, e))? {
-                return Err(mcap::McapError::BadMagic.into());
-            }
-        }
-        loop {
-            match self.framer.next().map_err(|e| io(&self.path, e))? {
-                Frame::Record { opcode, len, .. } => {
-                    let buf = self.reader.insert(len);
-                    buf.copy_from_slice(&self.framer.bytes()[..len]);
-                    self.reader.notify_read(len);
-                    self.current = Some((len, opcode == 0x06));
-                    return Ok(true);
-                }
-                Frame::EndMagic => return Ok(false),
-                Frame::Eof { .. } => return Err(LogError::Truncated),
-                Frame::Resynchronised { skipped, .. } => {
-                    self.corruption.bytes_skipped += skipped;
-                    self.reader = Self::parser();
-                }
-            }
-        }
     }
 
     /// The header, once its metadata record has been read (it is the first record we write).
@@ -760,7 +726,7 @@ impl<R: Read> LogReader<R> {
     }
 
     /// The next message through `f`, records of other kinds handled on the way; `None` at the
-    /// end.
+    /// end. The records of the chunk being read come first, then the file's next record.
     fn next_with<T>(
         &mut self,
         mut f: impl FnMut(&ChannelInfo, MessageKind, &MessageHeader, &[u8]) -> T,
@@ -769,76 +735,18 @@ impl<R: Read> LogReader<R> {
             return Ok(None);
         }
         loop {
-            let event = match self.reader.next_event() {
-                None => {
-                    self.done = true;
-                    return Ok(None);
-                }
-                // The record handed over is damaged (a chunk's CRC, its compression, a length):
-                // skip it and go on with the next.
-                Some(Err(_)) if self.current.is_some() => {
-                    self.skip_current();
+            let (opcode, body) = match self.chunk.next_record() {
+                Some(Ok(r)) => r,
+                Some(Err(())) => {
+                    // A record runs past its chunk's end: the rest of the chunk is lost.
+                    self.corruption.chunks_skipped += 1;
                     continue;
                 }
-                Some(Err(mcap::McapError::UnexpectedEof)) => {
-                    self.done = true;
-                    return Err(LogError::Truncated);
-                }
-                Some(Err(e)) => {
-                    self.done = true;
-                    return Err(e.into());
-                }
-                Some(Ok(LinearReadEvent::ReadRequest(_))) => Err(()),
-                // Indexes, statistics and the summary section say nothing the linear read
-                // needs: not parsed.
-                Some(Ok(LinearReadEvent::Record { opcode, .. }))
-                    if !matches!(
-                        opcode,
-                        op::SCHEMA | op::CHANNEL | op::MESSAGE | op::METADATA
-                    ) =>
-                {
-                    continue;
-                }
-                // Messages are read in place, their fixed header by hand (the generic parser
-                // costs more than the rest of the decoding).
-                Some(Ok(LinearReadEvent::Record {
-                    data,
-                    opcode: op::MESSAGE,
-                })) if data.len() >= MESSAGE_HEADER_LEN => {
-                    let (header, data) = message_in_place(data);
-                    let id = header.channel_id;
-                    let Some(Some((ch, kind))) = self.channels.get(usize::from(id)) else {
-                        if self.corruption.any() {
-                            // Its channel was defined in a chunk that was lost.
-                            self.corruption.messages_on_lost_channels += 1;
-                            continue;
-                        }
-                        return Err(LogError::UnknownChannel(id));
-                    };
-                    return Ok(Some(f(ch, *kind, &header, data)));
-                }
-                // A message record too short for its header: the parser says what is wrong.
-                Some(Ok(LinearReadEvent::Record { data, opcode })) => {
-                    match mcap::parse_record(opcode, data) {
-                        Ok(r) => Ok(r.into_owned()),
-                        Err(_) if self.current.is_some() => {
-                            self.skip_current();
-                            continue;
-                        }
-                        Err(e) => return Err(e.into()),
-                    }
-                }
-            };
-            match event {
-                Ok(record) => {
-                    self.handle(record)?;
-                    if self.stop_at_header && self.header.is_some() {
-                        return Ok(None);
-                    }
-                }
-                Err(()) => match self.feed_parser() {
-                    Ok(true) => {}
-                    Ok(false) => {
+                None => match self.next_top_level(&mut f) {
+                    Ok(TopLevel::Read) => continue,
+                    Ok(TopLevel::Message(t)) => return Ok(Some(t)),
+                    Ok(TopLevel::Header) => return Ok(None),
+                    Ok(TopLevel::End) => {
                         self.done = true;
                         return Ok(None);
                     }
@@ -847,8 +755,105 @@ impl<R: Read> LogReader<R> {
                         return Err(e);
                     }
                 },
+            };
+            let body = &self.chunk.bytes()[body];
+            if opcode == op::MESSAGE && body.len() >= MESSAGE_HEADER_LEN {
+                let (header, data) = message_in_place(body);
+                match channel_of(&self.channels, &mut self.corruption, header.channel_id)? {
+                    Some((ch, kind)) => return Ok(Some(f(ch, kind, &header, data))),
+                    None => continue,
+                }
+            }
+            if !matches!(
+                opcode,
+                op::SCHEMA | op::CHANNEL | op::MESSAGE | op::METADATA
+            ) {
+                // Indexes say nothing the linear read needs: not parsed.
+                continue;
+            }
+            match mcap::parse_record(opcode, body).map(Record::into_owned) {
+                Ok(record) => {
+                    self.handle(record)?;
+                    if self.stop_at_header && self.header.is_some() {
+                        return Ok(None);
+                    }
+                }
+                Err(_) => {
+                    // A schema, channel or metadata record that does not parse (or a message
+                    // too short for its header): the rest of the chunk is not trusted.
+                    self.chunk.clear();
+                    self.corruption.chunks_skipped += 1;
+                }
             }
         }
+    }
+
+    /// Reads the file's next record: a chunk is loaded (or skipped, counted, when damaged), a
+    /// message outside chunks goes to `f`, a schema, channel or metadata record is taken in.
+    fn next_top_level<T>(
+        &mut self,
+        f: &mut impl FnMut(&ChannelInfo, MessageKind, &MessageHeader, &[u8]) -> T,
+    ) -> Result<TopLevel<T>, LogError> {
+        let io = |path: &Path, source| LogError::Io {
+            op: "reading",
+            path: path.to_path_buf(),
+            source,
+        };
+        if !self.started {
+            self.started = true;
+            if !self.framer.start_magic().map_err(|e| io(&self.path, e))? {
+                return Err(mcap::McapError::BadMagic.into());
+            }
+        }
+        let (opcode, len) = match self.framer.next().map_err(|e| io(&self.path, e))? {
+            Frame::Record { opcode, len, .. } => (opcode, len),
+            Frame::EndMagic => return Ok(TopLevel::End),
+            Frame::Eof { .. } => return Err(LogError::Truncated),
+            Frame::Resynchronised { skipped, .. } => {
+                self.corruption.bytes_skipped += skipped;
+                return Ok(TopLevel::Read);
+            }
+        };
+        let body = &self.framer.bytes()[9..len];
+        let mut message = None;
+        let record = match opcode {
+            op::CHUNK => {
+                if self.chunk.load(body, RECORD_LENGTH_LIMIT).is_err() {
+                    self.corruption.chunks_skipped += 1;
+                    if let Some(span) = self.framer.chunk_span() {
+                        self.corruption.spans_ns.push(span);
+                    }
+                }
+                None
+            }
+            op::MESSAGE if body.len() >= MESSAGE_HEADER_LEN => {
+                let (header, data) = message_in_place(body);
+                message = channel_of(&self.channels, &mut self.corruption, header.channel_id)?
+                    .map(|(ch, kind)| f(ch, kind, &header, data));
+                None
+            }
+            op::SCHEMA | op::CHANNEL | op::MESSAGE | op::METADATA => {
+                match mcap::parse_record(opcode, body).map(Record::into_owned) {
+                    Ok(r) => Some(r),
+                    Err(_) => {
+                        self.corruption.records_skipped += 1;
+                        None
+                    }
+                }
+            }
+            _ => None,
+        };
+        self.framer.consume(len);
+        if let Some(t) = message {
+            return Ok(TopLevel::Message(t));
+        }
+        if let Some(r) = record {
+            self.handle(r)?;
+            if self.stop_at_header && self.header.is_some() {
+                return Ok(TopLevel::Header);
+            }
+        }
+        Ok(TopLevel::Read)
     }
 
     /// A record other than a message.
