@@ -20,7 +20,9 @@ use nalgebra::{DMatrix, DVector};
 /// The data one channel's fits run on.
 pub struct Problem<'a> {
     pub channel: &'a Channel,
-    pub reference: &'a Reference,
+    /// The reference as given, or with its velocity smoothed where the DVL channel's reference
+    /// carries noise of its own ([`Reference::with_smoothed_velocity`]).
+    pub reference: std::borrow::Cow<'a, Reference>,
     /// The nominal model (what the simulation assumes before discovery).
     pub nominal: Effects,
     /// Epochs the nominal model can predict (indices into the channel).
@@ -55,17 +57,28 @@ impl<'a> Problem<'a> {
             nominal.dvl_periodic_velocity_error_phase = line.phase_deg;
         }
         let d = channel.kind.dims();
-        let epochs = (0..channel.len())
-            .filter(|&i| {
-                channel.residual(&nominal, reference, i).is_some_and(|r| {
-                    if channel.kind.partial() {
-                        r[..d].iter().any(|x| x.is_finite())
-                    } else {
-                        r[..d].iter().all(|x| x.is_finite())
-                    }
-                })
+        let predicted = |reference: &Reference, i: usize| {
+            channel.residual(&nominal, reference, i).is_some_and(|r| {
+                if channel.kind.partial() {
+                    r[..d].iter().any(|x| x.is_finite())
+                } else {
+                    r[..d].iter().all(|x| x.is_finite())
+                }
             })
+        };
+        let mut epochs: Vec<usize> = (0..channel.len())
+            .filter(|&i| predicted(reference, i))
             .collect();
+        let mut reference = std::borrow::Cow::Borrowed(reference);
+        let mut reference_noise = 0.0;
+        if channel.kind == ChannelKind::Dvl {
+            reference_noise =
+                super::reference_noise::velocity_noise(channel, &reference, &nominal, &epochs);
+            if reference_noise > 0.0 {
+                reference = std::borrow::Cow::Owned(reference.with_smoothed_velocity());
+                epochs.retain(|&i| predicted(&reference, i));
+            }
+        }
         let mut p = Problem {
             channel,
             reference,
@@ -74,12 +87,8 @@ impl<'a> Problem<'a> {
             noise_lags: 0,
             noise_model: vec![None; d],
             drift_knot_s: None,
-            reference_noise: 0.0,
+            reference_noise,
         };
-        if channel.kind == ChannelKind::Dvl {
-            p.reference_noise =
-                super::reference_noise::velocity_noise(channel, reference, &p.nominal, &p.epochs);
-        }
         let all = p.candidates();
         if !all.is_empty() && p.epochs.len() >= 8 {
             p.fit_noise(&all);
@@ -228,7 +237,7 @@ impl<'a> Problem<'a> {
         let d = self.channel.kind.dims();
         let mut r = Vec::with_capacity(epochs.len() * d);
         for &i in epochs {
-            match self.channel.residual(e, self.reference, i) {
+            match self.channel.residual(e, &self.reference, i) {
                 Some(x) => r.extend(x[..d].iter().map(|v| if v.is_finite() { *v } else { 0.0 })),
                 None => r.extend(std::iter::repeat_n(0.0, d)),
             }

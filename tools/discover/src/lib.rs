@@ -32,6 +32,7 @@ mod reference_noise;
 pub mod report;
 pub mod residuals;
 pub mod smoothed;
+mod spline;
 pub mod surface_trials;
 pub mod trials;
 pub mod voyages;
@@ -60,10 +61,15 @@ pub struct RefState {
     pub specific_force_body: Vector3<f64>,
 }
 
-/// The reference motion: samples in time order, interpolated linearly (attitude by slerp).
+/// The reference motion: samples in time order, interpolated linearly (attitude by slerp), its
+/// velocity optionally smoothed ([`Reference::with_smoothed_velocity`]).
 #[derive(Debug, Clone, Default)]
 pub struct Reference {
     samples: Vec<(f64, UnitQuaternion<f64>, RefState)>,
+    /// The velocity from the cubic B-spline on the four samples around a time rather than the
+    /// line between two ([`crate::spline`]): for a reference whose samples carry noise of their
+    /// own ([`crate::reference_noise`]).
+    smooth_velocity: bool,
     /// The longest gap between samples [`Reference::at`] interpolates across (s): 1 s, or 1.5
     /// times the median interval of a reference sampled more slowly (a surface run's GPS
     /// reference at each 1 s ping).
@@ -150,6 +156,7 @@ impl Reference {
         let median = intervals.get(intervals.len() / 2).copied().unwrap_or(0.0);
         Reference {
             samples,
+            smooth_velocity: false,
             max_gap_s: (1.5 * median).max(1.0),
             effect_std: Vec::new(),
         }
@@ -186,6 +193,12 @@ impl Reference {
         }
         let (t0, q0, a) = &s[i - 1];
         if *t0 == t_s {
+            if self.smooth_velocity {
+                return Some(RefState {
+                    velocity_ned: self.smoothed_velocity(t_s)?,
+                    ..*a
+                });
+            }
             return Some(*a);
         }
         let (t1, q1, b) = s.get(i)?;
@@ -194,15 +207,68 @@ impl Reference {
         }
         let f = (t_s - t0) / (t1 - t0);
         let lerp = |x: &Vector3<f64>, y: &Vector3<f64>| x + (y - x) * f;
+        let velocity_ned = if self.smooth_velocity {
+            self.smoothed_velocity(t_s)?
+        } else {
+            lerp(&a.velocity_ned, &b.velocity_ned)
+        };
         Some(RefState {
             t_s,
             c_body_to_ned: q0.slerp(q1, f).to_rotation_matrix().into_inner(),
-            velocity_ned: lerp(&a.velocity_ned, &b.velocity_ned),
+            velocity_ned,
             omega_eb_body: lerp(&a.omega_eb_body, &b.omega_eb_body),
             height_m: a.height_m + (b.height_m - a.height_m) * f,
             latitude_rad: a.latitude_rad + (b.latitude_rad - a.latitude_rad) * f,
             specific_force_body: lerp(&a.specific_force_body, &b.specific_force_body),
         })
+    }
+}
+
+impl Reference {
+    /// The same reference with its velocity evaluated by the cubic B-spline on the four samples
+    /// around each time ([`crate::spline`]), whose noise gain varies little and smoothly, rather
+    /// than by the line between two samples, whose noise gain halves half-way and kinks at each
+    /// sample: for a reference whose samples carry noise of their own
+    /// ([`crate::reference_noise`]). What the spline still varies by is given back to the fit
+    /// ([`Reference::interpolation_loss`]).
+    pub fn with_smoothed_velocity(&self) -> Reference {
+        Reference {
+            smooth_velocity: true,
+            ..self.clone()
+        }
+    }
+
+    /// Whether the velocity is smoothed ([`Reference::with_smoothed_velocity`]).
+    pub fn smooths_velocity(&self) -> bool {
+        self.smooth_velocity
+    }
+
+    /// Where the spline takes `t_s` from: the index of the first of the four samples (the one
+    /// before the interval holding `t_s`), the fraction of that interval and its length; None
+    /// where the four samples are not there, or not within the gap limit of each other.
+    fn spline_at(&self, t_s: f64) -> Option<(usize, f64, f64)> {
+        let s = &self.samples;
+        let j = s.partition_point(|x| x.0 <= t_s).checked_sub(1)?;
+        let first = j.checked_sub(1)?;
+        let four = s.get(first..first + 4)?;
+        if four
+            .windows(2)
+            .any(|w| !(w[1].0 - w[0].0 > 0.0 && w[1].0 - w[0].0 <= self.max_gap_s))
+        {
+            return None;
+        }
+        let h = s[j + 1].0 - s[j].0;
+        Some((first, (t_s - s[j].0) / h, h))
+    }
+
+    fn smoothed_velocity(&self, t_s: f64) -> Option<Vector3<f64>> {
+        let (first, f, _) = self.spline_at(t_s)?;
+        let (w, _) = spline::weights(f);
+        Some(
+            (0..4)
+                .map(|k| self.samples[first + k].2.velocity_ned * w[k])
+                .sum(),
+        )
     }
 }
 

@@ -10,8 +10,15 @@
 //! null runs in ten named a time offset of 0.3–0.5 s, and with 20 cm of GNSS noise the null
 //! runs' offset was 0.50 s.
 //!
+//! Where the reference carries such noise, the DVL's fits evaluate its velocity with the cubic
+//! B-spline on the four samples around each time ([`crate::spline`],
+//! [`Reference::with_smoothed_velocity`]), whose noise gain varies little and smoothly between
+//! samples. With linear interpolation and the penalty below alone, the estimate stuck to the
+//! sample times: on the lake run, hidden offsets of 0.2 and 0.4 s came out 0.0 and 0.17 s.
+//!
 //! The fit gives back what the interpolation takes: per reading the reference's sample noise
-//! variance (summed over the components) times 2f(1 − f), a penalty on τ alone
+//! variance (summed over the components) times 2f(1 − f) (linear) or 1/2 − Σw²(f) (the
+//! spline's weights w), a penalty on τ alone
 //! ([`crate::fit::Problem::fit`]; the held-out scores likewise). The variance is measured with
 //! the DVL as the witness ([`velocity_noise`]): over three readings on consecutive reference
 //! samples evenly spaced, the second difference of the reference's prediction carries the
@@ -141,9 +148,14 @@ impl Reference {
     }
 
     /// The noise variance interpolating at `t − tau` takes from the reference velocity, summed
-    /// over the readings at `times`, with its first and second derivatives in `tau`:
-    /// Σ v·2f(1 − f), where f is the reading's fraction of its interval and `v` the reference's
-    /// sample noise summed over the components ([`velocity_noise`]).
+    /// over the readings at `times`, its first derivative in `tau`, and the curvature in `tau`
+    /// the fit gives back: Σ v·2f(1 − f) for linear interpolation, Σ v·(1/2 − Σw²(f)) for the
+    /// smoothed velocity ([`Reference::with_smoothed_velocity`]), where f is the reading's
+    /// fraction of its interval and `v` the reference's sample noise summed over the components
+    /// ([`velocity_noise`]). The curvature is minus twice the noise variance the regressor (the
+    /// reference velocity's slope in τ) carries, 2v/h² between linear samples and vΣw'²/h² on
+    /// the B-spline: the part of JᵀJ that is the reference's noise, not information. For linear
+    /// interpolation it is also the loss's second derivative.
     pub fn interpolation_loss(
         &self,
         times: impl Iterator<Item = f64>,
@@ -155,6 +167,18 @@ impl Reference {
         }
         let mut out = [0.0; 3];
         for t in times {
+            if self.smooths_velocity() {
+                if let Some((_, f, h)) = self.spline_at(t - tau) {
+                    let (g, g1, slope) = crate::spline::noise_gain(f);
+                    // v (g(0) − g(f)) with g(0) = 1/2, smooth in τ; df/dτ = −1/h.
+                    out[0] += v * (0.5 - g);
+                    out[1] += v * g1 / h;
+                    // The regressor (the velocity's slope in τ) carries the noise variance
+                    // v Σw'²/h²: twice that, taken from the curvature.
+                    out[2] -= 2.0 * v * slope / (h * h);
+                }
+                continue;
+            }
             if let Some((f, h)) = self.interpolation_at(t - tau) {
                 // df/dτ = −1/h.
                 out[0] += v * 2.0 * f * (1.0 - f);

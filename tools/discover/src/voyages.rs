@@ -339,7 +339,7 @@ fn held_out(
                 .collect();
         let q = Problem {
             channel: v.p.channel,
-            reference: v.p.reference,
+            reference: std::borrow::Cow::Borrowed(&*v.p.reference),
             nominal: v.p.effects(shared, &theta),
             epochs: v.p.epochs.clone(),
             noise_lags: v.p.noise_lags,
