@@ -53,6 +53,8 @@ pub mod processes {
             .to_path_buf();
         let built = BUILT.get_or_init(|| {
             let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_string());
+            // `.ci/run` builds the same packages before its performance guard (same features:
+            // nothing rebuilt); change both together.
             let mut cmd = Command::new(cargo);
             cmd.args([
                 "build",
@@ -108,6 +110,36 @@ pub mod processes {
             &out.display().to_string(),
             "--json",
         ]);
+    }
+
+    /// `auvnav import riversurveyor` of the measured M9 lake run (`20250117160335.mat`) into
+    /// `out`, with `extra` importer arguments; `None` where the measured data is absent (outside
+    /// CI, said by [`crate::measured_data`]).
+    pub fn import_lake_run(out: &Path, extra: &[&str]) -> Option<PathBuf> {
+        let dir = crate::measured_data("riversurveyor-m9", "20250117160335.mat")?;
+        let (file, log) = (
+            dir.join("20250117160335.mat").display().to_string(),
+            out.display().to_string(),
+        );
+        let mut args = vec!["import", "riversurveyor", &file, "--out", &log, "--json"];
+        args.extend_from_slice(extra);
+        auvnav_json(&args);
+        Some(out.to_path_buf())
+    }
+
+    /// `auvnav perturb LOG --out OUT --effect E…` to success.
+    pub fn perturb(log: &Path, out: &Path, effects: &[String]) {
+        let mut cmd = Command::new(binary("auvnav"));
+        cmd.arg("perturb").arg(log).arg("--out").arg(out);
+        for e in effects {
+            cmd.args(["--effect", e]);
+        }
+        let o = cmd.output().expect("running auvnav perturb");
+        assert!(
+            o.status.success(),
+            "auvnav perturb {effects:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
     }
 
     /// `auvnav import snapir DATA --segment N --out OUT`: one Snapir segment as a log.

@@ -30,19 +30,7 @@ fn param(report: &serde_json::Value, name: &str) -> (f64, bool) {
 }
 
 fn lake(tmp: &TempDir) -> Option<PathBuf> {
-    let dir = auvnav_tests::measured_data("riversurveyor-m9", "20250117160335.mat")?;
-    let out = tmp.path().join("lake.mcap");
-    auvnav(&[
-        "import",
-        "riversurveyor",
-        &s(&dir.join("20250117160335.mat")),
-        "--out",
-        &s(&out),
-        "--velocity",
-        "gga",
-        "--json",
-    ]);
-    Some(out)
+    auvnav_tests::processes::import_lake_run(&tmp.path().join("lake.mcap"), &["--velocity", "gga"])
 }
 
 #[test]
@@ -81,14 +69,15 @@ fn an_installation_hidden_in_the_measured_run_is_recovered_from_the_gnss() {
     let (yaw0, _) = param(&base, "dvl.mount_yaw");
     for (yaw, scale, offset) in [(3.0, 1.01, 0.5), (-2.0, 0.99, -0.3)] {
         let hidden = tmp.path().join(format!("lake-{yaw}.mcap"));
-        let o = Command::new(binary("auvnav"))
-            .args(["perturb", &s(&log), "--out", &s(&hidden)])
-            .args(["--effect", &format!("dvl.mount_yaw={yaw}")])
-            .args(["--effect", &format!("dvl.scale_factor={scale}")])
-            .args(["--effect", &format!("dvl.time_offset={offset}")])
-            .output()
-            .expect("perturb");
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        auvnav_tests::processes::perturb(
+            &log,
+            &hidden,
+            &[
+                format!("dvl.mount_yaw={yaw}"),
+                format!("dvl.scale_factor={scale}"),
+                format!("dvl.time_offset={offset}"),
+            ],
+        );
         let r = auvnav(&[
             "calibrate",
             "dvl",

@@ -3,9 +3,8 @@
 //! (`auvnav_discover::gnss`): named only when it stands five deviations out on all folds, every
 //! fold held out navigates no worse with what the others write, and the velocities agree.
 
-use auvnav_tests::processes::{TempDir, binary};
+use auvnav_tests::processes::{TempDir, import_lake_run, perturb};
 use std::path::Path;
-use std::process::Command;
 
 fn auvnav(args: &[&str]) -> serde_json::Value {
     auvnav_tests::processes::auvnav_json(args)
@@ -96,19 +95,10 @@ fn a_river_transect_names_its_heading_offset_on_the_gnss_positions() {
 /// itself carries.
 #[test]
 fn an_installation_hidden_in_a_measured_lake_run_is_named_by_discover() {
-    let Some(dir) = auvnav_tests::measured_data("riversurveyor-m9", "20250117160335.mat") else {
+    let tmp = TempDir::new("discover-lake");
+    let Some(log) = import_lake_run(&tmp.path().join("lake.mcap"), &[]) else {
         return;
     };
-    let tmp = TempDir::new("discover-lake");
-    let log = tmp.path().join("lake.mcap");
-    auvnav(&[
-        "import",
-        "riversurveyor",
-        &s(&dir.join("20250117160335.mat")),
-        "--out",
-        &s(&log),
-        "--json",
-    ]);
     let base = auvnav(&["discover", &s(&log), "--json"]);
     for name in ["dvl.mount_yaw", "dvl.scale_factor"] {
         let (verdict, _, _) = gnss(&base, name);
@@ -121,14 +111,15 @@ fn an_installation_hidden_in_a_measured_lake_run_is_named_by_discover() {
     let (_, yaw0, _) = gnss(&base, "dvl.mount_yaw");
     let (yaw, scale, offset) = (-2.5, 1.008, 0.4);
     let hidden = tmp.path().join("hidden.mcap");
-    let o = Command::new(binary("auvnav"))
-        .args(["perturb", &s(&log), "--out", &s(&hidden)])
-        .args(["--effect", &format!("dvl.mount_yaw={yaw}")])
-        .args(["--effect", &format!("dvl.scale_factor={scale}")])
-        .args(["--effect", &format!("dvl.time_offset={offset}")])
-        .output()
-        .expect("perturb");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    perturb(
+        &log,
+        &hidden,
+        &[
+            format!("dvl.mount_yaw={yaw}"),
+            format!("dvl.scale_factor={scale}"),
+            format!("dvl.time_offset={offset}"),
+        ],
+    );
     let r = auvnav(&["discover", &s(&hidden), "--json"]);
     let (verdict, found, _) = gnss(&r, "dvl.mount_yaw");
     assert_eq!(verdict, "named", "{}", r["gnss"]);
@@ -161,29 +152,15 @@ fn velocity_time_offset(report: &serde_json::Value) -> Option<(f64, bool)> {
 /// its noisy 1 s samples the estimate stuck to the sample times (0.2 s hidden: 0.0 found).
 #[test]
 fn a_latency_hidden_in_a_measured_lake_run_is_measured_by_discover() {
-    let Some(dir) = auvnav_tests::measured_data("riversurveyor-m9", "20250117160335.mat") else {
+    let tmp = TempDir::new("discover-lake-latency");
+    let Some(log) = import_lake_run(&tmp.path().join("lake.mcap"), &[]) else {
         return;
     };
-    let tmp = TempDir::new("discover-lake-latency");
-    let log = tmp.path().join("lake.mcap");
-    auvnav(&[
-        "import",
-        "riversurveyor",
-        &s(&dir.join("20250117160335.mat")),
-        "--out",
-        &s(&log),
-        "--json",
-    ]);
     let base = auvnav(&["discover", &s(&log), "--json"]);
     let own = velocity_time_offset(&base).map_or(0.0, |(v, _)| v);
     for hidden in [0.45, -0.65] {
         let perturbed = tmp.path().join(format!("latency-{hidden}.mcap"));
-        let o = Command::new(binary("auvnav"))
-            .args(["perturb", &s(&log), "--out", &s(&perturbed)])
-            .args(["--effect", &format!("dvl.time_offset={hidden}")])
-            .output()
-            .expect("perturb");
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        perturb(&log, &perturbed, &[format!("dvl.time_offset={hidden}")]);
         let r = auvnav(&["discover", &s(&perturbed), "--json"]);
         let (found, named) = velocity_time_offset(&r)
             .unwrap_or_else(|| panic!("{hidden} s hidden: no time offset in {}", r["effects"]));
