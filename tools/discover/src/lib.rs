@@ -222,9 +222,7 @@ impl Reference {
             specific_force_body: lerp(&a.specific_force_body, &b.specific_force_body),
         })
     }
-}
 
-impl Reference {
     /// The same reference with its velocity evaluated by the cubic B-spline on the four samples
     /// around each time ([`crate::spline`]), whose noise gain varies little and smoothly, rather
     /// than by the line between two samples, whose noise gain halves half-way and kinks at each

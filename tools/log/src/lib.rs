@@ -828,8 +828,10 @@ impl<R: Read> LogReader<R> {
             }
             op::MESSAGE if body.len() >= MESSAGE_HEADER_LEN => {
                 let (header, data) = message_in_place(body);
-                message = channel_of(&self.channels, &mut self.corruption, header.channel_id)?
-                    .map(|(ch, kind)| f(ch, kind, &header, data));
+                message = Some(
+                    channel_of(&self.channels, &mut self.corruption, header.channel_id)
+                        .map(|c| c.map(|(ch, kind)| f(ch, kind, &header, data))),
+                );
                 None
             }
             op::SCHEMA | op::CHANNEL | op::MESSAGE | op::METADATA => {
@@ -843,8 +845,9 @@ impl<R: Read> LogReader<R> {
             }
             _ => None,
         };
+        // Consumed before any error is returned: a reader called again goes on after it.
         self.framer.consume(len);
-        if let Some(t) = message {
+        if let Some(t) = message.transpose()?.flatten() {
             return Ok(TopLevel::Message(t));
         }
         if let Some(r) = record {
