@@ -52,6 +52,33 @@ fn held_out_better(report: &serde_json::Value) -> usize {
     writing
 }
 
+/// Every fold navigated with what `--write-config` writes from the other folds alone (the whole
+/// of discovery run on them) is closer to its GNSS than with the nominal installation, where
+/// they write anything; returns how many folds had something written.
+fn written_held_out_better(report: &serde_json::Value) -> usize {
+    let g = &report["gnss"];
+    let mut writing = 0;
+    for w in g["written_held_out"].as_array().expect("written held out") {
+        let with = w["score"]["rms_error_m"]
+            .as_f64()
+            .unwrap_or_else(|| panic!("a score for every fold: {w}"));
+        let nominal = g["held_out"]
+            .as_array()
+            .expect("held out")
+            .iter()
+            .find(|h| h["run"] == w["fold"])
+            .and_then(|h| h["scores"]["nominal"]["rms_error_m"].as_f64())
+            .unwrap_or_else(|| panic!("the fold's nominal score: {g}"));
+        if w["written"].as_array().is_some_and(|x| !x.is_empty()) {
+            writing += 1;
+            assert!(with < nominal, "{w} against {nominal} m nominal");
+        } else {
+            assert_eq!(with, nominal, "{w}");
+        }
+    }
+    writing
+}
+
 /// A river crossing by a boat ADCP steering by its magnetic compass, with GPS in every ensemble:
 /// the compass against true north is the declination there (about 20° east, Tanana River,
 /// Alaska) less the compass's own deviation. The crossing's bed moves: with `--moving-bed` each
@@ -80,6 +107,8 @@ fn a_river_transect_names_its_heading_offset_on_the_gnss_positions() {
         "yaw {yaw} ± {std} against a declination of about 20°"
     );
     assert!(held_out_better(&r) >= 1, "{}", r["gnss"]);
+    // What each half's discovery writes (measured: 3.06 → 0.62 m and 3.61 → 1.98 m).
+    assert_eq!(written_held_out_better(&r), 2, "{}", r["gnss"]);
     // Not also left undetermined by the velocities.
     assert!(
         r["undetermined"]
@@ -128,6 +157,57 @@ fn an_installation_hidden_in_a_measured_lake_run_is_named_by_discover() {
         "hidden {yaw} deg on a run at {yaw0}: found {found}"
     );
     assert!(held_out_better(&r) >= 1, "{}", r["gnss"]);
+    assert_eq!(written_held_out_better(&r), 2, "{}", r["gnss"]);
+}
+
+/// On the lake run as recorded the velocities name a lever arm; each half's discovery writes one,
+/// and the first half navigates worse against its GNSS with the second half's (measured: 0.48 →
+/// 0.55 m window RMS): `--write-config` withholds it, and writes what no fold refutes.
+#[test]
+fn what_discover_writes_for_a_surface_run_is_judged_on_held_out_gnss() {
+    let tmp = TempDir::new("discover-lake-written");
+    let Some(log) = import_lake_run(&tmp.path().join("lake.mcap"), &[]) else {
+        return;
+    };
+    let config = tmp.path().join("navigation.toml");
+    let r = auvnav(&[
+        "discover",
+        &s(&log),
+        "--write-config",
+        &s(&config),
+        "--json",
+    ]);
+    let found: Vec<&str> = r["effects"]
+        .as_array()
+        .expect("effects")
+        .iter()
+        .filter_map(|e| e["name"].as_str())
+        .collect();
+    assert!(found.contains(&"dvl.lever_arm"), "{found:?}");
+    let withheld = r["withheld"]
+        .as_array()
+        .expect("withheld")
+        .iter()
+        .find(|w| w["name"] == "dvl.lever_arm")
+        .unwrap_or_else(|| panic!("the lever arm withheld: {}", r["withheld"]));
+    assert!(
+        withheld["note"]
+            .as_str()
+            .is_some_and(|n| n.contains("held out against the GNSS")),
+        "{withheld}"
+    );
+    let text = std::fs::read_to_string(&config).expect("navigation.toml");
+    let table: toml::Table = toml::from_str(&text).expect("toml");
+    assert_eq!(
+        table["navigation"]["dvl"]["lever_arm_m"],
+        toml::Value::Array(vec![toml::Value::Float(0.0); 3]),
+        "{text}"
+    );
+    let folds = r["gnss"]["written_held_out"].as_array().expect("folds");
+    assert_eq!(folds.len(), 2, "{}", r["gnss"]);
+    for w in folds {
+        assert!(w["score"]["rms_error_m"].as_f64().is_some(), "{w}");
+    }
 }
 
 /// The velocities' time offset of a report: its estimate where discovery named it or points at

@@ -237,4 +237,30 @@ fn print_gnss(g: &auvnav_discover::gnss::GnssEvidence) {
             h.scores.calibrated.rms_error_m
         );
     }
+    for w in &g.written_held_out {
+        match (&w.score, &w.error) {
+            (Some(s), _) => println!(
+                "    held out {}, navigated with what `--write-config` writes from the other folds ({}): window RMS {:.2} m",
+                w.fold,
+                if w.written.is_empty() {
+                    "nothing".to_string()
+                } else {
+                    w.written
+                        .iter()
+                        .map(|e| match e.rms_without_m {
+                            Some(m) => format!("{} = {} ({m:.2} m without it)", e.name, e.value),
+                            None => format!("{} = {}", e.name, e.value),
+                        })
+                        .collect::<Vec<_>>()
+                        .join("; ")
+                },
+                s.rms_error_m
+            ),
+            (None, e) => println!(
+                "    held out {}: the other folds give no configuration ({})",
+                w.fold,
+                e.as_deref().unwrap_or("no reason given")
+            ),
+        }
+    }
 }

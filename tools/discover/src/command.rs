@@ -137,8 +137,9 @@ pub fn nominal_from_report(
     Ok(())
 }
 
-/// `auvnav discover`.
-pub fn run(a: &DiscoverOptions) -> Result<DiscoverReport, DiscoverError> {
+/// What `auvnav discover` finds and decides, before the surface runs' held-out check of what it
+/// writes ([`super::gnss_written`]) and before anything is written.
+pub fn findings(a: &DiscoverOptions) -> Result<DiscoverReport, DiscoverError> {
     let smoothed = a.reference == "smoothed";
     if smoothed && a.one_voyage && a.logs.len() > 1 {
         return Err(DiscoverError::Options(
@@ -238,6 +239,27 @@ pub fn run(a: &DiscoverOptions) -> Result<DiscoverReport, DiscoverError> {
     if !a.no_navigation {
         let start = std::time::Instant::now();
         super::navigation::navigation_gain(&a.logs, &mut r);
+        r.wall_s += start.elapsed().as_secs_f64();
+    }
+    Ok(r)
+}
+
+/// `auvnav discover`.
+pub fn run(a: &DiscoverOptions) -> Result<DiscoverReport, DiscoverError> {
+    let mut r = findings(a)?;
+    if r.gnss.is_some() {
+        let start = std::time::Instant::now();
+        let discover = |logs| {
+            let inner = DiscoverOptions {
+                logs,
+                report: None,
+                write_effects: None,
+                write_config: None,
+                ..a.clone()
+            };
+            Ok(findings(&inner)?)
+        };
+        super::gnss_written::held_out(&a.logs, a.gnss_threshold, &mut r, &discover);
         r.wall_s += start.elapsed().as_secs_f64();
     }
     if let Some(p) = &a.write_effects {

@@ -38,7 +38,7 @@ const THRESHOLD_SHARE: f64 = 0.25;
 const AGREE_SIGMAS: f64 = 3.0;
 
 /// The vocabulary effect of a position-fit parameter and the component it is.
-fn effect_of(parameter: &str) -> (&str, usize) {
+pub(crate) fn effect_of(parameter: &str) -> (&str, usize) {
     match parameter {
         "dvl.lever_arm.x" => ("dvl.lever_arm", 0),
         "dvl.lever_arm.y" => ("dvl.lever_arm", 1),
@@ -86,7 +86,10 @@ fn track(run: &SurfaceRun) -> (f64, f64) {
 }
 
 /// The folds of the logs and the windows' threshold: each log a fold, or one log's two halves.
-fn folds(logs: &[PathBuf], threshold_m: Option<f64>) -> Result<(Vec<VoyageSpec>, f64), String> {
+pub(crate) fn folds(
+    logs: &[PathBuf],
+    threshold_m: Option<f64>,
+) -> Result<(Vec<VoyageSpec>, f64), String> {
     let mut specs = Vec::new();
     let mut shortest = f64::INFINITY;
     for log in logs {
@@ -182,6 +185,7 @@ pub fn decide(
         in_sample: fit.in_sample,
         held_out: fit.held_out,
         decisions,
+        written_held_out: Vec::new(),
     }));
 }
 

@@ -1,7 +1,7 @@
 //! The GNSS evidence's place in the report: what the GNSS positions of surface runs decide of
 //! the DVL installation (the types; [`crate::gnss`] fills them).
 
-use auvnav_calibrate::surface::{FittedParam, HeldOut, ScoreSet};
+use auvnav_calibrate::surface::{FittedParam, HeldOut, ScoreSet, SurfaceScore};
 use serde::Serialize;
 
 /// What the GNSS positions of surface runs say of the DVL installation.
@@ -21,6 +21,23 @@ pub struct GnssEvidence {
     pub held_out: Vec<HeldOut>,
     /// The decision per parameter of the vocabulary.
     pub decisions: Vec<GnssDecision>,
+    /// Each fold scored with what `--write-config` writes from the other folds alone (the whole
+    /// of discovery run on them), beside `held_out`'s nominal and two-point figures.
+    pub written_held_out: Vec<WrittenHeldOut>,
+}
+
+/// One fold navigated with the navigator configuration `auvnav discover --write-config` writes
+/// from the other folds.
+#[derive(Debug, Clone, Serialize)]
+pub struct WrittenHeldOut {
+    /// The fold scored (`LOG` or `LOG@START..END`).
+    pub fold: String,
+    /// The effects written (installation and compass effects; empty when nothing is).
+    pub written: Vec<HeldOutEffect>,
+    /// The fold's window errors with it (`None` when the other folds could not be discovered
+    /// on: `error` says why).
+    pub score: Option<SurfaceScore>,
+    pub error: Option<String>,
 }
 
 /// The decision on one installation parameter.
@@ -33,4 +50,14 @@ pub struct GnssDecision {
     /// `named`, `not determined`, `consistent with nominal`, `not excited`, or `disagrees`.
     pub verdict: String,
     pub note: String,
+}
+
+/// An effect the other folds write, and the held-out fold without it.
+#[derive(Debug, Clone, Serialize)]
+pub struct HeldOutEffect {
+    pub name: String,
+    pub value: serde_json::Value,
+    /// The fold's window RMS (m) with the rest of what is written and this effect at its nominal
+    /// value: above the fold's score with everything, the effect helps the fold.
+    pub rms_without_m: Option<f64>,
 }

@@ -22,6 +22,7 @@ pub mod findings;
 pub mod fit;
 pub mod gnss;
 pub mod gnss_evidence;
+mod gnss_written;
 pub mod hidden_effects;
 pub mod imu;
 pub mod navigation;

@@ -256,6 +256,9 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
     struct Navigation {
         #[serde(skip_serializing_if = "Option::is_none")]
         depth_lever_arm_m: Option<[f64; 3]>,
+        /// The compass's deviation card, where one was found (surface runs steer by it).
+        #[serde(skip_serializing_if = "Option::is_none")]
+        compass_deviation_deg: Option<[f64; 5]>,
         #[serde(skip_serializing_if = "Option::is_none")]
         dvl: Option<DvlInstallation>,
         #[serde(skip_serializing_if = "Option::is_none")]
@@ -276,6 +279,8 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
     let body = toml::to_string(&File {
         navigation: Navigation {
             depth_lever_arm_m,
+            compass_deviation_deg: (model.heading_deviation != r.nominal_model.heading_deviation)
+                .then_some(model.heading_deviation),
             dvl,
             magnetometer,
         },

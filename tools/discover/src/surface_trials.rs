@@ -106,7 +106,7 @@ pub fn surface_trial(
     hidden: &[Hidden],
     coloured: bool,
     dir: &Path,
-) -> anyhow::Result<SetTrial> {
+) -> anyhow::Result<(SetTrial, Vec<WrittenFold>)> {
     let scenario = Scenario::parse(&surface_scenario(seed), "surface trial")?;
     let mut effects = scenario.effects()?;
     let mut settings: Vec<(String, Vec<f64>)> = vec![
@@ -142,7 +142,39 @@ pub fn surface_trial(
     let _ = std::fs::remove_file(&log);
     let report = report.context("discovering on the surface trial")?;
     let found: Vec<String> = report.effects.iter().map(|e| e.name.clone()).collect();
-    Ok(score(seed, hidden, found, &[], &report))
+    let folds = written_folds(&report);
+    Ok((score(seed, hidden, found, &[], &report), folds))
+}
+
+/// One fold of a surface run navigated against its GNSS (window RMS, m) with the nominal
+/// installation, S-CAL's two-point installation from the other fold, and what `auvnav discover
+/// --write-config` writes from the other fold.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct WrittenFold {
+    pub nominal_m: f64,
+    pub two_point_m: f64,
+    pub written_m: f64,
+    /// Whether the other fold's discovery writes anything.
+    pub writes: bool,
+}
+
+/// The folds of a report's GNSS evidence that were scored with what the others write.
+pub fn written_folds(r: &super::findings::DiscoverReport) -> Vec<WrittenFold> {
+    let Some(g) = r.gnss.as_ref() else {
+        return Vec::new();
+    };
+    g.written_held_out
+        .iter()
+        .filter_map(|w| {
+            let h = g.held_out.iter().find(|h| h.run == w.fold)?;
+            Some(WrittenFold {
+                nominal_m: h.scores.nominal.rms_error_m,
+                two_point_m: h.scores.two_point.rms_error_m,
+                written_m: w.score.as_ref()?.rms_error_m,
+                writes: !w.written.is_empty(),
+            })
+        })
+        .collect()
 }
 
 /// Writes what a boat without an IMU records of the simulated `messages` into `log`: the DVL,
@@ -214,7 +246,7 @@ mod tests {
     fn a_noisy_gnss_reference_does_not_make_a_time_offset() {
         let d = dir("null");
         for seed in 9301..9306 {
-            let t = surface_trial(seed, &[], false, &d).expect("trial");
+            let (t, _) = surface_trial(seed, &[], false, &d).expect("trial");
             assert!(
                 !t.found.iter().any(|n| n == "dvl.time_offset"),
                 "seed {seed}: {:?}",
@@ -234,7 +266,7 @@ mod tests {
             (9312, Hidden::new("dvl.bed_velocity", vec![0.1, -0.06])),
             (9313, Hidden::new("dvl.time_offset", vec![0.6])),
         ] {
-            let t = surface_trial(seed, std::slice::from_ref(&h), false, &d).expect("trial");
+            let (t, _) = surface_trial(seed, std::slice::from_ref(&h), false, &d).expect("trial");
             assert!(t.correct, "seed {seed}, {} hidden: {t:?}", h.name);
         }
         let _ = std::fs::remove_dir_all(&d);

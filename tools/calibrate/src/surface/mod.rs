@@ -25,9 +25,11 @@ use serde::Serialize;
 
 mod params;
 mod report;
+mod score;
 pub use params::Candidate;
 use params::{PARAMS, get, set};
 pub use report::*;
+pub use score::score_installation;
 
 /// One scoring window: the fixes A and B (indices) and the GNSS distance along the track.
 #[derive(Debug, Clone, Copy)]

@@ -7,7 +7,7 @@
 use super::discover_misses::Misses;
 use crate::calibrate::Progress;
 use crate::discover::hidden_effects::SetTrial;
-use crate::discover::surface_trials::{SURFACE_HIDDEN, surface_draw, surface_trial};
+use crate::discover::surface_trials::{SURFACE_HIDDEN, WrittenFold, surface_draw, surface_trial};
 use crate::parallel::map_runs;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -33,7 +33,42 @@ pub(super) struct SurfaceFamily {
     pub(super) hidden_named_right_where_detectable_rate: f64,
     /// Per hidden effect: trials, named right, correct, and what was reported (or "none").
     pub(super) per_effect: Vec<SurfaceEffect>,
+    /// Every trial's folds (null and hidden) navigated with what `--write-config` writes from
+    /// the other fold, where it writes anything.
+    pub(super) written: WrittenFigures,
     pub(super) trials: Vec<SetTrial>,
+}
+
+/// What `auvnav discover --write-config` writes from one half of a run, navigating the other.
+#[derive(Debug, Serialize)]
+pub(super) struct WrittenFigures {
+    /// Folds where the other half's discovery writes anything.
+    pub(super) folds: usize,
+    /// Of those, closer to the GNSS than with the nominal installation.
+    pub(super) better_than_nominal: usize,
+    /// Of those, closer than with S-CAL's two-point installation from the other half.
+    pub(super) better_than_two_point: usize,
+    /// Median over those folds of 1 − written / two-point window RMS.
+    pub(super) median_gain_over_two_point: f64,
+}
+
+fn written_figures(folds: &[WrittenFold]) -> WrittenFigures {
+    let writing: Vec<&WrittenFold> = folds.iter().filter(|f| f.writes).collect();
+    let mut gains: Vec<f64> = writing
+        .iter()
+        .map(|f| 1.0 - f.written_m / f.two_point_m)
+        .filter(|g| g.is_finite())
+        .collect();
+    gains.sort_by(f64::total_cmp);
+    WrittenFigures {
+        folds: writing.len(),
+        better_than_nominal: writing.iter().filter(|f| f.written_m < f.nominal_m).count(),
+        better_than_two_point: writing
+            .iter()
+            .filter(|f| f.written_m < f.two_point_m)
+            .count(),
+        median_gain_over_two_point: gains.get(gains.len() / 2).copied().unwrap_or(f64::NAN),
+    }
 }
 
 #[derive(Debug, Serialize)]
@@ -76,25 +111,34 @@ pub(super) fn run(
         .chain((0..coloured_hidden).map(|k| (800_001 + k as u64, true, true)))
         .collect();
     let progress = Mutex::new((Progress::new(!json), 0usize));
-    let results = map_runs(jobs.len(), threads, |k| -> anyhow::Result<SetTrial> {
-        let (seed, coloured, hidden) = jobs[k];
-        let seed = seed + offset;
-        let h: Vec<_> = if hidden {
-            vec![surface_draw(seed)]
-        } else {
-            Vec::new()
-        };
-        let t = surface_trial(seed, &h, coloured, dir)?;
-        if let Ok(mut p) = progress.lock() {
-            p.1 += 1;
-            let done = p.1;
-            p.0.update("surface trials", done, jobs.len());
-        }
-        Ok(t)
-    });
+    let results = map_runs(
+        jobs.len(),
+        threads,
+        |k| -> anyhow::Result<(SetTrial, Vec<WrittenFold>)> {
+            let (seed, coloured, hidden) = jobs[k];
+            let seed = seed + offset;
+            let h: Vec<_> = if hidden {
+                vec![surface_draw(seed)]
+            } else {
+                Vec::new()
+            };
+            let t = surface_trial(seed, &h, coloured, dir)?;
+            if let Ok(mut p) = progress.lock() {
+                p.1 += 1;
+                let done = p.1;
+                p.0.update("surface trials", done, jobs.len());
+            }
+            Ok(t)
+        },
+    );
     let _ = std::fs::remove_dir_all(dir);
     let results = results?;
     let (white_trials, coloured_trials) = results.split_at(white);
+    let family = |t: &[(SetTrial, Vec<WrittenFold>)], null| {
+        let trials: Vec<SetTrial> = t.iter().map(|x| x.0.clone()).collect();
+        let folds: Vec<WrittenFold> = t.iter().flat_map(|x| x.1.iter().copied()).collect();
+        family(&trials, null, written_figures(&folds))
+    };
     Ok(SurfaceSummary {
         hidden_from: SURFACE_HIDDEN
             .iter()
@@ -105,7 +149,7 @@ pub(super) fn run(
     })
 }
 
-fn family(trials: &[SetTrial], null: usize) -> SurfaceFamily {
+fn family(trials: &[SetTrial], null: usize, written: WrittenFigures) -> SurfaceFamily {
     let (nulls, hidden) = trials.split_at(null);
     let misses = Misses::of(hidden.iter().flat_map(|t| t.misses.iter().flatten()));
     let named_right = hidden.iter().filter(|t| t.named_right).count();
@@ -140,6 +184,7 @@ fn family(trials: &[SetTrial], null: usize) -> SurfaceFamily {
             / misses.detectable(hidden.len()).max(1) as f64,
         hidden_misses: misses,
         per_effect: per.into_values().collect(),
+        written,
         trials: trials.to_vec(),
     }
 }
@@ -160,6 +205,16 @@ pub(super) fn print(s: &SurfaceSummary) {
             100.0 * f.hidden_named_right_where_detectable_rate,
             f.hidden_false_discoveries,
             f.hidden_misses.describe()
+        );
+        let w = &f.written;
+        println!(
+            "  what --write-config writes from one half, on the other: {} halves written to, {} \
+             closer to the GNSS than nominal, {} closer than the two-point installation (median \
+             gain over it {:.1} %)",
+            w.folds,
+            w.better_than_nominal,
+            w.better_than_two_point,
+            100.0 * w.median_gain_over_two_point
         );
         for e in &f.per_effect {
             println!(
