@@ -53,8 +53,7 @@ pub mod processes {
             .to_path_buf();
         let built = BUILT.get_or_init(|| {
             let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_string());
-            // `.ci/run` builds the same packages before its performance guard (same features:
-            // nothing rebuilt); change both together.
+            // `.ci/run`'s performance guard runs the `auvnav` this builds.
             let mut cmd = Command::new(cargo);
             cmd.args([
                 "build",
