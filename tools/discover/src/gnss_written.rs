@@ -21,7 +21,8 @@ use std::path::{Path, PathBuf};
 /// Scores each fold of `r.gnss` with what discovery writes from the other folds, and withholds
 /// from what this run writes an effect with which a fold held out navigates worse than without
 /// it (its mean square window error larger by more than [`super::fit::Selection::min_gain`]),
-/// where the other folds write it.
+/// where the other folds write it and the windows can see it ([`visible`]).
+///
 /// `discover` runs the whole of discovery, with the options of this run, on other logs.
 pub fn held_out(
     logs: &[PathBuf],
@@ -77,7 +78,7 @@ pub fn held_out(
         .collect();
     let _ = std::fs::remove_dir_all(&dir);
     // Worse: the fold's mean square window error grows by more than the selection's smallest
-    // gain (a time offset the windows barely see moves it in the fourth digit either way).
+    // gain.
     let min_gain = super::fit::Selection::default().min_gain;
     let params = &g.params;
     let refuted: Vec<Withheld> = installation_effects(r)
@@ -135,14 +136,25 @@ fn failed(fold: String, error: String) -> WrittenHeldOut {
     }
 }
 
+/// Effects of the velocity channel that the navigator configuration carries and the surface dead
+/// reckoning applies (a moving bed is the river's, a periodic error the navigator does not
+/// model, the beams' effects need the beams channel).
+const WRITTEN: &[&str] = &[
+    "dvl.mount_roll",
+    "dvl.mount_pitch",
+    "dvl.mount_yaw",
+    "dvl.scale_factor",
+    "dvl.sound_speed",
+    "dvl.lever_arm",
+    "dvl.time_offset",
+    "heading.deviation",
+];
+
 /// The effects found that the navigator configuration writes for a surface run and that are not
-/// withheld: the DVL's installation and the compass's deviation (a moving bed is the river's,
-/// not the installation's).
+/// withheld: the DVL's installation and the compass's deviation.
 fn installation_effects(r: &DiscoverReport) -> impl Iterator<Item = &FoundEffect> {
     r.effects.iter().filter(|e| {
-        (e.name.starts_with("dvl.") || e.name == "heading.deviation")
-            && e.name != "dvl.bed_velocity"
-            && !r.withheld.iter().any(|w| w.name == e.name)
+        WRITTEN.contains(&e.name.as_str()) && !r.withheld.iter().any(|w| w.name == e.name)
     })
 }
 
