@@ -259,7 +259,7 @@ pub fn run(a: &DiscoverOptions) -> Result<DiscoverReport, DiscoverError> {
             };
             Ok(findings(&inner)?)
         };
-        super::gnss_written::held_out(&a.logs, a.gnss_threshold, &mut r, &discover);
+        super::gnss_written::held_out(&mut r, &discover);
         r.wall_s += start.elapsed().as_secs_f64();
     }
     if let Some(p) = &a.write_effects {

@@ -86,10 +86,7 @@ fn track(run: &SurfaceRun) -> (f64, f64) {
 }
 
 /// The folds of the logs and the windows' threshold: each log a fold, or one log's two halves.
-pub(crate) fn folds(
-    logs: &[PathBuf],
-    threshold_m: Option<f64>,
-) -> Result<(Vec<VoyageSpec>, f64), String> {
+fn folds(logs: &[PathBuf], threshold_m: Option<f64>) -> Result<(Vec<VoyageSpec>, f64), String> {
     let mut specs = Vec::new();
     let mut shortest = f64::INFINITY;
     for log in logs {
@@ -179,6 +176,7 @@ pub fn decide(
     }
     r.gnss = Some(Box::new(GnssEvidence {
         folds: fit.runs,
+        fold_specs: specs,
         threshold_m: threshold,
         moving_bed,
         params: fit.params,

@@ -2,6 +2,7 @@
 //! the DVL installation (the types; [`crate::gnss`] fills them).
 
 use auvnav_calibrate::surface::{FittedParam, HeldOut, ScoreSet, SurfaceScore};
+use auvnav_calibrate::voyage::VoyageSpec;
 use serde::Serialize;
 
 /// What the GNSS positions of surface runs say of the DVL installation.
@@ -9,6 +10,9 @@ use serde::Serialize;
 pub struct GnssEvidence {
     /// The folds (logs, or a log's halves as `LOG@START..END`).
     pub folds: Vec<String>,
+    /// The same folds as the position fit read them (for the held-out check of what is written).
+    #[serde(skip)]
+    pub fold_specs: Vec<VoyageSpec>,
     /// The windows' distance along the GNSS track (m).
     pub threshold_m: f64,
     /// Whether each fold's bed velocity was fitted as a nuisance (`--moving-bed`).

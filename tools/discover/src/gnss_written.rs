@@ -25,19 +25,15 @@ use std::path::{Path, PathBuf};
 ///
 /// `discover` runs the whole of discovery, with the options of this run, on other logs.
 pub fn held_out(
-    logs: &[PathBuf],
-    gnss_threshold: Option<f64>,
     r: &mut DiscoverReport,
     discover: &dyn Fn(Vec<PathBuf>) -> anyhow::Result<DiscoverReport>,
 ) {
-    let Some(g) = r.gnss.as_deref().cloned() else {
+    let Some(g) = r.gnss.as_deref() else { return };
+    if g.fold_specs.len() < 2 {
         return;
-    };
+    }
+    let (specs, params) = (g.fold_specs.clone(), g.params.clone());
     let (threshold, moving_bed) = (g.threshold_m, g.moving_bed);
-    let specs = match super::gnss::folds(logs, gnss_threshold) {
-        Ok((specs, _)) if specs.len() >= 2 => specs,
-        _ => return,
-    };
     let dir = std::env::temp_dir().join(format!(
         "auvnav-discover-folds-{}-{}",
         std::process::id(),
@@ -80,7 +76,6 @@ pub fn held_out(
     // Worse: the fold's mean square window error grows by more than the selection's smallest
     // gain.
     let min_gain = super::fit::Selection::default().min_gain;
-    let params = &g.params;
     let refuted: Vec<Withheld> = installation_effects(r)
         .filter_map(|e| {
             let worse: Vec<String> = written
@@ -89,7 +84,7 @@ pub fn held_out(
                     let with = w.score.as_ref()?.rms_error_m;
                     let x = w.written.iter().find(|x| x.name == e.name)?;
                     let without = x.rms_without_m?;
-                    (visible(params, x) && with * with > without * without * (1.0 + min_gain))
+                    (visible(&params, x) && with * with > without * without * (1.0 + min_gain))
                         .then(|| format!("{} {with:.2} m with it, {without:.2} m without", w.fold))
                 })
                 .collect();
