@@ -17,6 +17,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Instant;
 
+pub use super::guard_baseline::{Baseline, GuardBaseline};
 pub use super::reference_workload::reference_workload;
 
 /// What `auvnav bench guard` is asked to do (its command line).
@@ -96,20 +97,6 @@ pub struct GuardReport {
 /// judged: most of its time is writing some 200 MB per hour of log, whose ratio to the reference
 /// moved by up to 14 % between runs of one build on the build VM.
 const JUDGED: [&str; 3] = ["replay core", "replay from the log", "smoothing"];
-
-/// A baseline: the ratios of this build profile's workloads to the reference workload.
-#[derive(Debug, Clone, Default, Serialize, serde::Deserialize)]
-pub struct GuardBaseline {
-    /// Per build profile, per workload: the median ratio to the reference workload.
-    pub profiles: std::collections::BTreeMap<String, std::collections::BTreeMap<String, f64>>,
-    /// When, where and from which commit each profile's ratios were measured.
-    pub measured: std::collections::BTreeMap<String, String>,
-    /// The processor each profile's ratios were measured on ([`cpu_model`]): the ratio of the
-    /// project's code to the reference workload depends on the processor's design (vector units,
-    /// caches), so another processor's ratios are not judged against them.
-    #[serde(default)]
-    pub processors: std::collections::BTreeMap<String, String>,
-}
 
 fn profile() -> &'static str {
     if cfg!(debug_assertions) {
@@ -451,30 +438,32 @@ pub fn guard(a: &GuardArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Judges every workload of `report` that the baseline file at `path` has a ratio for.
+/// Judges every workload of `report` that the baseline file at `path` has a ratio for, on this
+/// processor.
 fn judge_against(report: &mut GuardReport, path: &Path, limit_percent: f64) -> anyhow::Result<()> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let b: GuardBaseline =
-        serde_json::from_str(&text).with_context(|| format!("reading {}", path.display()))?;
-    let ratios = b.profiles.get(profile()).with_context(|| {
-        format!(
+    let b = GuardBaseline::parse(&text).with_context(|| format!("reading {}", path.display()))?;
+    let here = cpu_model();
+    let ratios = match b.find(profile(), &here) {
+        Ok(found) => &found.ratios,
+        Err(elsewhere) if elsewhere.is_empty() => anyhow::bail!(
             "{} has no baseline for the {} profile",
             path.display(),
             profile()
-        )
-    })?;
-    let here = cpu_model();
-    if let Some(there) = b.processors.get(profile())
-        && *there != here
-    {
-        for w in &mut report.workloads {
-            w.verdict = Some(format!(
-                "not judged: the baseline was measured on {there}, this is {here}; write one here with --write-baseline"
-            ));
+        ),
+        Err(elsewhere) => {
+            for w in &mut report.workloads {
+                w.verdict = Some(format!(
+                    "not judged: the {} baselines were measured on {}, this is {here}; add one \
+                     for it with --write-baseline",
+                    profile(),
+                    elsewhere.join(" and ")
+                ));
+            }
+            return Ok(());
         }
-        return Ok(());
-    }
+    };
     for w in &mut report.workloads {
         if let Some(&r) = ratios.get(&w.name) {
             report.passed &= judge(w, r, limit_percent);
@@ -483,33 +472,32 @@ fn judge_against(report: &mut GuardReport, path: &Path, limit_percent: f64) -> a
     Ok(())
 }
 
-/// Records the report's ratios as this build profile's baseline in the file at `path` (the other
-/// profiles' kept).
+/// Records the report's ratios as this build profile's baseline on this processor in the file at
+/// `path` (the other profiles' and processors' kept).
 fn write_baseline(report: &GuardReport, a: &GuardArgs, path: &Path) -> anyhow::Result<()> {
-    let mut b: GuardBaseline = std::fs::read_to_string(path)
-        .ok()
-        .and_then(|t| serde_json::from_str(&t).ok())
-        .unwrap_or_default();
-    b.profiles.insert(
-        profile().into(),
-        report
+    let mut b = match std::fs::read_to_string(path) {
+        Ok(text) => {
+            GuardBaseline::parse(&text).with_context(|| format!("reading {}", path.display()))?
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => GuardBaseline::default(),
+        Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+    };
+    b.insert(Baseline {
+        profile: profile().into(),
+        processor: cpu_model(),
+        ratios: report
             .workloads
             .iter()
             .filter(|w| JUDGED.contains(&w.name.as_str()))
             .map(|w| (w.name.clone(), w.median_ratio))
             .collect(),
-    );
-    b.processors.insert(profile().into(), cpu_model());
-    b.measured.insert(
-        profile().into(),
-        format!(
-            "{} pairs on {} h, version {}, {}",
+        measured: format!(
+            "{} pairs on {} h, version {}",
             a.pairs,
             a.hours,
-            auvnav_version::LONG,
-            cpu_model()
+            auvnav_version::LONG
         ),
-    );
+    });
     std::fs::write(path, serde_json::to_string_pretty(&b)? + "\n")
         .with_context(|| format!("writing {}", path.display()))
 }

@@ -14,6 +14,7 @@ mod discover_measured;
 mod discover_misses;
 mod discover_surface;
 mod guard;
+mod guard_baseline;
 mod latency;
 mod mag;
 mod reference_workload;
