@@ -40,9 +40,12 @@ pub mod processes {
     use std::sync::atomic::{AtomicU32, Ordering};
 
     /// The path of a workspace binary built for this test run (`target/<profile>/<name>`). The
-    /// first call brings the binaries of the driver, daemon and tool packages up to date with one
-    /// `cargo build` (a no-op after `cargo test --workspace`; needed when only this package's
-    /// tests were built, or a binary would be stale).
+    /// first call brings the workspace's binaries up to date with one `cargo build --workspace
+    /// --bins` (needed when only this package's tests were built, or a binary would be stale).
+    /// After `cargo test --workspace` it only links the programs of packages without integration
+    /// tests: the whole workspace resolves the dependencies' features as that did, while a
+    /// selection of packages resolves them otherwise and built a second set of dependencies
+    /// (about a minute in CI).
     pub fn binary(name: &str) -> PathBuf {
         static BUILT: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
         let exe = std::env::current_exe().expect("the test executable's path");
@@ -55,20 +58,7 @@ pub mod processes {
             let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_string());
             // `.ci/run`'s performance guard runs the `auvnav` this builds.
             let mut cmd = Command::new(cargo);
-            cmd.args([
-                "build",
-                "--bins",
-                "-p",
-                "auvnav-drivers",
-                "-p",
-                "auvnav-tools",
-                "-p",
-                "auvnavd",
-                "-p",
-                "auvnav-bridge",
-                "-p",
-                "auvnav-mavlink",
-            ]);
+            cmd.args(["build", "--workspace", "--bins"]);
             if dir.file_name().is_some_and(|n| n == "release") {
                 cmd.arg("--release");
             }
