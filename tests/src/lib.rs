@@ -42,10 +42,11 @@ pub mod processes {
     /// The path of a workspace binary built for this test run (`target/<profile>/<name>`). The
     /// first call brings the workspace's binaries up to date with one `cargo build --workspace
     /// --bins` (needed when only this package's tests were built, or a binary would be stale).
-    /// After `cargo test --workspace` it only links the programs of packages without integration
-    /// tests: the whole workspace resolves the dependencies' features as that did, while a
-    /// selection of packages resolves them otherwise and built a second set of dependencies
-    /// (about a minute in CI).
+    /// Without `--tests` cargo resolves the dependencies' features without the
+    /// dev-dependencies', unlike `cargo test --workspace`: after that it builds a second set of
+    /// dependencies (about 90 s in CI). With `--tests` it would reuse the test build, but the
+    /// program left in `target/debug` is then the one `.ci/run`'s performance guard judged
+    /// 20-30 % slower against its baseline (not yet explained).
     pub fn binary(name: &str) -> PathBuf {
         static BUILT: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
         let exe = std::env::current_exe().expect("the test executable's path");

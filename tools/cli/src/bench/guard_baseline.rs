@@ -39,10 +39,13 @@ struct BaselinePerProfile {
 impl GuardBaseline {
     /// The file's text, in either layout.
     pub fn parse(text: &str) -> anyhow::Result<GuardBaseline> {
-        if let Ok(b) = serde_json::from_str::<GuardBaseline>(text) {
-            return Ok(b);
+        // The layout is told by its top-level key, so that a malformed file is reported in the
+        // terms of its own layout.
+        let value: serde_json::Value = serde_json::from_str(text)?;
+        if value.get("baselines").is_some() {
+            return Ok(serde_json::from_value(value)?);
         }
-        let old: BaselinePerProfile = serde_json::from_str(text)?;
+        let old: BaselinePerProfile = serde_json::from_value(value)?;
         Ok(GuardBaseline {
             baselines: old
                 .profiles
