@@ -81,6 +81,10 @@ pub struct DiscoverOptions {
     /// 20 m to 5000 m).
     #[cfg_attr(feature = "clap", arg(long, value_name = "METRES"))]
     pub gnss_threshold: Option<f64>,
+    /// Effects never selected (not a command-line option): the refit of what `--write-config`
+    /// keeps once effects are withheld ([`crate::gnss_written::refit`]).
+    #[cfg_attr(feature = "clap", arg(skip))]
+    pub never_select: Vec<String>,
 }
 
 impl DiscoverOptions {
@@ -102,6 +106,7 @@ impl DiscoverOptions {
             one_voyage: false,
             moving_bed: false,
             gnss_threshold: None,
+            never_select: Vec::new(),
         }
     }
 }
@@ -260,6 +265,17 @@ pub fn run(a: &DiscoverOptions) -> Result<DiscoverReport, DiscoverError> {
             Ok(findings(&inner)?)
         };
         super::gnss_written::held_out(&mut r, &discover);
+        let without = |never_select| {
+            let inner = DiscoverOptions {
+                report: None,
+                write_effects: None,
+                write_config: None,
+                never_select,
+                ..a.clone()
+            };
+            Ok(findings(&inner)?)
+        };
+        super::gnss_written::refit(&mut r, &without);
         r.wall_s += start.elapsed().as_secs_f64();
     }
     if let Some(p) = &a.write_effects {
@@ -361,8 +377,12 @@ fn analyse(
                 reference,
             });
         }
-        let r =
-            super::voyages::discover_voyages(&data, nominal, a.fit_fraction, &Selection::default());
+        let r = super::voyages::discover_voyages(
+            &data,
+            nominal,
+            a.fit_fraction,
+            &Selection::excluding(&a.never_select),
+        );
         (r, undecodable)
     } else {
         let (channels, reference, undecodable) = if smoothed {
@@ -380,7 +400,7 @@ fn analyse(
             &reference,
             nominal,
             a.fit_fraction,
-            &Selection::default(),
+            &Selection::excluding(&a.never_select),
         );
         (r, undecodable)
     };

@@ -240,6 +240,10 @@ pub struct DiscoverReport {
     /// nominal values: with them the held-out navigation of some log got worse.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub withheld: Vec<Withheld>,
+    /// Surface runs with effects withheld: the selection again without them, which is what the
+    /// navigator configuration carries ([`crate::gnss_written::refit`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refit: Option<Box<Refit>>,
     /// Each log's navigation with what the navigator configuration carries (the effects found
     /// less those withheld), when effects were withheld and some are left.
     #[serde(skip_serializing_if = "Vec::is_empty")]
@@ -283,6 +287,7 @@ impl DiscoverReport {
             voyages: None,
             reference_against_imu: Vec::new(),
             withheld: Vec::new(),
+            refit: None,
             gnss: None,
             navigation_written: Vec::new(),
             wall_s: 0.0,
@@ -374,6 +379,26 @@ pub struct NavigationGain {
     pub worse: bool,
     /// What the comparison shows, in words.
     pub verdict: String,
+}
+
+/// What the navigator configuration carries once effects are withheld: discovery run again with
+/// them never selected, so that the effects kept are fitted without them (fitted beside them, an
+/// effect the motion couples to a withheld one carries part of it).
+#[derive(Debug, Clone, Serialize)]
+pub struct Refit {
+    /// The effects never selected.
+    pub without: Vec<String>,
+    /// What the refit names (values fitted without `without`).
+    pub effects: Vec<FoundEffect>,
+    /// What the refit withholds in its turn (its own navigation check).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub withheld: Vec<Withheld>,
+    /// One sentence per effect kept, named or not: its value beside the withheld effects and
+    /// without them.
+    pub changes: Vec<String>,
+    /// The nominal effects with what the refit names.
+    #[serde(skip)]
+    pub model: Effects,
 }
 
 /// An effect found that the navigator configuration leaves out, and why.
@@ -554,38 +579,5 @@ pub fn components_of(v: &serde_json::Value) -> Vec<Option<f64>> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn accuracy(rms_m: f64, velocity_m_s: f64, own_m: f64) -> Accuracy {
-        Accuracy {
-            horizontal_error_rms_m: rms_m,
-            horizontal_velocity_error_rms_m_s: velocity_m_s,
-            truth_position_against_velocity_rms_m: own_m,
-            ..Default::default()
-        }
-    }
-
-    #[test]
-    fn a_growth_in_position_or_in_velocity_is_worse() {
-        let (worse, text) =
-            NavigationGain::judge(&accuracy(1.93, 0.0666, 1.10), &accuracy(1.45, 0.0183, 1.10));
-        assert!(!worse && text.starts_with("not worse"), "{text}");
-        // A growth within the reference's own departure counts, and is said to be within it.
-        let (worse, text) =
-            NavigationGain::judge(&accuracy(0.98, 0.0167, 0.75), &accuracy(1.25, 0.0125, 0.75));
-        assert!(worse && text.starts_with("worse in position"), "{text}");
-        assert!(text.contains("less than the 0.75 m"), "{text}");
-        let (worse, text) =
-            NavigationGain::judge(&accuracy(1.67, 0.091, 0.76), &accuracy(2.89, 0.025, 0.76));
-        assert!(worse && !text.contains("less than"), "{text}");
-        // The velocity error grows, the position falls.
-        let (worse, text) =
-            NavigationGain::judge(&accuracy(1.42, 0.0128, 1.41), &accuracy(0.95, 0.0134, 1.41));
-        assert!(worse && text.starts_with("worse in velocity:"), "{text}");
-        // No velocity compared (a reference without one): the position alone.
-        let (worse, text) =
-            NavigationGain::judge(&accuracy(0.12, 0.0, 0.001), &accuracy(0.10, 0.0, 0.001));
-        assert!(!worse && !text.contains("velocity"), "{text}");
-    }
-}
+#[path = "findings_tests.rs"]
+mod tests;

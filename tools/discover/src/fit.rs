@@ -859,7 +859,12 @@ pub struct Selection {
     pub min_sigma: f64,
     /// Canonical correlation above which two candidates count as not separable on the motion.
     pub max_correlation: f64,
+    /// Candidates never selected, one bit per index into [`CANDIDATES`]: the refit of what
+    /// `--write-config` keeps once effects are withheld (`crate::gnss_written::refit`).
+    pub excluded: u64,
 }
+
+const _: () = assert!(CANDIDATES.len() <= 64, "one bit per candidate");
 
 impl Default for Selection {
     fn default() -> Self {
@@ -867,7 +872,29 @@ impl Default for Selection {
             min_gain: 0.01,
             min_sigma: 5.0,
             max_correlation: 0.98,
+            excluded: 0,
         }
+    }
+}
+
+impl Selection {
+    /// The default thresholds, the effects `names` never selected (names outside the candidates
+    /// are ignored).
+    pub fn excluding(names: &[String]) -> Selection {
+        let excluded = CANDIDATES
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| names.iter().any(|n| n == c.name))
+            .fold(0u64, |m, (i, _)| m | 1 << i);
+        Selection {
+            excluded,
+            ..Selection::default()
+        }
+    }
+
+    /// Whether candidate `c` may be selected.
+    pub fn allows(&self, c: usize) -> bool {
+        self.excluded & (1 << c) == 0
     }
 }
 
@@ -890,7 +917,11 @@ pub fn select(p: &Problem, sel: &Selection, separability: &Separability) -> Sele
     let base = p.held_out_mse(&chosen);
     let mut current = base;
     let mut steps = Vec::new();
-    let mut remaining = p.candidates();
+    let mut remaining: Vec<usize> = p
+        .candidates()
+        .into_iter()
+        .filter(|&c| sel.allows(c))
+        .collect();
     let mut preferred = Vec::new();
     while !remaining.is_empty() {
         let scores: Vec<(usize, f64)> = remaining
@@ -1034,7 +1065,11 @@ pub fn parameters(c: usize) -> usize {
 /// error, which no installation effect reproduces, still is. Members whose estimate is not
 /// `min_sigma` from nominal are dropped. The kept set is reported in steps of decreasing gain.
 pub fn select_parsimonious(p: &Problem, sel: &Selection, separability: &Separability) -> Selected {
-    let candidates = p.candidates();
+    let candidates: Vec<usize> = p
+        .candidates()
+        .into_iter()
+        .filter(|&c| sel.allows(c))
+        .collect();
     let base = p.held_out_mse(&[]);
     let mut sets: Vec<Vec<usize>> = vec![Vec::new()];
     for size in 1..=MAX_SUBSET.min(candidates.len()) {

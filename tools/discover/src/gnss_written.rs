@@ -8,7 +8,7 @@
 //! name; this judges the calibration a user would deploy, on a run it has not seen.
 
 use super::ChannelKind;
-use super::findings::{DiscoverReport, FoundEffect, Withheld};
+use super::findings::{DiscoverReport, FoundEffect, Refit, Withheld, components_of};
 use super::gnss_evidence::{HeldOutEffect, WrittenHeldOut};
 use super::outputs::{at_nominal, navigator_tables, written_model};
 use anyhow::Context;
@@ -102,6 +102,131 @@ pub fn held_out(
     if let Some(g) = r.gnss.as_mut() {
         g.written_held_out = written;
     }
+}
+
+/// Fits again what `--write-config` keeps once [`held_out`] withheld effects: `discover`
+/// runs the whole of discovery with them never selected. Fitted beside a withheld effect, a
+/// kept one that the motion couples to it carries part of it (on the lake run a time offset and
+/// the lever arm's forward component trade in the turns: forward speed × offset). A kept effect
+/// whose refitted value agrees with its value beside them (every component within
+/// [`AGREE_SIGMAS`] combined deviations) is written as refitted; one that moves further, or is
+/// no longer named, is not determined apart from what was withheld and is withheld too; an
+/// effect named only without them stands in for them and is not written. Where the refit fails,
+/// a note says so and the effects kept are written as fitted beside them.
+pub fn refit(
+    r: &mut DiscoverReport,
+    discover: &dyn Fn(Vec<String>) -> anyhow::Result<DiscoverReport>,
+) {
+    if r.withheld.is_empty() {
+        return;
+    }
+    let without: Vec<String> = r.withheld.iter().map(|w| w.name.clone()).collect();
+    let again = match discover(without.clone()) {
+        Ok(a) => a,
+        Err(e) => {
+            r.notes.push(format!(
+                "--write-config: fitting again without {} failed ({e:#}); the effects kept are \
+                 written as fitted beside them",
+                without.join(", ")
+            ));
+            return;
+        }
+    };
+    let list = without.join(", ");
+    let mut changes = Vec::new();
+    let mut withheld = again.withheld.clone();
+    for e in installation_effects(r) {
+        let Some(x) = again.effects.iter().find(|x| x.name == e.name) else {
+            changes.push(format!(
+                "{} {} {} beside {list}, not named without",
+                e.name,
+                shown(e),
+                e.unit
+            ));
+            withheld.push(Withheld {
+                name: e.name.clone(),
+                note: format!("named beside {list} only, which is withheld"),
+            });
+            continue;
+        };
+        let sigmas = apart(e, x);
+        let moved = format!(
+            "{} {} {unit} beside {list}, {} {unit} without ({sigmas:.1} combined deviations apart)",
+            e.name,
+            shown(e),
+            shown(x),
+            unit = e.unit
+        );
+        if sigmas > AGREE_SIGMAS {
+            withheld.push(Withheld {
+                name: e.name.clone(),
+                note: format!("not determined apart from {list}: {moved}"),
+            });
+        }
+        changes.push(moved);
+    }
+    for x in installation_effects(&again).filter(|x| !r.effects.iter().any(|e| e.name == x.name)) {
+        changes.push(format!(
+            "{} {} {} named only without {list}",
+            x.name,
+            shown(x),
+            x.unit
+        ));
+        withheld.push(Withheld {
+            name: x.name.clone(),
+            note: format!("named only once {list} is left out: it stands in for it"),
+        });
+    }
+    if changes.is_empty() {
+        changes.push("nothing else named".into());
+    }
+    r.refit = Some(Box::new(Refit {
+        without,
+        effects: again.effects.clone(),
+        withheld,
+        changes,
+        model: again.model,
+    }));
+}
+
+/// An effect's value with its deviation, rounded to the deviation's second digit.
+fn shown(e: &FoundEffect) -> String {
+    let (v, d) = (components_of(&e.value), components_of(&e.std));
+    let v: Vec<f64> = v.iter().map(|x| x.unwrap_or(f64::NAN)).collect();
+    let d: Vec<f64> = (0..v.len())
+        .map(|k| d.get(k).copied().flatten().unwrap_or(f64::NAN))
+        .collect();
+    super::analysis::with_deviation(&v, &d)
+}
+
+/// A kept effect's refitted value agrees with its value beside the withheld effects within this
+/// many combined deviations (the GNSS evidence's agreement between positions and velocities).
+const AGREE_SIGMAS: f64 = 3.0;
+
+/// The largest distance of a component of `a`'s value from `b`'s, in their combined deviations
+/// (infinite where a deviation is missing and the values differ).
+fn apart(a: &FoundEffect, b: &FoundEffect) -> f64 {
+    let (va, vb) = (components_of(&a.value), components_of(&b.value));
+    let (sa, sb) = (components_of(&a.std), components_of(&b.std));
+    (0..va.len().max(vb.len()))
+        .map(|k| {
+            let at = |v: &[Option<f64>]| v.get(k).copied().flatten();
+            match (at(&va), at(&vb)) {
+                (Some(x), Some(y)) if x == y => 0.0,
+                (Some(x), Some(y)) => {
+                    let combined = at(&sa)
+                        .unwrap_or(f64::NAN)
+                        .hypot(at(&sb).unwrap_or(f64::NAN));
+                    if combined.is_finite() && combined > 0.0 {
+                        (x - y).abs() / combined
+                    } else {
+                        f64::INFINITY
+                    }
+                }
+                _ => f64::INFINITY,
+            }
+        })
+        .fold(0.0, f64::max)
 }
 
 /// Whether the GNSS windows can see the effect as the other folds write it: some component
@@ -224,4 +349,93 @@ fn cut(log: &Path, window: (f64, f64), out: &Path) -> anyhow::Result<()> {
         Ok(())
     })?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn effect(name: &str, value: f64, std: f64) -> FoundEffect {
+        FoundEffect {
+            name: name.into(),
+            value: value.into(),
+            std: std.into(),
+            nominal: 0.0.into(),
+            unit: String::new(),
+            channel: ChannelKind::Dvl,
+            evidence: String::new(),
+            gain: 0.1,
+            equivalent: None,
+            line: None,
+        }
+    }
+
+    fn report(effects: Vec<FoundEffect>) -> DiscoverReport {
+        let mut r = DiscoverReport::new(&Effects::default());
+        r.effects = effects;
+        r
+    }
+
+    fn withheld_by_refit(r: &DiscoverReport) -> Vec<&str> {
+        let f = r.refit.as_ref().expect("refitted");
+        f.withheld.iter().map(|w| w.name.as_str()).collect()
+    }
+
+    #[test]
+    fn what_moves_without_the_withheld_effect_or_stands_in_for_it_is_withheld_too() {
+        let mut r = report(vec![
+            effect("dvl.mount_yaw", 2.0, 0.2),
+            effect("dvl.lever_arm", -0.2, 0.02),
+            effect("dvl.time_offset", -0.13, 0.02),
+            effect("dvl.mount_pitch", 0.5, 0.05),
+        ]);
+        r.withheld.push(Withheld {
+            name: "dvl.lever_arm".into(),
+            note: String::new(),
+        });
+        let asked = std::cell::RefCell::new(Vec::new());
+        let again = |without: Vec<String>| {
+            asked.borrow_mut().push(without);
+            let mut a = report(vec![
+                // Within its deviations: written as refitted.
+                effect("dvl.mount_yaw", 2.1, 0.2),
+                // 0.17 s away, 6 combined deviations: not determined apart from the lever arm.
+                effect("dvl.time_offset", -0.30, 0.02),
+                // Named only without the lever arm.
+                effect("dvl.scale_factor", 1.01, 0.001),
+            ]);
+            a.model.set("dvl.mount_yaw", &[2.1]).expect("an effect");
+            Ok(a)
+        };
+        refit(&mut r, &again);
+        assert_eq!(asked.into_inner(), vec![vec!["dvl.lever_arm".to_string()]]);
+        let mut withheld = withheld_by_refit(&r);
+        withheld.sort_unstable();
+        assert_eq!(
+            withheld,
+            ["dvl.mount_pitch", "dvl.scale_factor", "dvl.time_offset"]
+        );
+        let written = super::super::outputs::written_model(&r);
+        assert_eq!(written.get("dvl.mount_yaw"), Some(vec![2.1]));
+    }
+
+    #[test]
+    fn nothing_withheld_nothing_refitted() {
+        let mut r = report(vec![effect("dvl.mount_yaw", 2.0, 0.2)]);
+        refit(&mut r, &|_| panic!("no refit without a withheld effect"));
+        assert!(r.refit.is_none());
+    }
+
+    #[test]
+    fn apart_is_the_largest_component_distance_in_combined_deviations() {
+        let mut a = effect("dvl.lever_arm", 0.0, 0.0);
+        a.value = serde_json::json!([0.0, 1.0]);
+        a.std = serde_json::json!([0.3, 0.3]);
+        let mut b = a.clone();
+        b.value = serde_json::json!([0.0, 0.0]);
+        b.std = serde_json::json!([0.3, 0.4]);
+        assert!((apart(&a, &b) - 2.0).abs() < 1e-12);
+        b.std = serde_json::json!([0.3, null]);
+        assert_eq!(apart(&a, &b), f64::INFINITY);
+    }
 }

@@ -208,8 +208,13 @@ pub fn navigator_tables(
 }
 
 /// The model the navigator configuration is written from: the effects found (on all readings)
-/// less those withheld because the held-out navigation got worse with them.
+/// less those withheld because the held-out navigation got worse with them — on surface runs,
+/// the refit without them ([`crate::gnss_written::refit`]).
 pub fn written_model(r: &DiscoverReport) -> Effects {
+    if let Some(f) = &r.refit {
+        let names: Vec<&str> = f.withheld.iter().map(|w| w.name.as_str()).collect();
+        return at_nominal(&f.model, &r.nominal_model, &names);
+    }
     let names: Vec<&str> = r.withheld.iter().map(|w| w.name.as_str()).collect();
     at_nominal(&r.model, &r.nominal_model, &names)
 }
@@ -308,6 +313,19 @@ pub fn navigator_toml(r: &DiscoverReport) -> anyhow::Result<String> {
             "# NOT APPLIED: {} ({}); the tables below keep its nominal value.\n",
             w.name, w.note
         ));
+    }
+    if let Some(f) = &r.refit {
+        head.push_str(&format!(
+            "# Fitted again without {}: {}.\n",
+            f.without.join(", "),
+            f.changes.join("; ")
+        ));
+        for w in &f.withheld {
+            head.push_str(&format!(
+                "# NOT APPLIED (after the refit): {} ({}).\n",
+                w.name, w.note
+            ));
+        }
     }
     for u in &r.unseparable {
         head.push_str(&format!(

@@ -240,6 +240,15 @@ fn markdown(r: &DiscoverReport, figures: &[(ChannelKind, Vec<String>)]) -> Strin
     if let Some(g) = &r.gnss {
         m.push_str(&super::gnss::markdown(g));
     }
+    if let Some(f) = &r.refit {
+        let _ = writeln!(
+            m,
+            "### Fitted again without what is withheld\n\n`navigation.toml` is written from \
+             discovery run again with {} never selected: {}.\n",
+            f.without.join(", "),
+            f.changes.join("; ")
+        );
+    }
     if !r.floors.is_empty() {
         let _ = writeln!(
             m,

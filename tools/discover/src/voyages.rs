@@ -401,7 +401,7 @@ pub fn discover_voyages(
         // Per-voyage effects named by each voyage alone.
         let named = |i: usize, name: &str| named_alone(&reports, i, kind, name);
         let candidates: Vec<usize> = (0..CANDIDATES.len())
-            .filter(|&c| CANDIDATES[c].channel == kind)
+            .filter(|&c| CANDIDATES[c].channel == kind && sel.allows(c))
             .collect();
         for &c in &candidates {
             let name = CANDIDATES[c].name;
