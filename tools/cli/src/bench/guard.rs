@@ -8,9 +8,10 @@
 //! --repeat 1 --json` (the navigation core on messages in memory, and the whole replay from the
 //! log file), `auvnav smooth LOG --out DIR --json` writing every solution (its forward and
 //! backward passes, and the whole command), `auvnav bench decode --pty-seconds 0 --json`. Without a base build the
-//! other side is [`reference_workload`]: a frozen mix of what the replay does (a strapdown step
-//! with its sines and square roots per sample, a sparse covariance propagation at 20 Hz, a
-//! checksum over the log's bytes), whose time tracks the machine but never the project's code.
+//! other side is the reference workload, a program of its own (`auvnav-guard-reference`,
+//! `tools/guard-reference`): a frozen mix of what the replay does (a strapdown step with its sines
+//! and square roots per sample, a sparse covariance propagation at 20 Hz, a checksum over the
+//! log's bytes), whose time tracks the machine but never the project's code.
 
 use super::*;
 use std::path::{Path, PathBuf};
@@ -18,7 +19,8 @@ use std::process::{Command, Stdio};
 use std::time::Instant;
 
 pub use super::guard_baseline::{Baseline, GuardBaseline};
-pub use super::reference_workload::reference_workload;
+pub use super::guard_judge::{GuardReport, GuardWorkload};
+use super::guard_judge::{cpu_model, judge_against, median_and_noise, merge, profile};
 
 /// What `auvnav bench guard` is asked to do (its command line).
 #[derive(clap::Args, Debug, Clone)]
@@ -48,76 +50,14 @@ pub struct GuardArgs {
     /// The CPU to run on (default: the last one this process may use).
     #[arg(long)]
     pub cpu: Option<usize>,
-    /// Run the reference workload for --hours, print its wall time as JSON and exit (what the
-    /// guard times).
-    #[arg(long, hide = true)]
-    pub reference_workload: bool,
     #[arg(long)]
     pub json: bool,
-}
-
-/// One workload's alternating runs.
-#[derive(Debug, Clone, Serialize)]
-pub struct GuardWorkload {
-    pub name: String,
-    /// Wall time of each run of this build (s), in the order run.
-    pub this_wall_s: Vec<f64>,
-    /// Wall time of each run of the other side (the base build or the reference workload).
-    pub other_wall_s: Vec<f64>,
-    /// This build's time over the other's, pair by pair (> 1: this build is slower).
-    pub pair_ratios: Vec<f64>,
-    pub median_ratio: f64,
-    /// Half the spread of the middle half of the pair ratios, relative to their median (%): how
-    /// far one ratio strays from the median on this machine now.
-    pub noise_percent: f64,
-    /// Against the baseline (reference mode with a baseline): the baseline's ratio, the
-    /// slowdown (%; negative: faster) and the verdict.
-    pub baseline_ratio: Option<f64>,
-    pub slowdown_percent: Option<f64>,
-    pub verdict: Option<String>,
-}
-
-/// The guard's report.
-#[derive(Debug, Clone, Serialize)]
-pub struct GuardReport {
-    pub this: String,
-    /// The other side: a base build's path, or "the reference workload".
-    pub other: String,
-    /// The build profile of this binary ("release" or "dev"): baselines are kept per profile.
-    pub profile: String,
-    pub cpu: Option<usize>,
-    pub log_hours: f64,
-    pub pairs: usize,
-    pub workloads: Vec<GuardWorkload>,
-    /// Whether every judged workload passed (true when nothing was judged).
-    pub passed: bool,
 }
 
 /// The workloads a baseline keeps and judges. The whole smoothing command is reported but not
 /// judged: most of its time is writing some 200 MB per hour of log, whose ratio to the reference
 /// moved by up to 14 % between runs of one build on the build VM.
 const JUDGED: [&str; 3] = ["replay core", "replay from the log", "smoothing"];
-
-fn profile() -> &'static str {
-    if cfg!(debug_assertions) {
-        "dev"
-    } else {
-        "release"
-    }
-}
-
-/// The processor's model name and this machine's CPU count: where a baseline was measured.
-fn cpu_model() -> String {
-    let info = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
-    let model = info
-        .lines()
-        .find(|l| l.starts_with("model name"))
-        .and_then(|l| l.split(':').nth(1))
-        .map_or("unknown processor", str::trim);
-    // Counted from /proc/cpuinfo: this process may already be pinned to one of them.
-    let n = info.lines().filter(|l| l.starts_with("processor")).count();
-    format!("{model}, {n} CPUs")
-}
 
 /// Pins this process (and so the children it starts) to `cpu`, or to the last CPU it may use.
 fn pin(cpu: Option<usize>) -> Option<usize> {
@@ -228,34 +168,29 @@ fn decode_times(exe: &Path) -> anyhow::Result<Vec<(&'static str, f64)>> {
     Ok(vec![("decode", s)])
 }
 
-/// The reference workload for `hours`, run by `exe` (its own timing, s).
-fn reference_time(exe: &Path, hours: f64) -> anyhow::Result<f64> {
+/// The reference workload for `hours`, run by `program` (its own timing, s).
+fn reference_time(program: &Path, hours: f64) -> anyhow::Result<f64> {
     let h = hours.to_string();
-    let args = ["bench", "guard", "--reference-workload", "--hours", &h];
+    let args = ["--hours", &h];
     let os: Vec<&std::ffi::OsStr> = args.iter().map(std::ffi::OsStr::new).collect();
-    let (v, _) = run_json(exe, &os)?;
+    let (v, _) = run_json(program, &os)?;
     number(&v, "wall_s")
 }
 
-/// `auvnav bench guard --reference-workload`: runs it and prints its wall time as JSON.
-fn run_reference_workload(hours: f64) -> anyhow::Result<()> {
-    let t = Instant::now();
-    std::hint::black_box(reference_workload(hours));
-    crate::json::print(&serde_json::json!({ "wall_s": t.elapsed().as_secs_f64() }))?;
-    Ok(())
-}
-
-/// Median and noise (half the interquartile range over the median, %) of `ratios`.
-fn median_and_noise(ratios: &[f64]) -> (f64, f64) {
-    let mut s = ratios.to_vec();
-    s.sort_by(f64::total_cmp);
-    let q = |p: f64| {
-        let x = p * (s.len() - 1) as f64;
-        let (i, f) = (x.floor() as usize, x - x.floor());
-        s[i] + (s[(i + 1).min(s.len() - 1)] - s[i]) * f
-    };
-    let m = q(0.5);
-    (m, 50.0 * (q(0.75) - q(0.25)) / m)
+/// The reference workload's program: `auvnav-guard-reference` beside this `auvnav` (the
+/// workspace's programs are built into one folder).
+fn reference_program(exe: &Path) -> anyhow::Result<PathBuf> {
+    let p = exe.with_file_name(format!(
+        "auvnav-guard-reference{}",
+        std::env::consts::EXE_SUFFIX
+    ));
+    anyhow::ensure!(
+        p.is_file(),
+        "{} is missing: the guard's reference workload is a program of its own (build it with \
+         `cargo build --workspace --bins`, or `-p auvnav-guard-reference`)",
+        p.display()
+    );
+    Ok(p)
 }
 
 /// Runs one group of workloads `pairs` times on each side, alternating which goes first; each
@@ -301,49 +236,88 @@ fn alternate(
             baseline_ratio: None,
             slowdown_percent: None,
             verdict: None,
+            passed: None,
         });
     }
     Ok(out)
 }
 
-/// Judges `w` against `baseline`: a slowdown beyond `limit_percent` and beyond twice the run's
-/// noise fails; one within the limit passes; one beyond the limit but within the noise cannot be
-/// told from it and fails too (the guard never passes what it cannot judge).
-fn judge(w: &mut GuardWorkload, baseline: f64, limit_percent: f64) -> bool {
-    let slowdown = (w.median_ratio / baseline - 1.0) * 100.0;
-    w.baseline_ratio = Some(baseline);
-    w.slowdown_percent = Some(slowdown);
-    let (passed, verdict) = if slowdown <= limit_percent {
-        (
-            true,
-            format!("{slowdown:+.1} % against the baseline: within the {limit_percent} % limit"),
-        )
-    } else if slowdown > 2.0 * w.noise_percent {
-        (
-            false,
-            format!(
-                "{slowdown:+.1} % against the baseline: slower beyond the {limit_percent} % limit and beyond this run's noise ({:.1} %)",
-                w.noise_percent
-            ),
-        )
-    } else {
-        (
-            false,
-            format!(
-                "{slowdown:+.1} % against the baseline, but this run's noise is {:.1} %: cannot be judged here; run with more --pairs on a quieter machine",
-                w.noise_percent
-            ),
-        )
-    };
-    w.verdict = Some(verdict);
-    passed
+/// The groups of workloads, each run by one [`alternate`] call.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Group {
+    Replay,
+    Smooth,
+    Decode,
+}
+
+impl Group {
+    /// The group a workload's runs belong to.
+    fn of(workload: &str) -> Option<Group> {
+        match workload {
+            "replay core" | "replay from the log" => Some(Group::Replay),
+            "smoothing" | "smooth command" => Some(Group::Smooth),
+            "decode" => Some(Group::Decode),
+            _ => None,
+        }
+    }
+}
+
+/// This build and the other side (a base build, or the reference workload), with the log and
+/// the output folder the runs use.
+struct Sides<'a> {
+    exe: &'a Path,
+    /// The reference workload's program (without a base build).
+    reference: Option<PathBuf>,
+    a: &'a GuardArgs,
+    log: &'a Path,
+    out: &'a Path,
+}
+
+impl Sides<'_> {
+    /// `pairs` alternating pairs of each group.
+    fn run(&self, groups: &[Group], pairs: usize) -> anyhow::Result<Vec<GuardWorkload>> {
+        let (exe, hours, log, out) = (self.exe, self.a.hours, self.log, self.out);
+        let reference = || -> anyhow::Result<Vec<(&'static str, f64)>> {
+            let program = self
+                .reference
+                .as_deref()
+                .context("no reference workload program")?;
+            Ok(vec![("reference", reference_time(program, hours)?)])
+        };
+        let mut workloads = Vec::new();
+        for g in groups {
+            workloads.extend(match (g, &self.a.base) {
+                (Group::Replay, Some(base)) => alternate(
+                    "replay",
+                    pairs,
+                    || replay_times(exe, hours),
+                    || replay_times(base, hours),
+                )?,
+                (Group::Smooth, Some(base)) => alternate(
+                    "smooth",
+                    pairs,
+                    || smooth_times(exe, log, out),
+                    || smooth_times(base, log, out),
+                )?,
+                (Group::Decode, Some(base)) => {
+                    alternate("decode", pairs, || decode_times(exe), || decode_times(base))?
+                }
+                (Group::Replay, None) => {
+                    alternate("replay", pairs, || replay_times(exe, hours), reference)?
+                }
+                (Group::Smooth, None) => {
+                    alternate("smooth", pairs, || smooth_times(exe, log, out), reference)?
+                }
+                // The reference workload has no decoder.
+                (Group::Decode, None) => Vec::new(),
+            });
+        }
+        Ok(workloads)
+    }
 }
 
 /// `auvnav bench guard`: fails (exit status 3) when a judged workload slowed down.
 pub fn guard(a: &GuardArgs) -> anyhow::Result<()> {
-    if a.reference_workload {
-        return run_reference_workload(a.hours);
-    }
     anyhow::ensure!(
         a.hours > 0.0 && a.hours.is_finite() && a.pairs >= 1,
         "--hours must be > 0 and --pairs at least 1"
@@ -353,6 +327,10 @@ pub fn guard(a: &GuardArgs) -> anyhow::Result<()> {
         "--baseline and --write-baseline are ratios to the reference workload: leave out --base"
     );
     let exe = std::env::current_exe().context("finding the auvnav executable")?;
+    let reference = match a.base {
+        None => Some(reference_program(&exe)?),
+        Some(_) => None,
+    };
     let cpu = pin(a.cpu);
     let dir = std::env::temp_dir().join(format!("auvnav-bench-guard-{}", std::process::id()));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -360,67 +338,62 @@ pub fn guard(a: &GuardArgs) -> anyhow::Result<()> {
         let log = dir.join("guard.mcap");
         eprintln!("bench guard: simulating {} h ...", a.hours);
         sim::simulate_to_log(&super::throughput::replay_log_config(a.hours)?, &log)?;
-        let out = dir.join("smoothed");
-        let reference = || -> anyhow::Result<Vec<(&'static str, f64)>> {
-            Ok(vec![("reference", reference_time(&exe, a.hours)?)])
+        let sides = Sides {
+            exe: &exe,
+            reference: reference.clone(),
+            a,
+            log: &log,
+            out: &dir.join("smoothed"),
         };
-        let mut workloads = Vec::new();
-        let other = match &a.base {
-            Some(base) => {
-                workloads.extend(alternate(
-                    "replay",
-                    a.pairs,
-                    || replay_times(&exe, a.hours),
-                    || replay_times(base, a.hours),
-                )?);
-                workloads.extend(alternate(
-                    "smooth",
-                    a.pairs,
-                    || smooth_times(&exe, &log, &out),
-                    || smooth_times(base, &log, &out),
-                )?);
-                if a.decode {
-                    workloads.extend(alternate(
-                        "decode",
-                        a.pairs,
-                        || decode_times(&exe),
-                        || decode_times(base),
-                    )?);
-                }
-                base.display().to_string()
-            }
-            None => {
-                workloads.extend(alternate(
-                    "replay",
-                    a.pairs,
-                    || replay_times(&exe, a.hours),
-                    reference,
-                )?);
-                workloads.extend(alternate(
-                    "smooth",
-                    a.pairs,
-                    || smooth_times(&exe, &log, &out),
-                    reference,
-                )?);
-                "the reference workload".into()
-            }
-        };
-        Ok(GuardReport {
+        let mut groups = vec![Group::Replay, Group::Smooth];
+        if a.decode && a.base.is_some() {
+            groups.push(Group::Decode);
+        }
+        let mut report = GuardReport {
             this: exe.display().to_string(),
-            other,
+            other: a.base.as_ref().map_or_else(
+                || "the reference workload".into(),
+                |b| b.display().to_string(),
+            ),
             profile: profile().into(),
             cpu,
             log_hours: a.hours,
             pairs: a.pairs,
-            workloads,
+            workloads: sides.run(&groups, a.pairs)?,
             passed: true,
-        })
+            confirmed: Vec::new(),
+        };
+        if let Some(path) = &a.baseline {
+            judge_against(&mut report, path, a.limit_percent)?;
+            // A slowdown is confirmed before it fails: the groups that failed run as many
+            // pairs again and are judged on all their pairs (noise that hit the first round
+            // passes, a slower build fails again).
+            let failed: Vec<Group> = groups
+                .iter()
+                .copied()
+                .filter(|g| {
+                    report
+                        .workloads
+                        .iter()
+                        .any(|w| w.failed() && Group::of(&w.name) == Some(*g))
+                })
+                .collect();
+            if !failed.is_empty() {
+                eprintln!(
+                    "bench guard: slower than the baseline; confirming with {} more pairs",
+                    a.pairs
+                );
+                let more = sides.run(&failed, a.pairs)?;
+                report.confirmed = more.iter().map(|w| w.name.clone()).collect();
+                merge(&mut report.workloads, more);
+                report.passed = true;
+                judge_against(&mut report, path, a.limit_percent)?;
+            }
+        }
+        Ok(report)
     })();
     let _ = std::fs::remove_dir_all(&dir);
-    let mut report = result?;
-    if let Some(path) = &a.baseline {
-        judge_against(&mut report, path, a.limit_percent)?;
-    }
+    let report = result?;
     if let Some(path) = &a.write_baseline {
         write_baseline(&report, a, path)?;
     }
@@ -434,40 +407,6 @@ pub fn guard(a: &GuardArgs) -> anyhow::Result<()> {
             "bench guard: slower than the baseline (see above)".into(),
         )
         .into());
-    }
-    Ok(())
-}
-
-/// Judges every workload of `report` that the baseline file at `path` has a ratio for, on this
-/// processor.
-fn judge_against(report: &mut GuardReport, path: &Path, limit_percent: f64) -> anyhow::Result<()> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let b = GuardBaseline::parse(&text).with_context(|| format!("reading {}", path.display()))?;
-    let here = cpu_model();
-    let ratios = match b.find(profile(), &here) {
-        Ok(found) => &found.ratios,
-        Err(elsewhere) if elsewhere.is_empty() => anyhow::bail!(
-            "{} has no baseline for the {} profile",
-            path.display(),
-            profile()
-        ),
-        Err(elsewhere) => {
-            for w in &mut report.workloads {
-                w.verdict = Some(format!(
-                    "not judged: the {} baselines were measured on {}, this is {here}; add one \
-                     for it with --write-baseline",
-                    profile(),
-                    elsewhere.join(" and ")
-                ));
-            }
-            return Ok(());
-        }
-    };
-    for w in &mut report.workloads {
-        if let Some(&r) = ratios.get(&w.name) {
-            report.passed &= judge(w, r, limit_percent);
-        }
     }
     Ok(())
 }
@@ -529,59 +468,12 @@ fn print_report(report: &GuardReport) {
                 .map_or(String::new(), |v| format!(": {v}"))
         );
     }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn workload(ratios: &[f64]) -> GuardWorkload {
-        let (median_ratio, noise_percent) = median_and_noise(ratios);
-        GuardWorkload {
-            name: "replay core".into(),
-            this_wall_s: ratios.to_vec(),
-            other_wall_s: vec![1.0; ratios.len()],
-            pair_ratios: ratios.to_vec(),
-            median_ratio,
-            noise_percent,
-            baseline_ratio: None,
-            slowdown_percent: None,
-            verdict: None,
-        }
-    }
-
-    #[test]
-    fn the_noise_is_half_the_middle_spread_over_the_median() {
-        let (m, n) = median_and_noise(&[5.0, 1.0, 3.0, 2.0, 4.0]);
-        assert_eq!(m, 3.0);
-        assert!((n - 100.0 / 3.0).abs() < 1e-12, "{n}");
-        assert_eq!(median_and_noise(&[2.0]), (2.0, 0.0));
-    }
-
-    /// 20 % slower with a quiet run fails; 5 % slower passes; 20 % slower in a run whose ratios
-    /// scatter by more than that cannot be judged and fails too; faster passes.
-    #[test]
-    fn a_slowdown_beyond_the_limit_and_the_noise_fails() {
-        let mut w = workload(&[1.19, 1.2, 1.21, 1.2, 1.2]);
-        assert!(!judge(&mut w, 1.0, 10.0));
-        assert!(
-            w.verdict
-                .as_deref()
-                .expect("judged")
-                .contains("beyond the 10 % limit")
+    if !report.confirmed.is_empty() {
+        println!(
+            "  slower than the baseline after {} pairs: {} ran {} more, judged on all of them",
+            report.pairs,
+            report.confirmed.join(", "),
+            report.pairs
         );
-        assert!((w.slowdown_percent.expect("judged") - 20.0).abs() < 1e-9);
-        let mut w = workload(&[1.04, 1.05, 1.06]);
-        assert!(judge(&mut w, 1.0, 10.0));
-        let mut w = workload(&[0.7, 1.2, 1.7, 1.0, 1.5]);
-        assert!(!judge(&mut w, 1.0, 10.0));
-        assert!(
-            w.verdict
-                .as_deref()
-                .expect("judged")
-                .contains("cannot be judged")
-        );
-        let mut w = workload(&[0.8, 0.8, 0.8]);
-        assert!(judge(&mut w, 1.0, 10.0));
     }
 }

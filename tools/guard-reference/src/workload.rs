@@ -1,7 +1,8 @@
 //! The guard's reference workload ([`reference_workload`]): fixed code whose time follows the
 //! machine, never the project's, so that a build's time divided by it can be compared across
 //! runs and days. Frozen: the baselines in `tools/cli/guard-baseline.json` are ratios to it, and
-//! any change here needs every baseline measured again (`auvnav bench guard --write-baseline`).
+//! any change here (or to this program's build) needs every baseline measured again (`auvnav
+//! bench guard --write-baseline`).
 
 /// The fixed reference workload for `hours` of a 200 Hz log. Frozen: the guard's baselines are
 /// ratios to it, so any change to it (or to its constants) needs every baseline measured again.
