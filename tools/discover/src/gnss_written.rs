@@ -405,6 +405,10 @@ mod tests {
                 effect("dvl.scale_factor", 1.01, 0.001),
             ]);
             a.model.set("dvl.mount_yaw", &[2.1]).expect("an effect");
+            // As if the refit's GNSS decision named the withheld effect again.
+            a.model
+                .set("dvl.lever_arm", &[-0.2, -0.2, 0.0])
+                .expect("an effect");
             Ok(a)
         };
         refit(&mut r, &again);
@@ -417,6 +421,7 @@ mod tests {
         );
         let written = super::super::outputs::written_model(&r);
         assert_eq!(written.get("dvl.mount_yaw"), Some(vec![2.1]));
+        assert_eq!(written.get("dvl.lever_arm"), Some(vec![0.0; 3]));
     }
 
     #[test]

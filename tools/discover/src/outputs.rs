@@ -212,7 +212,14 @@ pub fn navigator_tables(
 /// the refit without them ([`crate::gnss_written::refit`]).
 pub fn written_model(r: &DiscoverReport) -> Effects {
     if let Some(f) = &r.refit {
-        let names: Vec<&str> = f.withheld.iter().map(|w| w.name.as_str()).collect();
+        // What the first pass withheld stays at nominal even where the refit's GNSS decision
+        // names it again.
+        let names: Vec<&str> = f
+            .withheld
+            .iter()
+            .chain(&r.withheld)
+            .map(|w| w.name.as_str())
+            .collect();
         return at_nominal(&f.model, &r.nominal_model, &names);
     }
     let names: Vec<&str> = r.withheld.iter().map(|w| w.name.as_str()).collect();
