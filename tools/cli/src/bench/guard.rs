@@ -20,7 +20,7 @@ use std::time::Instant;
 
 pub use super::guard_baseline::{Baseline, GuardBaseline};
 pub use super::guard_judge::{GuardReport, GuardWorkload};
-use super::guard_judge::{cpu_model, judge_against, median_and_noise, merge, profile};
+use super::guard_judge::{cpu_model, judge_against, merge, profile};
 
 /// What `auvnav bench guard` is asked to do (its command line).
 #[derive(clap::Args, Debug, Clone)]
@@ -220,24 +220,7 @@ fn alternate(
             .iter()
             .map(|r| r.iter().find(|(n, _)| n == name).unwrap_or(&r[0]).1)
             .collect();
-        let pair_ratios: Vec<f64> = this_wall_s
-            .iter()
-            .zip(&other_wall_s)
-            .map(|(x, y)| x / y)
-            .collect();
-        let (median_ratio, noise_percent) = median_and_noise(&pair_ratios);
-        out.push(GuardWorkload {
-            name: (*name).into(),
-            this_wall_s,
-            other_wall_s,
-            pair_ratios,
-            median_ratio,
-            noise_percent,
-            baseline_ratio: None,
-            slowdown_percent: None,
-            verdict: None,
-            passed: None,
-        });
+        out.push(GuardWorkload::of_runs(name, this_wall_s, other_wall_s));
     }
     Ok(out)
 }

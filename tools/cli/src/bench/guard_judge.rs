@@ -32,6 +32,29 @@ pub struct GuardWorkload {
 }
 
 impl GuardWorkload {
+    /// A workload's runs, not judged yet: pair by pair this build's time over the other's, their
+    /// median and noise.
+    pub fn of_runs(name: &str, this_wall_s: Vec<f64>, other_wall_s: Vec<f64>) -> GuardWorkload {
+        let pair_ratios: Vec<f64> = this_wall_s
+            .iter()
+            .zip(&other_wall_s)
+            .map(|(x, y)| x / y)
+            .collect();
+        let (median_ratio, noise_percent) = median_and_noise(&pair_ratios);
+        GuardWorkload {
+            name: name.into(),
+            this_wall_s,
+            other_wall_s,
+            pair_ratios,
+            median_ratio,
+            noise_percent,
+            baseline_ratio: None,
+            slowdown_percent: None,
+            verdict: None,
+            passed: None,
+        }
+    }
+
     /// Judged and failed.
     pub fn failed(&self) -> bool {
         self.passed == Some(false)
@@ -80,7 +103,7 @@ pub(super) fn cpu_model() -> String {
 }
 
 /// Median and noise (half the interquartile range over the median, %) of `ratios`.
-pub(super) fn median_and_noise(ratios: &[f64]) -> (f64, f64) {
+fn median_and_noise(ratios: &[f64]) -> (f64, f64) {
     let mut s = ratios.to_vec();
     s.sort_by(f64::total_cmp);
     let q = |p: f64| {
@@ -171,14 +194,9 @@ pub(super) fn merge(workloads: &mut [GuardWorkload], more: Vec<GuardWorkload>) {
         let Some(w) = workloads.iter_mut().find(|w| w.name == m.name) else {
             continue;
         };
-        w.this_wall_s.extend(m.this_wall_s);
-        w.other_wall_s.extend(m.other_wall_s);
-        w.pair_ratios.extend(m.pair_ratios);
-        (w.median_ratio, w.noise_percent) = median_and_noise(&w.pair_ratios);
-        w.baseline_ratio = None;
-        w.slowdown_percent = None;
-        w.verdict = None;
-        w.passed = None;
+        let this = [w.this_wall_s.as_slice(), &m.this_wall_s].concat();
+        let other = [w.other_wall_s.as_slice(), &m.other_wall_s].concat();
+        *w = GuardWorkload::of_runs(&m.name, this, other);
     }
 }
 
@@ -187,19 +205,7 @@ mod tests {
     use super::*;
 
     fn workload(ratios: &[f64]) -> GuardWorkload {
-        let (median_ratio, noise_percent) = median_and_noise(ratios);
-        GuardWorkload {
-            name: "replay core".into(),
-            this_wall_s: ratios.to_vec(),
-            other_wall_s: vec![1.0; ratios.len()],
-            pair_ratios: ratios.to_vec(),
-            median_ratio,
-            noise_percent,
-            baseline_ratio: None,
-            slowdown_percent: None,
-            verdict: None,
-            passed: None,
-        }
+        GuardWorkload::of_runs("replay core", ratios.to_vec(), vec![1.0; ratios.len()])
     }
 
     #[test]
