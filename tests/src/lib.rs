@@ -43,9 +43,10 @@ pub mod processes {
     /// first call brings the workspace's binaries up to date with one `cargo build --workspace
     /// --bins --test source_size` (needed when only this package's tests were built, or a binary
     /// would be stale). Cargo resolves the dependencies' features per selection: `--bins` alone
-    /// leaves out this package's dev-dependencies (`syn` with its `visit` feature, for the
-    /// source-size guard), and so every procedural macro and everything derived with one was
-    /// built a second time after `cargo test --workspace` (about 90 s of every CI run). With
+    /// leaves out this package's dev-dependencies (`syn` with `visit`, `proc-macro2` with
+    /// `span-locations`, for the source-size guard), and so every procedural macro and
+    /// everything derived with one was built a second time after `cargo test --workspace`
+    /// (about 90 s of every CI run). With
     /// the one test target that uses them the selection resolves as `cargo test --workspace`
     /// does, and after it the command has nothing to build. (Measured on 2026-12-07: the
     /// program built either way replays and smooths at the same speed, pair ratio 0.99.)

@@ -254,27 +254,21 @@ pub fn run(a: &DiscoverOptions) -> Result<DiscoverReport, DiscoverError> {
     let mut r = findings(a)?;
     if r.gnss.is_some() {
         let start = std::time::Instant::now();
-        let discover = |logs| {
-            let inner = DiscoverOptions {
+        // Discovery as this run makes it, on other logs or with effects never selected, writing
+        // nothing.
+        let inner = |logs, never_select| {
+            findings(&DiscoverOptions {
                 logs,
-                report: None,
-                write_effects: None,
-                write_config: None,
-                ..a.clone()
-            };
-            Ok(findings(&inner)?)
-        };
-        super::gnss_written::held_out(&mut r, &discover);
-        let without = |never_select| {
-            let inner = DiscoverOptions {
                 report: None,
                 write_effects: None,
                 write_config: None,
                 never_select,
                 ..a.clone()
-            };
-            Ok(findings(&inner)?)
+            })
         };
+        let discover = |logs| Ok(inner(logs, a.never_select.clone())?);
+        super::gnss_written::held_out(&mut r, &discover);
+        let without = |never_select| Ok(inner(a.logs.clone(), never_select)?);
         super::gnss_written::refit(&mut r, &without);
         r.wall_s += start.elapsed().as_secs_f64();
     }

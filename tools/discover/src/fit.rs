@@ -896,6 +896,14 @@ impl Selection {
     pub fn allows(&self, c: usize) -> bool {
         self.excluded & (1 << c) == 0
     }
+
+    /// The channel's candidates ([`Problem::candidates`]) that may be selected.
+    pub fn candidates(&self, p: &Problem) -> Vec<usize> {
+        p.candidates()
+            .into_iter()
+            .filter(|&c| self.allows(c))
+            .collect()
+    }
 }
 
 /// One step of the selection: the candidate, the held-out score before and after.
@@ -917,11 +925,7 @@ pub fn select(p: &Problem, sel: &Selection, separability: &Separability) -> Sele
     let base = p.held_out_mse(&chosen);
     let mut current = base;
     let mut steps = Vec::new();
-    let mut remaining: Vec<usize> = p
-        .candidates()
-        .into_iter()
-        .filter(|&c| sel.allows(c))
-        .collect();
+    let mut remaining = sel.candidates(p);
     let mut preferred = Vec::new();
     while !remaining.is_empty() {
         let scores: Vec<(usize, f64)> = remaining
@@ -1065,11 +1069,7 @@ pub fn parameters(c: usize) -> usize {
 /// error, which no installation effect reproduces, still is. Members whose estimate is not
 /// `min_sigma` from nominal are dropped. The kept set is reported in steps of decreasing gain.
 pub fn select_parsimonious(p: &Problem, sel: &Selection, separability: &Separability) -> Selected {
-    let candidates: Vec<usize> = p
-        .candidates()
-        .into_iter()
-        .filter(|&c| sel.allows(c))
-        .collect();
+    let candidates = sel.candidates(p);
     let base = p.held_out_mse(&[]);
     let mut sets: Vec<Vec<usize>> = vec![Vec::new()];
     for size in 1..=MAX_SUBSET.min(candidates.len()) {

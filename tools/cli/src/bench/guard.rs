@@ -250,7 +250,7 @@ impl Group {
 struct Sides<'a> {
     exe: &'a Path,
     /// The reference workload's program (without a base build).
-    reference: Option<PathBuf>,
+    reference: Option<&'a Path>,
     a: &'a GuardArgs,
     log: &'a Path,
     out: &'a Path,
@@ -261,10 +261,7 @@ impl Sides<'_> {
     fn run(&self, groups: &[Group], pairs: usize) -> anyhow::Result<Vec<GuardWorkload>> {
         let (exe, hours, log, out) = (self.exe, self.a.hours, self.log, self.out);
         let reference = || -> anyhow::Result<Vec<(&'static str, f64)>> {
-            let program = self
-                .reference
-                .as_deref()
-                .context("no reference workload program")?;
+            let program = self.reference.context("no reference workload program")?;
             Ok(vec![("reference", reference_time(program, hours)?)])
         };
         let mut workloads = Vec::new();
@@ -323,7 +320,7 @@ pub fn guard(a: &GuardArgs) -> anyhow::Result<()> {
         sim::simulate_to_log(&super::throughput::replay_log_config(a.hours)?, &log)?;
         let sides = Sides {
             exe: &exe,
-            reference: reference.clone(),
+            reference: reference.as_deref(),
             a,
             log: &log,
             out: &dir.join("smoothed"),
