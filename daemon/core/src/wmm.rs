@@ -8,9 +8,11 @@
 //! to the geodetic north-east-down frame. A model is valid for five years from its epoch; a date
 //! outside that window is an error, not an extrapolation.
 //!
-//! The current model (WMM2025, valid 2025.0–2030.0) is built in ([`WorldMagneticModel::builtin`]);
-//! the WMM coefficients are a work of the US government (public domain). A newer or older model
-//! is read from its `WMM.COF` file ([`WorldMagneticModel::from_cof`]).
+//! The current model (WMM2025, valid 2025.0–2030.0) is built in ([`WorldMagneticModel::builtin`]),
+//! and so are WMM2010 (2010.0–2015.0) and WMM2020 (2020.0–2025.0) for older recordings
+//! ([`WorldMagneticModel::builtin_for`]);
+//! the WMM coefficients are a work of the US government (public domain). Another model is read
+//! from its `WMM.COF` file ([`WorldMagneticModel::from_cof`]).
 
 use nalgebra::Vector3;
 use std::fmt;
@@ -25,6 +27,8 @@ const TERMS: usize = (DEGREE + 1) * (DEGREE + 2) / 2;
 pub const VALIDITY_YEARS: f64 = 5.0;
 
 const WMM2025_COF: &str = include_str!("wmm/WMM2025.COF");
+const WMM2010_COF: &str = include_str!("wmm/WMM2010.COF");
+const WMM2020_COF: &str = include_str!("wmm/WMM2020.COF");
 
 fn index(n: usize, m: usize) -> usize {
     n * (n + 1) / 2 + m
@@ -115,6 +119,19 @@ impl WorldMagneticModel {
     pub fn builtin() -> WorldMagneticModel {
         // The embedded file is checked by a unit test; a failure here is a build defect.
         Self::from_cof(WMM2025_COF).expect("the built-in WMM2025 coefficients parse")
+    }
+
+    /// The built-in model whose validity holds `date` (decimal year): WMM2010 for 2010.0–2015.0,
+    /// WMM2020 for 2020.0–2025.0 (WMM2025 from 2025.0 on), WMM2025 to 2030.0; None for other
+    /// dates (their model's `WMM.COF` must be given).
+    pub fn builtin_for(date: f64) -> Option<WorldMagneticModel> {
+        [WMM2010_COF, WMM2025_COF, WMM2020_COF]
+            .iter()
+            .map(|text| Self::from_cof(text).expect("the built-in WMM coefficients parse"))
+            .find(|m| {
+                let (from, to) = m.validity();
+                (from..=to).contains(&date)
+            })
     }
 
     /// Reads a model from the text of a `WMM.COF` file: a header line "epoch name date", one
@@ -367,6 +384,67 @@ mod tests {
         assert!(e.to_string().contains("outside the validity of WMM-2025"));
         assert!(m.field(91.0, 0.0, 0.0, 2026.0).is_err());
         assert!(m.field(f64::NAN, 0.0, 0.0, 2026.0).is_err());
+    }
+
+    /// The test values of the WMM2010 technical report (NOAA NGDC / BGS, 2010): declination at
+    /// 0 and 100 km above the ellipsoid, 2010.0 and 2012.5.
+    #[test]
+    fn wmm2010_gives_its_reports_test_values() {
+        let m = WorldMagneticModel::builtin_for(2012.5).expect("WMM2010 for 2012.5");
+        assert_eq!(m.name, "WMM-2010");
+        for (date, height_m, lat, lon, declination) in [
+            (2010.0, 0.0, 80.0, 0.0, -6.13),
+            (2010.0, 0.0, 0.0, 120.0, 0.97),
+            (2010.0, 0.0, -80.0, 240.0, 70.21),
+            (2010.0, 100e3, 80.0, 0.0, -6.57),
+            (2010.0, 100e3, 0.0, 120.0, 0.94),
+            (2010.0, 100e3, -80.0, 240.0, 69.62),
+            (2012.5, 0.0, 80.0, 0.0, -5.21),
+            (2012.5, 0.0, 0.0, 120.0, 0.88),
+            (2012.5, 0.0, -80.0, 240.0, 70.04),
+            (2012.5, 100e3, 80.0, 0.0, -5.63),
+            (2012.5, 100e3, 0.0, 120.0, 0.86),
+            (2012.5, 100e3, -80.0, 240.0, 69.45),
+        ] {
+            let d = m
+                .field(lat, lon, height_m, date)
+                .expect("inside")
+                .declination_deg();
+            assert!((d - declination).abs() < 0.01, "{date} {lat} {lon}: {d}");
+        }
+        assert_eq!(
+            WorldMagneticModel::builtin_for(2026.0).map(|m| m.name),
+            Some("WMM-2025".into())
+        );
+        assert!(WorldMagneticModel::builtin_for(2019.0).is_none());
+    }
+
+    /// WMM2020 carried to its end agrees with WMM2025 at its start away from the poles (within
+    /// 0.5° of declination: the two fits and five years of secular variation differ by a few
+    /// tenths), which a wrong coefficient would break; it covers 2020–2025.
+    #[test]
+    fn wmm2020_meets_wmm2025_at_2025() {
+        let old = WorldMagneticModel::builtin_for(2022.6).expect("WMM2020 for 2022");
+        assert_eq!(old.name, "WMM-2020");
+        let new = WorldMagneticModel::builtin();
+        for (lat, lon) in [
+            (45.0, 10.0),
+            (-33.9, 18.4),
+            (40.0, -105.0),
+            (35.7, 139.7),
+            (0.0, -60.0),
+            (64.6, -149.1),
+        ] {
+            let a = old
+                .field(lat, lon, 0.0, 2025.0)
+                .expect("inside")
+                .declination_deg();
+            let b = new
+                .field(lat, lon, 0.0, 2025.0)
+                .expect("inside")
+                .declination_deg();
+            assert!((a - b).abs() < 0.5, "{lat} {lon}: {a} against {b}");
+        }
     }
 
     #[test]

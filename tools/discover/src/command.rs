@@ -272,6 +272,7 @@ pub fn run(a: &DiscoverOptions) -> Result<DiscoverReport, DiscoverError> {
         super::gnss_written::refit(&mut r, &without);
         r.wall_s += start.elapsed().as_secs_f64();
     }
+    super::outputs::compass_declinations(&a.logs, &mut r);
     if let Some(p) = &a.write_effects {
         write_atomically(p, &super::outputs::effect_set_toml(&r))?;
     }

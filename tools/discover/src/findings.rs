@@ -252,6 +252,9 @@ pub struct DiscoverReport {
     /// installation ([`crate::gnss`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gnss: Option<Box<crate::gnss_evidence::GnssEvidence>>,
+    /// Each magnetic compass's declination not applied (surface runs whose header says so).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub compass: Vec<crate::compass::CompassDeclination>,
     pub wall_s: f64,
     /// The nominal effects.
     #[serde(skip)]
@@ -289,6 +292,7 @@ impl DiscoverReport {
             withheld: Vec::new(),
             refit: None,
             gnss: None,
+            compass: Vec::new(),
             navigation_written: Vec::new(),
             wall_s: 0.0,
             nominal_model: nominal.clone(),

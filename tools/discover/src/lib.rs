@@ -17,6 +17,7 @@
 
 pub mod analysis;
 pub mod command;
+pub mod compass;
 mod error;
 pub mod findings;
 pub mod fit;

@@ -436,6 +436,44 @@ pub fn reference_caveats(logs: &[std::path::PathBuf], r: &mut DiscoverReport) {
     }
 }
 
+/// For every log whose heading is a magnetic compass's: its declination not applied
+/// ([`DiscoverReport::compass`]) and a note beside the heading offset discovery estimated
+/// (named or pointed at), or why the declination cannot be given.
+pub fn compass_declinations(logs: &[std::path::PathBuf], r: &mut DiscoverReport) {
+    for log in logs {
+        match super::compass::declination_of(log) {
+            None => {}
+            Some(Err(why)) => r.notes.push(format!(
+                "{}: the heading is a magnetic compass's, but its declination cannot be given: {why}",
+                log.display()
+            )),
+            Some(Ok(c)) => {
+                r.notes.push(super::compass::note(&c, yaw_estimate(r)));
+                r.compass.push(c);
+            }
+        }
+    }
+}
+
+/// The heading offset discovery estimated: named, pointed at, or else the GNSS positions'
+/// estimate of a surface run (value, deviation; deg).
+fn yaw_estimate(r: &DiscoverReport) -> Option<(f64, f64, &'static str)> {
+    let named = r.effects.iter().find(|e| e.name == "dvl.mount_yaw");
+    if let Some(e) = named {
+        return Some((e.value.as_f64()?, e.std.as_f64()?, "named"));
+    }
+    if let Some(u) = r.undetermined.iter().find(|u| u.name == "dvl.mount_yaw") {
+        return Some((u.value.as_f64()?, u.std.as_f64()?, "pointed at"));
+    }
+    let p = r
+        .gnss
+        .as_ref()?
+        .params
+        .iter()
+        .find(|p| p.name == "dvl.mount_yaw" && p.std.is_finite())?;
+    Some((p.estimate, p.std, "estimated on the GNSS positions"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

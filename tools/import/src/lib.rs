@@ -196,6 +196,32 @@ fn import_header(
     header
 }
 
+/// The date of a time in ns since 2000-01-01 (the PD0 and RiverSurveyor clocks' origin),
+/// `YYYY-MM-DD`.
+fn date_since_2000(ns: u64) -> String {
+    chrono::NaiveDate::from_ymd_opt(2000, 1, 1)
+        .and_then(|d| d.checked_add_signed(chrono::TimeDelta::seconds((ns / 1_000_000_000) as i64)))
+        .map(|d| d.format("%Y-%m-%d").to_string())
+        .unwrap_or_default()
+}
+
+/// The header notes a surface run's compass needs for its declination to be judged: the
+/// recording's date and, where the heading is a magnetic compass's, the declination already
+/// added to it ([`auvnav_log::RECORDED_DATE`], [`auvnav_log::HEADING_DECLINATION_APPLIED`]).
+fn dated_compass_notes(header: &mut LogHeader, date: &str, declination_applied_deg: Option<f64>) {
+    if !date.is_empty() {
+        header
+            .notes
+            .insert(auvnav_log::RECORDED_DATE.into(), date.to_string());
+    }
+    if let Some(d) = declination_applied_deg.filter(|d| d.is_finite()) {
+        header.notes.insert(
+            auvnav_log::HEADING_DECLINATION_APPLIED.into(),
+            format!("{d}"),
+        );
+    }
+}
+
 fn note(pairs: &[(&str, &str)]) -> BTreeMap<String, String> {
     pairs
         .iter()

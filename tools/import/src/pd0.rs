@@ -69,6 +69,11 @@ pub struct Pd0Summary {
     pub fixes_outside: u64,
     /// Lines of the fix file that did not parse (left out).
     pub fixes_unparsable_lines: u64,
+    /// The first ensemble's date on the DVL's clock (`YYYY-MM-DD`; empty without one).
+    pub start_date: String,
+    /// Where the heading is the ADCP's own compass (the fixed leader's sensor source): the
+    /// heading bias (EB) it adds, the declination set in the instrument (deg, east positive).
+    pub declination_applied_deg: Option<f64>,
 }
 
 /// The messages of a PD0 file with GPS: the DVL channel (bottom track, as the DVL driver
@@ -100,9 +105,15 @@ pub fn pd0_messages(
         fixes_written: 0,
         fixes_outside: 0,
         fixes_unparsable_lines: 0,
+        start_date: String::new(),
+        declination_applied_deg: None,
     };
     if let Some(f) = ensembles.iter().find_map(|e| e.fixed.as_ref()) {
         s.coordinate_system = format!("{:?}", f.coordinate_system).to_lowercase();
+        // Sensor source bit 4: the heading comes from the transducer's own (magnetic) compass.
+        if f.sensor_source & 0x10 != 0 {
+            s.declination_applied_deg = Some(f.heading_bias_deg);
+        }
     }
     // Ensemble times on the DVL's clock, seconds from the first ensemble.
     let mut t0: Option<u64> = None;
@@ -113,7 +124,11 @@ pub fn pd0_messages(
             s.bad_time += 1;
             continue;
         };
-        let t = (ns as i128 - *t0.get_or_insert(ns) as i128) as f64 * 1e-9;
+        let first = *t0.get_or_insert(ns);
+        if s.start_date.is_empty() {
+            s.start_date = date_since_2000(first);
+        }
+        let t = (ns as i128 - first as i128) as f64 * 1e-9;
         if t <= last {
             s.bad_time += 1;
             continue;
@@ -306,6 +321,12 @@ pub fn pd0(a: &Pd0Options) -> Result<Pd0Summary> {
         "Teledyne RDI PD0 bottom track with GPS (WinRiver NMEA blocks); time 0 = first ensemble \
          on the DVL's clock",
         &summary,
+    );
+    let mut header = header;
+    dated_compass_notes(
+        &mut header,
+        &summary.start_date,
+        summary.declination_applied_deg,
     );
     write_log_atomically(&a.out, &header, |w: &mut LogWriter<_>| {
         w.declare::<DvlVelocityV1>(

@@ -93,6 +93,8 @@ pub struct RiverSurveyorSummary {
     pub reference: u64,
     pub no_reference: u64,
     pub duration_s: f64,
+    /// The first sample's date on the ADCP clock (`YYYY-MM-DD`, the local time it was set to).
+    pub start_date: String,
 }
 
 /// Column-major numeric array `name` of struct `s`, checked to be `rows` × `cols`.
@@ -242,6 +244,9 @@ pub fn riversurveyor_messages(
     let t0 = time[0];
     if !t0.is_finite() {
         malformed!("System.Time[0] is {t0}");
+    }
+    if t0 >= 0.0 {
+        s.start_date = super::date_since_2000((t0 * 1e9) as u64);
     }
     // ADCP clock minus UTC from every fix's receive stamp.
     let fix_ok = |i: usize| {
@@ -507,6 +512,12 @@ pub fn riversurveyor(a: &RiverSurveyorOptions) -> Result<RiverSurveyorSummary> {
             summary.serial_number, summary.adcp_clock_minus_utc_s
         ),
         &summary,
+    );
+    let mut header = header;
+    super::dated_compass_notes(
+        &mut header,
+        &summary.start_date,
+        Some(summary.magnetic_declination_deg),
     );
     write_log_atomically(&a.out, &header, |w: &mut LogWriter<_>| {
         w.declare::<GnssFixV1>(

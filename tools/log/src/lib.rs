@@ -61,6 +61,12 @@ pub const PROFILE: &str = "auvnav";
 /// `imu,dvl: …`). Effects of those sensors found against that reference are not judged
 /// independently of them.
 pub const REFERENCE_AIDED_BY: &str = "reference.aided_by";
+/// Header note of a log whose attitude's heading is a magnetic compass's: the declination (deg,
+/// east positive) the instrument or its export already added to it (0: the heading is magnetic).
+pub const HEADING_DECLINATION_APPLIED: &str = "heading.declination_applied_deg";
+/// Header note of a log whose clock starts at 0: the recording's date on the instrument's clock
+/// (`YYYY-MM-DD`, as that clock was set).
+pub const RECORDED_DATE: &str = "recorded.date";
 /// CDR encapsulation header: plain CDR, little endian.
 pub const CDR_HEADER: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
 /// Largest record (or decompressed chunk) the reader accepts (bytes).
