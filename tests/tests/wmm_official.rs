@@ -164,6 +164,11 @@ fn every_official_test_value_is_reproduced_to_its_precision() {
         Some("Ydot"),
         Some("Zdot"),
     ];
+    assert_eq!(
+        Some(load("WMM2020")),
+        WorldMagneticModel::builtin_for(2022.0),
+        "the built-in model for 2020–2025 is WMM2020"
+    );
     let n2020 = check(
         &load("WMM2020"),
         &read(&dir.join("WMM2020/WMM2020_TEST_VALUES.txt"), None, &c2020),
