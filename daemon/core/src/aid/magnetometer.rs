@@ -137,7 +137,8 @@ impl MagnetometerConfig {
         Matrix3::from_row_slice(&self.soft_iron)
     }
 
-    /// The field model: the file's when given, else the built-in one.
+    /// The field model: the file's when given, else the built-in one for `model_date` (WMM2010,
+    /// WMM2020 or WMM2025; WMM2025 where none covers it, which the check then refuses).
     pub fn field_model(&self) -> Result<WorldMagneticModel, String> {
         match &self.field_model_file {
             Some(p) => {
@@ -145,7 +146,10 @@ impl MagnetometerConfig {
                     .map_err(|e| format!("reading {}: {e}", p.display()))?;
                 WorldMagneticModel::from_cof(&text).map_err(|e| format!("{}: {e}", p.display()))
             }
-            None => Ok(WorldMagneticModel::builtin()),
+            None => Ok(self
+                .model_date
+                .and_then(WorldMagneticModel::builtin_for)
+                .unwrap_or_else(WorldMagneticModel::builtin)),
         }
     }
 }
@@ -329,6 +333,24 @@ mod tests {
             c.problems()
                 .iter()
                 .any(|p| p.contains("outside the validity"))
+        );
+        // An older mission's date takes the built-in model of its epoch.
+        for (date, model) in [(2012.3, "WMM-2010"), (2022.6, "WMM-2020")] {
+            let c = MagnetometerConfig {
+                model_date: Some(date),
+                ..Default::default()
+            };
+            assert!(c.problems().is_empty(), "{date}: {:?}", c.problems());
+            assert_eq!(c.field_model().map(|m| m.name), Ok(model.to_string()));
+        }
+        let c = MagnetometerConfig {
+            model_date: Some(2018.0),
+            ..Default::default()
+        };
+        assert!(
+            c.problems()
+                .iter()
+                .any(|p| p.contains("outside the validity of WMM-2025"))
         );
         let c = MagnetometerConfig {
             declination_deg: Some(3.0),

@@ -167,7 +167,9 @@ fn reference_field(
     let date = a.date.or(rec.whereabouts.date);
     let model = match (lat, lon, date) {
         (Some(lat), Some(lon), Some(date)) if a.field_ut.is_none() || a.dip_deg.is_none() => {
-            let m = auvnav_core::wmm::WorldMagneticModel::builtin();
+            use auvnav_core::wmm::WorldMagneticModel;
+            let m =
+                WorldMagneticModel::builtin_for(date).unwrap_or_else(WorldMagneticModel::builtin);
             match m.field(lat, lon, 0.0, date) {
                 Ok(f) => Some(f),
                 Err(e) => unusable!("field model at {lat:.4}°, {lon:.4}° on {date:.3}: {e}"),
