@@ -5,6 +5,16 @@
 
 use auvnav_tests::processes::{TempDir, auvnav_json, import_lake_run, import_pd0};
 
+/// `auvnav discover LOG --json --no-navigation`.
+fn discover(log: &std::path::Path) -> serde_json::Value {
+    auvnav_json(&[
+        "discover",
+        &log.display().to_string(),
+        "--json",
+        "--no-navigation",
+    ])
+}
+
 /// The report's compass entry of its only log.
 fn compass(report: &serde_json::Value) -> &serde_json::Value {
     let c = report["compass"].as_array().expect("a compass entry");
@@ -35,12 +45,7 @@ fn a_magnetic_compass_without_declination_is_compared_with_the_world_magnetic_mo
     let tmp = TempDir::new("discover-compass");
     let log = tmp.path().join("wr.mcap");
     import_pd0(&dir.join("raw/winriver02_transect.PD0"), &log);
-    let r = auvnav_json(&[
-        "discover",
-        &log.display().to_string(),
-        "--json",
-        "--no-navigation",
-    ]);
+    let r = discover(&log);
     let c = compass(&r);
     assert_eq!(c["date"], "2010-09-23", "{c}");
     assert_eq!(c["model"], "WMM-2010", "{c}");
@@ -60,12 +65,7 @@ fn a_magnetic_compass_without_declination_is_compared_with_the_world_magnetic_mo
 
     let rp = tmp.path().join("rp.mcap");
     import_pd0(&dir.join("raw/RiverPro_test01.PD0"), &rp);
-    let r = auvnav_json(&[
-        "discover",
-        &rp.display().to_string(),
-        "--json",
-        "--no-navigation",
-    ]);
+    let r = discover(&rp);
     let c = compass(&r);
     assert_eq!(c["model"], "WMM-2020", "{c}");
     let d = c["declination_deg"].as_f64().expect("declination");
@@ -81,12 +81,7 @@ fn a_corrected_compass_is_left_the_declination_not_applied() {
     let Some(log) = import_lake_run(&tmp.path().join("lake.mcap"), &[]) else {
         return;
     };
-    let r = auvnav_json(&[
-        "discover",
-        &log.display().to_string(),
-        "--json",
-        "--no-navigation",
-    ]);
+    let r = discover(&log);
     let c = compass(&r);
     assert_eq!(c["model"], "WMM-2025", "{c}");
     let applied = c["applied_deg"].as_f64().expect("applied");
