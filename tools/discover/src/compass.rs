@@ -59,25 +59,30 @@ fn declination_with(
         .ok_or("the log does not say when it was recorded")?
         .clone();
     let year = parse_date(&date).ok_or(format!("its recording date {date:?} does not parse"))?;
-    let (mut n, mut lat, mut lon) = (0usize, 0.0, 0.0);
+    // The mean position; longitudes as offsets from the first fix's, wrapped, so that a run
+    // across the antimeridian does not average to the other side of the Earth.
+    let (mut n, mut lat, mut dlon, mut lon0) = (0usize, 0.0, 0.0, None);
     while let Ok(Some(raw)) = reader.next_message() {
         if let Ok(LogMessage::Gnss(f)) = raw.decode_any()
             && f.validity & GnssFixV1::VALID_POSITION != 0
             && f.latitude_rad.is_finite()
             && f.longitude_rad.is_finite()
         {
+            let lon = f.longitude_rad.to_degrees();
+            let first = *lon0.get_or_insert(lon);
             n += 1;
             lat += f.latitude_rad.to_degrees();
-            lon += f.longitude_rad.to_degrees();
+            dlon += (lon - first + 540.0).rem_euclid(360.0) - 180.0;
         }
     }
-    if n == 0 {
+    let Some(lon0) = lon0 else {
         return Err("it has no GNSS position".into());
-    }
-    let (lat, lon) = (lat / n as f64, lon / n as f64);
+    };
+    let lat = lat / n as f64;
+    let lon = (lon0 + dlon / n as f64 + 540.0).rem_euclid(360.0) - 180.0;
     let model = WorldMagneticModel::builtin_for(year).ok_or(format!(
-        "no built-in World Magnetic Model covers {date} (WMM2010 covers 2010–2015, WMM2025 \
-         2025–2030)"
+        "no built-in World Magnetic Model covers {date} (WMM2010 covers 2010–2015, WMM2020 and \
+         WMM2025 2020–2030)"
     ))?;
     let declination = model
         .field(lat, lon, 0.0, year)
