@@ -116,6 +116,19 @@ fn the_heading_offset_of_a_river_transect_is_found_against_its_gps() {
     // The ADCP's magnetic heading against true north: about 20° of declination there (WMM), less
     // some compass deviation. Measured: 15.6 ± 1.5°.
     assert!(written && (12.0..=21.0).contains(&yaw), "{r}");
+    // The report gives the declination not applied (WMM2010 at the run on its date) beside it.
+    let compass = &r["compass"][0];
+    assert_eq!(compass["model"], "WMM-2010", "{r}");
+    let d = compass["expected_mount_yaw_deg"]
+        .as_f64()
+        .expect("declination");
+    assert!((19.0..21.0).contains(&d), "{compass}");
+    assert!(
+        r["notes"][0]
+            .as_str()
+            .is_some_and(|n| n.contains("fitted here") && n.contains("from none")),
+        "{r}"
+    );
     let score = |which: &str| {
         r["in_sample"][which]["median_error_per_distance_percent"]
             .as_f64()

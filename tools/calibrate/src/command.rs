@@ -150,13 +150,20 @@ pub fn calibrate_dvl_surface(
         dvl: cfg.navigation.dvl_installation(),
         compass_deviation_deg: cfg.navigation.compass_deviation_deg,
     };
-    let report = crate::surface::calibrate_surface(
+    let mut report = crate::surface::calibrate_surface(
         &args.voyages,
         &start,
         &args.params,
         args.threshold,
         args.moving_bed,
     )?;
+    let yaw = report
+        .params
+        .iter()
+        .find(|p| p.name == "dvl.mount_yaw" && p.std.is_finite())
+        .map(|p| (p.estimate, p.std, "fitted"));
+    (report.compass, report.notes) =
+        crate::surface::compass::declinations(args.voyages.iter().map(|v| v.path.as_path()), yaw);
     if let Some(path) = &args.write_config {
         crate::surface::write_config(path, &report)
             .map_err(|e| CalibrationError::output(path, e))?;

@@ -254,7 +254,7 @@ pub struct DiscoverReport {
     pub gnss: Option<Box<crate::gnss_evidence::GnssEvidence>>,
     /// Each magnetic compass's declination not applied (surface runs whose header says so).
     #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub compass: Vec<crate::compass::CompassDeclination>,
+    pub compass: Vec<auvnav_calibrate::surface::compass::CompassDeclination>,
     pub wall_s: f64,
     /// The nominal effects.
     #[serde(skip)]

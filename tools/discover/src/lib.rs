@@ -17,7 +17,6 @@
 
 pub mod analysis;
 pub mod command;
-pub mod compass;
 mod error;
 pub mod findings;
 pub mod fit;

@@ -440,19 +440,12 @@ pub fn reference_caveats(logs: &[std::path::PathBuf], r: &mut DiscoverReport) {
 /// ([`DiscoverReport::compass`]) and a note beside the heading offset discovery estimated
 /// (named or pointed at), or why the declination cannot be given.
 pub fn compass_declinations(logs: &[std::path::PathBuf], r: &mut DiscoverReport) {
-    for log in logs {
-        match super::compass::declination_of(log) {
-            None => {}
-            Some(Err(why)) => r.notes.push(format!(
-                "{}: the heading is a magnetic compass's, but its declination cannot be given: {why}",
-                log.display()
-            )),
-            Some(Ok(c)) => {
-                r.notes.push(super::compass::note(&c, yaw_estimate(r)));
-                r.compass.push(c);
-            }
-        }
-    }
+    let (found, notes) = auvnav_calibrate::surface::compass::declinations(
+        logs.iter().map(|p| p.as_path()),
+        yaw_estimate(r),
+    );
+    r.compass.extend(found);
+    r.notes.extend(notes);
 }
 
 /// The heading offset discovery estimated: named, pointed at, or else the GNSS positions'

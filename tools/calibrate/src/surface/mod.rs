@@ -23,6 +23,7 @@ pub use auvnav_replay::surface::{SurfaceRun, is_surface_run};
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
+pub mod compass;
 mod params;
 mod report;
 mod score;
@@ -583,5 +584,7 @@ pub fn calibrate_surface(
         in_sample,
         held_out,
         verdict,
+        compass: Vec::new(),
+        notes: Vec::new(),
     })
 }

@@ -22,6 +22,12 @@ pub struct SurfaceReport {
     /// give.
     pub held_out: Vec<HeldOut>,
     pub verdict: String,
+    /// Each magnetic compass's declination not applied ([`super::compass`]).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub compass: Vec<super::compass::CompassDeclination>,
+    /// What the report adds about the runs (the compasses' declinations).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -119,6 +125,9 @@ pub fn text(r: &SurfaceReport) -> String {
         let _ = writeln!(s, "    {}", line("nominal", &h.scores.nominal));
         let _ = writeln!(s, "    {}", line("two-point", &h.scores.two_point));
         let _ = writeln!(s, "    {}", line("calibrated", &h.scores.calibrated));
+    }
+    for n in &r.notes {
+        let _ = writeln!(s, "  note: {n}");
     }
     let _ = writeln!(s, "{}", r.verdict);
     s

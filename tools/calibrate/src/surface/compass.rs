@@ -3,10 +3,10 @@
 //! pd0` and `auvnav import riversurveyor`) and when it was recorded
 //! ([`auvnav_log::RECORDED_DATE`]), the declination at the run's GNSS positions on that date
 //! (the World Magnetic Model) less the declination already applied is the heading offset the
-//! compass shows against the GNSS before any deviation of its own: the `dvl.mount_yaw` a
-//! surface run's discovery compares its DVL with. The report gives it beside the estimate, so a
-//! heading offset the data only point at has its likely cause named, and one the data name can
-//! be told from a compass that was not corrected.
+//! compass shows against true north before any deviation of its own: the `dvl.mount_yaw` a
+//! surface run's calibration and discovery estimate. `auvnav calibrate dvl` and `auvnav
+//! discover` give it beside their estimate, so a heading offset has its likely cause named, and
+//! a compass that was corrected can be told from one that was not.
 
 use auvnav_core::wmm::{WorldMagneticModel, decimal_year};
 use auvnav_log::{LogMessage, LogReader};
@@ -98,6 +98,31 @@ fn declination_with(
         applied_deg: applied,
         expected_mount_yaw_deg: declination - applied,
     })
+}
+
+/// The declinations of the logs whose heading is a magnetic compass's, and a note for each: the
+/// declination not applied beside `yaw` (the heading offset the caller estimated: value,
+/// deviation, how; deg), or why it cannot be given.
+pub fn declinations<'a>(
+    logs: impl IntoIterator<Item = &'a Path>,
+    yaw: Option<(f64, f64, &str)>,
+) -> (Vec<CompassDeclination>, Vec<String>) {
+    let (mut found, mut notes) = (Vec::new(), Vec::new());
+    for log in logs {
+        match declination_of(log) {
+            None => {}
+            Some(Err(why)) => notes.push(format!(
+                "{}: the heading is a magnetic compass's, but its declination cannot be given: \
+                 {why}",
+                log.display()
+            )),
+            Some(Ok(c)) => {
+                notes.push(note(&c, yaw));
+                found.push(c);
+            }
+        }
+    }
+    (found, notes)
 }
 
 /// The decimal year of `YYYY-MM-DD` (its middle).
