@@ -166,7 +166,7 @@ fn run_perturb(a: &PerturbArgs) -> anyhow::Result<()> {
         }))?;
     } else {
         eprintln!(
-            "{}: {} applied to {} messages ({} IMU, {} DVL, {} depth, {} attitude changed; {} DVL without a neighbour at t - offset marked invalid)",
+            "{}: {} applied to {} messages ({} IMU, {} DVL, {} depth, {} attitude changed; {} DVL moved by the time offset, {} moved before time zero and left out)",
             a.out.display(),
             p.describe(),
             counts.messages,
@@ -174,7 +174,8 @@ fn run_perturb(a: &PerturbArgs) -> anyhow::Result<()> {
             counts.dvl_changed,
             counts.depth_changed,
             counts.attitude_changed,
-            counts.dvl_invalidated
+            counts.dvl_restamped,
+            counts.dvl_dropped
         );
     }
     Ok(())

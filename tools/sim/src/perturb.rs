@@ -5,12 +5,16 @@
 //! contains, treating the recorded value as the ideal sensor's:
 //!
 //! - DVL (`dvl.scale_factor`, `dvl.mount_roll|pitch|yaw`, `dvl.lever_arm`, `dvl.time_offset`,
-//!   `dvl.periodic_velocity_error` with its period and phase, `dvl.noise`):
-//!   `z'(t) = s C_b^d (z(t - tau) + omega(t - tau) x l) + a sin(2 pi t / P + phi) + noise`, with
-//!   the recorded velocity `z` and the IMU angular rate interpolated linearly at `t - tau`. A message whose
-//!   `t - tau` has no valid recorded neighbour within three DVL intervals is marked invalid and
-//!   counted. The noise is added per velocity axis (the simulator adds it per beam). Recorded beam
-//!   velocities no longer match the perturbed velocity and are marked invalid.
+//!   `dvl.periodic_velocity_error` with its period and phase, `dvl.noise`): a reading recorded at
+//!   `t` with velocity `z` becomes one stamped `t + tau` with
+//!   `z' = s C_b^d (z + omega x l) + a sin(2 pi (t + tau) / P + phi) + noise`, the IMU angular rate
+//!   `omega` the last one recorded before the reading. The time offset moves the reading (its
+//!   host, validity and device times) rather than interpolating the recorded velocities at
+//!   `t - tau`: the result is what a DVL late by `tau` records, with the recorded motion and noise
+//!   untouched (interpolating a 1 Hz DVL smoothed both), and the messages are written in the order
+//!   of their new times. A reading moved before time zero is left out and counted. The noise is
+//!   added per velocity axis (the simulator adds it per beam). Recorded beam velocities no longer
+//!   match a changed velocity and are marked invalid (a time offset alone keeps them).
 //! - IMU (`imu.gyro_bias`, `imu.accel_bias`): constant biases added to every sample (to the
 //!   increments times the interval in increment mode).
 //! - Depth (`depth.bias`, `depth.noise`).
@@ -27,7 +31,7 @@ use crate::SimError;
 use crate::effects::{self, Effects};
 use crate::rng::Rng;
 use auvnav_log::{LogMessage, LogReader, RawLogMessage, write_log_atomically};
-use auvnav_shm_schema::{DepthV1, DvlVelocityV1, ImuSampleV1};
+use auvnav_shm_schema::{AttitudeV1, DepthV1, DvlVelocityV1, ImuSampleV1};
 use nalgebra::Vector3;
 use serde::Serialize;
 use std::path::Path;
@@ -57,8 +61,10 @@ pub struct PerturbCounts {
     pub messages: u64,
     pub imu_changed: u64,
     pub dvl_changed: u64,
-    /// DVL messages marked invalid: no recorded neighbour at `t - dvl.time_offset`.
-    pub dvl_invalidated: u64,
+    /// DVL messages moved by `dvl.time_offset` (every DVL message, valid or not, when it is set).
+    pub dvl_restamped: u64,
+    /// DVL messages left out: `dvl.time_offset` moved them before time zero.
+    pub dvl_dropped: u64,
     pub depth_changed: u64,
     /// Attitude messages whose heading was given the compass deviation.
     pub attitude_changed: u64,
@@ -115,34 +121,6 @@ impl Perturbation {
     }
 }
 
-/// One DVL epoch of the input: the recorded velocity and the IMU rate at it.
-#[derive(Debug, Clone, Copy)]
-struct DvlEpoch {
-    t: f64,
-    valid: bool,
-    z: Vector3<f64>,
-    omega: Vector3<f64>,
-}
-
-/// The recorded velocity and IMU rate at `t` (linear between the two valid epochs around it,
-/// at most `max_gap` apart), or `None`.
-fn at_time(epochs: &[DvlEpoch], t: f64, max_gap: f64) -> Option<(Vector3<f64>, Vector3<f64>)> {
-    let k = epochs.partition_point(|e| e.t <= t);
-    let after = epochs.get(k).filter(|e| e.valid);
-    let before = k
-        .checked_sub(1)
-        .and_then(|i| epochs.get(i))
-        .filter(|e| e.valid);
-    match (before, after) {
-        (Some(b), _) if (b.t - t).abs() < 1e-9 => Some((b.z, b.omega)),
-        (Some(b), Some(a)) if a.t - b.t <= max_gap => {
-            let w = (t - b.t) / (a.t - b.t);
-            Some((b.z + (a.z - b.z) * w, b.omega + (a.omega - b.omega) * w))
-        }
-        _ => None,
-    }
-}
-
 fn read_all(input: &Path) -> Result<(auvnav_log::LogHeader, Vec<RawLogMessage>), SimError> {
     let failed = |e: auvnav_log::LogError| SimError::Log {
         path: input.to_path_buf(),
@@ -173,28 +151,6 @@ pub fn perturb_log(
     let e = &p.effects;
     let mut counts = PerturbCounts::default();
 
-    // Pass 1: the DVL epochs with the IMU rate at each.
-    let mut last_rate = Vector3::zeros();
-    let mut epochs = Vec::new();
-    for m in &raw {
-        match m.decode_any() {
-            Ok(LogMessage::Imu(x)) => {
-                if let Some(w) = x.angular_rate() {
-                    last_rate = Vector3::from(w);
-                }
-            }
-            Ok(LogMessage::Dvl(x)) => epochs.push(DvlEpoch {
-                t: x.validity_time_ns as f64 * 1e-9,
-                valid: x.validity & DvlVelocityV1::VALID_VELOCITY != 0
-                    && x.velocity_dvl_m_s.iter().all(|v| v.is_finite()),
-                z: Vector3::from(x.velocity_dvl_m_s),
-                omega: last_rate,
-            }),
-            _ => {}
-        }
-    }
-    epochs.sort_by(|a, b| a.t.total_cmp(&b.t));
-    let interval = median_interval(&epochs).unwrap_or(1.0);
     // The mounting, lever arm and periodic error as the simulator's DVL has them (its scale, which
     // folds in `dvl.sound_speed`, is not used: perturb applies `dvl.scale_factor` alone).
     let install = crate::sensors::DvlInstallation::from_effects(e);
@@ -214,66 +170,101 @@ pub fn perturb_log(
     header
         .notes
         .insert("perturb.source".into(), input.display().to_string());
-    write_log_atomically(output, &header, |w| {
-        for m in &raw {
-            counts.messages += 1;
-            let decoded = match m.decode_any() {
-                Ok(d) => d,
-                Err(_) => {
-                    counts.undecodable += 1;
-                    w.write_raw(m)?;
-                    continue;
+    // A time offset moves the DVL's readings by whole stamps, so the output is put in time
+    // order before it is written (a 1 Hz DVL moved by a second passes other sensors' messages).
+    let tau_ns = (e.dvl_time_offset * 1e9).round() as i64;
+    let restamp = tau_ns != 0;
+    let velocity_changed = p
+        .settings
+        .iter()
+        .any(|(n, _)| n.starts_with("dvl.") && n != "dvl.time_offset");
+    let mut last_rate = Vector3::zeros();
+    let mut out: Vec<(u64, Out)> = Vec::with_capacity(raw.len());
+    for m in &raw {
+        counts.messages += 1;
+        let decoded = match m.decode_any() {
+            Ok(d) => d,
+            Err(_) => {
+                counts.undecodable += 1;
+                out.push((m.log_time_ns, Out::Raw(m)));
+                continue;
+            }
+        };
+        if let LogMessage::Imu(x) = &decoded
+            && let Some(w) = x.angular_rate()
+        {
+            last_rate = Vector3::from(w);
+        }
+        match decoded {
+            LogMessage::Imu(mut x) if imu_on => {
+                let scale = if x.status & ImuSampleV1::STATUS_INCREMENTS != 0 {
+                    x.interval_s
+                } else {
+                    1.0
+                };
+                for i in 0..3 {
+                    x.angular[i] += gyro_bias[i] * scale;
+                    x.specific[i] += accel_bias[i] * scale;
                 }
-            };
-            match decoded {
-                LogMessage::Imu(mut x) if imu_on => {
-                    let scale = if x.status & ImuSampleV1::STATUS_INCREMENTS != 0 {
-                        x.interval_s
-                    } else {
-                        1.0
+                counts.imu_changed += 1;
+                out.push((m.log_time_ns, Out::Imu(m, x)));
+            }
+            LogMessage::Dvl(mut x) if dvl_on => {
+                if restamp {
+                    let moved = |t: u64| t.checked_add_signed(tau_ns);
+                    let (Some(host), Some(validity)) =
+                        (moved(x.host_time_ns), moved(x.validity_time_ns))
+                    else {
+                        counts.dvl_dropped += 1;
+                        continue;
                     };
-                    for i in 0..3 {
-                        x.angular[i] += gyro_bias[i] * scale;
-                        x.specific[i] += accel_bias[i] * scale;
+                    x.host_time_ns = host;
+                    x.validity_time_ns = validity;
+                    if x.device_time_ns != 0 {
+                        x.device_time_ns = moved(x.device_time_ns).unwrap_or(0);
                     }
-                    counts.imu_changed += 1;
-                    w.write(&m.topic, &x)?;
+                    counts.dvl_restamped += 1;
                 }
-                LogMessage::Dvl(mut x)
-                    if dvl_on && x.validity & DvlVelocityV1::VALID_VELOCITY != 0 =>
-                {
+                if velocity_changed && x.validity & DvlVelocityV1::VALID_VELOCITY != 0 {
                     let stamp = x.validity_time_ns as f64 * 1e-9;
-                    match at_time(&epochs, stamp - e.dvl_time_offset, 3.0 * interval) {
-                        Some((z, omega)) => {
-                            let noise = Vector3::from_fn(|_, _| dvl_rng.gauss(e.dvl_noise));
-                            let v = c_body_to_dvl * (z + omega.cross(&lever)) * e.dvl_scale_factor
-                                + install.periodic_error(stamp)
-                                + noise;
-                            x.velocity_dvl_m_s = v.into();
-                            counts.dvl_changed += 1;
-                        }
-                        None => {
-                            x.validity &= !DvlVelocityV1::VALID_VELOCITY;
-                            counts.dvl_invalidated += 1;
-                        }
-                    }
+                    let z = Vector3::from(x.velocity_dvl_m_s);
+                    let noise = Vector3::from_fn(|_, _| dvl_rng.gauss(e.dvl_noise));
+                    let v = c_body_to_dvl * (z + last_rate.cross(&lever)) * e.dvl_scale_factor
+                        + install.periodic_error(stamp)
+                        + noise;
+                    x.velocity_dvl_m_s = v.into();
                     x.validity &= !(0xf * DvlVelocityV1::VALID_BEAM_VELOCITY);
-                    w.write(&m.topic, &x)?;
+                    counts.dvl_changed += 1;
                 }
-                LogMessage::Depth(mut x) if depth_on && x.validity & DepthV1::VALID_DEPTH != 0 => {
-                    x.depth_m += e.depth_bias + depth_rng.gauss(e.depth_noise);
-                    counts.depth_changed += 1;
-                    w.write(&m.topic, &x)?;
-                }
-                LogMessage::Attitude(mut x) if compass_on => {
-                    x.euler_rad[2] = auvnav_core::dead_reckoning::compass_reading_rad(
-                        x.euler_rad[2],
-                        &e.heading_deviation,
-                    );
-                    counts.attitude_changed += 1;
-                    w.write(&m.topic, &x)?;
-                }
-                _ => w.write_raw(m)?,
+                out.push((x.host_time_ns, Out::Dvl(m, x)));
+            }
+            LogMessage::Depth(mut x) if depth_on && x.validity & DepthV1::VALID_DEPTH != 0 => {
+                x.depth_m += e.depth_bias + depth_rng.gauss(e.depth_noise);
+                counts.depth_changed += 1;
+                out.push((m.log_time_ns, Out::Depth(m, x)));
+            }
+            LogMessage::Attitude(mut x) if compass_on => {
+                x.euler_rad[2] = auvnav_core::dead_reckoning::compass_reading_rad(
+                    x.euler_rad[2],
+                    &e.heading_deviation,
+                );
+                counts.attitude_changed += 1;
+                out.push((m.log_time_ns, Out::Attitude(m, x)));
+            }
+            _ => out.push((m.log_time_ns, Out::Raw(m))),
+        }
+    }
+    if restamp {
+        out.sort_by_key(|(t, _)| *t);
+    }
+    write_log_atomically(output, &header, |w| {
+        for (_, o) in &out {
+            match o {
+                Out::Raw(m) => w.write_raw(m)?,
+                Out::Imu(m, x) => w.write(&m.topic, x)?,
+                Out::Dvl(m, x) => w.write(&m.topic, x)?,
+                Out::Depth(m, x) => w.write(&m.topic, x)?,
+                Out::Attitude(m, x) => w.write(&m.topic, x)?,
             }
         }
         Ok(())
@@ -285,17 +276,13 @@ pub fn perturb_log(
     Ok(counts)
 }
 
-fn median_interval(epochs: &[DvlEpoch]) -> Option<f64> {
-    let mut d: Vec<f64> = epochs
-        .windows(2)
-        .map(|w| w[1].t - w[0].t)
-        .filter(|d| *d > 0.0)
-        .collect();
-    if d.is_empty() {
-        return None;
-    }
-    d.sort_by(f64::total_cmp);
-    Some(d[d.len() / 2])
+/// A message of the output: copied as recorded, or changed.
+enum Out<'a> {
+    Raw(&'a RawLogMessage),
+    Imu(&'a RawLogMessage, ImuSampleV1),
+    Dvl(&'a RawLogMessage, DvlVelocityV1),
+    Depth(&'a RawLogMessage, DepthV1),
+    Attitude(&'a RawLogMessage, AttitudeV1),
 }
 
 #[cfg(test)]
@@ -315,19 +302,118 @@ mod tests {
         assert!(Perturbation::parse(&["dvl.scale_factor=3".into()], 1).is_err());
     }
 
+    /// A log of 2 s: IMU at 10 Hz turning about z at 0.1 rad/s, DVL at 1 Hz with beams.
+    fn small_log(path: &Path) {
+        let header = auvnav_log::LogHeader::new("perturb test", "");
+        write_log_atomically(path, &header, |w| {
+            for k in 1..=20u64 {
+                let t = k * 100_000_000;
+                let imu = ImuSampleV1 {
+                    host_time_ns: t,
+                    sequence: k,
+                    angular: [0.0, 0.0, 0.1],
+                    specific: [0.0, 0.0, -9.8],
+                    interval_s: 0.1,
+                    ..Default::default()
+                };
+                w.write("imu", &imu)?;
+                if k % 10 == 0 {
+                    let dvl = DvlVelocityV1 {
+                        host_time_ns: t,
+                        validity_time_ns: t,
+                        sequence: k / 10,
+                        velocity_dvl_m_s: [1.0 + k as f64 * 0.01, 0.2, 0.0],
+                        validity: DvlVelocityV1::VALID_VELOCITY
+                            | (0xf * DvlVelocityV1::VALID_BEAM_VELOCITY),
+                        ..Default::default()
+                    };
+                    w.write("dvl", &dvl)?;
+                }
+            }
+            Ok(())
+        })
+        .expect("write");
+    }
+
+    fn read_back(path: &Path) -> Vec<LogMessage> {
+        let (_, raw) = read_all(path).expect("read");
+        raw.iter()
+            .map(|m| m.decode_any().expect("decode"))
+            .collect()
+    }
+
     #[test]
-    fn interpolates_between_valid_epochs_only() {
-        let e = |t: f64, valid: bool, x: f64| DvlEpoch {
-            t,
-            valid,
-            z: Vector3::new(x, 0.0, 0.0),
-            omega: Vector3::zeros(),
-        };
-        let epochs = [e(0.0, true, 1.0), e(1.0, true, 3.0), e(2.0, false, 9.0)];
-        let (z, _) = at_time(&epochs, 0.25, 3.0).expect("inside");
-        assert!((z.x - 1.5).abs() < 1e-12);
-        assert_eq!(at_time(&epochs, 1.0, 3.0).map(|v| v.0.x), Some(3.0));
-        assert!(at_time(&epochs, 1.5, 3.0).is_none(), "next epoch invalid");
-        assert!(at_time(&epochs, -0.5, 3.0).is_none(), "before the first");
+    fn a_time_offset_moves_the_readings_and_keeps_what_they_recorded() {
+        let dir = std::env::temp_dir().join(format!("perturb-restamp-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let (input, output) = (dir.join("in.mcap"), dir.join("out.mcap"));
+        small_log(&input);
+        let before: Vec<DvlVelocityV1> = read_back(&input)
+            .into_iter()
+            .filter_map(|m| match m {
+                LogMessage::Dvl(x) => Some(x),
+                _ => None,
+            })
+            .collect();
+
+        // Late by 0.35 s: the same velocities, beams still valid, stamped later, in time order.
+        let p = Perturbation::parse(&["dvl.time_offset=0.35".into()], 1).expect("parse");
+        let counts = perturb_log(&input, &output, &p).expect("perturb");
+        assert_eq!((counts.dvl_restamped, counts.dvl_changed), (2, 0));
+        let after = read_back(&output);
+        let times: Vec<u64> = after
+            .iter()
+            .map(|m| match m {
+                LogMessage::Imu(x) => x.host_time_ns,
+                LogMessage::Dvl(x) => x.host_time_ns,
+                _ => panic!("unexpected message"),
+            })
+            .collect();
+        assert!(times.windows(2).all(|w| w[0] <= w[1]), "{times:?}");
+        let dvl: Vec<&DvlVelocityV1> = after
+            .iter()
+            .filter_map(|m| match m {
+                LogMessage::Dvl(x) => Some(x),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(dvl.len(), 2);
+        for (a, b) in dvl.iter().zip(&before) {
+            assert_eq!(a.validity_time_ns, b.validity_time_ns + 350_000_000);
+            assert_eq!(a.host_time_ns, b.host_time_ns + 350_000_000);
+            assert_eq!(a.velocity_dvl_m_s, b.velocity_dvl_m_s);
+            assert_eq!(a.validity, b.validity);
+        }
+
+        // Early by 1.5 s: the first reading (at 1 s) would fall before zero and is left out;
+        // a scale changes the velocity and the beams no longer match it.
+        let p = Perturbation::parse(
+            &[
+                "dvl.time_offset=-1.5".into(),
+                "dvl.scale_factor=1.01".into(),
+            ],
+            1,
+        )
+        .expect("parse");
+        let counts = perturb_log(&input, &output, &p).expect("perturb");
+        assert_eq!(
+            (counts.dvl_restamped, counts.dvl_dropped, counts.dvl_changed),
+            (1, 1, 1)
+        );
+        let dvl: Vec<DvlVelocityV1> = read_back(&output)
+            .into_iter()
+            .filter_map(|m| match m {
+                LogMessage::Dvl(x) => Some(x),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(dvl.len(), 1);
+        assert_eq!(dvl[0].validity_time_ns, 500_000_000);
+        assert!((dvl[0].velocity_dvl_m_s[0] - 1.2 * 1.01).abs() < 1e-12);
+        assert_eq!(
+            dvl[0].validity & (0xf * DvlVelocityV1::VALID_BEAM_VELOCITY),
+            0
+        );
+        std::fs::remove_dir_all(&dir).ok();
     }
 }
