@@ -342,19 +342,23 @@ mod tests {
             .collect()
     }
 
+    fn dvl_of(messages: &[LogMessage]) -> Vec<DvlVelocityV1> {
+        messages
+            .iter()
+            .filter_map(|m| match m {
+                LogMessage::Dvl(x) => Some(*x),
+                _ => None,
+            })
+            .collect()
+    }
+
     #[test]
     fn a_time_offset_moves_the_readings_and_keeps_what_they_recorded() {
         let dir = std::env::temp_dir().join(format!("perturb-restamp-{}", std::process::id()));
         std::fs::create_dir_all(&dir).expect("dir");
         let (input, output) = (dir.join("in.mcap"), dir.join("out.mcap"));
         small_log(&input);
-        let before: Vec<DvlVelocityV1> = read_back(&input)
-            .into_iter()
-            .filter_map(|m| match m {
-                LogMessage::Dvl(x) => Some(x),
-                _ => None,
-            })
-            .collect();
+        let before = dvl_of(&read_back(&input));
 
         // Late by 0.35 s: the same velocities, beams still valid, stamped later, in time order.
         let p = Perturbation::parse(&["dvl.time_offset=0.35".into()], 1).expect("parse");
@@ -370,13 +374,7 @@ mod tests {
             })
             .collect();
         assert!(times.windows(2).all(|w| w[0] <= w[1]), "{times:?}");
-        let dvl: Vec<&DvlVelocityV1> = after
-            .iter()
-            .filter_map(|m| match m {
-                LogMessage::Dvl(x) => Some(x),
-                _ => None,
-            })
-            .collect();
+        let dvl = dvl_of(&after);
         assert_eq!(dvl.len(), 2);
         for (a, b) in dvl.iter().zip(&before) {
             assert_eq!(a.validity_time_ns, b.validity_time_ns + 350_000_000);
@@ -400,13 +398,7 @@ mod tests {
             (counts.dvl_restamped, counts.dvl_dropped, counts.dvl_changed),
             (1, 1, 1)
         );
-        let dvl: Vec<DvlVelocityV1> = read_back(&output)
-            .into_iter()
-            .filter_map(|m| match m {
-                LogMessage::Dvl(x) => Some(x),
-                _ => None,
-            })
-            .collect();
+        let dvl = dvl_of(&read_back(&output));
         assert_eq!(dvl.len(), 1);
         assert_eq!(dvl[0].validity_time_ns, 500_000_000);
         assert!((dvl[0].velocity_dvl_m_s[0] - 1.2 * 1.01).abs() < 1e-12);
