@@ -56,7 +56,6 @@ pub(crate) fn velocity_noise(
     nominal: &Effects,
     epochs: &[usize],
 ) -> f64 {
-    let on_sample = |t: f64| reference.at(t).is_some() && reference.interpolation_at(t).is_none();
     let times: Vec<f64> = epochs.iter().map(|&i| ch.times[i]).collect();
     // The readings at `t` (linear between consecutive epochs no further apart than the gap).
     let z_at = |t: f64| -> Option<[f64; 3]> {
@@ -96,7 +95,7 @@ pub(crate) fn velocity_noise(
         if h1 <= 0.0 || h2 <= 0.0 || h1.max(h2) > reference.max_gap_s {
             continue;
         }
-        if (h1 - h2).abs() > EVEN_SPACING * 0.5 * (h1 + h2) || !t.iter().all(|&s| on_sample(s)) {
+        if (h1 - h2).abs() > EVEN_SPACING * 0.5 * (h1 + h2) {
             continue;
         }
         let pred: Option<Vec<[f64; 3]>> = t

@@ -170,8 +170,8 @@ pub fn perturb_log(
     header
         .notes
         .insert("perturb.source".into(), input.display().to_string());
-    // A time offset moves the DVL's readings by whole stamps, so the output is put in time
-    // order before it is written (a 1 Hz DVL moved by a second passes other sensors' messages).
+    // A time offset moves the DVL's readings in time, so the output is put in time order before
+    // it is written (a 1 Hz DVL moved by a second passes other sensors' messages).
     let tau_ns = (e.dvl_time_offset * 1e9).round() as i64;
     let restamp = tau_ns != 0;
     let velocity_changed = p
