@@ -120,6 +120,15 @@ pub mod processes {
         Some(out.to_path_buf())
     }
 
+    /// `auvnav import pd0` of the measured RDI river crossing (`winriver02_transect.PD0`, bottom
+    /// track with GPS) into `out`; `None` where the measured data is absent (outside CI, said by
+    /// [`crate::measured_data`]).
+    pub fn import_river_crossing(out: &Path) -> Option<PathBuf> {
+        let dir = crate::measured_data("rdi-pd0", "raw/winriver02_transect.PD0")?;
+        import_pd0(&dir.join("raw/winriver02_transect.PD0"), out);
+        Some(out.to_path_buf())
+    }
+
     /// `auvnav perturb LOG --out OUT --effect E…` to success.
     pub fn perturb(log: &Path, out: &Path, effects: &[String]) {
         let mut cmd = Command::new(binary("auvnav"));

@@ -105,12 +105,11 @@ fn an_installation_hidden_in_the_measured_run_is_recovered_from_the_gnss() {
 
 #[test]
 fn the_heading_offset_of_a_river_transect_is_found_against_its_gps() {
-    let Some(dir) = auvnav_tests::measured_data("rdi-pd0", "raw/winriver02_transect.PD0") else {
+    let tmp = TempDir::new("surface-winriver");
+    let Some(log) = auvnav_tests::processes::import_river_crossing(&tmp.path().join("wr.mcap"))
+    else {
         return;
     };
-    let tmp = TempDir::new("surface-winriver");
-    let log = tmp.path().join("wr.mcap");
-    auvnav_tests::processes::import_pd0(&dir.join("raw/winriver02_transect.PD0"), &log);
     let r = auvnav(&["calibrate", "dvl", &s(&log), "--threshold", "100", "--json"]);
     let (yaw, written) = param(&r, "dvl.mount_yaw");
     // The ADCP's magnetic heading against true north: about 20° of declination there (WMM), less

@@ -86,12 +86,11 @@ fn written_held_out_better(report: &serde_json::Value) -> usize {
 /// Measured: 24.2 ± 2.5° (9.7σ); held out, each half 3.06 → 2.78 m and 3.61 → 1.87 m.
 #[test]
 fn a_river_transect_names_its_heading_offset_on_the_gnss_positions() {
-    let Some(dir) = auvnav_tests::measured_data("rdi-pd0", "raw/winriver02_transect.PD0") else {
+    let tmp = TempDir::new("discover-winriver");
+    let Some(log) = auvnav_tests::processes::import_river_crossing(&tmp.path().join("wr.mcap"))
+    else {
         return;
     };
-    let tmp = TempDir::new("discover-winriver");
-    let log = tmp.path().join("wr.mcap");
-    auvnav_tests::processes::import_pd0(&dir.join("raw/winriver02_transect.PD0"), &log);
     let r = auvnav(&["discover", &s(&log), "--moving-bed", "--json"]);
     let (verdict, yaw, std) = gnss(&r, "dvl.mount_yaw");
     assert_eq!(verdict, "named", "{}", r["gnss"]);
